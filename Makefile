@@ -1,0 +1,36 @@
+# Set-up and everyday commands. Everything runs inside .venv, built with Python 3.12 (pymc 6 and
+# arviz 1.x need >= 3.12). Override the interpreter with `make PYTHON=/path/to/python3.12 ...`.
+
+PYTHON ?= $(shell for p in python3.12 python3.13 $$HOME/.pyenv/versions/3.12*/bin/python3.12 \
+             /usr/local/bin/python3.12 /usr/bin/python3.12 python3; do \
+             $$p -c 'import sys; sys.exit(sys.version_info[:2] < (3, 12))' >/dev/null 2>&1 \
+             && { echo $$p; break; }; done)
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+DEMO_MAP ?= data/maps/ubremen-cartesium.yaml
+DEMO_OUT ?= out/demo
+
+.PHONY: install test demo bench clean
+
+$(STAMP): pyproject.toml
+	@test -n "$(PYTHON)" || { echo "make: no Python >= 3.12 found (set PYTHON=...)"; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	@touch $(STAMP)
+
+install: $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2
+
+demo: $(STAMP)
+	$(BIN)/semmap info $(DEMO_MAP)
+
+bench: $(STAMP)
+	@for b in bench/bench_*.py; do n=$$(basename $$b .py); n=$${n#bench_}; \
+	  echo "== $$n"; $(BIN)/python bench/run.py $$n --json || exit 1; done
+
+clean:
+	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -1,0 +1,7 @@
+"""semmap_pp: abstract semantic maps from 2D occupancy grids.
+
+Data-driven reversible-jump MCMC over worlds of rectangular space units, with a prior and a
+sensor model shaped by editable logic rules (Liu & von Wichert, IROS 2013, re-implemented).
+"""
+
+__version__ = "0.1.0"

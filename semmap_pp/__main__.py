@@ -1,0 +1,5 @@
+import sys
+
+from semmap_pp.cli import main
+
+sys.exit(main())

@@ -1,0 +1,51 @@
+"""The ``semmap`` command.
+
+Each subcommand lives in its own module ``semmap_pp/cli/cmd_<name>.py`` exposing
+``register(subparsers)``; the module registers its parser and sets ``func(args) -> int``.
+Modules are discovered, so adding a subcommand never touches this file.
+
+Every :class:`~semmap_pp.errors.SemmapError` becomes one line on stderr and exit status 2;
+Ctrl-C becomes exit status 130. No traceback reaches the user for an input error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from semmap_pp import __version__
+from semmap_pp.errors import SemmapError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="semmap",
+        description="Abstract semantic maps (rooms, corridors, halls, doors) from ROS occupancy grids.",
+    )
+    parser.add_argument("--version", action="version", version=f"semmap_pp {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    subparsers.required = True
+    package = importlib.import_module(__name__)
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("cmd_"):
+            importlib.import_module(f"{__name__}.{info.name}").register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except SemmapError as exc:
+        print(f"semmap: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("semmap: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,51 @@
+"""The project's own error types.
+
+Every error a user can cause (a broken map, a bad rule file, a wrong model file) is raised as a
+:class:`SemmapError`. Its message is one line that names the file and what is wrong, in the
+``file:line:col: message`` form when a position is known. The command line prints that line and
+exits non-zero; nothing else is allowed to escape to the user as a traceback.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+class SemmapError(Exception):
+    """A user-facing error: one line naming the file and the problem."""
+
+    def __init__(self, path: str | os.PathLike | None, message: str,
+                 line: int | None = None, col: int | None = None):
+        self.path = None if path is None else os.fspath(path)
+        self.message = " ".join(str(message).split())  # always one line
+        self.line = line
+        self.col = col
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        where = self.path if self.path is not None else "<input>"
+        if self.line is not None:
+            where += f":{self.line}"
+            if self.col is not None:
+                where += f":{self.col}"
+        return f"{where}: {self.message}"
+
+
+class MapError(SemmapError):
+    """An occupancy grid map (YAML, image or array) cannot be read or makes no sense."""
+
+
+class ModelError(SemmapError):
+    """A model file (``models/*.toml``) is missing a value or holds an invalid one."""
+
+
+class RuleError(SemmapError):
+    """A rule file is malformed, unsafe or contradictory."""
+
+
+class EvidenceError(SemmapError):
+    """Evidence facts handed to the knowledge engine are malformed."""
+
+
+class OutputError(SemmapError):
+    """An output directory or file cannot be written as asked."""
