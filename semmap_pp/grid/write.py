@@ -17,6 +17,7 @@ import yaml
 from semmap_pp import atomic
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.errors import OutputError
+from semmap_pp.grid.meta import DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH
 
 # map_saver's grey levels for the three classes (ROS map_saver writes exactly these).
 GREY_FREE = 254
@@ -68,7 +69,8 @@ def encode_pgm(image: np.ndarray, comment: str | None = None) -> bytes:
 
 def write_map(yaml_path: str | os.PathLike, image: np.ndarray, resolution: float,
               origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
-              occupied_thresh: float = 0.65, free_thresh: float = 0.196,
+              occupied_thresh: float = DEFAULT_OCCUPIED_THRESH,
+              free_thresh: float = DEFAULT_FREE_THRESH,
               negate: int = 0) -> Path:
     """Write ``NAME.yaml`` and ``NAME.pgm`` as ROS map_server reads them.
 
@@ -136,3 +138,24 @@ def write_map(yaml_path: str | os.PathLike, image: np.ndarray, resolution: float
     except OSError as exc:
         raise OutputError(yaml_path, f"cannot write map: {exc.strerror or exc}") from exc
     return yaml_path
+
+
+def save_grid(grid, yaml_path: str | os.PathLike) -> Path:
+    """Write ``grid``'s classes back in map_server form (``NAME.yaml`` + ``NAME.pgm``).
+
+    The image holds map_saver's grey levels (254 / 205 / 0) and the YAML the map_server default
+    thresholds 0.65 / 0.196 with ``negate: 0``, which classify those levels back into the same
+    classes whatever thresholds the grid was loaded with. Resolution and origin are kept; the
+    scaled occupancy values are not.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib, numpy as np
+    >>> from semmap_pp.grid import OccupancyGrid, load_map
+    >>> g = OccupancyGrid(np.array([[0, 1], [2, 0]], np.uint8), np.zeros((2, 2)), 0.1)
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> load_map(save_grid(g, d / "g.yaml")).classes.tolist()
+    [[0, 1], [2, 0]]
+    """
+    return write_map(yaml_path, classes_to_image(grid.classes), grid.resolution,
+                     origin=grid.origin)
