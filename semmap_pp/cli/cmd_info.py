@@ -1,0 +1,111 @@
+"""``semmap info MAP [--json]``: what a map file holds and how its cells classify.
+
+The map options (``--occupied-thresh``, ``--free-thresh``, ``--negate``, ``--resolution``,
+``--mode``, ``--max-cells``) are added by :func:`add_map_options` and turned into
+:func:`~semmap_pp.grid.load_map` keywords by :func:`map_options`, so other subcommands can offer the
+same ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from semmap_pp.cells import INPUT_CLASSES
+from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
+from semmap_pp.grid.pixels import MODES
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {value}")
+    return value
+
+
+def add_map_options(parser: argparse.ArgumentParser) -> None:
+    """Add the options that override or complete a map's map_server parameters."""
+    group = parser.add_argument_group("map parameters (override the YAML, complete a bare image)")
+    group.add_argument("--occupied-thresh", type=float, metavar="P",
+                       help="occupancy above P is occupied (map_server default 0.65)")
+    group.add_argument("--free-thresh", type=float, metavar="P",
+                       help="occupancy below P is free (map_server default 0.196)")
+    group.add_argument("--negate", type=int, choices=(0, 1),
+                       help="1: dark pixels are free, light ones occupied")
+    group.add_argument("--resolution", type=float, metavar="M",
+                       help="metres per cell (bare images default to 0.05, with a note)")
+    group.add_argument("--mode", choices=MODES, help="map_server mode (default trinary)")
+    group.add_argument("--max-cells", type=_positive_int, default=MAX_CELLS, metavar="N",
+                       help=f"refuse larger images (default {MAX_CELLS})")
+
+
+def map_options(args: argparse.Namespace) -> dict:
+    """:func:`load_map` keyword arguments from the options of :func:`add_map_options`."""
+    return {"occupied_thresh": args.occupied_thresh, "free_thresh": args.free_thresh,
+            "negate": args.negate, "resolution": args.resolution, "mode": args.mode,
+            "max_cells": args.max_cells}
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "info", help="describe a map: size, resolution, origin, thresholds, cell counts",
+        description="Load a map (map_server YAML, .png, .pgm or .npy) and describe it.")
+    parser.add_argument("map", help="map file: .yaml/.yml (map_server), .png, .pgm or .npy")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_map_options(parser)
+    parser.set_defaults(func=run)
+
+
+def describe(grid: OccupancyGrid) -> dict:
+    """The facts ``semmap info`` prints, as a JSON-ready dict."""
+    counts = grid.counts()
+    total = grid.classes.size
+    width_m, height_m = grid.size_m
+    return {
+        "map": str(grid.source) if grid.source else None,
+        "image": str(grid.image_path) if grid.image_path else None,
+        "image_format": grid.image_format,
+        "width": grid.width,
+        "height": grid.height,
+        "width_m": width_m,
+        "height_m": height_m,
+        "resolution": grid.resolution,
+        "origin": list(grid.origin),
+        "mode": grid.mode,
+        "negate": int(grid.negate),
+        "occupied_thresh": grid.occupied_thresh,
+        "free_thresh": grid.free_thresh,
+        "counts": counts,
+        "fractions": {name: counts[name] / total for name in INPUT_CLASSES},
+        "notes": list(grid.notes),
+    }
+
+
+def format_text(facts: dict) -> str:
+    """Human-readable lines of :func:`describe`'s dict."""
+    ox, oy, yaw = facts["origin"]
+    lines = [
+        f"map         {facts['map']}",
+        f"image       {facts['image']} ({facts['image_format']})",
+        f"size        {facts['width']} x {facts['height']} cells, "
+        f"{facts['width_m']:.2f} x {facts['height_m']:.2f} m",
+        f"resolution  {facts['resolution']:g} m/cell",
+        f"origin      x {ox:g} m, y {oy:g} m, yaw {yaw:g} rad",
+        f"mode        {facts['mode']} (negate {facts['negate']})",
+        f"thresholds  occupied > {facts['occupied_thresh']:g}, free < {facts['free_thresh']:g}",
+    ]
+    for name in INPUT_CLASSES:
+        lines.append(f"{name:<11} {facts['counts'][name]:>10d} cells  "
+                     f"{100.0 * facts['fractions'][name]:6.2f} %")
+    lines += [f"note        {note}" for note in facts["notes"]]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    grid = load_map(args.map, **map_options(args))
+    facts = describe(grid)
+    print(json.dumps(facts) if args.json else format_text(facts))
+    return 0
