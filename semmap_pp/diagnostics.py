@@ -1,0 +1,228 @@
+"""Convergence diagnostics and posterior spread — the only module that imports ArviZ.
+
+Slot-level quantities (the rectangle in slot 3) are meaningless across chains: units are born and die
+in any slot (label switching). So chains are judged on *label-invariant* summaries of each sampled
+world — its log posterior, number of units, total wall length, cell prediction rate and counts per
+type — with ArviZ's rank-normalised split R-hat and bulk / tail ESS. A NaN R-hat or ESS (for example
+a summary that never moved in any chain) counts as a failure, never as a pass.
+
+Posterior spread is shown per cell: the probability, over sampled worlds, that a cell is wall or
+belongs to a unit of each type (:class:`SpreadAccumulator`), and one number, the mean Bernoulli
+variance ``p (1 - p)`` of the wall indicator over the cells that are ever wall.
+
+Examples
+--------
+>>> import numpy as np
+>>> rng = np.random.default_rng(0)
+>>> report = convergence({"log_posterior": rng.normal(size=(4, 300))}, rhat_max=1.01, ess_min=100)
+>>> report.ok
+True
+>>> stuck = rng.normal(size=(4, 300)); stuck[0] += 5.0
+>>> convergence({"log_posterior": stuck}, rhat_max=1.01, ess_min=100).ok
+False
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import arviz as az
+import numpy as np
+
+from semmap_pp.atomic import atomic_path
+from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.errors import SemmapError
+
+#: Label-invariant summaries recorded for every draw, in report order.
+SUMMARIES = ("log_posterior", "n_units", "wall_length", "cpr") + tuple(f"n_{t}" for t in UNIT_TYPES)
+
+
+@dataclass(frozen=True)
+class QuantityDiagnostics:
+    """R-hat and ESS of one summary across chains."""
+
+    name: str
+    mean: float
+    sd: float
+    rhat: float
+    ess_bulk: float
+    ess_tail: float
+    ok: bool
+    reason: str  # "" when ok, else why it failed
+
+
+@dataclass(frozen=True)
+class ConvergenceReport:
+    """Diagnostics of every summary, with the thresholds they were judged by."""
+
+    quantities: tuple[QuantityDiagnostics, ...]
+    n_chains: int
+    n_draws: int
+    rhat_max: float
+    ess_min: float
+
+    @property
+    def ok(self) -> bool:
+        return all(q.ok for q in self.quantities)
+
+    def to_dict(self) -> dict:
+        def clean(v):
+            return None if isinstance(v, float) and not math.isfinite(v) else v
+
+        return {
+            "ok": self.ok, "chains": self.n_chains, "draws": self.n_draws,
+            "rhat_max": self.rhat_max, "ess_min": self.ess_min,
+            "quantities": {q.name: {"mean": clean(q.mean), "sd": clean(q.sd), "rhat": clean(q.rhat),
+                                    "ess_bulk": clean(q.ess_bulk), "ess_tail": clean(q.ess_tail),
+                                    "ok": q.ok, "reason": q.reason} for q in self.quantities},
+        }
+
+    def to_text(self) -> str:
+        lines = [f"chains: {self.n_chains}, draws per chain: {self.n_draws}; "
+                 f"pass when R-hat <= {self.rhat_max} and ESS >= {self.ess_min} (NaN fails)",
+                 f"{'quantity':<16}{'mean':>12}{'sd':>10}{'R-hat':>8}{'ESS bulk':>10}{'ESS tail':>10}  verdict"]
+        for q in self.quantities:
+            verdict = "ok" if q.ok else f"FAIL: {q.reason}"
+            lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
+                         f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
+        lines.append("converged" if self.ok else "NOT converged")
+        return "\n".join(lines)
+
+
+def _as_chain_draw(name: str, values) -> np.ndarray:
+    a = np.asarray(values, dtype=float)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] < 4:
+        raise ValueError(f"summary {name!r} must be (chains, draws) with at least 4 draws, got {a.shape}")
+    return a
+
+
+def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> QuantityDiagnostics:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if np.all(np.isnan(a)):
+            rhat = ess_b = ess_t = float("nan")
+        else:
+            rhat = float(az.rhat(a))
+            ess_b = float(az.ess(a, method="bulk"))
+            ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
+        mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
+    reasons = []
+    if not math.isfinite(rhat):
+        same = np.all(a == a.flat[0]) if np.all(np.isfinite(a)) else False
+        reasons.append("R-hat is NaN (" + ("summary never moved in any chain" if same else "NaN values") + ")")
+    elif rhat > rhat_max:
+        reasons.append(f"R-hat {rhat:.3f} > {rhat_max}")
+    if math.isfinite(rhat) and not (math.isfinite(ess_b) and math.isfinite(ess_t)):
+        reasons.append("ESS is NaN")
+    elif math.isfinite(ess_b) and min(ess_b, ess_t) < ess_min:
+        reasons.append(f"ESS {min(ess_b, ess_t):.0f} < {ess_min}")
+    return QuantityDiagnostics(name, mean, sd, rhat, ess_b, ess_t, not reasons, "; ".join(reasons))
+
+
+def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,
+                ess_min: float) -> ConvergenceReport:
+    """Judge convergence of label-invariant summaries.
+
+    Parameters
+    ----------
+    summaries : mapping of name to (chains, draws) array, or a DataTree from :func:`to_datatree`
+    rhat_max, ess_min : float
+        Thresholds (the model file's ``[diagnostics]`` section holds the project's values).
+    """
+    if hasattr(summaries, "children"):  # an ArviZ DataTree (itself a Mapping of groups)
+        post = summaries["posterior"]
+        summaries = {k: np.asarray(post[k].values) for k in post.data_vars}
+    if not summaries:
+        raise ValueError("no summaries to diagnose")
+    names = [n for n in SUMMARIES if n in summaries] + sorted(n for n in summaries if n not in SUMMARIES)
+    arrays = {n: _as_chain_draw(n, summaries[n]) for n in names}
+    shapes = {a.shape for a in arrays.values()}
+    if len(shapes) != 1:
+        raise ValueError(f"summaries differ in shape: {sorted(shapes)}")
+    (n_chains, n_draws), = shapes
+    qs = tuple(_diagnose_one(n, arrays[n], rhat_max, ess_min) for n in names)
+    return ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min)
+
+
+def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,
+                attrs: Mapping[str, object] | None = None):
+    """Pack (chains, draws) summaries (and optional sampler stats) into an ArviZ DataTree."""
+    groups = {"posterior": {k: _as_chain_draw(k, v) for k, v in summaries.items()}}
+    if sample_stats:
+        groups["sample_stats"] = {k: np.asarray(v) for k, v in sample_stats.items()}
+    tree = az.from_dict(groups)
+    tree.attrs.update({k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in (attrs or {}).items()})
+    return tree
+
+
+def write_trace(tree, path: str | os.PathLike) -> Path:
+    """Write a DataTree as NetCDF atomically (temporary file, then rename)."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tree.to_netcdf(tmp, engine="h5netcdf")
+    return path
+
+
+def read_trace(path: str | os.PathLike):
+    """Read a trace written by :func:`write_trace`; a clear error if it is missing or not a trace."""
+    path = Path(path)
+    if not path.is_file():
+        raise SemmapError(path, "no trace file here (expected trace.nc written by `semmap map`)")
+    try:
+        tree = az.from_netcdf(path, engine="h5netcdf")
+        tree["posterior"]
+    except Exception as exc:  # h5py/xarray raise many kinds; the user needs one line
+        raise SemmapError(path, f"not a readable ArviZ trace ({type(exc).__name__}: {exc})") from None
+    return tree
+
+
+@dataclass
+class SpreadAccumulator:
+    """Per-cell posterior probabilities of wall and of each unit type, accumulated over sampled worlds.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> acc = SpreadAccumulator((1, 3))
+    >>> acc.add(np.array([[True, False, False]]), np.array([[0, 1, -1]]))
+    >>> acc.add(np.array([[False, False, False]]), np.array([[0, 1, -1]]))
+    >>> acc.p_wall().tolist(), acc.p_type()[0].tolist()
+    ([[0.5, 0.0, 0.0]], [[1.0, 0.0, 0.0]])
+    >>> round(acc.wall_spread(), 3)  # mean p(1-p) over cells ever wall: 0.5 * 0.5
+    0.25
+    """
+
+    shape: tuple[int, int]
+    n: int = 0
+    wall: np.ndarray = field(init=False)
+    types: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self.wall = np.zeros(self.shape, np.int32)
+        self.types = np.zeros((len(UNIT_TYPES),) + tuple(self.shape), np.int32)
+
+    def add(self, wall_mask: np.ndarray, type_index: np.ndarray) -> None:
+        """Count one world: its wall cells and, per cell, the type index of its unit (-1 none)."""
+        self.n += 1
+        self.wall += wall_mask
+        for t in range(len(UNIT_TYPES)):
+            self.types[t] += type_index == t
+
+    def p_wall(self) -> np.ndarray:
+        return self.wall / max(self.n, 1)
+
+    def p_type(self) -> np.ndarray:
+        return self.types / max(self.n, 1)
+
+    def wall_spread(self) -> float:
+        """Mean Bernoulli variance of the wall indicator over cells that were ever wall (0 = no spread)."""
+        p = self.p_wall()
+        ever = p > 0
+        return float(np.mean(p[ever] * (1 - p[ever]))) if ever.any() else 0.0

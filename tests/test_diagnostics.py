@@ -1,0 +1,83 @@
+import numpy as np
+import pytest
+
+from semmap_pp import diagnostics as dg
+from semmap_pp.errors import SemmapError
+
+
+def mixing_chains(rng, chains=4, draws=400):
+    return rng.normal(size=(chains, draws))
+
+
+def test_well_mixed_chains_pass():
+    rng = np.random.default_rng(1)
+    rep = dg.convergence({"log_posterior": mixing_chains(rng), "n_units": rng.integers(3, 9, (4, 400))},
+                         rhat_max=1.01, ess_min=200)
+    assert rep.ok, rep.to_text()
+    assert [q.name for q in rep.quantities] == ["log_posterior", "n_units"]
+
+
+def test_one_chain_stuck_elsewhere_fails_on_rhat():
+    rng = np.random.default_rng(2)
+    a = mixing_chains(rng)
+    a[2] += 4.0
+    rep = dg.convergence({"log_posterior": a}, rhat_max=1.01, ess_min=10)
+    assert not rep.ok
+    assert "R-hat" in rep.quantities[0].reason
+
+
+def test_sticky_chain_fails_on_ess():
+    rng = np.random.default_rng(3)
+    # a random walk with tiny steps: chains overlap little and autocorrelation is huge
+    a = np.cumsum(rng.normal(scale=0.01, size=(4, 400)), axis=1)
+    rep = dg.convergence({"x": a}, rhat_max=10.0, ess_min=100)
+    assert not rep.ok
+    assert "ESS" in rep.quantities[0].reason
+
+
+def test_nan_counts_as_failure():
+    const = np.full((4, 100), 7.0)
+    rep = dg.convergence({"n_units": const}, rhat_max=1.01, ess_min=10)
+    assert not rep.ok and "never moved" in rep.quantities[0].reason
+    nan = np.full((4, 100), np.nan)
+    rep = dg.convergence({"cpr": nan}, rhat_max=1.01, ess_min=10)
+    assert not rep.ok and "NaN" in rep.quantities[0].reason
+    assert rep.to_dict()["quantities"]["cpr"]["rhat"] is None  # JSON-safe
+
+
+def test_shape_mismatch_is_refused():
+    with pytest.raises(ValueError):
+        dg.convergence({"a": np.zeros((4, 10)), "b": np.zeros((3, 10))}, rhat_max=1.01, ess_min=1)
+
+
+def test_trace_round_trip(tmp_path):
+    rng = np.random.default_rng(4)
+    tree = dg.to_datatree({"log_posterior": mixing_chains(rng, 2, 50)},
+                          sample_stats={"accept_add": rng.random((2, 50))}, attrs={"map": "x.yaml"})
+    path = dg.write_trace(tree, tmp_path / "trace.nc")
+    back = dg.read_trace(path)
+    np.testing.assert_allclose(back["posterior"]["log_posterior"].values,
+                               tree["posterior"]["log_posterior"].values)
+    rep = dg.convergence(back, rhat_max=1.1, ess_min=10)
+    assert rep.n_chains == 2 and rep.n_draws == 50
+    assert [p.name for p in tmp_path.iterdir()] == ["trace.nc"]  # no temporary file left
+
+
+def test_read_trace_errors_are_one_line(tmp_path):
+    with pytest.raises(SemmapError, match="no trace file"):
+        dg.read_trace(tmp_path / "missing.nc")
+    bad = tmp_path / "bad.nc"
+    bad.write_bytes(b"not hdf5 at all")
+    with pytest.raises(SemmapError) as exc:
+        dg.read_trace(bad)
+    assert "\n" not in str(exc.value) and "bad.nc" in str(exc.value)
+
+
+def test_spread_accumulator_counts_types():
+    acc = dg.SpreadAccumulator((2, 2))
+    acc.add(np.array([[1, 0], [0, 0]], bool), np.array([[0, 0], [1, -1]]))
+    acc.add(np.array([[1, 0], [0, 1]], bool), np.array([[0, 2], [1, -1]]))
+    assert acc.p_wall().tolist() == [[1.0, 0.0], [0.0, 0.5]]
+    assert acc.p_type()[2].tolist() == [[0.0, 0.5], [0.0, 0.0]]
+    # cells ever wall: (0,0) with p=1 (variance 0) and (1,1) with p=0.5 (variance 0.25)
+    assert acc.wall_spread() == pytest.approx(0.125)
