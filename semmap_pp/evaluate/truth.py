@@ -124,10 +124,9 @@ def _ratio(num: float, den: float) -> float:
     return float(num) / float(den) if den else float("nan")
 
 
-def _f1(p: float, r: float) -> float:
-    if np.isnan(p) or np.isnan(r):
-        return float("nan")
-    return 2 * p * r / (p + r) if p + r > 0 else 0.0
+def _f1(n_match: int, n_pred: int, n_true: int) -> float:
+    # 2PR / (P + R) written with counts, so that it is 0 (not NaN) when one side is empty.
+    return _ratio(2 * n_match, n_pred + n_true)
 
 
 def _field(obj: Mapping, key: str, source: str, where: str) -> Any:
@@ -319,7 +318,7 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int], resolutio
     return WorldScore(
         unit_precision=unit_p,
         unit_recall=unit_r,
-        unit_f1=_f1(unit_p, unit_r),
+        unit_f1=_f1(n_match, len(pred_units), len(true_units)),
         type_accuracy=_ratio(same_type, n_match),
         adjacency_precision=_ratio(adj_tp, len(pred_adj)),
         adjacency_recall=_ratio(adj_tp, len(true_adj)),
