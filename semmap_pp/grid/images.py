@@ -178,8 +178,13 @@ def decode_pillow(path: Path, *, max_cells: int = MAX_CELLS) -> Decoded:
                 return _from_pillow(im, path)
     except MapError:
         raise
-    except Image.DecompressionBombError as exc:
-        raise MapError(path, f"image too large to decode safely ({exc})") from exc
+    except Image.DecompressionBombError:
+        # Pillow refuses before reading the size out to us; PNG headers are easy to read here.
+        size = _png_size(path)
+        if size is not None:
+            _check_size(path, *size, max_cells)
+        raise MapError(path, f"image is larger than Pillow decodes safely "
+                             f"({2 * Image.MAX_IMAGE_PIXELS} pixels)") from None
     except Image.UnidentifiedImageError:
         raise MapError(path, "not an image file that can be read (unknown or damaged format)") from None
     except MemoryError:
@@ -187,6 +192,15 @@ def decode_pillow(path: Path, *, max_cells: int = MAX_CELLS) -> Decoded:
     except _PILLOW_ERRORS as exc:
         message = str(exc) or type(exc).__name__
         raise MapError(path, f"damaged or truncated image: {message}") from None
+
+
+def _png_size(path: Path) -> tuple[int, int] | None:
+    """``(width, height)`` from a PNG's IHDR chunk, or None if the file is not a PNG."""
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+    if len(head) == 24 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return struct.unpack(">II", head[16:24])
+    return None
 
 
 def _from_pillow(im: Image.Image, path: Path) -> Decoded:
