@@ -1,0 +1,107 @@
+"""Tests of `semmap info MAP [--json]`."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from semmap_pp.cli import main
+from semmap_pp.grid import write_map
+
+DATA = Path(__file__).parent / "data" / "maps"
+REAL = Path(__file__).parent.parent / "data" / "maps"
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONWARNINGS="error")
+    return subprocess.run([sys.executable, "-m", "semmap_pp", *args], capture_output=True,
+                          text=True, timeout=60, env=env)
+
+
+def test_text_output_of_the_tiny_map(capsys):
+    assert main(["info", str(DATA / "tiny.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "5 x 4 cells, 2.50 x 2.00 m" in out
+    assert "resolution  0.5 m/cell" in out
+    assert "origin      x -1 m, y 2 m, yaw 0 rad" in out
+    assert "trinary (negate 0)" in out
+    assert "occupied > 0.65, free < 0.196" in out
+    # 4 free, 9 unknown, 7 occupied of 20 cells.
+    assert "free                 4 cells   20.00 %" in out
+    assert "unknown              9 cells   45.00 %" in out
+    assert "occupied             7 cells   35.00 %" in out
+    assert "note" not in out
+
+
+def test_json_output_is_one_object(capsys):
+    assert main(["info", str(DATA / "tiny.yaml"), "--json"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1
+    facts = json.loads(out)
+    assert (facts["width"], facts["height"]) == (5, 4)
+    assert (facts["width_m"], facts["height_m"]) == (2.5, 2.0)
+    assert facts["origin"] == [-1.0, 2.0, 0.0] and facts["resolution"] == 0.5
+    assert facts["counts"] == {"free": 4, "unknown": 9, "occupied": 7}
+    assert facts["fractions"]["unknown"] == pytest.approx(0.45)
+    assert sum(facts["fractions"].values()) == pytest.approx(1.0)
+    assert facts["image"].endswith("tiny.pgm") and facts["notes"] == []
+
+
+def test_bare_image_reports_the_assumed_resolution_and_options_apply(capsys, tmp_path):
+    np.save(tmp_path / "m.npy", np.array([[254, 128]], np.uint8))   # 128: p = 0.498
+    assert main(["info", str(tmp_path / "m.npy"), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["counts"] == {"free": 1, "unknown": 1, "occupied": 0}
+    assert facts["resolution"] == 0.05 and "assumed 0.05" in facts["notes"][0]
+    assert main(["info", str(tmp_path / "m.npy"), "--json", "--occupied-thresh", "0.4",
+                 "--resolution", "0.1", "--negate", "1"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    # negated: 254 -> p = 0.996 occupied; 128 -> p = 0.502 occupied at 0.4.
+    assert facts["counts"] == {"free": 0, "unknown": 0, "occupied": 2}
+    assert facts["resolution"] == 0.1 and facts["notes"] == []
+
+
+def test_real_map_through_a_subprocess():
+    result = run_cli("info", str(REAL / "intel-lab.yaml"), "--json")
+    assert result.returncode == 0, result.stderr
+    facts = json.loads(result.stdout)
+    assert (facts["width"], facts["height"]) == (586, 587)
+    assert sum(facts["counts"].values()) == 586 * 587
+
+
+@pytest.mark.parametrize("name, content, phrase", [
+    ("broken.yaml", "image: [unclosed\n", "YAML syntax error"),
+    ("bad.png", "not a png", "not an image file"),
+    ("norez.yaml", "image: norez.yaml\n", "YAML file itself"),
+])
+def test_errors_through_a_subprocess_are_one_line_without_traceback(tmp_path, name, content,
+                                                                    phrase):
+    (tmp_path / name).write_text(content)
+    result = run_cli("info", str(tmp_path / name))
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"semmap: error: {tmp_path / name}")
+    assert phrase in lines[0]
+
+
+def test_missing_map_through_a_subprocess(tmp_path):
+    result = run_cli("info", str(tmp_path / "absent.yaml"))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip() == f"semmap: error: {tmp_path / 'absent.yaml'}: map file does not exist"
+
+
+def test_info_on_a_map_written_by_write_map(capsys, tmp_path):
+    write_map(tmp_path / "w.yaml", np.array([[254, 254], [205, 0]], np.uint8), 0.25,
+              origin=(1.0, 2.0, 0.0))
+    assert main(["info", str(tmp_path / "w.yaml"), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["counts"] == {"free": 2, "unknown": 1, "occupied": 1}
+    assert facts["origin"] == [1.0, 2.0, 0.0] and facts["width_m"] == 0.5
