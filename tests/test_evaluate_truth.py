@@ -14,26 +14,36 @@ SHAPE = (20, 30)
 
 
 def rect(x0, y0, x1, y1):
-    """Corners of an axis-aligned rectangle; it covers columns x0..x1 and rows y0..y1."""
-    return [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    """Corners of the axis-aligned box covering the cells of columns x0..x1 and rows y0..y1.
+
+    In the continuous pixel frame cell [r, c] spans [c, c + 1) x [r, r + 1), so the box's corners
+    are (x0, y0) and (x1 + 1, y1 + 1).
+    """
+    return [[x0, y0], [x1 + 1, y0], [x1 + 1, y1 + 1], [x0, y1 + 1]]
 
 
 # ---------------------------------------------------------------------------- polygon_mask
-def test_rectangle_covers_its_boundary_cells_either_orientation():
-    m = polygon_mask(rect(1, 1, 4, 3), (6, 7))
+def test_rectangle_covers_the_cells_inside_either_orientation():
+    m = polygon_mask([[1, 1], [5, 1], [5, 4], [1, 4]], (6, 7))
     assert m.sum() == 4 * 3 and m[1:4, 1:5].all()          # columns 1..4, rows 1..3
     assert (polygon_mask(rect(1, 1, 4, 3)[::-1], (6, 7)) == m).all()
 
 
 def test_rotated_square_counts_lattice_points():
-    # A square rotated by 45 deg, |x - 10| + |y - 10| <= 5: 2n^2 + 2n + 1 = 61 points for n = 5
-    diamond = [[10, 5], [15, 10], [10, 15], [5, 10]]
+    # A square rotated by 45 deg with corners on cell centres, centred on cell (10, 10):
+    # cells with |c - 10| + |r - 10| <= 5, i.e. 2n^2 + 2n + 1 = 61 for n = 5 (the 20 cells whose
+    # centres lie on the edges count).
+    diamond = [[10.5, 5.5], [15.5, 10.5], [10.5, 15.5], [5.5, 10.5]]
     assert polygon_mask(diamond, (21, 21)).sum() == 61
+    # In a frame whose integer coordinates are cell centres the same cells need integer corners.
+    shifted = [[x - 0.5, y - 0.5] for x, y in diamond]
+    assert (polygon_mask(shifted, (21, 21), centre_offset=0.0)
+            == polygon_mask(diamond, (21, 21))).all()
 
 
 def test_non_convex_polygon():
     # L shape: rows 0..2 x columns 0..4 (15 cells) plus rows 3..4 x columns 0..2 (6 cells)
-    ell = [[0, 0], [4, 0], [4, 2], [2, 2], [2, 4], [0, 4]]
+    ell = [[0, 0], [5, 0], [5, 3], [3, 3], [3, 5], [0, 5]]
     m = polygon_mask(ell, (6, 6))
     assert m.sum() == 21
     assert m[2, 4] and m[4, 2] and not m[3, 3]
@@ -134,6 +144,16 @@ def test_truth_as_prediction_scores_one():
     truth = truth_world()
     s = score_world(as_prediction(truth), truth, SHAPE, RES)
     assert s[:8] == (1.0,) * 8
+
+
+def test_grid_and_resolution_default_to_the_truth_header():
+    truth = dict(truth_world(), height=SHAPE[0], width=SHAPE[1], resolution=RES)
+    pred = as_prediction(truth)
+    pred["doors"][0]["center_px"] = [5 + 21, 5]     # 1.05 m at 0.05 m/cell: too far
+    assert score_world(pred, truth).door_recall == pytest.approx(1 / 2)
+    assert score_world(pred, truth, resolution=0.04).door_recall == 1.0   # 0.84 m: close enough
+    with pytest.raises(MapError, match="missing 'height'"):
+        score_world(pred, truth_world())
 
 
 def test_door_tolerance_is_the_larger_of_width_and_one_metre():

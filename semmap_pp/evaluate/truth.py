@@ -5,10 +5,11 @@ assignment maximising total IoU, a pair kept when its IoU >= ``iou_min``). Throu
 unit precision / recall / F1, type accuracy over matched pairs, adjacency precision / recall and
 door precision / recall. The expected shapes of both dicts are in docs/evaluation.md.
 
-Pixel frame: a polygon vertex ``[x, y]`` has x = column, y = row (:mod:`semmap_pp.cells`), and
-the cell ``[row, col]`` is the point ``(x, y) = (col, row)``; a cell belongs to a polygon when
-that point lies inside it or on its boundary. Both sides are rasterised the same way, so the
-choice of frame cannot favour either.
+Pixel frame (docs/world.schema.json, semmap_pp.synth.truth): continuous image coordinates
+``[x, y]``, x = column, y = row; the cell ``[row, col]`` covers ``col <= x < col + 1`` and
+``row <= y < row + 1``, so its centre is ``(col + 0.5, row + 0.5)``. A cell belongs to a polygon
+when its centre lies inside it or on its boundary. Both sides are rasterised the same way, so the
+rule cannot favour either.
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ from semmap_pp.errors import MapError
 _EPS = 1e-9
 
 
-def polygon_mask(vertices_px: Sequence[Sequence[float]], shape: tuple[int, int]) -> np.ndarray:
-    """Cells of a grid whose point ``(col, row)`` lies inside a polygon (boundary included).
+def polygon_mask(vertices_px: Sequence[Sequence[float]], shape: tuple[int, int],
+                 centre_offset: float = 0.5) -> np.ndarray:
+    """Cells of a grid whose centre lies inside a polygon (boundary included).
 
     Parameters
     ----------
@@ -35,6 +37,10 @@ def polygon_mask(vertices_px: Sequence[Sequence[float]], shape: tuple[int, int])
         At least three vertices in order (either orientation), x = column, y = row.
     shape : (int, int)
         (rows, cols) of the grid.
+    centre_offset : float
+        The centre of cell ``[row, col]`` is ``(col + centre_offset, row + centre_offset)``:
+        0.5 in the continuous frame of world.json and truth.json; 0 for a frame whose integer
+        coordinates are cell centres.
 
     Returns
     -------
@@ -42,12 +48,15 @@ def polygon_mask(vertices_px: Sequence[Sequence[float]], shape: tuple[int, int])
 
     Examples
     --------
-    >>> polygon_mask([[1, 0], [3, 0], [3, 1], [1, 1]], (3, 5)).astype(int).tolist()
-    [[0, 1, 1, 1, 0], [0, 1, 1, 1, 0], [0, 0, 0, 0, 0]]
-    >>> polygon_mask([[2, 0], [4, 2], [2, 4], [0, 2]], (5, 5)).astype(int).tolist()  # a diamond
+    The box x in [1, 3], y in [0, 1] covers the cells of columns 1 and 2 in row 0:
+
+    >>> polygon_mask([[1, 0], [3, 0], [3, 1], [1, 1]], (2, 5)).astype(int).tolist()
+    [[0, 1, 1, 0, 0], [0, 0, 0, 0, 0]]
+    >>> diamond = [[2.5, 0.5], [4.5, 2.5], [2.5, 4.5], [0.5, 2.5]]   # corners on cell centres
+    >>> polygon_mask(diamond, (5, 5)).astype(int).tolist()
     [[0, 0, 1, 0, 0], [0, 1, 1, 1, 0], [1, 1, 1, 1, 1], [0, 1, 1, 1, 0], [0, 0, 1, 0, 0]]
     """
-    v = np.asarray(vertices_px, dtype=np.float64)
+    v = np.asarray(vertices_px, dtype=np.float64) - centre_offset  # now in cell-index units
     if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] < 3 or not np.isfinite(v).all():
         raise ValueError(f"a polygon needs >= 3 finite [x, y] vertices, got {v.tolist()}")
     rows, cols = int(shape[0]), int(shape[1])
@@ -222,7 +231,8 @@ def match_units(pred_masks: Sequence[np.ndarray], true_masks: Sequence[np.ndarra
     return pairs, iou
 
 
-def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int], resolution: float, *,
+def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = None,
+                resolution: float | None = None, *,
                 iou_min: float = 0.5, door_tol_m: float = 1.0,
                 pred_source: str = "prediction", truth_source: str = "truth") -> WorldScore:
     """Score a predicted world dict against a synthetic truth dict.
@@ -234,10 +244,12 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int], resolutio
         [{"units": [a, b], "center_px": [x, y], "width_m"}]}`` (a ``world.json``).
     truth : mapping
         The same with ``"corners_px"`` instead of ``"vertices_px"`` (a ``truth.json``).
-    shape : (int, int)
-        (rows, cols) of the map grid both polygons are rasterised on.
-    resolution : float
-        Metres per cell, to compare door centre distances with door widths.
+    shape : (int, int), optional
+        (rows, cols) of the map grid both polygons are rasterised on; by default the truth's
+        ``[height, width]``.
+    resolution : float, optional
+        Metres per cell, to compare door centre distances with door widths; by default the
+        truth's ``resolution``.
     iou_min : float
         A unit pair matches when its IoU is at least this (0.5).
     door_tol_m : float
@@ -273,6 +285,14 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int], resolutio
     >>> s.unit_f1, s.type_accuracy, s.adjacency_recall, s.door_recall  # door 8 px = 0.4 m away
     (1.0, 0.5, 1.0, 1.0)
     """
+    if shape is None:
+        shape = (int(_field(truth, "height", truth_source, "top level")),
+                 int(_field(truth, "width", truth_source, "top level")))
+    if resolution is None:
+        resolution = float(_field(truth, "resolution", truth_source, "top level"))
+    if len(shape) != 2 or min(shape) <= 0 or not resolution > 0:
+        raise MapError(truth_source, f"need a positive grid shape and resolution, got {shape}, "
+                                     f"{resolution}")
     pred_units = _units(pred, "vertices_px", pred_source)
     true_units = _units(truth, "corners_px", truth_source)
     pred_masks = [polygon_mask(c, shape) for _, _, c in pred_units]
