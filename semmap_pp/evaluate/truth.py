@@ -206,7 +206,9 @@ def match_units(pred_masks: Sequence[np.ndarray], true_masks: Sequence[np.ndarra
     """One-to-one matching of predicted to true masks by IoU (Hungarian, maximum total IoU).
 
     Returns the matched (pred index, true index) pairs whose IoU >= ``iou_min`` and the full
-    IoU matrix (n_pred, n_true).
+    IoU matrix (n_pred, n_true). Masks are boolean arrays of one shape, or (what
+    :func:`score_world` passes, to keep memory small on large maps) sorted arrays of the flat
+    indices of their cells.
 
     Examples
     --------
@@ -216,19 +218,26 @@ def match_units(pred_masks: Sequence[np.ndarray], true_masks: Sequence[np.ndarra
     >>> pairs, iou.round(2).tolist()      # a∩b = 1 cell, a∪b = 4 cells
     ([(1, 0)], [[0.25], [1.0]])
     """
-    n_p, n_t = len(pred_masks), len(true_masks)
+    p = [_cells(m) for m in pred_masks]
+    t = [_cells(m) for m in true_masks]
+    n_p, n_t = len(p), len(t)
     iou = np.zeros((n_p, n_t))
+    for i, a in enumerate(p):
+        for j, b in enumerate(t):
+            if a.size and b.size and a[0] <= b[-1] and b[0] <= a[-1]:
+                inter = np.intersect1d(a, b, assume_unique=True).size
+                iou[i, j] = inter / (a.size + b.size - inter)
     if n_p and n_t:
-        p = np.stack([m.ravel() for m in pred_masks]).astype(np.float64)
-        t = np.stack([m.ravel() for m in true_masks]).astype(np.float64)
-        inter = p @ t.T
-        union = p.sum(1)[:, None] + t.sum(1)[None, :] - inter
-        iou = np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
         rows, cols = linear_sum_assignment(iou, maximize=True)
         pairs = [(int(r), int(c)) for r, c in zip(rows, cols) if iou[r, c] >= iou_min]
     else:
         pairs = []
     return pairs, iou
+
+
+def _cells(mask: np.ndarray) -> np.ndarray:
+    m = np.asarray(mask)
+    return np.flatnonzero(m) if m.dtype == bool else np.asarray(m, dtype=np.int64).ravel()
 
 
 def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = None,
@@ -295,9 +304,9 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
                                      f"{resolution}")
     pred_units = _units(pred, "vertices_px", pred_source)
     true_units = _units(truth, "corners_px", truth_source)
-    pred_masks = [polygon_mask(c, shape) for _, _, c in pred_units]
-    true_masks = [polygon_mask(c, shape) for _, _, c in true_units]
-    pairs, iou = match_units(pred_masks, true_masks, iou_min)
+    pred_cells = [np.flatnonzero(polygon_mask(c, shape)) for _, _, c in pred_units]
+    true_cells = [np.flatnonzero(polygon_mask(c, shape)) for _, _, c in true_units]
+    pairs, iou = match_units(pred_cells, true_cells, iou_min)
     to_true = {pred_units[i][0]: true_units[j][0] for i, j in pairs}
     match_iou = {pred_units[i][0]: float(iou[i, j]) for i, j in pairs}
     n_match = len(pairs)
