@@ -3,7 +3,6 @@
 import copy
 import math
 
-import numpy as np
 import pytest
 
 from semmap_pp.errors import MapError
