@@ -181,6 +181,8 @@ def walk(node):
 
 
 def _loc(node) -> tuple[int, int]:
+    while "location" not in node.keys():  # e.g. SymbolicAtom: its term carries the location
+        node = getattr(node, node.child_keys[0])
     return node.location.begin.line, node.location.begin.column
 
 

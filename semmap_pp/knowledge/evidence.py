@@ -144,7 +144,8 @@ def evidence_to_facts(ev: Evidence) -> str:
 
     Examples
     --------
-    >>> print(evidence_to_facts(Evidence.build([1, 2], rolike={1}, halike={2: 0.25}, adj=[(1, 2)])))
+    >>> ev = Evidence.build([1, 2], rolike={1}, halike={2: 0.25}, adj=[(1, 2)])
+    >>> print(evidence_to_facts(ev), end="")
     unit(1).
     unit(2).
     rolike(1).
