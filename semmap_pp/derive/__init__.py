@@ -1,0 +1,1 @@
+"""Derived elements of a world on the lattice map: cell states, doors, objects, adjacency, unexplored areas."""

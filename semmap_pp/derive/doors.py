@@ -1,0 +1,125 @@
+"""Doors: runs of free cells on the wall two adjacent units share (paper Sec. III-B, DESIGN.md).
+
+For two units ``p`` and ``q`` the *connecting wall* is the strip between their facing wall bands:
+when they sit side by side along the columns (their column gap exceeds their row gap) it is the
+columns from the inner edge of the left unit's right band to the inner edge of the right unit's
+left band, over the rows both interiors share; likewise with rows and columns swapped. A line of
+the strip across the wall is *open* when every cell on it is input-free. A door is a maximal run
+of open lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an open passage
+(the two units are one space), a shorter one a gap in a noisy wall.
+
+Examples
+--------
+>>> import numpy as np
+>>> from semmap_pp.model import load_model
+>>> cells = load_model().cells(0.05)       # wall 2 cells, doors 12..50 cells
+>>> free = np.zeros((60, 80), np.uint8)    # all free ...
+>>> free[:, 38:42] = 2                     # ... but a wall at columns 38..41
+>>> free[20:36, 38:42] = 0                 # with a 16-cell doorway
+>>> [d.box for d in doors_between(free, (0, 0, 60, 40), (0, 40, 60, 80), cells)]
+[(20, 38, 36, 42)]
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from semmap_pp.cells import FREE
+
+
+class Door(NamedTuple):
+    """A door between units (slots) ``p`` and ``q``.
+
+    ``box`` is the lattice box ``(r0, c0, r1, c1)`` of its cells (half-open); ``vertical`` is True
+    when the wall runs along the rows (the units sit side by side along the columns);
+    ``width`` is the door's width in cells.
+    """
+
+    p: int
+    q: int
+    box: tuple
+    vertical: bool
+    width: int
+
+
+def connecting_wall(rp, rq, wall: int):
+    """The connecting-wall strip of two rectangles: ``(box, vertical)`` or ``None``.
+
+    The strip spans the facing wall bands (and any gap between them) across the wall, and the
+    rows (columns) that both interiors share along it.
+    """
+    rp = [int(v) for v in rp]
+    rq = [int(v) for v in rq]
+    col_gap = max(rp[1], rq[1]) - min(rp[3], rq[3])
+    row_gap = max(rp[0], rq[0]) - min(rp[2], rq[2])
+    vertical = col_gap >= row_gap
+    a, b = (1, 0) if vertical else (0, 1)  # a: axis across the wall, b: axis along it
+    left, right = (rp, rq) if rp[a] <= rq[a] else (rq, rp)
+    lo = min(left[a + 2] - wall, right[a])
+    hi = max(left[a + 2], right[a] + wall)
+    s0 = max(rp[b], rq[b]) + wall
+    s1 = min(rp[b + 2], rq[b + 2]) - wall
+    if s1 <= s0 or hi <= lo:
+        return None
+    box = (s0, lo, s1, hi) if vertical else (lo, s0, hi, s1)
+    return box, vertical
+
+
+def open_runs(line_open: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal runs ``[start, stop)`` of True in a 1-D boolean array.
+
+    >>> open_runs(np.array([0, 1, 1, 0, 1], bool))
+    [(1, 3), (4, 5)]
+    """
+    x = np.concatenate([[False], np.asarray(line_open, bool), [False]]).astype(np.int8)
+    d = np.diff(x)
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) -> list[Door]:
+    """Doors on the connecting wall of units ``p`` (rectangle ``rp``) and ``q`` (``rq``).
+
+    Parameters
+    ----------
+    classes : (H', W') uint8
+        Lattice input classes.
+    rp, rq : (r0, c0, r1, c1)
+    cells : CellParams
+        Wall thickness and door width limits in cells.
+    """
+    cw = connecting_wall(rp, rq, cells.wall)
+    if cw is None:
+        return []
+    (r0, c0, r1, c1), vertical = cw
+    H, W = classes.shape
+    a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
+    if a0 >= a1 or b0 >= b1:
+        return []
+    strip = classes[a0:a1, b0:b1] == FREE
+    full_across = (b1 - b0) == (c1 - c0) if vertical else (a1 - a0) == (r1 - r0)
+    if not full_across:  # the wall leaves the map: nothing can be seen through it
+        return []
+    line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
+    doors = []
+    for s, e in open_runs(line_open):
+        width = e - s
+        if cells.door_min <= width <= cells.door_max:
+            box = (a0 + s, b0, a0 + e, b1) if vertical else (a0, b0 + s, a1, b0 + e)
+            doors.append(Door(int(p), int(q), tuple(int(v) for v in box), bool(vertical), width))
+    return doors
+
+
+def find_doors(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
+               slots=None) -> list[Door]:
+    """All doors of a world: :func:`doors_between` for every adjacent pair.
+
+    ``rects`` (n, 4) and ``adj`` (n, n) of the active units; ``slots`` their ids (default 0..n-1).
+    """
+    rects = np.asarray(rects).reshape(-1, 4)
+    slots = np.arange(len(rects)) if slots is None else np.asarray(slots)
+    out = []
+    for i, j in zip(*np.nonzero(np.triu(np.asarray(adj, bool), 1))):
+        out += doors_between(classes, rects[i], rects[j], cells, int(slots[i]), int(slots[j]))
+    return out

@@ -1,0 +1,198 @@
+"""Evidence for the knowledge engine (paper Table 1) and the type/SaLe provider protocol.
+
+Geometry evidence comes from the paper's Table 4 classifier: a unit whose *size* is big is
+hall-like; otherwise a big length-to-width *ratio* makes it corridor-like and a small one room-like.
+Thresholds and the size measure are in the model file (``[evidence]``). Near a threshold the class
+is uncertain, so each unit also gets probabilities
+
+``P(big size) = logistic((size - hall_min_size) / size_scale)``,
+``P(big ratio) = logistic((ratio - corridor_min_ratio) / ratio_scale)``,
+``P(HaLi) = P(big size)``, ``P(CoLi) = (1 - P(big size)) P(big ratio)``, ``P(RoLi)`` the rest;
+
+a unit whose thresholded class has probability below ``hard_above`` is passed as soft evidence
+(:attr:`Evidence.soft`) instead of a hard fact. ``MulDoor(u)`` holds when ``u`` has at least
+``multiple_doors`` doors; ``Adj`` is the adjacency of :mod:`semmap_pp.derive.adjacency`.
+
+Unit ids are the world's slot indices.
+
+Examples
+--------
+>>> import numpy as np
+>>> from semmap_pp.model import load_model
+>>> p = load_model().evidence
+>>> rects = np.array([[0, 0, 80, 100], [0, 0, 40, 400], [0, 0, 200, 240]])  # 0.05 m cells
+>>> [GEOMETRY_CLASSES[g] for g in geometry_class(rects, 0.05, p)]
+['rolike', 'colike', 'halike']
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Protocol
+
+import numpy as np
+
+from semmap_pp.cells import UNIT_TYPES
+
+GEOMETRY_CLASSES = ("rolike", "colike", "halike")
+ROLIKE, COLIKE, HALIKE = 0, 1, 2
+# The type each geometry class implies when no knowledge is used (RoLi->room, CoLi->corridor,
+# HaLi->hall): the fixed provider's rule, documented in docs/model.md.
+GEOMETRY_TYPE = np.array([UNIT_TYPES.index("room"), UNIT_TYPES.index("corridor"),
+                          UNIT_TYPES.index("hall")], dtype=np.int8)
+
+
+def _size_ratio(rects: np.ndarray, resolution: float, params):
+    r = np.asarray(rects, dtype=np.float64).reshape(-1, 4)
+    h = (r[:, 2] - r[:, 0]) * resolution
+    w = (r[:, 3] - r[:, 1]) * resolution
+    short, long_ = np.minimum(h, w), np.maximum(h, w)
+    size = {"short_side": short, "long_side": long_, "area": h * w}[params.size_measure]
+    ratio = long_ / np.maximum(short, 1e-12)
+    return size, ratio
+
+
+def geometry_class(rects: np.ndarray, resolution: float, params) -> np.ndarray:
+    """Table 4 classes (ROLIKE / COLIKE / HALIKE) of rectangles (n, 4) in cells at ``resolution``."""
+    size, ratio = _size_ratio(rects, resolution, params)
+    return np.where(size >= params.hall_min_size, HALIKE,
+                    np.where(ratio >= params.corridor_min_ratio, COLIKE, ROLIKE)).astype(np.int8)
+
+
+def geometry_probabilities(rects: np.ndarray, resolution: float, params) -> np.ndarray:
+    """(n, 3) probabilities of RoLi, CoLi, HaLi (logistic in the distance to each threshold)."""
+    size, ratio = _size_ratio(rects, resolution, params)
+    big = 1.0 / (1.0 + np.exp(-(size - params.hall_min_size) / params.size_scale))
+    long_ = 1.0 / (1.0 + np.exp(-(ratio - params.corridor_min_ratio) / params.ratio_scale))
+    return np.stack([(1 - big) * (1 - long_), (1 - big) * long_, big], axis=1)
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """The evidence of one world: hashable, so results can be cached by it.
+
+    Attributes
+    ----------
+    units : tuple of int
+        Unit ids (slot indices), sorted.
+    geometry : tuple of (unit, class name)
+        The thresholded Table 4 class of every unit.
+    soft : tuple of (unit, (p_rolike, p_colike, p_halike))
+        Units near a class boundary; they carry no hard geometry fact.
+    muldoor : frozenset of int
+        Units with multiple doors (empty when doors were not computed: see ``with_doors``).
+    adj : frozenset of (p, q), p < q
+        Adjacent pairs.
+    with_doors : bool
+        Whether doors were detected (MulDoor is meaningful).
+    """
+
+    units: tuple
+    geometry: tuple
+    soft: tuple = ()
+    muldoor: frozenset = field(default_factory=frozenset)
+    adj: frozenset = field(default_factory=frozenset)
+    with_doors: bool = True
+
+    def hard_geometry(self) -> dict:
+        """``{unit: class name}`` for units with hard geometry evidence."""
+        softs = {u for u, _ in self.soft}
+        return {u: g for u, g in self.geometry if u not in softs}
+
+    def facts(self) -> str:
+        """Hard evidence as clingo facts (``unit/1, rolike/1, colike/1, halike/1, muldoor/1,
+        adj/2``; adj in both directions). Soft evidence is in :attr:`soft`, for the engine."""
+        lines = [f"unit({u})." for u in self.units]
+        lines += [f"{g}({u})." for u, g in sorted(self.hard_geometry().items())]
+        lines += [f"muldoor({u})." for u in sorted(self.muldoor)]
+        for p, q in sorted(self.adj):
+            lines += [f"adj({p},{q}).", f"adj({q},{p})."]
+        return "\n".join(lines) + ("\n" if lines else "")
+
+    def soft_log_odds(self) -> dict:
+        """``{(class name, unit): log(p / (1 - p))}``: MLN weights of the soft geometry facts."""
+        out = {}
+        for u, probs in self.soft:
+            for g, p in zip(GEOMETRY_CLASSES, probs):
+                p = min(max(float(p), 1e-12), 1 - 1e-12)
+                out[(g, u)] = float(np.log(p / (1 - p)))
+        return out
+
+
+def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float, params,
+                   door_counts: np.ndarray | None = None) -> Evidence:
+    """Evidence of the units ``units`` with rectangles ``rects`` (n, 4) and adjacency (n, n).
+
+    Parameters
+    ----------
+    units : sequence of int
+        Unit ids (slot indices), one per row of ``rects``.
+    rects : (n, 4) int
+    adj : (n, n) bool
+    resolution : float
+        Metres per cell.
+    params : EvidenceParams
+    door_counts : (n,) int, optional
+        Doors per unit; ``None`` when doors were not detected (no MulDoor evidence).
+    """
+    units = [int(u) for u in units]
+    cls = geometry_class(rects, resolution, params)
+    probs = geometry_probabilities(rects, resolution, params)
+    geometry = tuple((u, GEOMETRY_CLASSES[c]) for u, c in zip(units, cls))
+    soft = tuple((u, tuple(round(float(v), 6) for v in pr))
+                 for u, c, pr in zip(units, cls, probs) if pr[c] < params.hard_above)
+    muldoor = frozenset()
+    if door_counts is not None:
+        muldoor = frozenset(u for u, k in zip(units, door_counts) if k >= params.multiple_doors)
+    iu, ju = np.nonzero(np.triu(np.asarray(adj, dtype=bool), 1))
+    pairs = frozenset((min(units[i], units[j]), max(units[i], units[j])) for i, j in zip(iu, ju))
+    order = np.argsort(units)
+    return Evidence(units=tuple(sorted(units)), geometry=tuple(geometry[i] for i in order),
+                    soft=tuple(sorted(soft)), muldoor=muldoor, adj=pairs,
+                    with_doors=door_counts is not None)
+
+
+class Result(Protocol):
+    """What a provider returns (the knowledge engine's result satisfies this)."""
+
+    types: Mapping[int, np.ndarray]        # unit -> (4,) marginals over UNIT_TYPES
+    sale: Mapping[tuple, float]            # (p, q), p < q -> P(SaLe(p, q))
+    map_types: Mapping[int, str]           # unit -> MAP type name
+
+
+class Provider(Protocol):
+    """Anything that turns evidence into type and SaLe marginals: ``infer(evidence) -> Result``."""
+
+    def infer(self, evidence: Evidence) -> Result: ...
+
+
+@dataclass(frozen=True)
+class FixedResult:
+    types: dict
+    sale: dict
+    map_types: dict
+
+
+class FixedProvider:
+    """Types from the geometry class alone (RoLi->room, CoLi->corridor, HaLi->hall) and P(SaLe)
+    from the model's fixed table per type pair. Serves before knowledge is switched on.
+
+    It needs no doors (``needs_doors = False``), so the sampler skips door detection.
+    """
+
+    needs_doors = False
+
+    def __init__(self, fixed_sale: np.ndarray):
+        self.fixed_sale = np.asarray(fixed_sale, dtype=np.float64)
+
+    def types_of(self, geometry: np.ndarray) -> np.ndarray:
+        """Type indices of units with geometry classes ``geometry`` (vectorised fast path)."""
+        return GEOMETRY_TYPE[np.asarray(geometry, dtype=np.intp)]
+
+    def infer(self, evidence: Evidence) -> FixedResult:
+        eye = np.eye(len(UNIT_TYPES))
+        t = {u: int(GEOMETRY_TYPE[GEOMETRY_CLASSES.index(g)]) for u, g in evidence.geometry}
+        return FixedResult(
+            types={u: eye[k].copy() for u, k in t.items()},
+            sale={(p, q): float(self.fixed_sale[t[p], t[q]]) for p, q in sorted(evidence.adj)},
+            map_types={u: UNIT_TYPES[k] for u, k in t.items()})

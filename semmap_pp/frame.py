@@ -1,0 +1,257 @@
+"""The building lattice: the map's dominant orientation θ0 and the map resampled onto a grid rotated
+by θ0 (see docs/architecture.md, "The building lattice").
+
+Coordinates follow :mod:`semmap_pp.grid`: integer (fractional) cell indices are cell *centres*, so
+image pixel ``(x_px, y_px) = (col, row)`` is the centre of that pixel and a lattice rectangle
+``(r0, c0, r1, c1)`` spans the continuous box ``[r0 - 0.5, r1 - 0.5] x [c0 - 0.5, c1 - 0.5]``.
+A lattice point maps to the image by ``p_img = R(θ0) (p_lat - o_lat) + o_img`` on ``[x, y]``
+pairs, with ``o_lat`` and ``o_img`` the centres of the two grids; the lattice's column axis runs
+along the image direction ``(cos θ0, sin θ0)`` (y pointing down the image).
+
+Examples
+--------
+>>> import numpy as np
+>>> from semmap_pp.model import load_model
+>>> classes = np.zeros((5, 8), np.uint8)
+>>> f = build_frame_from_classes(classes, 0.05, load_model())
+>>> f.theta, f.classes.shape, bool(f.outside.any())
+(0.0, (5, 8), False)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from semmap_pp.cells import OCCUPIED, UNKNOWN
+from semmap_pp.model import CellParams, LatticeParams, Model
+
+
+def _soft_hist(u: np.ndarray) -> np.ndarray:
+    """Histogram of fractional positions with linear interpolation between the two nearest bins."""
+    f = np.floor(u)
+    i = (f - f.min()).astype(np.intp)
+    t = u - f
+    return np.bincount(i, weights=1.0 - t, minlength=i.max() + 2) + np.bincount(
+        i + 1, weights=t, minlength=i.max() + 2)
+
+
+def projection_sharpness(x: np.ndarray, y: np.ndarray, theta: float, bin_cells: float = 1.0) -> float:
+    """Sum of squared row and column profiles of points ``(x, y)`` on a lattice rotated by ``theta``.
+
+    Walls are long straight runs, so the angle that stacks the occupied cells into the fewest
+    lattice rows and columns is the wall direction. Linear-interpolated binning (bins of
+    ``bin_cells``) makes the score smooth in ``theta``.
+    """
+    c, s = math.cos(theta), math.sin(theta)
+    hu = _soft_hist((c * x + s * y) / bin_cells)
+    hv = _soft_hist((-s * x + c * y) / bin_cells)
+    return float(np.dot(hu, hu) + np.dot(hv, hv))
+
+
+def _best(x, y, angles, bin_cells):
+    scores = np.array([projection_sharpness(x, y, a, bin_cells) for a in angles])
+    i = int(np.argmax(scores))
+    return i, scores
+
+
+def estimate_orientation(classes: np.ndarray, params: LatticeParams) -> float:
+    """Dominant wall orientation θ0 in radians, in (-π/4, π/4].
+
+    Maximises :func:`projection_sharpness` of the occupied cells: a coarse scan over 90° in steps
+    of ``angle_bin_deg`` (bins of 2 cells, so a peak between two steps is not missed), a fine scan
+    of ±``refine_window_deg`` around the best coarse angle in tenth steps (1-cell bins), then a
+    parabola through the best three fine angles. (A histogram of gradient orientations, tried
+    first, is biased towards the axes on aliased walls: see docs/model.md.)
+
+    Parameters
+    ----------
+    classes : (H, W) uint8
+        Input classes (:mod:`semmap_pp.cells` codes).
+    params : LatticeParams
+        Step and refinement window from the model file.
+
+    Returns
+    -------
+    float
+        θ0; 0.0 when the map holds fewer than two occupied cells.
+    """
+    y, x = np.nonzero(np.asarray(classes) == OCCUPIED)
+    if x.size < 2:
+        return 0.0
+    # integer centring: at theta = 0 every cell sits on a bin centre (no interpolation spread)
+    x = (x - round(float(x.mean()))).astype(np.float64)
+    y = (y - round(float(y.mean()))).astype(np.float64)
+    period = math.pi / 2
+    step = math.radians(params.angle_bin_deg)
+    coarse = -period / 2 + step * np.arange(int(math.ceil(period / step)))
+    i, _ = _best(x, y, coarse, 2.0)
+    fine_step = step / 10.0
+    half = int(math.ceil(math.radians(params.refine_window_deg) / fine_step))
+    fine = coarse[i] + fine_step * np.arange(-half, half + 1)
+    j, scores = _best(x, y, fine, 1.0)
+    theta = float(fine[j])
+    if 0 < j < len(fine) - 1:
+        a, b, c = scores[j - 1], scores[j], scores[j + 1]
+        den = a - 2 * b + c
+        if den < 0:
+            theta += 0.5 * fine_step * (a - c) / den
+    theta = math.remainder(theta, period)  # into [-45°, 45°]
+    if theta <= -period / 2:
+        theta += period
+    return float(theta)
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """The map resampled onto the building lattice.
+
+    Attributes
+    ----------
+    theta : float
+        θ0 in radians (0.0 for the identity frame).
+    classes : (H', W') uint8
+        Lattice classes; cells outside the input image are UNKNOWN.
+    outside : (H', W') bool
+        Lattice cells whose centre falls outside the input image.
+    image_shape : (H, W)
+        Shape of the input image.
+    resolution : float
+        Metres per cell (the same on the lattice).
+    cells : CellParams
+        The model's lengths in cells at this resolution.
+    origin : (x, y, yaw)
+        The input map's origin (ROS map_server), for metres.
+    """
+
+    theta: float
+    classes: np.ndarray
+    outside: np.ndarray
+    image_shape: tuple[int, int]
+    resolution: float
+    cells: CellParams
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.classes.shape
+
+    def _centres(self):
+        h, w = self.image_shape
+        hl, wl = self.classes.shape
+        return (w - 1) / 2.0, (h - 1) / 2.0, (wl - 1) / 2.0, (hl - 1) / 2.0
+
+    def lattice_to_image(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous image coordinates ``(x_px, y_px)`` of (fractional) lattice ``(rows, cols)``."""
+        oxi, oyi, oxl, oyl = self._centres()
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        u = np.asarray(cols, dtype=np.float64) - oxl
+        v = np.asarray(rows, dtype=np.float64) - oyl
+        return c * u - s * v + oxi, s * u + c * v + oyi
+
+    def image_to_lattice(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional lattice ``(rows, cols)`` of image coordinates; inverse of lattice_to_image."""
+        oxi, oyi, oxl, oyl = self._centres()
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        u = np.asarray(x_px, dtype=np.float64) - oxi
+        v = np.asarray(y_px, dtype=np.float64) - oyi
+        return -s * u + c * v + oyl, c * u + s * v + oxl
+
+    def rect_vertices_px(self, rect) -> np.ndarray:
+        """The four ``[x, y]`` corners of a lattice rectangle in the input image frame.
+
+        Order: (r0, c0), (r0, c1), (r1, c1), (r1, c0) corners of the half-open cell box.
+        """
+        r0, c0, r1, c1 = (float(v) for v in rect)
+        rows = np.array([r0, r0, r1, r1]) - 0.5
+        cols = np.array([c0, c1, c1, c0]) - 0.5
+        x, y = self.lattice_to_image(rows, cols)
+        return np.stack([x, y], axis=1)
+
+    def image_to_metres(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
+        """Map-frame metres of image coordinates (ROS map_server, as :mod:`semmap_pp.grid`)."""
+        h = self.image_shape[0]
+        u = (np.asarray(x_px, dtype=np.float64) + 0.5) * self.resolution
+        v = (h - np.asarray(y_px, dtype=np.float64) - 0.5) * self.resolution
+        ox, oy, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        return ox + c * u - s * v, oy + s * u + c * v
+
+    def rect_vertices_m(self, rect) -> np.ndarray:
+        """The four corners of :meth:`rect_vertices_px` in map-frame metres."""
+        v = self.rect_vertices_px(rect)
+        x, y = self.image_to_metres(v[:, 0], v[:, 1])
+        return np.stack([x, y], axis=1)
+
+    def to_image(self, lattice_array: np.ndarray, fill=0) -> np.ndarray:
+        """Resample a lattice array into the input image frame (nearest neighbour).
+
+        Image pixels whose centre falls outside the lattice take ``fill``.
+        """
+        a = np.asarray(lattice_array)
+        if a.shape[:2] != self.classes.shape:
+            raise ValueError(f"expected a lattice array of shape {self.classes.shape}, got {a.shape}")
+        if self.theta == 0.0:
+            return a.copy()
+        h, w = self.image_shape
+        y, x = np.mgrid[0:h, 0:w]
+        rows, cols = self.image_to_lattice(x, y)
+        ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
+        hl, wl = a.shape[:2]
+        ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
+        out = np.full((h, w) + a.shape[2:], fill, dtype=a.dtype)
+        out[ok] = a[ri[ok], ci[ok]]
+        return out
+
+
+def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Model,
+                             origin=(0.0, 0.0, 0.0), theta: float | None = None) -> Frame:
+    """Estimate θ0 (unless given) and resample ``classes`` onto the lattice.
+
+    Parameters
+    ----------
+    classes : (H, W) uint8
+        Input classes.
+    resolution : float
+        Metres per cell.
+    model : Model
+        The model (lattice parameters, lengths).
+    origin : (x, y, yaw)
+        Map origin, for metres.
+    theta : float, optional
+        Use this orientation instead of estimating one (radians).
+    """
+    classes = np.asarray(classes, dtype=np.uint8)
+    if theta is None:
+        theta = estimate_orientation(classes, model.lattice)
+    if abs(math.degrees(theta)) < model.lattice.identity_below_deg:
+        theta = 0.0
+    h, w = classes.shape
+    cells = model.cells(resolution)
+    origin = tuple(float(v) for v in origin)
+    if theta == 0.0:
+        lat = classes.copy()
+        outside = np.zeros(classes.shape, dtype=bool)
+    else:
+        c, s = abs(math.cos(theta)), abs(math.sin(theta))
+        wl = int(math.ceil(w * c + h * s - 1e-9))
+        hl = int(math.ceil(w * s + h * c - 1e-9))
+        probe = Frame(theta, np.zeros((hl, wl), np.uint8), np.zeros((hl, wl), bool), (h, w),
+                      float(resolution), cells, origin)
+        rows, cols = np.mgrid[0:hl, 0:wl]
+        x, y = probe.lattice_to_image(rows, cols)
+        xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
+        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        lat = np.full((hl, wl), UNKNOWN, dtype=np.uint8)
+        lat[inside] = classes[yi[inside], xi[inside]]
+        outside = ~inside
+    lat.setflags(write=False)
+    outside.setflags(write=False)
+    return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin)
+
+
+def build_frame(grid, model: Model, theta: float | None = None) -> Frame:
+    """The building lattice of an :class:`~semmap_pp.grid.OccupancyGrid` (the module contract)."""
+    return build_frame_from_classes(grid.classes, grid.resolution, model, origin=grid.origin,
+                                    theta=theta)

@@ -1,0 +1,305 @@
+"""The model file (``models/*.toml``): every number of the semantic map model, validated.
+
+:func:`load_model` reads a TOML file into frozen dataclasses. Every problem (a missing key, a wrong
+type, a probability outside [0, 1], a sensor table row that does not sum to 1, ...) raises
+:class:`~semmap_pp.errors.ModelError` naming the file and the dotted key. Lengths are stored in
+metres; :meth:`Model.cells` converts them to lattice cells for one map resolution.
+
+Examples
+--------
+>>> m = load_model()
+>>> m.sensor.psi
+0.5
+>>> c = m.cells(0.05)
+>>> c.wall, c.object_max_extent
+(2, 30)
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from semmap_pp.cells import UNIT_TYPES, WORLD_STATES
+from semmap_pp.errors import ModelError
+
+DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "models" / "default.toml"
+SIZE_MEASURES = ("short_side", "long_side", "area")
+N_PRIORS = ("poisson", "geometric")
+
+
+@dataclass(frozen=True)
+class LatticeParams:
+    identity_below_deg: float
+    angle_bin_deg: float
+    refine_window_deg: float
+
+
+@dataclass(frozen=True)
+class WorldParams:
+    wall_thickness_m: float
+    object_max_extent_m: float
+    door_min_m: float
+    door_max_m: float
+    min_unit_side_m: float
+    max_unit_side_m: float
+    adjacency_dilation_m: float
+    unexplored_min_area_m2: float
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """Semantic sensor model.
+
+    ``corridor`` and ``other`` are (4, 3) arrays ``p(input class | world state)``: rows in the
+    order of :data:`semmap_pp.cells.WORLD_STATES`, columns in the order of
+    :data:`semmap_pp.cells.INPUT_CLASSES`. ``table(corridor)`` gives the paper's 3x4 layout.
+    """
+
+    psi: float
+    corridor: np.ndarray
+    other: np.ndarray
+
+    def table(self, corridor: bool) -> np.ndarray:
+        """The 3x4 look-up table (input class x world state) of the paper."""
+        return (self.corridor if corridor else self.other).T
+
+
+@dataclass(frozen=True)
+class EvidenceParams:
+    size_measure: str
+    hall_min_size: float
+    corridor_min_ratio: float
+    size_scale: float
+    ratio_scale: float
+    hard_above: float
+    multiple_doors: int
+
+
+@dataclass(frozen=True)
+class PriorParams:
+    n_prior: str
+    n_mean: float
+    k_max: int
+    sale_sigma_m: float
+    sale_threshold: float
+
+
+@dataclass(frozen=True)
+class KnowledgeParams:
+    coverage_threshold: float
+    fixed_sale: np.ndarray  # (4, 4) symmetric, order of UNIT_TYPES
+
+
+@dataclass(frozen=True)
+class EvaluateParams:
+    roi_closing_m: float
+
+
+@dataclass(frozen=True)
+class CellParams:
+    """The model's lengths in lattice cells for one resolution (see :meth:`Model.cells`)."""
+
+    resolution: float
+    wall: int
+    object_max_extent: int
+    door_min: int
+    door_max: int
+    min_side: int
+    max_side: int
+    adjacency_dilation: int
+    unexplored_min_area: int
+
+
+@dataclass(frozen=True)
+class Model:
+    path: Path
+    lattice: LatticeParams
+    world: WorldParams
+    sensor: SensorParams
+    evidence: EvidenceParams
+    prior: PriorParams
+    knowledge: KnowledgeParams
+    evaluate: EvaluateParams
+
+    def cells(self, resolution: float) -> CellParams:
+        """Convert the model's lengths to whole lattice cells at ``resolution`` metres per cell.
+
+        Rounded to the nearest cell; the wall band is at least 1 cell, a unit side at least
+        ``2 * wall + 1`` cells (so every unit has an interior).
+        """
+        w = self.world
+
+        def n(m: float) -> int:
+            return int(round(m / resolution))
+
+        wall = max(1, n(w.wall_thickness_m))
+        min_side = max(2 * wall + 1, n(w.min_unit_side_m))
+        return CellParams(
+            resolution=float(resolution), wall=wall,
+            object_max_extent=max(1, n(w.object_max_extent_m)),
+            door_min=max(1, n(w.door_min_m)), door_max=max(1, n(w.door_max_m)),
+            min_side=min_side, max_side=max(min_side, n(w.max_unit_side_m)),
+            adjacency_dilation=max(1, n(w.adjacency_dilation_m)),
+            unexplored_min_area=max(1, int(round(w.unexplored_min_area_m2 / resolution ** 2))))
+
+
+class _Reader:
+    """Typed access to one TOML document with errors naming the file and dotted key."""
+
+    def __init__(self, path: Path, doc: dict):
+        self.path, self.doc = path, doc
+
+    def error(self, key: str, problem: str) -> ModelError:
+        return ModelError(self.path, f"{key}: {problem}")
+
+    def raw(self, key: str):
+        node = self.doc
+        for part in key.split("."):
+            if not isinstance(node, dict) or part not in node:
+                raise self.error(key, "missing")
+            node = node[part]
+        return node
+
+    def number(self, key: str, *, lo: float | None = None, hi: float | None = None,
+               positive: bool = False) -> float:
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.error(key, f"expected a number, got {type(v).__name__}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.error(key, "must be finite")
+        if positive and v <= 0:
+            raise self.error(key, f"must be > 0, got {v}")
+        if lo is not None and v < lo:
+            raise self.error(key, f"must be >= {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise self.error(key, f"must be <= {hi}, got {v}")
+        return v
+
+    def integer(self, key: str, *, lo: int) -> int:
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(key, f"expected an integer, got {type(v).__name__}")
+        if v < lo:
+            raise self.error(key, f"must be >= {lo}, got {v}")
+        return int(v)
+
+    def choice(self, key: str, options: tuple[str, ...]) -> str:
+        v = self.raw(key)
+        if not isinstance(v, str) or v not in options:
+            raise self.error(key, f"must be one of {', '.join(options)}, got {v!r}")
+        return v
+
+    def probabilities(self, key: str, n: int) -> np.ndarray:
+        v = self.raw(key)
+        if (not isinstance(v, list) or len(v) != n
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
+            raise self.error(key, f"expected a list of {n} numbers")
+        a = np.array(v, dtype=np.float64)
+        if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1):
+            raise self.error(key, "probabilities must lie in [0, 1]")
+        return a
+
+    def sensor_table(self, key: str) -> np.ndarray:
+        rows = []
+        for state in WORLD_STATES:
+            row = self.probabilities(f"{key}.{state}", 3)
+            if abs(row.sum() - 1.0) > 1e-9:
+                raise self.error(f"{key}.{state}", f"row must sum to 1, sums to {row.sum():.6g}")
+            if np.any(row <= 0):
+                raise self.error(f"{key}.{state}", "every probability must be > 0 (log space)")
+            rows.append(row)
+        table = np.array(rows)
+        table.setflags(write=False)
+        return table
+
+
+def load_model(path: str | Path | None = None) -> Model:
+    """Read and validate a model file; ``None`` reads ``models/default.toml`` of the repository.
+
+    Raises
+    ------
+    ModelError
+        The file cannot be read, is not TOML, or a key is missing or invalid.
+    """
+    path = DEFAULT_MODEL if path is None else Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ModelError(path, f"cannot read model file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise ModelError(path, "not a UTF-8 text file") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelError(path, f"not valid TOML: {exc}") from None
+    r = _Reader(path, doc)
+
+    lattice = LatticeParams(
+        identity_below_deg=r.number("lattice.identity_below_deg", lo=0.0, hi=45.0),
+        angle_bin_deg=r.number("lattice.angle_bin_deg", positive=True, hi=15.0),
+        refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0))
+    world = WorldParams(**{k: r.number(f"world.{k}", positive=True) for k in (
+        "wall_thickness_m", "object_max_extent_m", "door_min_m", "door_max_m", "min_unit_side_m",
+        "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2")})
+    if world.door_max_m < world.door_min_m:
+        raise r.error("world.door_max_m", "must be >= world.door_min_m")
+    if world.max_unit_side_m < world.min_unit_side_m:
+        raise r.error("world.max_unit_side_m", "must be >= world.min_unit_side_m")
+
+    corridor, other = r.sensor_table("sensor.corridor"), r.sensor_table("sensor.other")
+    unknown = WORLD_STATES.index("unknown")
+    if not np.allclose(corridor[unknown], other[unknown], rtol=0, atol=1e-12):
+        raise r.error("sensor.corridor.unknown", "must equal sensor.other.unknown "
+                      "(cells outside every unit have no type)")
+    psi = r.number("sensor.psi", positive=True)
+    if psi >= 1:
+        raise r.error("sensor.psi", f"must lie in (0, 1), got {psi}")
+    sensor = SensorParams(psi=psi, corridor=corridor, other=other)
+
+    evidence = EvidenceParams(
+        size_measure=r.choice("evidence.size_measure", SIZE_MEASURES),
+        hall_min_size=r.number("evidence.hall_min_size", positive=True),
+        corridor_min_ratio=r.number("evidence.corridor_min_ratio", lo=1.0),
+        size_scale=r.number("evidence.size_scale", positive=True),
+        ratio_scale=r.number("evidence.ratio_scale", positive=True),
+        hard_above=r.number("evidence.hard_above", lo=0.5, hi=1.0),
+        multiple_doors=r.integer("evidence.multiple_doors", lo=1))
+
+    prior = PriorParams(
+        n_prior=r.choice("prior.n_prior", N_PRIORS),
+        n_mean=r.number("prior.n_mean", positive=True),
+        k_max=r.integer("prior.k_max", lo=1),
+        sale_sigma_m=r.number("prior.sale_sigma_m", positive=True),
+        sale_threshold=r.number("prior.sale_threshold", lo=0.0, hi=1.0))
+
+    n = len(UNIT_TYPES)
+    raw = r.raw("knowledge.fixed_sale")
+    if not isinstance(raw, list) or len(raw) != n:
+        raise r.error("knowledge.fixed_sale", f"expected {n} rows of {n} probabilities")
+    fixed = np.array([_row(r, "knowledge.fixed_sale", raw, i, n) for i in range(n)])
+    if not np.allclose(fixed, fixed.T):
+        raise r.error("knowledge.fixed_sale", "must be symmetric")
+    fixed.setflags(write=False)
+    knowledge = KnowledgeParams(
+        coverage_threshold=r.number("knowledge.coverage_threshold", lo=0.0, hi=1.0),
+        fixed_sale=fixed)
+    evaluate = EvaluateParams(roi_closing_m=r.number("evaluate.roi_closing_m", lo=0.0))
+    return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
+                 prior=prior, knowledge=knowledge, evaluate=evaluate)
+
+
+def _row(r: _Reader, key: str, raw: list, i: int, n: int) -> np.ndarray:
+    row = raw[i]
+    if (not isinstance(row, list) or len(row) != n
+            or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in row)):
+        raise r.error(f"{key}[{i}]", f"expected a list of {n} numbers")
+    a = np.array(row, dtype=np.float64)
+    if np.any(a < 0) or np.any(a > 1) or not np.all(np.isfinite(a)):
+        raise r.error(f"{key}[{i}]", "probabilities must lie in [0, 1]")
+    return a

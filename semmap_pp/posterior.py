@@ -1,0 +1,261 @@
+"""The target the sampler sees: likelihood + prior + types from knowledge, full and incremental.
+
+Types are a deterministic function of the geometry: the MAP types of the provider given the
+evidence of the world (:mod:`semmap_pp.evidence`). Before knowledge is switched on (or without a
+knowledge engine) the provider is :class:`~semmap_pp.evidence.FixedProvider` (types from the
+geometry class alone, P(SaLe) from the model's fixed table); :attr:`Posterior.knowledge_on` switches
+to the engine between sampling phases, once :meth:`Tracker.coverage` reaches the model's
+``coverage_threshold``.
+
+Examples
+--------
+>>> import numpy as np
+>>> from semmap_pp import world as W
+>>> from semmap_pp.model import load_model
+>>> from semmap_pp.frame import build_frame_from_classes
+>>> classes = np.full((40, 60), 1, np.uint8); classes[5:35, 5:55] = 0
+>>> post = Posterior(build_frame_from_classes(classes, 0.05, load_model()), load_model())
+>>> w = W.add(W.empty(8), 0, (5, 5, 35, 30))
+>>> tr = post.start(w)
+>>> prop = tr.propose(W.replace(tr.world, 0, (5, 5, 35, 55)), [0])
+>>> abs(prop.logp - post.evaluate(prop.world).total) < 1e-9
+True
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from semmap_pp import world as W
+from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.derive.adjacency import adjacency_rows
+from semmap_pp.evidence import FixedProvider, build_evidence, geometry_class
+from semmap_pp.likelihood import Change, CoverTracker, LikPatch, full_tallies, loglik_from_tallies, prepare
+from semmap_pp.prior import (log_p_n_table, log_p_rect_const, log_slots, rects_valid,
+                             sale_log_factor)
+
+CORRIDOR = UNIT_TYPES.index("corridor")
+
+
+class Terms(NamedTuple):
+    """A full evaluation: log-likelihood, log-prior, their sum, and the world with types."""
+
+    loglik: float
+    logprior: float
+    total: float
+    world: W.World
+
+
+@dataclass(frozen=True)
+class _Typing:
+    """Types, adjacency and SaLe marginals of one world (all slot-indexed, (K,) / (K, K))."""
+
+    world: W.World
+    geometry: np.ndarray
+    adj: np.ndarray
+    sale: np.ndarray
+
+
+class Posterior:
+    """``log p(W | M) + const`` for worlds on one map.
+
+    Parameters
+    ----------
+    frame : Frame
+        The building lattice of the map.
+    model : Model
+    knowledge : Provider, optional
+        The knowledge engine (``infer(evidence)``); used only while :attr:`knowledge_on`.
+    """
+
+    def __init__(self, frame, model, knowledge=None):
+        self.frame, self.model, self.knowledge = frame, model, knowledge
+        self.cells = frame.cells
+        self.data = prepare(frame, model)
+        self.fixed = FixedProvider(model.knowledge.fixed_sale)
+        self.knowledge_on = False
+        self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side)
+        self._log_pn: dict[int, np.ndarray] = {}
+        self._door_cache: dict = {}
+
+    # ------------------------------------------------------------------ pieces
+    @property
+    def provider(self):
+        """The provider in use: the knowledge engine when switched on, else the fixed one."""
+        if self.knowledge_on and self.knowledge is not None:
+            return self.knowledge
+        return self.fixed
+
+    def _log_pn_table(self, capacity: int) -> np.ndarray:
+        if capacity not in self._log_pn:
+            self._log_pn[capacity] = log_p_n_table(capacity, self.model.prior)
+        return self._log_pn[capacity]
+
+    def door_counts(self, rects: np.ndarray, adj: np.ndarray) -> np.ndarray:
+        """Doors of each unit (cached per pair of rectangles)."""
+        from semmap_pp.derive.doors import doors_between
+        n = len(rects)
+        counts = np.zeros(n, dtype=np.int64)
+        for p, q in zip(*np.nonzero(np.triu(adj, 1))):
+            key = (tuple(int(v) for v in rects[p]), tuple(int(v) for v in rects[q]))
+            k = self._door_cache.get(key)
+            if k is None:
+                if len(self._door_cache) > 200_000:
+                    self._door_cache.clear()
+                k = len(doors_between(self.frame.classes, rects[p], rects[q], self.cells))
+                self._door_cache[key] = k
+            counts[p] += k
+            counts[q] += k
+        return counts
+
+    def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
+        """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider."""
+        slots = W.active_slots(world)
+        types = np.full(world.capacity, W.NO_TYPE, dtype=np.int8)
+        sale = np.zeros((world.capacity, world.capacity))
+        provider = self.provider
+        if isinstance(provider, FixedProvider):
+            t = provider.types_of(geometry[slots])
+            types[slots] = t
+            sale[np.ix_(slots, slots)] = provider.fixed_sale[np.ix_(t, t)]
+            return types, sale
+        rects = world.rects[slots]
+        sub = adj[np.ix_(slots, slots)]
+        doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
+        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
+        result = provider.infer(ev)
+        for s in slots:
+            types[s] = UNIT_TYPES.index(result.map_types[int(s)])
+        for (p, q), v in result.sale.items():
+            sale[p, q] = sale[q, p] = v
+        return types, sale
+
+    def typing(self, world: W.World) -> _Typing:
+        """Geometry classes, adjacency, types and SaLe marginals of a world, from scratch."""
+        K = world.capacity
+        geometry = np.zeros(K, dtype=np.int8)
+        adj = np.zeros((K, K), dtype=bool)
+        slots = W.active_slots(world)
+        if len(slots):
+            rects = world.rects[slots]
+            geometry[slots] = geometry_class(rects, self.cells.resolution, self.model.evidence)
+            adj[np.ix_(slots, slots)] = adjacency_rows(
+                rects, np.arange(len(slots)), self.cells.wall, self.cells.adjacency_dilation)
+        types, sale = self._types(world, geometry, adj)
+        return _Typing(W.with_types(world, types), geometry, adj, sale)
+
+    def _logprior(self, world: W.World, adj: np.ndarray, sale: np.ndarray) -> float:
+        slots = W.active_slots(world)
+        n, K = len(slots), world.capacity
+        rects = world.rects[slots]
+        c = self.cells
+        if not np.all(rects_valid(rects, self.frame.shape, c.min_side, c.max_side)):
+            return -math.inf
+        sub = np.ix_(slots, slots)
+        return float(self._log_pn_table(K)[n] - log_slots(n, K) + n * self.log_rect
+                     + sale_log_factor(rects, adj[sub], sale[sub], c.resolution, self.model.prior))
+
+    # ------------------------------------------------------------------ full
+    def evaluate(self, world: W.World) -> Terms:
+        """Full, stateless evaluation (types assigned from the geometry)."""
+        typ = self.typing(world)
+        w = typ.world
+        slots = W.active_slots(w)
+        hist, g = full_tallies(self.data, w.rects[slots], w.types[slots] == CORRIDOR)
+        loglik = loglik_from_tallies(self.data, hist, g)
+        logprior = self._logprior(w, typ.adj, typ.sale)
+        return Terms(loglik, logprior, loglik + logprior, w)
+
+    def start(self, world: W.World) -> "Tracker":
+        """The incremental tracker of one chain, starting at ``world``."""
+        return Tracker(self, world)
+
+
+@dataclass(frozen=True, eq=False)
+class Proposal:
+    """A proposed world with its log posterior; pass it to :meth:`Tracker.accept` to commit."""
+
+    world: W.World
+    logp: float
+    loglik: float
+    logprior: float
+    typing: _Typing
+    patch: LikPatch
+
+
+class Tracker:
+    """Incremental log posterior of one chain (the one stateful object; see architecture.md)."""
+
+    def __init__(self, post: Posterior, world: W.World):
+        self.post = post
+        self._typ = post.typing(world)
+        w = self._typ.world
+        slots = W.active_slots(w)
+        self.cover = CoverTracker(post.data, w.rects[slots], w.types[slots] == CORRIDOR)
+        self.loglik = self.cover.loglik
+        self.logprior = post._logprior(w, self._typ.adj, self._typ.sale)
+        self.logp = self.loglik + self.logprior
+
+    @property
+    def world(self) -> W.World:
+        return self._typ.world
+
+    def coverage(self, hist=None) -> float:
+        """Fraction of the input-free lattice cells covered by some unit."""
+        return self.cover.covered_free(hist) / max(self.post.data.n_free, 1)
+
+    def _retype(self, new_world: W.World, changed) -> _Typing:
+        post, old = self.post, self._typ
+        K = new_world.capacity
+        changed = np.asarray(sorted(set(int(s) for s in changed)), dtype=np.intp)
+        geometry = old.geometry.copy()
+        adj = old.adj.copy()
+        if changed.size:
+            act = new_world.active
+            live = changed[act[changed]]
+            if live.size:
+                geometry[live] = geometry_class(new_world.rects[live], post.cells.resolution,
+                                                post.model.evidence)
+            adj[changed, :] = False
+            adj[:, changed] = False
+            if live.size:
+                rows = adjacency_rows(new_world.rects, live, post.cells.wall,
+                                      post.cells.adjacency_dilation)
+                rows &= act[None, :]
+                adj[live, :] = rows
+                adj[:, live] = rows.T
+        types, sale = post._types(new_world, geometry, adj)
+        return _Typing(W.with_types(new_world, types) if K else new_world, geometry, adj, sale)
+
+    def propose(self, new_world: W.World, changed_slots) -> Proposal:
+        """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
+
+        Types of *every* unit are re-derived (evidence of a neighbour may change with the edit);
+        units whose type changed are recomputed in the likelihood along with the edited ones.
+        """
+        old = self._typ.world
+        typ = self._retype(new_world, changed_slots)
+        new = typ.world
+        touched = set(int(s) for s in changed_slots)
+        touched.update(int(s) for s in np.flatnonzero(new.types != old.types))
+        changes = []
+        for s in sorted(touched):
+            a = tuple(old.rects[s]) if old.active[s] else None
+            b = tuple(new.rects[s]) if new.active[s] else None
+            ca = bool(old.active[s] and old.types[s] == CORRIDOR)
+            cb = bool(new.active[s] and new.types[s] == CORRIDOR)
+            if a != b or ca != cb:
+                changes.append(Change(a, ca, b, cb))
+        patch = self.cover.propose(changes)
+        logprior = self.post._logprior(new, typ.adj, typ.sale)
+        return Proposal(new, patch.loglik + logprior, patch.loglik, logprior, typ, patch)
+
+    def accept(self, prop: Proposal) -> None:
+        """Commit a proposal (a rejected one is simply dropped)."""
+        self.cover.commit(prop.patch)
+        self._typ = prop.typing
+        self.loglik, self.logprior, self.logp = prop.loglik, prop.logprior, prop.logp
