@@ -1,0 +1,123 @@
+"""Pieces shared by the kernels: line evidence, adjacency of units, wall-position moves.
+
+Axis convention: a rectangle is ``(r0, c0, r1, c1)``; along axis ``a`` (0 = rows, 1 = columns) its
+edges are ``rect[a]`` (low) and ``rect[a + 2]`` (high) and its span on the other axis is
+``rect[1 - a], rect[3 - a]``. A *horizontal* line (a lattice row) bounds units along axis 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from semmap_pp.kernels.data import KernelData
+
+LOG_HALF = math.log(0.5)
+
+
+def line_cum(data: KernelData, axis: int) -> np.ndarray:
+    """Prefix sums of line evidence for lines that bound units along ``axis``."""
+    return data.hcum if axis == 0 else data.vcum
+
+
+def band_weights(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1: int,
+                 floor: float) -> np.ndarray:
+    """Weight of each position ``x = lo..hi``: ``floor`` + mean line fraction over lines ``x+a..x+b-1``.
+
+    The line fraction of line ``i`` is the share of its cells in ``[s0, s1)`` that are wall (occupied)
+    or door-candidate cells; lines outside the lattice count 0.
+    """
+    n_lines = cum.shape[0]
+    idx = np.arange(lo + a, hi + b)
+    frac = np.zeros(idx.size)
+    ok = (idx >= 0) & (idx < n_lines)
+    iv = idx[ok]
+    frac[ok] = (cum[iv, s1] - cum[iv, s0]) / float(s1 - s0)
+    cs = np.concatenate(([0.0], np.cumsum(frac)))
+    width = b - a
+    n = hi - lo + 1
+    return floor + (cs[width:width + n] - cs[:n]) / width
+
+
+def attach_matrices(rects: np.ndarray, active: np.ndarray, m: int, g: int):
+    """Which units share a wall.
+
+    Returns ``(V, Hz)``, (K, K) bool: ``V[a, b]`` when unit ``b`` lies below ``a`` sharing its wall
+    (``b.r0 == a.r1 - g`` and their column spans overlap by at least ``m`` cells); ``Hz[a, b]`` when
+    ``b`` lies right of ``a`` in the same sense.
+    """
+    r0, c0, r1, c1 = (rects[:, i].astype(np.int64) for i in range(4))
+    both = active[:, None] & active[None, :]
+    col_ov = np.minimum(c1[:, None], c1[None, :]) - np.maximum(c0[:, None], c0[None, :])
+    row_ov = np.minimum(r1[:, None], r1[None, :]) - np.maximum(r0[:, None], r0[None, :])
+    v = (r0[None, :] == r1[:, None] - g) & (col_ov >= m) & both
+    hz = (c0[None, :] == c1[:, None] - g) & (row_ov >= m) & both
+    return v, hz
+
+
+def attached_to(rect, rects: np.ndarray, active: np.ndarray, m: int, g: int) -> np.ndarray:
+    """(K, 4) bool: ``out[k, side]`` when ``rect`` touches unit ``k`` on ``k``'s side ``side``.
+
+    Sides are indexed ``(axis, direction)`` as ``0: (0, +1)`` below, ``1: (0, -1)`` above,
+    ``2: (1, +1)`` right, ``3: (1, -1)`` left of unit ``k``.
+    """
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    a0, b0, a1, b1 = (rects[:, i].astype(np.int64) for i in range(4))
+    col_ov = np.minimum(b1, c1) - np.maximum(b0, c0) >= m
+    row_ov = np.minimum(a1, r1) - np.maximum(a0, r0) >= m
+    out = np.empty((rects.shape[0], 4), bool)
+    out[:, 0] = (r0 == a1 - g) & col_ov
+    out[:, 1] = (r1 == a0 + g) & col_ov
+    out[:, 2] = (c0 == b1 - g) & row_ov
+    out[:, 3] = (c1 == b0 + g) & row_ov
+    out &= active[:, None]
+    return out
+
+
+# --- moving one wall position x within [lo, hi]: local step or jump towards line evidence ---------
+
+def position_q(x_from: int, x_to: int, lo: int, w: np.ndarray, total: float, rho: float, d: int) -> float:
+    """Probability that :func:`position_draw` moves ``x_from`` to ``x_to`` (``x_to != x_from``).
+
+    ``q = rho * [1 <= |dx| <= d] / (2 d) + (1 - rho) * w[x_to] / (total - w[x_from])``.
+    """
+    q = rho / (2 * d) if 1 <= abs(x_to - x_from) <= d else 0.0
+    rest = total - w[x_from - lo]
+    if rest > 0:
+        q += (1.0 - rho) * w[x_to - lo] / rest
+    return q
+
+
+def position_draw(rng, x: int, lo: int, hi: int, w: np.ndarray, rho: float, d: int):
+    """Draw a new position from ``x`` (``None``: the draw left ``[lo, hi]`` or no other position)."""
+    if rng.random() < rho:
+        step = 1 + int(rng.random() * d)
+        x2 = x + step if rng.random() < 0.5 else x - step
+        return x2 if lo <= x2 <= hi else None
+    if hi <= lo:
+        return None
+    cdf = np.cumsum(w)
+    cdf[x - lo:] -= w[x - lo]
+    u = rng.random() * cdf[-1]
+    return lo + int(np.searchsorted(cdf, u, side="right"))
+
+
+def position_enumerate(x: int, lo: int, hi: int, w: np.ndarray, rho: float, d: int) -> dict:
+    """Brute-force pmf of :func:`position_draw` over the new positions (for the exact tests)."""
+    out: dict[int, float] = {}
+    for step in range(1, d + 1):
+        for x2 in (x + step, x - step):
+            if lo <= x2 <= hi:
+                out[x2] = out.get(x2, 0.0) + rho / d * 0.5
+    if hi > lo:
+        rest = float(w.sum() - w[x - lo])
+        for x2 in range(lo, hi + 1):
+            if x2 != x:
+                out[x2] = out.get(x2, 0.0) + (1.0 - rho) * w[x2 - lo] / rest
+    return out
+
+
+def world_key(world) -> tuple:
+    """Slot-level identity of a state (geometry and activity; types are a function of them)."""
+    return (world.rects.tobytes(), world.active.tobytes())

@@ -1,0 +1,95 @@
+"""The Metropolis–Hastings–Green acceptance, written once, and a plain-Python chain runner.
+
+Every kernel returns ``Proposal(world, log_ratio, changed_slots)`` with
+``log_ratio = log q(reverse) - log q(forward)``; on the discrete building lattice there is no
+Jacobian, so the acceptance of a proposal ``W -> W'`` is
+
+    log alpha = (log pi(W') - log pi(W)) / T + log_ratio,
+
+with temperature ``T = 1`` for sampling (``T > 1`` only while annealing during burn-in).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+
+def mh_green(rng, tracker, proposal, temperature: float = 1.0) -> bool:
+    """Accept or reject ``proposal`` against ``tracker`` (commits it on acceptance).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    tracker : object with ``logp``, ``propose(world, changed_slots)`` and ``accept(prop)``
+        The incremental target of one chain (see :mod:`semmap_pp.posterior`).
+    proposal : Proposal or None
+        ``None`` (no valid move) is a rejection.
+    temperature : float
+
+    Returns
+    -------
+    bool
+        Whether the proposal was accepted.
+    """
+    if proposal is None:
+        return False
+    prop = tracker.propose(proposal.world, proposal.changed_slots)
+    new = prop.logp
+    if new == -math.inf or math.isnan(new):
+        return False
+    old = tracker.logp
+    if old == -math.inf:  # leaving an impossible start is always accepted
+        tracker.accept(prop)
+        return True
+    log_alpha = (new - old) / temperature + proposal.log_ratio
+    if log_alpha >= 0.0 or math.log(rng.random()) < log_alpha:
+        tracker.accept(prop)
+        return True
+    return False
+
+
+class ChainStats(NamedTuple):
+    """Per-kind counts of a run: ``attempted[i]``, ``accepted[i]``, ``impossible[i]`` (``None`` moves)."""
+
+    kinds: tuple
+    attempted: np.ndarray
+    accepted: np.ndarray
+    impossible: np.ndarray
+
+    def acceptance(self) -> dict:
+        return {k: (float(a) / n if n else math.nan)
+                for k, a, n in zip(self.kinds, self.accepted, self.attempted)}
+
+
+def run_chain(rng, tracker, kernels, n: int, data, temperature: float = 1.0, callback=None) -> ChainStats:
+    """Apply ``n`` kernels drawn from the mix ``kernels`` with MH–Green acceptance.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    tracker : Tracker
+        Updated in place (it is the one stateful object of a chain).
+    kernels : semmap_pp.kernels.Mix
+    n : int
+    data : KernelData
+    temperature : float
+    callback : callable(i, tracker, accepted), optional
+        Called after every kernel (e.g. to record states in tests).
+    """
+    k = len(kernels)
+    attempted, accepted, impossible = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k, np.int64)
+    for i in range(n):
+        j, proposal = kernels(rng, tracker.world, data)
+        attempted[j] += 1
+        if proposal is None:
+            impossible[j] += 1
+            ok = False
+        else:
+            ok = mh_green(rng, tracker, proposal, temperature)
+            accepted[j] += ok
+        if callback is not None:
+            callback(i, tracker, ok)
+    return ChainStats(kernels.kinds, attempted, accepted, impossible)
