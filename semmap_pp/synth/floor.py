@@ -126,16 +126,17 @@ def generate_floor(seed: int, *, units: int | None = None, rotation_deg: float |
 
     margin = int(math.ceil(p.laser_range_max / res)) + 4
     pl, shape = render.place_canvas(br, rot, margin)
-    inside = render.resample(br.inside, br, pl, shape, fill=False)
-    solid = render.resample(solid_b, br, pl, shape, fill=False)
+    index = render.lookup(br, pl, shape)
+    inside = render.resample(br.inside, index, fill=False)
+    solid = render.resample(solid_b, index, fill=False)
     solid |= render.outside_clutter(rng_scan, inside, p, res)
-    glass = render.resample(br.glass, br, pl, shape, fill=False)
+    glass = render.resample(br.glass, index, fill=False)
     poses = pl.apply(poses_b) if len(poses_b) else np.zeros((0, 2))
     hits, passes, laser_range = render.scan_counts(rng_scan, solid, glass, poses, p, res)
     classes = render.classify(rng_map, hits, passes, p)
     r0, r1, c0, c1 = render.crop_box(classes, inside, rng_map, p, res)
     classes = np.ascontiguousarray(classes[r0:r1, c0:c1])
-    labels = render.resample(br.labels, br, pl, shape, fill=0)[r0:r1, c0:c1]
+    labels = render.resample(br.labels, index, fill=0)[r0:r1, c0:c1]
     final = pl.shifted(-c0, -r0)
     truth = build_truth(plan, final, seed=int(seed), resolution=res, width=classes.shape[1],
                         height=classes.shape[0], laser_range_m=laser_range)

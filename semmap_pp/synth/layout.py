@@ -136,7 +136,7 @@ def spine(rng: np.random.Generator, p: SynthParams, res: float, n_units: int) ->
     d = Draft(layout="spine")
     wc = cells(rng.uniform(p.corridor_width_min, p.corridor_width_max), res)
     with_hall = n_units >= 5 and rng.random() < 0.35
-    both = n_units >= 4 and rng.random() < 0.85
+    both = n_units > 8 or (n_units >= 4 and rng.random() < 0.8)
     n_rooms = max(1, n_units - 1 - int(with_hall))
     per_side = -(-n_rooms // 2) if both else n_rooms
     length = cells(max(p.room_min, per_side * rng.uniform(3.6, 5.2)), res)

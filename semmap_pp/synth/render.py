@@ -62,19 +62,28 @@ def place_canvas(br: BuildingRasters, rotation_deg: float, margin: int):
     return pl, (h, w)
 
 
-def resample(building: np.ndarray, br: BuildingRasters, pl: Placement, shape, fill=0) -> np.ndarray:
-    """Nearest-neighbour image of a building raster under placement ``pl`` (``fill`` outside)."""
+def lookup(br: BuildingRasters, pl: Placement, shape) -> np.ndarray:
+    """For every image cell, the flat index of the building cell under its centre (-1: none)."""
     h, w = shape
-    rows, cols = np.mgrid[0:h, 0:w]
-    XY = np.stack([cols.ravel() + 0.5, rows.ravel() + 0.5], axis=1)
-    xy = pl.invert(XY)
+    a = np.deg2rad(pl.rotation_deg)
+    cos, sin = np.cos(a), np.sin(a)
+    X = np.arange(w) + 0.5 - pl.tx
+    Y = np.arange(h) + 0.5 - pl.ty
     ox, oy = br.offset
-    c = np.floor(xy[:, 0]).astype(np.int64) - ox
-    r = np.floor(xy[:, 1]).astype(np.int64) - oy
-    ok = (r >= 0) & (r < building.shape[0]) & (c >= 0) & (c < building.shape[1])
-    out = np.full(h * w, fill, dtype=building.dtype)
-    out[ok] = building[r[ok], c[ok]]
-    return out.reshape(h, w)
+    hb, wb = br.solid.shape
+    # (x, y) = (X, Y) @ R, written as outer sums (no (H*W, 2) temporaries)
+    c = np.floor(cos * X[None, :] - sin * Y[:, None]).astype(np.int64) - ox
+    r = np.floor(sin * X[None, :] + cos * Y[:, None]).astype(np.int64) - oy
+    ok = (r >= 0) & (r < hb) & (c >= 0) & (c < wb)
+    return np.where(ok, r * wb + c, -1)
+
+
+def resample(building: np.ndarray, index: np.ndarray, fill=0) -> np.ndarray:
+    """Nearest-neighbour image of a building raster through :func:`lookup`'s ``index``."""
+    out = np.full(index.shape, fill, dtype=building.dtype)
+    ok = index >= 0
+    out[ok] = building.ravel()[index[ok]]
+    return out
 
 
 def scan_counts(rng: np.random.Generator, solid: np.ndarray, glass: np.ndarray, poses: np.ndarray,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,8 @@ from semmap_pp.errors import OutputError
 from semmap_pp.synth.render import Placement
 from semmap_pp.synth.topology import Plan
 
-DIGITS = 3  # rounding of every float in truth.json, so the file's bytes are stable
+DIGITS = 3
+_NUMBER_LIST = re.compile(r"\[\s*(-?[\d.]+(?:,\s*-?[\d.]+)*)\s*\]")  # rounding of every float in truth.json, so the file's bytes are stable
 
 
 def _r(v) -> float:
@@ -81,7 +83,11 @@ def build_truth(plan: Plan, pl: Placement, *, seed: int, resolution: float, widt
 
 def encode_truth(truth: dict) -> str:
     """The JSON text of ``truth`` (fixed key order, fixed float rounding, trailing newline)."""
-    return json.dumps(truth, indent=1) + "\n"
+    text = json.dumps(truth, indent=1)
+    # lists of plain numbers on one line: [x, y] points stay readable
+    text = _NUMBER_LIST.sub(lambda m: "[" + ", ".join(m.group(1).split()).replace(",,", ",") + "]",
+                            text)
+    return text + "\n"
 
 
 def encode_labels(labels: np.ndarray) -> bytes:
