@@ -109,6 +109,19 @@ class Evidence:
             lines += [f"adj({p},{q}).", f"adj({q},{p})."]
         return "\n".join(lines) + ("\n" if lines else "")
 
+    def to_knowledge(self):
+        """The same evidence as the knowledge engine's :class:`semmap_pp.knowledge.Evidence`
+        (hard facts with probability 1, soft geometry as the three class probabilities)."""
+        from semmap_pp.knowledge.evidence import Evidence as KEvidence  # imports clingo
+        unary = {g: {} for g in GEOMETRY_CLASSES}
+        for u, g in self.hard_geometry().items():
+            unary[g][u] = 1.0
+        for u, probs in self.soft:
+            for g, p in zip(GEOMETRY_CLASSES, probs):
+                unary[g][u] = float(p)
+        return KEvidence.build(self.units, rolike=unary["rolike"], colike=unary["colike"],
+                               halike=unary["halike"], muldoor=set(self.muldoor), adj=self.adj)
+
     def soft_log_odds(self) -> dict:
         """``{(class name, unit): log(p / (1 - p))}``: MLN weights of the soft geometry facts."""
         out = {}
@@ -161,7 +174,11 @@ class Result(Protocol):
 
 
 class Provider(Protocol):
-    """Anything that turns evidence into type and SaLe marginals: ``infer(evidence) -> Result``."""
+    """Anything that turns evidence into type and SaLe marginals: ``infer(evidence) -> Result``.
+
+    The knowledge engine (:class:`semmap_pp.knowledge.KnowledgeEngine`) takes its own evidence
+    value, :meth:`Evidence.to_knowledge`; :class:`FixedProvider` takes :class:`Evidence`.
+    """
 
     def infer(self, evidence: Evidence) -> Result: ...
 

@@ -127,7 +127,7 @@ class Posterior:
         sub = adj[np.ix_(slots, slots)]
         doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
         ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
-        result = provider.infer(ev)
+        result = provider.infer(ev.to_knowledge())
         for s in slots:
             types[s] = UNIT_TYPES.index(result.map_types[int(s)])
         for (p, q), v in result.sale.items():
