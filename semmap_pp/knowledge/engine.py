@@ -24,8 +24,10 @@ from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import RuleError
 from semmap_pp.knowledge.dialect import RuleSet, load_rules
 from semmap_pp.knowledge.evidence import Evidence
-from semmap_pp.knowledge.exact import JunctionTree, calibrate, decode_max, merged_potentials
+from semmap_pp.knowledge.exact import (JunctionTree, calibrate, decode_max, merged_potentials,
+                                       scope_marginal)
 from semmap_pp.knowledge.ground import ground
+from semmap_pp.knowledge.local import LocalModel, is_pairwise
 from semmap_pp.knowledge.map import map_clingo, map_rc2
 from semmap_pp.knowledge.mcsat import mcsat_marginals
 
@@ -77,11 +79,14 @@ class KnowledgeEngine:
     seed : int
         Mixed with a hash of the rules and the evidence: MC-SAT results are a deterministic
         function of (rules, evidence, settings).
+    fast : bool
+        Use cached unit/pair templates (:mod:`~semmap_pp.knowledge.local`) when the rule set is
+        pairwise-local and the method is exact with junction-tree MAP.
     """
 
     def __init__(self, rules: RuleSet, method: str = "exact", map_method: str = "jt",
-                 n_chains: int = 128, n_iter: int = 80, burn_in: int = 20,
-                 cache_size: int = 4096, seed: int = 0):
+                 n_chains: int = 128, n_iter: int = 150, burn_in: int = 40,
+                 cache_size: int = 4096, seed: int = 0, fast: bool = True):
         if method not in METHODS:
             raise RuleError(rules.path, f"unknown inference method {method!r}; use one of {METHODS}")
         if map_method not in MAP_METHODS:
@@ -91,6 +96,8 @@ class KnowledgeEngine:
         self.mcsat_settings = (int(n_chains), int(n_iter), int(burn_in))
         self.cache_size, self.seed = int(cache_size), int(seed)
         self._cache: OrderedDict = OrderedDict()
+        self.local = (LocalModel(rules) if fast and method == "exact" and map_method == "jt"
+                      and is_pairwise(rules) else None)
         self.hits = self.misses = 0
 
     @classmethod
@@ -120,6 +127,8 @@ class KnowledgeEngine:
         return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
 
     def _compute(self, ev: Evidence) -> InferenceResult:
+        if self.local is not None:
+            return self._compute_local(ev)
         g = ground(self.rules, ev, keep_control=self.map_method == "clingo")
         net = g.network
         pots = merged_potentials(net)
@@ -154,3 +163,24 @@ class KnowledgeEngine:
             v = net.sale.get((p_, q_))
             sale[(p_, q_)] = float(marg[v][1]) if v is not None else 0.0
         return InferenceResult(types, sale, map_types, float(cost) / 1000.0, log_z, self.method)
+
+    def _compute_local(self, ev: Evidence) -> InferenceResult:
+        card, sum_pots, max_pots, softs, conds = self.local.reduced(ev)
+        path = self.rules.path
+        jt = JunctionTree(card, [s for s, _ in sum_pots], path)
+        log_z, marg, full = calibrate(jt, sum_pots, return_beliefs=True)
+        if marg is None:
+            raise RuleError(path, "the hard rules admit no world for this evidence")
+        x, best = decode_max(jt, max_pots)
+        index = {u: i for i, u in enumerate(ev.units)}
+        types, map_types = {}, {}
+        for i, u in enumerate(ev.units):
+            p = marg[i].reshape(4, 1 << softs[i]).sum(axis=1)
+            p.setflags(write=False)
+            types[u] = p
+            map_types[u] = UNIT_TYPES[int(x[i]) >> softs[i]]
+        sale = {}
+        for (p_, q_), cond in conds.items():
+            pm = scope_marginal(jt, full, (index[p_], index[q_]))
+            sale[(p_, q_)] = float(np.sum(pm * cond))
+        return InferenceResult(types, sale, map_types, -float(best), float(log_z), self.method)

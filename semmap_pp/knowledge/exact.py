@@ -174,13 +174,17 @@ def upward(jt: JunctionTree, potentials, maximize=False):
     return beliefs, msgs, const
 
 
-def calibrate(jt: JunctionTree, potentials):
-    """Sum-product: ``(log_z, marginals)`` with ``marginals[v]`` the distribution of variable v."""
+def calibrate(jt: JunctionTree, potentials, return_beliefs=False):
+    """Sum-product: ``(log_z, marginals)`` with ``marginals[v]`` the distribution of variable v.
+
+    With ``return_beliefs`` also the calibrated clique beliefs (log, unnormalised), for
+    :func:`scope_marginal`.
+    """
     beliefs, msgs, const = upward(jt, potentials)
     n = len(jt.order)
     log_z = const + sum(float(msgs[i]) for i in range(n) if jt.parent[i] < 0)
     if not np.isfinite(log_z):
-        return log_z, None
+        return (log_z, None, None) if return_beliefs else (log_z, None)
     full = [None] * n
     marg = [None] * n
     for i in range(n - 1, -1, -1):
@@ -203,7 +207,19 @@ def calibrate(jt: JunctionTree, potentials):
         lm = _lse(x, 1) if x.shape[1] > 1 else x[:, 0]
         pm = np.exp(lm - np.max(lm))
         marg[v] = pm / pm.sum()
-    return log_z, marg
+    return (log_z, marg, full) if return_beliefs else (log_z, marg)
+
+
+def scope_marginal(jt: JunctionTree, full, scope):
+    """Joint distribution of the sorted ``scope`` (contained in one clique) from beliefs."""
+    i = min(jt.pos[v] for v in scope)
+    ax = jt.axes[i]
+    keep = [ax.index(v) for v in scope]
+    rest = [k for k in range(len(ax)) if k not in keep]
+    t = np.transpose(full[i], rest + keep).reshape((-1,) + tuple(jt.card[v] for v in scope))
+    lm = _lse(t, 0)
+    pm = np.exp(lm - np.max(lm))
+    return pm / pm.sum()
 
 
 def decode_max(jt: JunctionTree, potentials):

@@ -1,0 +1,219 @@
+"""Fast path: a pairwise network assembled from cached per-unit and per-pair templates.
+
+When every rule is *pairwise-local* (checked on the AST by :func:`is_pairwise`), the ground
+network of any evidence is a sum of unit factors, each depending only on that unit's evidence,
+and pair factors, each depending only on an adjacent pair's evidence. Then one clingo grounding of
+a single unit per evidence pattern, and of one adjacent pair per pattern pair, gives every factor
+ever needed; the pair template minus its two unit templates is the pair factor. SaLe atoms only
+occur in pair factors, so they are summed (or maximised) out inside the template, and inference
+runs on one variable per unit (its type times its soft evidence atoms). The result is the same
+network as :func:`~semmap_pp.knowledge.ground.ground` builds (tests check both against
+enumeration).
+
+A rule file is pairwise-local when: its only normal rule is ``adj(Q,P) :- adj(P,Q).``; every
+constraint body is plain literals of evidence and query atoms whose arguments are variables, plus
+comparisons between those variables; a body has one unit variable, or two linked by a positive
+``adj`` or ``sale`` literal; and every weak constraint's terms are a constant id (unique in the
+file) followed by exactly its unit variables. Anything else uses the general path.
+"""
+
+from __future__ import annotations
+
+import clingo
+import clingo.ast as cast
+import numpy as np
+
+from semmap_pp.knowledge.dialect import SOFT_PREDICATES, RuleSet, parse_text
+from semmap_pp.knowledge.evidence import Evidence
+from semmap_pp.knowledge.exact import _lse, merged_potentials
+from semmap_pp.knowledge.ground import ground
+
+_T = cast.ASTType
+
+
+def _var_args(atom_node):
+    sym = atom_node.symbol
+    if sym.ast_type == _T.SymbolicTerm:
+        return [] if sym.symbol.type == clingo.SymbolType.Function else None
+    if sym.ast_type != _T.Function or sym.external:
+        return None
+    names = []
+    for a in sym.arguments:
+        if a.ast_type != _T.Variable:
+            return None
+        names.append(a.name)
+    return sym.name, names
+
+
+def _body_ok(body):
+    """Unit variables of a local body, or None."""
+    variables, links = set(), []
+    for lit in body:
+        if lit.ast_type != _T.Literal:
+            return None
+        atom = lit.atom
+        if atom.ast_type == _T.BooleanConstant:
+            continue
+        if atom.ast_type == _T.Comparison:
+            terms = [atom.term] + [g.term for g in atom.guards]
+            if not all(t.ast_type == _T.Variable for t in terms):
+                return None
+            continue
+        if atom.ast_type != _T.SymbolicAtom:
+            return None
+        va = _var_args(atom)
+        if va is None or not va:
+            return None
+        name, args = va
+        variables.update(args)
+        if name in ("adj", "sale") and lit.sign == cast.Sign.NoSign and len(set(args)) == 2:
+            links.append(set(args))
+    if len(variables) == 1 or (len(variables) == 2 and variables in links):
+        return variables
+    return None
+
+
+def is_pairwise(rules: RuleSet) -> bool:
+    """Whether ``rules`` is in the pairwise-local fragment (see the module docstring)."""
+    ids = set()
+    for st in parse_text(rules.program, rules.path):
+        t = st.ast_type
+        if t in (_T.Program, _T.Definition):
+            continue
+        if t == _T.Rule:
+            head = st.head
+            if head.atom.ast_type == _T.BooleanConstant:
+                if _body_ok(st.body) is None:
+                    return False
+                continue
+            if str(st) != "adj(Q,P) :- adj(P,Q)." and not (
+                    head.atom.ast_type == _T.SymbolicAtom and _is_adj_closure(st)):
+                return False
+            continue
+        if t == _T.Minimize:
+            variables = _body_ok(st.body)
+            if variables is None or not st.terms:
+                return False
+            first, rest = st.terms[0], st.terms[1:]
+            if first.ast_type != _T.SymbolicTerm or str(first) in ids:
+                return False
+            ids.add(str(first))
+            if not all(r.ast_type == _T.Variable for r in rest):
+                return False
+            if sorted(r.name for r in rest) != sorted(variables):
+                return False
+            continue
+        return False
+    return True
+
+
+def _is_adj_closure(st) -> bool:
+    va = _var_args(st.head.atom)
+    if not va or va[0] != "adj" or len(st.body) != 1:
+        return False
+    lit = st.body[0]
+    if lit.ast_type != _T.Literal or lit.sign != cast.Sign.NoSign:
+        return False
+    vb = _var_args(lit.atom) if lit.atom.ast_type == _T.SymbolicAtom else None
+    return bool(vb) and vb[0] == "adj" and vb[1] == va[1][::-1] and len(set(va[1])) == 2
+
+
+def _dense(net, order):
+    """Dense log potential of ``net`` over the variables in ``order`` (constant included)."""
+    where = {v: i for i, v in enumerate(order)}
+    shape = tuple(int(net.card[v]) for v in order)
+    out = np.full(shape, -net.offset / 1000.0)
+    for scope, table in merged_potentials(net):
+        pos = [where[v] for v in scope]
+        perm = sorted(range(len(scope)), key=lambda j: pos[j])
+        sh = [1] * len(order)
+        for j in perm:
+            sh[pos[j]] = table.shape[j]
+        out = out + np.transpose(table, perm).reshape(sh)
+    return out
+
+
+def _unit_key(ev_maps, u):
+    return tuple(ev_maps[name].get(u, 0.0) for name in SOFT_PREDICATES)
+
+
+def _pattern_evidence(units_keys, adj):
+    kw = {name: {} for name in SOFT_PREDICATES}
+    for u, key in units_keys:
+        for name, p in zip(SOFT_PREDICATES, key):
+            if p > 0:
+                kw[name][u] = p
+    return Evidence.build([u for u, _ in units_keys], adj=adj, **kw)
+
+
+class LocalModel:
+    """Templates of one pairwise-local rule set, cached by evidence pattern."""
+
+    def __init__(self, rules: RuleSet):
+        self.rules = rules
+        self._units: dict = {}
+        self._pairs: dict = {}
+
+    def unit(self, key):
+        """``(log potential over super-states, n_soft_atoms)`` of a unit with pattern ``key``."""
+        hit = self._units.get(key)
+        if hit is None:
+            net = ground(self.rules, _pattern_evidence([(1, key)], [])).network
+            order = self._unit_order(net, 1)
+            table = _dense(net, order).reshape(-1)
+            hit = self._units[key] = (table, len(order) - 1)
+        return hit
+
+    @staticmethod
+    def _unit_order(net, u):
+        names = {f"{p}({u})" for p in SOFT_PREDICATES}
+        soft = sorted((name, v) for v, name in enumerate(net.names) if name in names)
+        return [net.units.index(u)] + [v for _, v in soft]
+
+    def pair(self, kp, kq):
+        """Pair tables over (super p, super q): sum-out and max-out of SaLe, and P(sale(p,q))."""
+        hit = self._pairs.get((kp, kq))
+        if hit is None:
+            net = ground(self.rules, _pattern_evidence([(1, kp), (2, kq)], [(1, 2)])).network
+            o1, o2 = self._unit_order(net, 1), self._unit_order(net, 2)
+            sale_vars = sorted(net.sale.values())
+            full = _dense(net, o1 + o2 + sale_vars)
+            s1, s2 = self.unit(kp)[0], self.unit(kq)[0]
+            full = full.reshape(len(s1), len(s2), -1)
+            uni = s1[:, None, None] + s2[None, :, None]
+            with np.errstate(invalid="ignore"):
+                pair = np.where(np.isfinite(uni), full - uni, 0.0)
+            lse = _lse(pair, 2)
+            mx = pair.max(axis=2)
+            v12 = net.sale.get((1, 2))
+            if v12 is None:
+                cond = np.zeros(lse.shape)
+            else:
+                bit = len(sale_vars) - 1 - sale_vars.index(v12)
+                on = ((np.arange(pair.shape[2]) >> bit) & 1).astype(bool)
+                with np.errstate(invalid="ignore"):
+                    cond = np.exp(_lse(pair[:, :, on], 2) - lse)
+                cond = np.where(np.isnan(cond), 0.0, cond)
+            hit = self._pairs[(kp, kq)] = (lse, mx, cond)
+        return hit
+
+    def reduced(self, ev: Evidence):
+        """Cardinalities, sum potentials, max potentials and pair info for ``ev``."""
+        maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
+        keys = [_unit_key(maps, u) for u in ev.units]
+        index = {u: i for i, u in enumerate(ev.units)}
+        card, sum_pots, max_pots, softs = [], [], [], []
+        for i, key in enumerate(keys):
+            table, k = self.unit(key)
+            card.append(len(table))
+            softs.append(k)
+            sum_pots.append(((i,), table))
+            max_pots.append(((i,), table))
+        conds = {}
+        for p, q in ev.adj:
+            i, j = index[p], index[q]
+            lse, mx, cond = self.pair(keys[i], keys[j])
+            sum_pots.append(((i, j), lse))
+            max_pots.append(((i, j), mx))
+            conds[(p, q)] = cond
+        return card, sum_pots, max_pots, softs, conds
