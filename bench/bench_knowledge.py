@@ -1,0 +1,116 @@
+"""Knowledge engine speed: exact marginals (grounding included), MC-SAT, cache hits.
+
+Floors are hand-built evidence of real layouts: a corridor with rooms on both sides, a grid of
+corridors with rooms, a hall with rooms around it, at 20 and 40 units. "exact" times a cold
+engine's first inference (templates warmed on a different floor of the same patterns, as in a
+long MCMC run); "exact_cold" includes building the templates.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
+
+
+def corridor_floor(n):
+    """Unit 1 a corridor; rooms 2..n on both sides, side neighbours adjacent."""
+    rooms = list(range(2, n + 1))
+    left, right = rooms[0::2], rooms[1::2]
+    adj = [(1, r) for r in rooms]
+    adj += list(zip(left, left[1:])) + list(zip(right, right[1:]))
+    return Evidence.build(range(1, n + 1), colike={1}, muldoor={1}, rolike=rooms, adj=adj)
+
+
+def grid_floor(n):
+    """Corridors in a grid (every 4th unit), rooms hanging off them."""
+    n_corr = max(2, n // 4)
+    side = int(np.ceil(np.sqrt(n_corr)))
+    corr = list(range(1, n_corr + 1))
+    adj = []
+    for c in corr:
+        r, k = divmod(c - 1, side)
+        if k + 1 < side and c + 1 <= n_corr:
+            adj.append((c, c + 1))
+        if c + side <= n_corr:
+            adj.append((c, c + side))
+    rooms = list(range(n_corr + 1, n + 1))
+    for i, room in enumerate(rooms):
+        adj.append((corr[i % n_corr], room))
+        if i % 3 and room - 1 in rooms:
+            adj.append((room - 1, room))
+    return Evidence.build(range(1, n + 1), colike=corr, muldoor=corr + rooms[::5],
+                          rolike=rooms, adj=adj)
+
+
+def hall_floor(n):
+    """Unit 1 a hall, rooms around it in a ring, two corridors leaving it."""
+    rooms = list(range(4, n + 1))
+    adj = [(1, 2), (1, 3)] + [(1, r) for r in rooms] + list(zip(rooms, rooms[1:]))
+    return Evidence.build(range(1, n + 1), halike={1}, colike=[2, 3], muldoor=[1, 2, 3],
+                          rolike={r: (1.0 if r % 4 else 0.7) for r in rooms}, adj=adj)
+
+
+FLOORS = {"corridor": corridor_floor, "grid": grid_floor, "hall": hall_floor}
+
+
+def add_arguments(parser):
+    parser.add_argument("--rules", default="rules/table3.lp")
+    parser.add_argument("--repeat", type=int, default=20)
+
+
+def _time(fn, repeat):
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def run(args):
+    rules = load_rules(args.rules)
+    out = {"rules": args.rules}
+    warm = KnowledgeEngine(rules)
+    for name, make in FLOORS.items():
+        for n in (20, 40):
+            ev = make(n)
+            t = time.perf_counter()
+            KnowledgeEngine(rules).infer(ev)
+            cold = time.perf_counter() - t
+            warm.infer(ev)   # builds the templates of these patterns
+
+            def fresh():
+                warm._cache.clear()
+                warm.infer(ev)
+            out[f"exact_ms_{name}_{n}"] = round(1000 * _time(fresh, args.repeat), 3)
+            out[f"exact_cold_ms_{name}_{n}"] = round(1000 * cold, 2)
+            generic = KnowledgeEngine(rules, fast=False)
+            out[f"exact_generic_ms_{name}_{n}"] = round(
+                1000 * _time(lambda: (generic._cache.clear(), generic.infer(ev)), 3), 2)
+    # cache hits
+    ev = corridor_floor(20)
+    warm.infer(ev)
+    k = 20000
+    t = time.perf_counter()
+    for _ in range(k):
+        warm.infer(ev)
+    out["cache_hit_us"] = round(1e6 * (time.perf_counter() - t) / k, 3)
+    t = time.perf_counter()
+    for _ in range(2000):
+        warm.infer(corridor_floor(20))
+    out["build_evidence_and_hit_us"] = round(1e6 * (time.perf_counter() - t) / 2000, 2)
+    # MC-SAT at default settings on 20 units, error against exact
+    for name in ("corridor", "hall"):
+        ev = FLOORS[name](20)
+        exact = KnowledgeEngine(rules).infer(ev)
+        mc = KnowledgeEngine(rules, method="mcsat")
+        t = time.perf_counter()
+        r = mc.infer(ev)
+        out[f"mcsat_ms_{name}_20"] = round(1000 * (time.perf_counter() - t), 1)
+        err = max(max(np.abs(r.types[u] - exact.types[u]).max() for u in ev.units),
+                  max(abs(r.sale[pq] - exact.sale[pq]) for pq in ev.adj))
+        out[f"mcsat_max_abs_err_{name}_20"] = round(float(err), 4)
+    return out
