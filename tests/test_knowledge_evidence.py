@@ -1,0 +1,92 @@
+"""Evidence values, the facts syntax and the `semmap rules` command."""
+
+import json
+
+import numpy as np
+import pytest
+
+from semmap_pp.cli import main
+from semmap_pp.errors import EvidenceError
+from semmap_pp.knowledge import Evidence, KnowledgeEngine, evidence_from_facts, evidence_to_facts
+
+
+def test_build_canonicalises_pairs_and_drops_zero_probabilities():
+    ev = Evidence.build([3, 1, 2], rolike={1: 0.0, 2: 1.0}, adj=[(3, 1), (1, 3), (2, 1)])
+    assert ev.units == (1, 2, 3) and ev.rolike == ((2, 1.0),) and ev.adj == ((1, 2), (1, 3))
+    assert ev == Evidence.build([1, 2, 3], rolike=[2], adj=[(1, 2), (1, 3)])
+
+
+@pytest.mark.parametrize("kwargs, pattern", [
+    (dict(units=[1], adj=[(1, 1)]), "not adjacent to itself"),
+    (dict(units=[1], adj=[(1, 2)]), "unit 2 is not declared"),
+    (dict(units=[1], rolike={2}), "unit 2 is not declared"),
+    (dict(units=[1], muldoor={1: 1.5}), r"not in \[0, 1\]"),
+    (dict(units=[1], muldoor={1: float("nan")}), r"not in \[0, 1\]"),
+])
+def test_build_rejects_bad_evidence(kwargs, pattern):
+    with pytest.raises(EvidenceError, match=pattern):
+        Evidence.build(**kwargs)
+
+
+def test_facts_round_trip():
+    ev = Evidence.build([1, 2, 5], colike={1}, muldoor={1: 0.35}, halike=[5], adj=[(5, 2)])
+    assert evidence_from_facts(evidence_to_facts(ev)) == ev
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("unit(1). room(1).", r"ev\.lp:1:10: unknown evidence predicate room/1"),
+    ("unit(1).\nrolike(X) :- unit(X).", r"ev\.lp:2:1: only ground evidence facts"),
+    ('unit(1). soft(rolike(1), "high").', "probability must be"),
+    ('unit(1). soft(rolike(1), 0).', "probability must be"),
+    ("unit(1). rolike(1). rolike(1).", "given twice"),
+    ('#include "x.lp".', r"ev\.lp:1:1: #include is not allowed"),
+    ("unit(1). adj(1,2).", "unit 2 is not declared"),
+    ("unit(1)", "syntax error"),
+])
+def test_bad_facts_are_rejected(text, pattern):
+    with pytest.raises(EvidenceError, match=pattern):
+        evidence_from_facts(text, "ev.lp")
+
+
+def test_soft_evidence_without_rules_keeps_its_probability(tmp_path):
+    ev = evidence_from_facts('unit(1). soft(muldoor(1), "0.3").')
+    eng = KnowledgeEngine.from_file("rules/none.lp", fast=False)
+    net_types = eng.infer(ev).types[1]
+    np.testing.assert_allclose(net_types, 0.25, atol=1e-12)
+
+
+def test_fast_and_general_paths_agree():
+    rng = np.random.default_rng(7)
+    fast = KnowledgeEngine.from_file("rules/table3.lp")
+    slow = KnowledgeEngine.from_file("rules/table3.lp", fast=False)
+    assert fast.local is not None and slow.local is None
+    for _ in range(5):
+        units = list(range(1, 9))
+        adj = [(p, q) for p in units for q in units if p < q and rng.random() < 0.3]
+        kw = {n: {u: float(rng.choice([1.0, 0.4])) for u in units if rng.random() < 0.3}
+              for n in ("rolike", "colike", "halike", "muldoor")}
+        ev = Evidence.build(units, adj=adj, **kw)
+        a, b = fast.infer(ev), slow.infer(ev)
+        for u in units:
+            np.testing.assert_allclose(a.types[u], b.types[u], atol=1e-9)
+        for pq in adj:
+            assert abs(a.sale[pq] - b.sale[pq]) < 1e-9
+        assert abs(a.log_z - b.log_z) < 1e-9 and abs(a.map_cost - b.map_cost) < 1e-9
+
+
+def test_cli_check_and_query(tmp_path, capsys):
+    assert main(["rules", "check", "rules/table3.lp", "rules/none.lp"]) == 0
+    bad = tmp_path / "bad.lp"
+    bad.write_text(":- room(U), @f(U).\n")
+    assert main(["rules", "check", str(bad)]) == 1
+    assert f"{bad}:1:" in capsys.readouterr().err
+    ev = tmp_path / "ev.lp"
+    ev.write_text("unit(1). unit(2). halike(1). rolike(2). adj(1,2).\n")
+    assert main(["rules", "query", "rules/table3.lp", "--evidence", str(ev), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["map_types"] == {"1": "hall", "2": "room"} and "1,2" in out["sale"]
+    assert main(["rules", "query", "rules/table3.lp", "--evidence", str(ev), "--map", "rc2"]) == 0
+    assert "P(SaLe(1,2))" in capsys.readouterr().out
+    ev.write_text("unit(1). wall(1).\n")
+    assert main(["rules", "query", "rules/table3.lp", "--evidence", str(ev)]) == 2
+    assert "unknown evidence predicate" in capsys.readouterr().err
