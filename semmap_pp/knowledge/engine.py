@@ -183,4 +183,4 @@ class KnowledgeEngine:
         for (p_, q_), cond in conds.items():
             pm = scope_marginal(jt, full, (index[p_], index[q_]))
             sale[(p_, q_)] = float(np.sum(pm * cond))
-        return InferenceResult(types, sale, map_types, -float(best), float(log_z), self.method)
+        return InferenceResult(types, sale, map_types, -float(best) + 0.0, float(log_z), self.method)
