@@ -1,0 +1,167 @@
+"""Tests of semmap_pp.derive on small literal maps whose answer can be seen by eye.
+
+Map legend: '#' occupied, '.' free, '?' unknown.
+"""
+
+import numpy as np
+
+from semmap_pp import world as W
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL
+from semmap_pp.derive import derive_world
+from semmap_pp.derive.adjacency import adjacency_matrix, adjacency_raster
+from semmap_pp.derive.doors import doors_between
+from semmap_pp.derive.states import cell_states, find_objects
+from semmap_pp.derive.unexplored import find_unexplored
+from semmap_pp.frame import build_frame_from_classes
+from semmap_pp.likelihood import wall_like
+from semmap_pp.model import CellParams, load_model
+
+CELLS = CellParams(resolution=0.05, wall=1, object_max_extent=4, door_min=2, door_max=4,
+                   min_side=4, max_side=100, adjacency_dilation=1, unexplored_min_area=2)
+
+
+def grid(text):
+    code = {"#": OCCUPIED, ".": FREE, "?": UNKNOWN}
+    return np.array([[code[ch] for ch in line] for line in text.split()], np.uint8)
+
+
+DOORS = grid("""
+###############
+#......#......#
+#.............#
+#.............#
+#.............#
+#......#......#
+#......#......#
+#.............#
+#......#......#
+#......#......#
+#......#......#
+###############
+""")
+
+
+def test_door_is_a_run_of_free_cells_on_the_shared_wall():
+    doors = doors_between(DOORS, (0, 0, 12, 8), (0, 7, 12, 15), CELLS, 1, 2)
+    # rows 2..4 of column 7 are open (3 cells, within 2..4); row 7 alone is too narrow
+    assert [(d.p, d.q, d.box, d.vertical, d.width) for d in doors] == [(1, 2, (2, 7, 5, 8), True, 3)]
+
+
+def test_too_wide_an_opening_is_a_passage_not_a_door():
+    m = DOORS.copy()
+    m[1:11, 7] = FREE            # the whole wall is open: 10 cells > door_max
+    assert doors_between(m, (0, 0, 12, 8), (0, 7, 12, 15), CELLS) == []
+
+
+def test_door_on_a_horizontal_wall_between_stacked_units():
+    m = DOORS.T.copy()           # the same map transposed: units one above the other
+    doors = doors_between(m, (0, 0, 8, 12), (7, 0, 15, 12), CELLS)
+    assert [(d.box, d.vertical) for d in doors] == [((7, 2, 8, 5), False)]
+
+
+OBJECTS = grid("""
+############
+#..........#
+#.##.......#
+#.##....?..#
+#..........#
+#.########.#
+#..........#
+#.....#....#
+#......#...#
+############
+""")
+
+
+def test_objects_are_small_non_free_components_inside_a_unit():
+    objs = find_objects(OBJECTS, np.array([(0, 0, 10, 12)]), 1, CELLS.object_max_extent, [5])
+    # the 2x2 block, the unknown cell and the diagonal pair; the 8-long interior wall is no object
+    assert sorted((o.unit, o.box, o.cells) for o in objs) == [
+        (5, (2, 2, 4, 4), 4), (5, (3, 8, 4, 9), 1), (5, (7, 6, 9, 8), 2)]
+
+
+def test_cell_states_of_one_unit():
+    s = cell_states(OBJECTS, np.array([(0, 0, 10, 12)]), 1, CELLS.object_max_extent)
+    assert s[0, 0] == W_WALL and s[9, 5] == W_WALL
+    assert s[2, 2] == W_OBJECT and s[3, 8] == W_OBJECT      # object, unknown-as-object
+    assert s[5, 4] == W_FREE                               # interior wall: a mismatch, not an object
+    assert s[1, 1] == W_FREE
+    outside = cell_states(OBJECTS, np.array([(0, 0, 5, 6)]), 1, CELLS.object_max_extent)
+    assert outside[8, 8] == W_UNKNOWN
+
+
+def test_component_and_line_object_rules_differ_on_a_long_staircase():
+    # a diagonal staircase 6 cells long: no straight run > 4 (lines: object),
+    # but its component spans 6 > 4 cells (components: not an object, a mismatch)
+    m = np.zeros((10, 10), np.uint8)
+    for k in range(6):
+        m[2 + k, 2 + k] = OCCUPIED
+    rect = np.array([(0, 0, 10, 10)])
+    comp = cell_states(m, rect, 1, 4)
+    lines = cell_states(m, rect, 1, 4, objects="lines", wall_like=wall_like(m == OCCUPIED, 4))
+    assert comp[4, 4] == W_FREE and lines[4, 4] == W_OBJECT
+    # on the map above (straight runs only) the two rules agree
+    wl = wall_like(OBJECTS == OCCUPIED, 4)
+    a = cell_states(OBJECTS, np.array([(0, 0, 10, 12)]), 1, 4)
+    b = cell_states(OBJECTS, np.array([(0, 0, 10, 12)]), 1, 4, objects="lines", wall_like=wl)
+    assert np.array_equal(a, b)
+
+
+def test_adjacency_as_in_the_paper_figure():
+    # units 0 | 1 | 2 in a row, one free column between neighbours: dilated walls meet
+    rects = np.array([(0, 0, 10, 10), (0, 11, 10, 21), (0, 22, 10, 32)])
+    expected = [[False, True, False], [True, False, True], [False, True, False]]
+    assert adjacency_matrix(rects, 1, 1).tolist() == expected
+    assert adjacency_raster((12, 34), rects + [1, 1, 1, 1], 1, 1).tolist() == expected
+    # three free columns between them: too far apart for a dilation of 1
+    far = np.array([(0, 0, 10, 10), (0, 13, 10, 23)])
+    assert not adjacency_matrix(far, 1, 1).any()
+    # a small unit deep inside a big one touches none of its walls
+    nested = np.array([(0, 0, 30, 30), (10, 10, 20, 20)])
+    assert not adjacency_matrix(nested, 1, 1).any()
+
+
+def test_closed_form_adjacency_equals_the_raster():
+    rng = np.random.default_rng(7)
+    for _ in range(150):
+        n = int(rng.integers(2, 6))
+        r0, c0 = rng.integers(5, 40, n), rng.integers(5, 40, n)
+        rects = np.stack([r0, c0, r0 + rng.integers(4, 25, n), c0 + rng.integers(4, 25, n)], 1)
+        wall, dil = int(rng.integers(1, 3)), int(rng.integers(1, 3))
+        assert np.array_equal(adjacency_matrix(rects, wall, dil),
+                              adjacency_raster((80, 80), rects, wall, dil))
+
+
+UNEXPLORED = grid("""
+??????????????????
+?.....?...????????
+?.....?...?......?
+?.....?...?......?
+?.....??????.....?
+?.....?...?......?
+?.....???.?......?
+??????????????????
+""")
+
+
+def test_unexplored_areas_are_small_free_components_outside_units():
+    units = np.array([(0, 0, 8, 7)])          # covers the left block
+    areas = find_unexplored(UNEXPLORED, units, CELLS.min_side, CELLS.unexplored_min_area)
+    # the 3x3 pocket and the 4-cell pocket below it are unexplored; the 6x5 block could be a unit
+    assert [(a.box, a.cells) for a in areas] == [((1, 7, 4, 10), 9), ((5, 7, 7, 10), 4)]
+    tiny = UNEXPLORED.copy()
+    tiny[1:7, 7:10] = UNKNOWN
+    tiny[5, 8] = FREE                          # a single free cell is noise
+    assert find_unexplored(tiny, units, CELLS.min_side, CELLS.unexplored_min_area) == []
+
+
+def test_derive_world_puts_doors_into_the_states():
+    frame = build_frame_from_classes(DOORS, 0.05, load_model(), theta=0.0)
+    frame = frame.__class__(frame.theta, frame.classes, frame.outside, frame.image_shape,
+                            frame.resolution, CELLS, frame.origin)
+    w = W.add(W.add(W.empty(3), 0, (0, 0, 12, 8)), 2, (0, 7, 12, 15))
+    d = derive_world(frame, w)
+    assert d.slots.tolist() == [0, 2]
+    assert [(x.p, x.q) for x in d.doors] == [(0, 2)]
+    assert d.states[3, 7] == W_FREE and d.states[6, 7] == W_WALL
+    assert d.adjacency.tolist() == [[False, True], [True, False]]

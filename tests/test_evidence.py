@@ -1,0 +1,70 @@
+"""Tests of semmap_pp.evidence: Table 4 classes, soft evidence, facts, providers."""
+
+import numpy as np
+import pytest
+
+from semmap_pp.evidence import (COLIKE, HALIKE, ROLIKE, FixedProvider, build_evidence,
+                                geometry_class, geometry_probabilities)
+from semmap_pp.model import load_model
+
+MODEL = load_model()
+P = MODEL.evidence
+RES = 0.05
+
+
+def cells(h_m, w_m):
+    return np.array([[0, 0, round(h_m / RES), round(w_m / RES)]])
+
+
+@pytest.mark.parametrize("h,w,cls", [
+    (4, 5, ROLIKE),      # an office
+    (2, 20, COLIKE),     # a corridor: long and narrow
+    (10, 12, HALIKE),    # a hall: big short side
+    (8, 40, HALIKE),     # big size wins over the ratio (Table 4)
+    (3, 8.9, ROLIKE),    # ratio 2.97 < 3
+    (3, 9.1, COLIKE),
+])
+def test_table4_classes(h, w, cls):
+    assert geometry_class(cells(h, w), RES, P)[0] == cls
+
+
+def test_probabilities_are_soft_near_a_threshold_and_hard_far_from_it():
+    far = geometry_probabilities(cells(4, 5), RES, P)[0]
+    near = geometry_probabilities(cells(3, 9.05), RES, P)[0]
+    assert far.sum() == pytest.approx(1) and near.sum() == pytest.approx(1)
+    assert far[ROLIKE] > 0.95
+    assert 0.3 < near[COLIKE] < 0.7 and 0.3 < near[ROLIKE] < 0.7
+
+
+def test_build_evidence_and_facts():
+    rects = np.vstack([cells(4, 5), cells(2, 20), cells(3, 9.05)])
+    adj = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool)
+    ev = build_evidence([7, 3, 5], rects, adj, RES, P, door_counts=np.array([1, 2, 0]))
+    assert ev.units == (3, 5, 7)
+    assert ev.adj == frozenset({(3, 7), (3, 5)})
+    assert ev.muldoor == frozenset({3})
+    assert [u for u, _ in ev.soft] == [5]
+    facts = ev.facts().splitlines()
+    assert "rolike(7)." in facts and "colike(3)." in facts and "muldoor(3)." in facts
+    assert not any(f.endswith("(5).") and not f.startswith("unit") for f in facts)
+    assert "adj(3,7)." in facts and "adj(7,3)." in facts
+    assert hash(ev) == hash(build_evidence([7, 3, 5], rects, adj, RES, P, np.array([1, 2, 0])))
+
+
+def test_to_knowledge_carries_hard_and_soft_evidence():
+    rects = np.vstack([cells(4, 5), cells(3, 9.05)])
+    ev = build_evidence([0, 1], rects, np.array([[0, 1], [1, 0]], bool), RES, P, np.array([2, 0]))
+    k = ev.to_knowledge()
+    assert k.rolike[0] == (0, 1.0) and k.muldoor == ((0, 1.0),) and k.adj == ((0, 1),)
+    assert dict(k.colike)[1] == pytest.approx(dict(ev.soft)[1][COLIKE], abs=1e-6)
+
+
+def test_fixed_provider_types_and_sale():
+    rects = np.vstack([cells(4, 5), cells(4, 5), cells(2, 20)])
+    adj = np.array([[0, 1, 1], [1, 0, 0], [1, 0, 0]], bool)
+    ev = build_evidence([0, 1, 2], rects, adj, RES, P)
+    r = FixedProvider(MODEL.knowledge.fixed_sale).infer(ev)
+    assert r.map_types == {0: "room", 1: "room", 2: "corridor"}
+    assert r.sale[(0, 1)] == MODEL.knowledge.fixed_sale[0, 0]
+    assert r.sale[(0, 2)] == MODEL.knowledge.fixed_sale[0, 1]
+    assert r.types[2].tolist() == [0, 1, 0, 0]

@@ -1,0 +1,51 @@
+"""Tests of semmap_pp.model: the default file loads, broken files fail with file and key."""
+
+import numpy as np
+import pytest
+
+from semmap_pp.errors import ModelError
+from semmap_pp.model import DEFAULT_MODEL, load_model
+
+
+def test_default_model_loads_and_converts_to_cells():
+    m = load_model()
+    assert m.path == DEFAULT_MODEL
+    assert np.allclose(m.sensor.corridor.sum(axis=1), 1) and np.allclose(m.sensor.other.sum(axis=1), 1)
+    assert m.sensor.table(True).shape == (3, 4)
+    c = m.cells(0.05)
+    assert (c.wall, c.object_max_extent, c.door_min, c.door_max) == (2, 30, 12, 50)
+    assert c.min_side >= 2 * c.wall + 1
+
+
+def edited(tmp_path, old, new):
+    text = DEFAULT_MODEL.read_text()
+    assert old in text
+    p = tmp_path / "m.toml"
+    p.write_text(text.replace(old, new, 1))
+    return p
+
+
+@pytest.mark.parametrize("old,new,key", [
+    ("psi = 0.5", "psi = 1.5", "sensor.psi"),
+    ("psi = 0.5", "", "sensor.psi: missing"),
+    ("wall = [0.25, 0.25, 0.50]", "wall = [0.25, 0.25, 0.60]", "sensor.corridor.wall: row must sum to 1"),
+    ("wall = [0.25, 0.25, 0.50]", "wall = [1.25, -0.75, 0.50]", "probabilities must lie in [0, 1]"),
+    ("k_max = 64", "k_max = 6.5", "prior.k_max: expected an integer"),
+    ('size_measure = "short_side"', 'size_measure = "volume"', "evidence.size_measure"),
+    ("door_max_m = 2.5", "door_max_m = 0.1", "world.door_max_m"),
+    ("unknown = [0.30, 0.60, 0.10]", "unknown = [0.40, 0.50, 0.10]", "must equal sensor.other.unknown"),
+])
+def test_bad_values_name_file_and_key(tmp_path, old, new, key):
+    p = edited(tmp_path, old, new)
+    with pytest.raises(ModelError) as e:
+        load_model(p)
+    assert str(p) in str(e.value) and key in str(e.value)
+
+
+def test_unreadable_and_invalid_toml(tmp_path):
+    with pytest.raises(ModelError, match="cannot read"):
+        load_model(tmp_path / "nope.toml")
+    p = tmp_path / "bad.toml"
+    p.write_text("[sensor\npsi = ")
+    with pytest.raises(ModelError, match="not valid TOML"):
+        load_model(p)

@@ -1,0 +1,122 @@
+"""Tests of semmap_pp.posterior: the Tracker agrees with the full evaluation, types included."""
+
+import math
+
+import numpy as np
+import pytest
+
+from semmap_pp import world as W
+from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.evidence import FixedResult
+from semmap_pp.frame import build_frame_from_classes
+from semmap_pp.posterior import Posterior
+from semmap_pp.model import load_model
+from semmap_pp.prior import log_p_n, log_p_rect_const, log_slots
+
+MODEL = load_model()
+
+
+class NeighbourProvider:
+    """A stand-in engine whose types depend on the neighbours: a unit with two or more
+    neighbours is a corridor, else a room; P(SaLe) = 0.9 for every adjacent pair.
+    An edit of one unit therefore changes the types of *other* units."""
+
+    needs_doors = False
+
+    def __init__(self):
+        self.calls = 0
+
+    def infer(self, ev):
+        self.calls += 1
+        deg = {u: 0 for u in ev.units}
+        for p, q in ev.adj:
+            deg[p] += 1
+            deg[q] += 1
+        names = {u: ("corridor" if deg[u] >= 2 else "room") for u in ev.units}
+        eye = np.eye(4)
+        return FixedResult({u: eye[UNIT_TYPES.index(n)] for u, n in names.items()},
+                           {pq: 0.9 for pq in ev.adj}, names)
+
+
+def posterior(rng, knowledge=None, shape=(90, 120)):
+    cls = rng.choice(3, size=shape, p=[0.6, 0.25, 0.15]).astype(np.uint8)
+    cls[shape[0] // 2, :] = 2
+    post = Posterior(build_frame_from_classes(cls, 0.05, MODEL, theta=0.0), MODEL, knowledge)
+    post.knowledge_on = knowledge is not None
+    return post
+
+
+def random_rect(rng, shape, lo=21):
+    h, w = rng.integers(lo, min(70, shape[0])), rng.integers(lo, min(70, shape[1]))
+    r0, c0 = rng.integers(0, shape[0] - h + 1), rng.integers(0, shape[1] - w + 1)
+    return (int(r0), int(c0), int(r0 + h), int(c0 + w))
+
+
+def random_proposal(rng, world, shape):
+    s = int(rng.integers(world.capacity))
+    if world.active[s] and rng.random() < 0.15:
+        return W.remove(world, s), [s]
+    if not world.active[s]:
+        return W.add(world, s, random_rect(rng, shape)), [s]
+    r = list(world.rects[s])
+    r[rng.integers(4)] += int(rng.integers(-8, 9))
+    return W.replace(world, s, r), [s]
+
+
+@pytest.mark.parametrize("with_engine", [False, True])
+def test_tracker_equals_full_evaluation(with_engine):
+    rng = np.random.default_rng(11)
+    provider = NeighbourProvider() if with_engine else None
+    post = posterior(rng, provider)
+    shape = post.frame.shape
+    w = W.empty(8)
+    for s in range(5):
+        w = W.add(w, s, random_rect(rng, shape))
+    tr = post.start(w)
+    assert tr.logp == pytest.approx(post.evaluate(w).total, rel=1e-12)
+    other_type_changes = 0
+    for _ in range(600):
+        nw, changed = random_proposal(rng, tr.world, shape)
+        prop = tr.propose(nw, changed)
+        full = post.evaluate(nw)
+        assert np.array_equal(prop.world.types, full.world.types)
+        if math.isinf(full.total):
+            assert prop.logp == full.total
+        else:
+            assert prop.logp == pytest.approx(full.total, rel=1e-9, abs=0)
+        moved = np.flatnonzero(prop.world.types != tr.world.types)
+        other_type_changes += int(np.any(~np.isin(moved, changed)))
+        if math.isfinite(prop.logp) and rng.random() < 0.7:
+            tr.accept(prop)
+    if with_engine:
+        assert other_type_changes > 0       # the case the tracker must handle did occur
+        assert provider.calls > 0
+
+
+def test_fixed_types_follow_the_geometry_class():
+    rng = np.random.default_rng(2)
+    post = posterior(rng, shape=(200, 400))
+    w = W.add(W.add(W.empty(4), 0, (0, 0, 80, 100)), 1, (100, 0, 140, 400))
+    terms = post.evaluate(w)
+    assert [UNIT_TYPES[t] for t in terms.world.types[:2]] == ["room", "corridor"]
+    assert terms.world.types[2] == W.NO_TYPE
+
+
+def test_prior_of_a_world_without_adjacent_pairs():
+    rng = np.random.default_rng(3)
+    post = posterior(rng)
+    w = W.add(W.add(W.empty(6), 0, (0, 0, 30, 30)), 3, (50, 60, 90, 120))
+    c = post.cells
+    expected = (log_p_n(2, 6, MODEL.prior) - log_slots(2, 6)
+                + 2 * log_p_rect_const(post.frame.shape, c.min_side, c.max_side))
+    assert post.evaluate(w).logprior == pytest.approx(expected)
+    # a unit narrower than the minimum side has prior probability 0
+    assert post.evaluate(W.replace(w, 0, (0, 0, 30, 5))).logprior == -math.inf
+
+
+def test_coverage_counts_free_cells_under_units():
+    cls = np.ones((40, 40), np.uint8)
+    cls[0:20, :] = 0
+    post = Posterior(build_frame_from_classes(cls, 0.05, MODEL, theta=0.0), MODEL)
+    tr = post.start(W.add(W.empty(2), 0, (0, 0, 20, 20)))
+    assert tr.coverage() == pytest.approx(0.5)
