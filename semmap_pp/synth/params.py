@@ -54,9 +54,12 @@ class SynthParams:
     p_exit: float = 0.35              # a corridor/hall end on the outline has an open exit door
 
     # --- furniture ---------------------------------------------------------------------------
-    furniture_per_m2: float = 0.12    # blobs (desks, cabinets) per square metre of room
-    legs_per_m2: float = 0.08         # tables/chairs seen only as legs
-    clutter_per_m2: float = 0.15      # small things: bins, boxes, bags (0.1-0.3 m)
+    furniture_per_m2: float = 0.18    # blobs (desks, cabinets) per square metre of room
+    legs_per_m2: float = 0.12         # tables/chairs seen only as legs
+    clutter_per_m2: float = 0.30      # small things: bins, boxes, bags (0.1-0.3 m)
+    p_pilasters: float = 0.35         # a unit's walls carry columns / radiators at intervals
+    pilaster_spacing_min: float = 2.0
+    pilaster_spacing_max: float = 4.5
     pillar_spacing_min: float = 4.0   # halls: pillars on a grid
     pillar_spacing_max: float = 7.0
     p_hall_pillars: float = 0.5
@@ -68,12 +71,16 @@ class SynthParams:
     laser_range_min: float = 8.0
     laser_range_max: float = 15.0
     laser_rays: int = 360             # rays per scan over 360 degrees
-    range_sigma: float = 0.02         # range noise
+    range_sigma_min: float = 0.015    # range noise, drawn per floor (map quality varies)
+    range_sigma_max: float = 0.045
+    hit_depth_max: float = 0.1        # a reading also marks up to this far behind its end (drawn
+                                      # per floor: thin map_saver walls to thick GMapping walls)
     pose_sigma_xy: float = 0.015      # registration error of a scan
     pose_sigma_deg: float = 0.15
     p_ray_dropout: float = 0.03       # no return for a ray
     outside_clutter: float = 0.012    # density of obstacles outside the building (cells)
-    occupied_ratio: float = 0.15      # hits / (hits + passes) above which a cell is occupied
+    occupied_ratio: float = 0.15      # hits / (hits + passes) from which a cell is occupied
+    free_ratio: float = 0.05          # ... up to which it is free (between: unknown, as map_server)
     p_speckle_occupied: float = 0.001 # free cell shown occupied
     p_speckle_unknown: float = 0.002  # free cell shown unknown
     p_wall_dropout: float = 0.04      # occupied cell lost (unknown)

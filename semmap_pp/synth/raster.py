@@ -133,6 +133,15 @@ def furnish(rng: np.random.Generator, plan: Plan, br: BuildingRasters, p: SynthP
         if w < 4 or h < 4:
             continue
         area = w * h * res * res
+        if rng.random() < p.p_pilasters:  # columns or radiators along the walls, at intervals
+            step = m(rng.uniform(p.pilaster_spacing_min, p.pilaster_spacing_max))
+            along, depth = m(rng.uniform(0.2, 0.5)), m(rng.uniform(0.1, 0.3))
+            for s in range(bx0 + step // 2, bx1 - along, step):
+                place((s, by0, s + along, by0 + depth))
+                place((s, by1 - depth, s + along, by1))
+            for s in range(by0 + step // 2, by1 - along, step):
+                place((bx0, s, bx0 + depth, s + along))
+                place((bx1 - depth, s, bx1, s + along))
         if kind == "corridor":
             length = max(w, h) * res
             for _ in range(int(rng.poisson(p.p_corridor_object * length))):

@@ -99,7 +99,9 @@ def scan_counts(rng: np.random.Generator, solid: np.ndarray, glass: np.ndarray, 
     n_rays = p.laser_rays
     block = solid.ravel()
     pane = glass.ravel()
-    sig_r, sig_xy, sig_a = p.range_sigma / res, p.pose_sigma_xy / res, np.deg2rad(p.pose_sigma_deg)
+    sig_r = rng.uniform(p.range_sigma_min, p.range_sigma_max) / res
+    depth = int(rng.integers(0, int(round(p.hit_depth_max / res)) + 1))
+    sig_xy, sig_a = p.pose_sigma_xy / res, np.deg2rad(p.pose_sigma_deg)
     for k in range(0, len(poses), batch):
         pos = poses[k:k + batch]
         b = len(pos)
@@ -129,6 +131,10 @@ def scan_counts(rng: np.random.Generator, solid: np.ndarray, glass: np.ndarray, 
         hx = np.floor(ex[:, None] + measured * ndx).astype(np.int64)
         hy = np.floor(ey[:, None] + measured * ndy).astype(np.int64)
         hits += np.bincount((hy * w + hx)[end], minlength=h * w)
+        for e in range(1, depth + 1):  # the beam's footprint reaches a little into the wall
+            hx = np.floor(ex[:, None] + (measured + e) * ndx).astype(np.int64)
+            hy = np.floor(ey[:, None] + (measured + e) * ndy).astype(np.int64)
+            hits += np.bincount((hy * w + hx)[end], minlength=h * w)
     return hits.reshape(h, w), passes.reshape(h, w), float(rng_max * res)
 
 
@@ -136,7 +142,7 @@ def classify(rng: np.random.Generator, hits: np.ndarray, passes: np.ndarray, p: 
     """Cell classes from hit / pass counts, with speckle and dropped wall cells on top."""
     ratio = hits / np.maximum(hits + passes, 1)
     classes = np.full(hits.shape, UNKNOWN, dtype=np.uint8)
-    classes[passes > 0] = FREE
+    classes[(passes > 0) & (ratio <= p.free_ratio)] = FREE
     classes[(hits > 0) & (ratio >= p.occupied_ratio)] = OCCUPIED
     u = rng.random(hits.shape)
     occ, free = classes == OCCUPIED, classes == FREE
