@@ -6,7 +6,7 @@ Each kernel returns a :class:`Proposal` (new world, log proposal ratio, changed 
 
 from semmap_pp.kernels.add_remove import add_remove
 from semmap_pp.kernels.allocate_delete import allocate_delete
-from semmap_pp.kernels.data import (KIND_NAMES, KernelData, KernelSettings, build_data,
+from semmap_pp.kernels.data import (KIND_NAMES, KernelData, KernelSettings, build_data, data_from_frame,
                                     settings_from_mapping)
 from semmap_pp.kernels.interchange import interchange
 from semmap_pp.kernels.proposal import Kernel, Mix, Proposal
@@ -23,5 +23,5 @@ def default_mix(settings: KernelSettings | None = None) -> Mix:
 
 
 __all__ = ["KERNELS", "KIND_NAMES", "Kernel", "KernelData", "KernelSettings", "Mix", "Proposal",
-           "add_remove", "allocate_delete", "build_data", "default_mix", "interchange",
+           "add_remove", "allocate_delete", "build_data", "data_from_frame", "default_mix", "interchange",
            "settings_from_mapping", "shrink_dilate", "split_merge"]

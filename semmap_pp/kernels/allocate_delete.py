@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import attach_matrices, attached_to
+from semmap_pp.kernels.common import attach_pairs, attached_to
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -113,8 +113,8 @@ def _sources_q(b_rect, world, data: KernelData) -> float:
 
 def deletable(world, data: KernelData) -> np.ndarray:
     """Slots of the units that share a wall with at least one other unit."""
-    v, hz = attach_matrices(world.rects, world.active, data.min_side, data.wall_share)
-    return np.flatnonzero(v.any(0) | v.any(1) | hz.any(0) | hz.any(1))
+    _, a, b = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
+    return np.unique(np.concatenate([a, b]))
 
 
 def _log(x: float) -> float:

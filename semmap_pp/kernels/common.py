@@ -40,19 +40,30 @@ def band_weights(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1:
     return floor + (cs[width:width + n] - cs[:n]) / width
 
 
-def attach_matrices(rects: np.ndarray, active: np.ndarray, m: int, g: int):
-    """Which units share a wall.
+def attach_pairs(rects: np.ndarray, active: np.ndarray, m: int, g: int):
+    """Slot pairs of units that share a wall: ``(axis, a, b)`` arrays, ``a`` upper (axis 0) or left.
 
-    Returns ``(V, Hz)``, (K, K) bool: ``V[a, b]`` when unit ``b`` lies below ``a`` sharing its wall
-    (``b.r0 == a.r1 - g`` and their column spans overlap by at least ``m`` cells); ``Hz[a, b]`` when
-    ``b`` lies right of ``a`` in the same sense.
+    ``b`` lies below ``a`` (axis 0) when ``b.r0 == a.r1 - g`` and their column spans overlap by at
+    least ``m`` cells; right of ``a`` (axis 1) in the same sense. Only active units are compared.
     """
-    r0, c0, r1, c1 = (rects[:, i].astype(np.int64) for i in range(4))
-    both = active[:, None] & active[None, :]
+    slots = np.flatnonzero(active)
+    r = rects[slots].astype(np.int64)
+    r0, c0, r1, c1 = r[:, 0], r[:, 1], r[:, 2], r[:, 3]
     col_ov = np.minimum(c1[:, None], c1[None, :]) - np.maximum(c0[:, None], c0[None, :])
     row_ov = np.minimum(r1[:, None], r1[None, :]) - np.maximum(r0[:, None], r0[None, :])
-    v = (r0[None, :] == r1[:, None] - g) & (col_ov >= m) & both
-    hz = (c0[None, :] == c1[:, None] - g) & (row_ov >= m) & both
+    av, bv = np.nonzero((r0[None, :] == r1[:, None] - g) & (col_ov >= m))
+    ah, bh = np.nonzero((c0[None, :] == c1[:, None] - g) & (row_ov >= m))
+    axis = np.concatenate([np.zeros(av.size, np.int64), np.ones(ah.size, np.int64)])
+    return axis, slots[np.concatenate([av, ah])], slots[np.concatenate([bv, bh])]
+
+
+def attach_matrices(rects: np.ndarray, active: np.ndarray, m: int, g: int):
+    """Which units share a wall, as (K, K) bool matrices ``(V, Hz)`` (see :func:`attach_pairs`)."""
+    k = rects.shape[0]
+    v, hz = np.zeros((k, k), bool), np.zeros((k, k), bool)
+    axis, a, b = attach_pairs(rects, active, m, g)
+    v[a[axis == 0], b[axis == 0]] = True
+    hz[a[axis == 1], b[axis == 1]] = True
     return v, hz
 
 

@@ -289,3 +289,14 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
     maxima.setflags(write=False)
     return KernelData((h, w), m, big, t, g, s, hcum, vcum, up, down, left, right, birth_rects,
                       birth_weights, (n_rows, n_cols), (cdf_rows, cdf_cols), wall_lines, doors, maxima)
+
+
+def data_from_frame(frame, settings: KernelSettings | None = None) -> KernelData:
+    """Kernel data for a :class:`~semmap_pp.frame.Frame`, sizes from its model cells.
+
+    Adjacent units share a wall by overlapping their wall bands (``wall_share = wall``), the
+    convention of :mod:`semmap_pp.likelihood` (overlapping wall bands cost no overlap penalty).
+    """
+    c = frame.cells
+    return build_data(frame.classes, min_side=c.min_side, max_side=c.max_side, wall_cells=c.wall,
+                      wall_share=c.wall, door_min=c.door_min, door_max=c.door_max, settings=settings)

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import (attach_matrices, band_weights, line_cum, position_draw,
+from semmap_pp.kernels.common import (attach_pairs, band_weights, line_cum, position_draw,
                                       position_enumerate, position_q)
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
@@ -25,15 +25,12 @@ from semmap_pp.kernels.proposal import Kernel, Proposal
 
 def adjacent_pairs(world, data: KernelData):
     """``(axis, a, b)`` of every pair sharing a wall, ``a`` the upper or left unit."""
-    v, hz = attach_matrices(world.rects, world.active, data.min_side, data.wall_share)
-    a0, b0 = np.nonzero(v)
-    a1, b1 = np.nonzero(hz)
-    return [(0, int(a), int(b)) for a, b in zip(a0, b0)] + [(1, int(a), int(b)) for a, b in zip(a1, b1)]
+    axis, a, b = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
+    return list(zip(axis.tolist(), a.tolist(), b.tolist()))
 
 
 def n_adjacent(world, data: KernelData) -> int:
-    v, hz = attach_matrices(world.rects, world.active, data.min_side, data.wall_share)
-    return int(np.count_nonzero(v) + np.count_nonzero(hz))
+    return int(attach_pairs(world.rects, world.active, data.min_side, data.wall_share)[0].size)
 
 
 def shared_wall_range(ra, rb, axis: int, data: KernelData):

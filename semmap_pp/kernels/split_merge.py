@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import LOG_HALF, attach_matrices, band_weights, line_cum
+from semmap_pp.kernels.common import LOG_HALF, attach_pairs, band_weights, line_cum
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -52,15 +52,15 @@ def split_log_q(rect, axis: int, s: int, n: int, capacity: int, data: KernelData
 
 def mergeable(world, data: KernelData):
     """``(axis, a, b)`` of every pair MERGE may join, ``a`` the first (upper or left) unit."""
+    axis, a, b = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
     r = world.rects
-    v, hz = attach_matrices(r, world.active, data.min_side, data.wall_share)
-    same_c = (r[:, None, 1] == r[None, :, 1]) & (r[:, None, 3] == r[None, :, 3])
-    same_r = (r[:, None, 0] == r[None, :, 0]) & (r[:, None, 2] == r[None, :, 2])
-    v &= same_c & (r[None, :, 2] - r[:, None, 0] <= data.max_side)
-    hz &= same_r & (r[None, :, 3] - r[:, None, 1] <= data.max_side)
-    a0, b0 = np.nonzero(v)
-    a1, b1 = np.nonzero(hz)
-    return [(0, int(a), int(b)) for a, b in zip(a0, b0)] + [(1, int(a), int(b)) for a, b in zip(a1, b1)]
+    ra, rb = r[a].astype(np.int64), r[b].astype(np.int64)
+    other = 1 - axis
+    same = (ra[np.arange(a.size), other] == rb[np.arange(a.size), other]) & \
+        (ra[np.arange(a.size), other + 2] == rb[np.arange(a.size), other + 2])
+    fits = rb[np.arange(a.size), axis + 2] - ra[np.arange(a.size), axis] <= data.max_side
+    ok = same & fits
+    return list(zip(axis[ok].tolist(), a[ok].tolist(), b[ok].tolist()))
 
 
 def _split_world(world, slot, new_slot, axis, s, data):

@@ -1,0 +1,198 @@
+"""The PyMC step method that runs the reversible-jump kernels (the only module that imports PyMC).
+
+PyMC's ``pm.Model`` is only a container here: it holds three fixed-shape variables of the world
+(``rects`` (K, 4) ``pm.Flat``, ``active`` (K,) and ``types`` (K,) discrete, none transformed) so that
+``pm.sample`` can drive chains, traces and multiprocessing. :class:`WorldStep` owns all three: each
+PyMC draw applies ``n_inner`` kernels with the MH–Green acceptance against the incremental target
+(:mod:`semmap_pp.posterior`), so PyMC's per-draw cost is shared by many kernels.
+
+Chains: PyMC calls :meth:`WorldStep.setup_chain` before each chain (sequential chains share one step
+object, parallel ones get an unpickled copy), which drops the target's caches; the first
+:meth:`~WorldStep.step` of the chain rebuilds them from the chain's start point. A start with
+``log p = -inf`` falls back to the empty world. During tuning (burn-in) the target can be annealed:
+``log alpha = Δ log p / T + log_ratio`` with ``T`` falling geometrically from ``anneal`` to 1.
+The best world seen (its ``log p``, rectangles and activity) is reported in the stats of every draw,
+so the MAP world ``W*`` can be taken across chains even when they ran in other processes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pymc as pm
+from pymc.step_methods.compound import BlockedStep, Competence
+
+from semmap_pp import world as wm
+from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.kernels import KIND_NAMES, default_mix
+from semmap_pp.mcmc import mh_green
+
+VAR_NAMES = ("rects", "active", "types")
+
+
+def world_model(capacity: int) -> pm.Model:
+    """A ``pm.Model`` holding the world variables of ``capacity`` slots (flat, untransformed)."""
+    with pm.Model() as model:
+        pm.Flat("rects", shape=(capacity, 4))
+        pm.DiscreteUniform("active", 0, 1, shape=capacity)
+        pm.DiscreteUniform("types", wm.NO_TYPE, len(UNIT_TYPES) - 1, shape=capacity)
+    return model
+
+
+def world_to_point(world: wm.World) -> dict:
+    """The PyMC point (``initvals`` entry) of a world."""
+    return {"rects": world.rects.astype(np.float64), "active": world.active.astype(np.int64),
+            "types": world.types.astype(np.int64)}
+
+
+def point_to_world(point: dict) -> wm.World:
+    """The world of a PyMC point (rectangles rounded to the lattice)."""
+    return wm.make(np.rint(point["rects"]).astype(np.int32), np.asarray(point["active"]) > 0,
+                   np.asarray(point["types"]))
+
+
+def _scalar_stats() -> dict:
+    stats = {"logp": (np.float64, []), "n_units": (np.int64, []), "cpr": (np.float64, []),
+             "accept": (np.float64, []), "temperature": (np.float64, []), "best_logp": (np.float64, [])}
+    stats.update({f"accept_{k}": (np.float64, []) for k in KIND_NAMES})
+    stats.update({f"n_{t}": (np.int64, []) for t in UNIT_TYPES})
+    return stats
+
+
+class WorldStep(BlockedStep):
+    """Reversible-jump MCMC over worlds as a PyMC ``BlockedStep``.
+
+    Parameters
+    ----------
+    vars : list
+        The model's ``rects``, ``active`` and ``types`` value variables (see :func:`world_model`).
+    target : Posterior or callable
+        The target (``start(world) -> tracker``) or a zero-argument callable returning it (use a
+        callable when the target itself does not pickle; it is called once per process).
+    data : KernelData
+    mix : Mix, optional
+        The kernel mix (default: :func:`semmap_pp.kernels.default_mix`).
+    n_inner : int
+        Kernels applied per PyMC draw.
+    anneal : float
+        Start temperature of the burn-in (1 = no annealing).
+    cpr_fn : callable(world) -> float, optional
+        Cell prediction rate of a world, recorded per draw (NaN without it).
+    """
+
+    name = "semmap_world"
+    stats_dtypes_shapes = _scalar_stats()
+
+    def __init__(self, vars=None, target=None, data=None, *, mix=None, n_inner: int = 100,
+                 anneal: float = 1.0, cpr_fn=None, model=None, blocked: bool = True, rng=None):
+        model = pm.modelcontext(model)
+        self.vars = [model.rvs_to_values.get(v, v) for v in (vars or model.value_vars)]
+        names = sorted(v.name for v in self.vars)
+        if names != sorted(VAR_NAMES):
+            raise ValueError(f"WorldStep owns exactly the variables {VAR_NAMES}, got {names}")
+        if target is None or data is None:
+            raise ValueError("WorldStep needs a target and the kernel data")
+        if n_inner < 1 or anneal < 1.0:
+            raise ValueError("n_inner must be >= 1 and anneal >= 1")
+        self.capacity = int(model.initial_point()["active"].shape[0])
+        # The best world travels as object stats (PyMC's ndarray trace stores scalar stats only).
+        self.stats_dtypes_shapes = dict(_scalar_stats(), best_rects=(object, None),
+                                        best_active=(object, None))
+        self.stats_dtypes = [{k: d for k, (d, _) in self.stats_dtypes_shapes.items()}]
+        self._target = target
+        self.data = data
+        self.mix = mix if mix is not None else default_mix(data.settings)
+        self._kind_index = np.array([KIND_NAMES.index(k) for k in self.mix.kinds])
+        self.n_inner = int(n_inner)
+        self.anneal = float(anneal)
+        self.cpr_fn = cpr_fn
+        self.rng = np.random.default_rng(rng)
+        self.tune = False
+        self._reset_chain(0)
+
+    # -------------------------------------------------------------- chain set-up
+    def _reset_chain(self, tune: int) -> None:
+        self._tracker = None
+        self._n_tune = int(tune)
+        self._draw = 0
+        self._best = (-math.inf, None, None)
+
+    def setup_chain(self, rng, tune: int, draws: int) -> None:
+        """Called by PyMC before each chain: new RNG, caches dropped (rebuilt from the start point)."""
+        super().setup_chain(rng, tune, draws)
+        self._reset_chain(tune)
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_tracker"] = None  # caches are per process and per chain
+        return state
+
+    @property
+    def target(self):
+        if callable(self._target) and not hasattr(self._target, "start"):
+            self._target = self._target()
+        return self._target
+
+    def _sync(self, point):
+        world = point_to_world(point)
+        tr = self._tracker
+        if tr is not None and np.array_equal(tr.world.rects, world.rects) \
+                and np.array_equal(tr.world.active, world.active):
+            return tr
+        tr = self.target.start(world)
+        if tr.logp == -math.inf:  # guard an impossible start: begin from the empty world instead
+            empty = self.target.start(wm.empty(world.capacity))
+            if empty.logp > -math.inf:
+                tr = empty
+        self._tracker = tr
+        self._remember(tr)
+        return tr
+
+    def _remember(self, tr) -> None:
+        if tr.logp > self._best[0]:
+            self._best = (tr.logp, tr.world.rects.copy(), tr.world.active.copy())
+
+    def temperature(self) -> float:
+        """Temperature of the current draw: geometric from ``anneal`` to 1 over the tuning draws."""
+        if not self.tune or self._n_tune <= 0 or self.anneal == 1.0 or self._draw >= self._n_tune:
+            return 1.0
+        return self.anneal ** (1.0 - self._draw / self._n_tune)
+
+    # -------------------------------------------------------------- one draw
+    def step(self, point):
+        tr = self._sync(point)
+        temp = self.temperature()
+        rng, mix, data = self.rng, self.mix, self.data
+        k = len(mix)
+        attempted, accepted = np.zeros(k, np.int64), np.zeros(k, np.int64)
+        best = self._best[0]
+        for _ in range(self.n_inner):
+            j, proposal = mix(rng, tr.world, data)
+            attempted[j] += 1
+            if proposal is not None and mh_green(rng, tr, proposal, temp):
+                accepted[j] += 1
+                if tr.logp > best:
+                    self._remember(tr)
+                    best = tr.logp
+        self._draw += 1
+        world = tr.world
+        stats = {"logp": float(tr.logp), "n_units": wm.n_units(world), "temperature": temp,
+                 "cpr": float(self.cpr_fn(world)) if self.cpr_fn is not None else math.nan,
+                 "accept": float(accepted.sum()) / self.n_inner, "best_logp": float(self._best[0])}
+        for kind in KIND_NAMES:
+            stats[f"accept_{kind}"] = math.nan
+        for kind, a, n in zip(mix.kinds, accepted, attempted):
+            stats[f"accept_{kind}"] = float(a) / n if n else math.nan
+        typed = world.types[world.active].astype(np.int64)
+        counts = np.bincount(typed[typed >= 0], minlength=len(UNIT_TYPES))
+        for t, c in zip(UNIT_TYPES, counts):
+            stats[f"n_{t}"] = int(c)
+        _, b_rects, b_active = self._best
+        stats["best_rects"] = b_rects.astype(np.int64)
+        stats["best_active"] = b_active.astype(bool)
+        return world_to_point(world), [stats]
+
+    @staticmethod
+    def competence(var, has_grad):
+        return Competence.INCOMPATIBLE  # only ever assigned explicitly
