@@ -59,6 +59,19 @@ def geometry_class(rects: np.ndarray, resolution: float, params) -> np.ndarray:
                     np.where(ratio >= params.corridor_min_ratio, COLIKE, ROLIKE)).astype(np.int8)
 
 
+def geometry_class_one(rect, resolution: float, params) -> int:
+    """:func:`geometry_class` of one rectangle with Python scalars (the sampler's hot path);
+    the same floating-point operations, so the two always agree."""
+    h = (int(rect[2]) - int(rect[0])) * resolution
+    w = (int(rect[3]) - int(rect[1])) * resolution
+    short, long_ = min(h, w), max(h, w)
+    m = params.size_measure
+    size = short if m == "short_side" else long_ if m == "long_side" else h * w
+    if size >= params.hall_min_size:
+        return HALIKE
+    return COLIKE if long_ / max(short, 1e-12) >= params.corridor_min_ratio else ROLIKE
+
+
 def geometry_probabilities(rects: np.ndarray, resolution: float, params) -> np.ndarray:
     """(n, 3) probabilities of RoLi, CoLi, HaLi (logistic in the distance to each threshold)."""
     size, ratio = _size_ratio(rects, resolution, params)

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -296,6 +297,70 @@ def _disjoint_boxes(boxes: list) -> list:
     return boxes
 
 
+@numba.njit(cache=True, nogil=True)
+def _apply(cw, rect, corr, wall, sign, r_off, c_off):  # pragma: no cover - compiled
+    """:func:`_add_unit` for the compiled window update (same clipping, same channels)."""
+    h, w = cw.shape[1], cw.shape[2]
+    a0, b0 = max(rect[0] - r_off, 0), max(rect[1] - c_off, 0)
+    a1, b1 = min(rect[2] - r_off, h), min(rect[3] - c_off, w)
+    if a0 >= a1 or b0 >= b1:
+        return
+    for i in range(a0, a1):
+        for j in range(b0, b1):
+            cw[0, i, j] += sign
+            if corr:
+                cw[2, i, j] += sign
+    i0, j0 = max(rect[0] + wall - r_off, 0), max(rect[1] + wall - c_off, 0)
+    i1, j1 = min(rect[2] - wall - r_off, h), min(rect[3] - wall - c_off, w)
+    for i in range(i0, i1):
+        for j in range(j0, j1):
+            cw[0, i, j] -= sign
+            cw[1, i, j] += sign
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_update(counts, cat, gamma, xcode, r0, c0, r1, c1, old_rects, old_corr,
+                   new_rects, new_corr, wall, hist):  # pragma: no cover - compiled
+    """Recompute one window after removing ``old_rects`` and adding ``new_rects``.
+
+    Returns the new count, category and γ windows and the change of Σγ; adds the change of the
+    category histogram into ``hist``. Same rules as :func:`categorise`.
+    """
+    h, w = r1 - r0, c1 - c0
+    cw = counts[:, r0:r1, c0:c1].copy()
+    for k in range(old_rects.shape[0]):
+        _apply(cw, old_rects[k], old_corr[k], wall, -1, r0, c0)
+    for k in range(new_rects.shape[0]):
+        _apply(cw, new_rects[k], new_corr[k], wall, 1, r0, c0)
+    ncat = np.empty((h, w), np.uint8)
+    ngam = np.empty((h, w), np.int16)
+    dgamma = 0
+    for i in range(h):
+        for j in range(w):
+            nw, ni, nc = cw[0, i, j], cw[1, i, j], cw[2, i, j]
+            if nw > 0:
+                region = R_WALL
+            elif ni > 0:
+                region = R_INTERIOR
+            else:
+                region = R_OUT
+            corr = 1 if (region != R_OUT and nc == nw + ni) else 0
+            c = xcode[r0 + i, c0 + j] + N_X * (region + 3 * corr)
+            g = ni + (1 if nw > 0 else 0) - 1
+            if g < 0:
+                g = 0
+            ncat[i, j] = c
+            ngam[i, j] = g
+            hist[c] += 1
+            hist[cat[r0 + i, c0 + j]] -= 1
+            dgamma += g - gamma[r0 + i, c0 + j]
+    return cw, ncat, ngam, dgamma
+
+
+def _rect_array(rects) -> np.ndarray:
+    return np.array(rects, dtype=np.int64).reshape(-1, 4)
+
+
 @dataclass(frozen=True, eq=False)
 class LikPatch:
     """A proposed likelihood update: new windows and the tallies they give."""
@@ -334,19 +399,18 @@ class CoverTracker:
         hist = self.hist.copy()
         gamma_total = self.gamma_total
         windows = []
+        old = [ch for ch in changes if ch.old_rect is not None]
+        new = [ch for ch in changes if ch.new_rect is not None]
+        old_rects = _rect_array([ch.old_rect for ch in old])
+        new_rects = _rect_array([ch.new_rect for ch in new])
+        old_corr = np.array([ch.old_corr for ch in old], dtype=np.bool_)
+        new_corr = np.array([ch.new_corr for ch in new], dtype=np.bool_)
         for box in _disjoint_boxes(boxes):
             r0, c0, r1, c1 = box
-            counts = self.counts[:, r0:r1, c0:c1].copy()
-            for ch in changes:
-                if ch.old_rect is not None:
-                    _add_unit(counts, ch.old_rect, ch.old_corr, data.wall, -1, r0, c0)
-                if ch.new_rect is not None:
-                    _add_unit(counts, ch.new_rect, ch.new_corr, data.wall, +1, r0, c0)
-            cat, gamma = categorise(counts, data.xcode[r0:r1, c0:c1])
-            hist -= np.bincount(self.cat[r0:r1, c0:c1].ravel(), minlength=N_CATEGORIES)
-            hist += np.bincount(cat.ravel(), minlength=N_CATEGORIES)
-            gamma_total += int(gamma.sum(dtype=np.int64)) - int(
-                self.gamma[r0:r1, c0:c1].sum(dtype=np.int64))
+            counts, cat, gamma, dg = _window_update(
+                self.counts, self.cat, self.gamma, data.xcode, r0, c0, r1, c1,
+                old_rects, old_corr, new_rects, new_corr, data.wall, hist)
+            gamma_total += int(dg)
             windows.append((box, counts, cat, gamma))
         return LikPatch(tuple(windows), hist, gamma_total,
                         loglik_from_tallies(data, hist, gamma_total))

@@ -32,11 +32,12 @@ import numpy as np
 
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.derive.adjacency import adjacency_rows
-from semmap_pp.evidence import FixedProvider, build_evidence, geometry_class
-from semmap_pp.likelihood import Change, CoverTracker, LikPatch, full_tallies, loglik_from_tallies, prepare
-from semmap_pp.prior import (log_p_n_table, log_p_rect_const, log_slots, rects_valid,
-                             sale_log_factor)
+from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
+from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_class,
+                                geometry_class_one)
+from semmap_pp.likelihood import (Change, CoverTracker, LikPatch, full_tallies,
+                                  loglik_from_tallies, prepare)
+from semmap_pp.prior import all_valid, log_p_n_table, log_p_rect_const, log_slots, sale_log_factor_slots
 
 CORRIDOR = UNIT_TYPES.index("corridor")
 
@@ -57,7 +58,7 @@ class _Typing:
     world: W.World
     geometry: np.ndarray
     adj: np.ndarray
-    sale: np.ndarray
+    sale: np.ndarray | None   # None: P(SaLe) = fixed_sale[type p, type q]
 
 
 class Posterior:
@@ -113,16 +114,17 @@ class Posterior:
         return counts
 
     def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
-        """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider."""
+        """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider.
+
+        With the fixed provider the SaLe matrix is ``None`` (read from the fixed table by type).
+        """
+        provider = self.provider
+        if isinstance(provider, FixedProvider):
+            types = np.where(world.active, GEOMETRY_TYPE[geometry], W.NO_TYPE).astype(np.int8)
+            return types, None
         slots = W.active_slots(world)
         types = np.full(world.capacity, W.NO_TYPE, dtype=np.int8)
         sale = np.zeros((world.capacity, world.capacity))
-        provider = self.provider
-        if isinstance(provider, FixedProvider):
-            t = provider.types_of(geometry[slots])
-            types[slots] = t
-            sale[np.ix_(slots, slots)] = provider.fixed_sale[np.ix_(t, t)]
-            return types, sale
         rects = world.rects[slots]
         sub = adj[np.ix_(slots, slots)]
         doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
@@ -133,6 +135,10 @@ class Posterior:
         for (p, q), v in result.sale.items():
             sale[p, q] = sale[q, p] = v
         return types, sale
+
+    def _typed(self, world: W.World, types: np.ndarray) -> W.World:
+        types.setflags(write=False)
+        return W.World(world.rects, world.active, types)
 
     def typing(self, world: W.World) -> _Typing:
         """Geometry classes, adjacency, types and SaLe marginals of a world, from scratch."""
@@ -146,18 +152,21 @@ class Posterior:
             adj[np.ix_(slots, slots)] = adjacency_rows(
                 rects, np.arange(len(slots)), self.cells.wall, self.cells.adjacency_dilation)
         types, sale = self._types(world, geometry, adj)
-        return _Typing(W.with_types(world, types), geometry, adj, sale)
+        return _Typing(self._typed(world, types), geometry, adj, sale)
 
-    def _logprior(self, world: W.World, adj: np.ndarray, sale: np.ndarray) -> float:
-        slots = W.active_slots(world)
-        n, K = len(slots), world.capacity
-        rects = world.rects[slots]
+    def _logprior(self, typ: _Typing) -> float:
+        w = typ.world
+        n, K = int(np.count_nonzero(w.active)), w.capacity
         c = self.cells
-        if not np.all(rects_valid(rects, self.frame.shape, c.min_side, c.max_side)):
+        if not all_valid(w.rects, w.active, self.frame.shape, c.min_side, c.max_side):
             return -math.inf
-        sub = np.ix_(slots, slots)
-        return float(self._log_pn_table(K)[n] - log_slots(n, K) + n * self.log_rect
-                     + sale_log_factor(rects, adj[sub], sale[sub], c.resolution, self.model.prior))
+        if typ.sale is None:
+            sale = sale_log_factor_slots(w.rects, w.active, typ.adj, self.model.prior,
+                                         c.resolution, types=w.types, table=self.fixed.fixed_sale)
+        else:
+            sale = sale_log_factor_slots(w.rects, w.active, typ.adj, self.model.prior,
+                                         c.resolution, sale=typ.sale)
+        return float(self._log_pn_table(K)[n] - log_slots(n, K) + n * self.log_rect + sale)
 
     # ------------------------------------------------------------------ full
     def evaluate(self, world: W.World) -> Terms:
@@ -167,7 +176,7 @@ class Posterior:
         slots = W.active_slots(w)
         hist, g = full_tallies(self.data, w.rects[slots], w.types[slots] == CORRIDOR)
         loglik = loglik_from_tallies(self.data, hist, g)
-        logprior = self._logprior(w, typ.adj, typ.sale)
+        logprior = self._logprior(typ)
         return Terms(loglik, logprior, loglik + logprior, w)
 
     def start(self, world: W.World) -> "Tracker":
@@ -197,7 +206,7 @@ class Tracker:
         slots = W.active_slots(w)
         self.cover = CoverTracker(post.data, w.rects[slots], w.types[slots] == CORRIDOR)
         self.loglik = self.cover.loglik
-        self.logprior = post._logprior(w, self._typ.adj, self._typ.sale)
+        self.logprior = post._logprior(self._typ)
         self.logp = self.loglik + self.logprior
 
     @property
@@ -208,28 +217,25 @@ class Tracker:
         """Fraction of the input-free lattice cells covered by some unit."""
         return self.cover.covered_free(hist) / max(self.post.data.n_free, 1)
 
-    def _retype(self, new_world: W.World, changed) -> _Typing:
+    def _retype(self, new_world: W.World, changed: list) -> _Typing:
+        """Types after an edit of ``changed`` slots: geometry and adjacency rows of the changed
+        slots are recomputed, then the provider types *every* unit again."""
         post, old = self.post, self._typ
-        K = new_world.capacity
-        changed = np.asarray(sorted(set(int(s) for s in changed)), dtype=np.intp)
         geometry = old.geometry.copy()
         adj = old.adj.copy()
-        if changed.size:
-            act = new_world.active
-            live = changed[act[changed]]
-            if live.size:
-                geometry[live] = geometry_class(new_world.rects[live], post.cells.resolution,
-                                                post.model.evidence)
-            adj[changed, :] = False
-            adj[:, changed] = False
-            if live.size:
-                rows = adjacency_rows(new_world.rects, live, post.cells.wall,
-                                      post.cells.adjacency_dilation)
-                rows &= act[None, :]
-                adj[live, :] = rows
-                adj[:, live] = rows.T
+        act, rects = new_world.active, new_world.rects
+        c = post.cells
+        row = np.empty(new_world.capacity, dtype=np.bool_)
+        for s in changed:
+            adj[s, :] = False
+            adj[:, s] = False
+            if act[s]:
+                geometry[s] = geometry_class_one(rects[s], c.resolution, post.model.evidence)
+                adjacency_row(rects, act, s, c.wall, c.adjacency_dilation, row)
+                adj[s, :] = row
+                adj[:, s] = row
         types, sale = post._types(new_world, geometry, adj)
-        return _Typing(W.with_types(new_world, types) if K else new_world, geometry, adj, sale)
+        return _Typing(post._typed(new_world, types), geometry, adj, sale)
 
     def propose(self, new_world: W.World, changed_slots) -> Proposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
@@ -238,20 +244,21 @@ class Tracker:
         units whose type changed are recomputed in the likelihood along with the edited ones.
         """
         old = self._typ.world
-        typ = self._retype(new_world, changed_slots)
+        changed = sorted({int(s) for s in changed_slots})
+        typ = self._retype(new_world, changed)
         new = typ.world
-        touched = set(int(s) for s in changed_slots)
-        touched.update(int(s) for s in np.flatnonzero(new.types != old.types))
+        touched = set(changed)
+        touched.update(np.flatnonzero(new.types != old.types).tolist())
         changes = []
         for s in sorted(touched):
-            a = tuple(old.rects[s]) if old.active[s] else None
-            b = tuple(new.rects[s]) if new.active[s] else None
+            a = tuple(old.rects[s].tolist()) if old.active[s] else None
+            b = tuple(new.rects[s].tolist()) if new.active[s] else None
             ca = bool(old.active[s] and old.types[s] == CORRIDOR)
             cb = bool(new.active[s] and new.types[s] == CORRIDOR)
             if a != b or ca != cb:
                 changes.append(Change(a, ca, b, cb))
         patch = self.cover.propose(changes)
-        logprior = self.post._logprior(new, typ.adj, typ.sale)
+        logprior = self.post._logprior(typ)
         return Proposal(new, patch.loglik + logprior, patch.loglik, logprior, typ, patch)
 
     def accept(self, prop: Proposal) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 
@@ -125,3 +126,65 @@ def log_prior(rects: np.ndarray, capacity: int, shape, min_side: int, max_side: 
     return (log_p_n(n, capacity, params) - log_slots(n, capacity)
             + n * log_p_rect_const(shape, min_side, max_side)
             + sale_log_factor(rects, adj, sale_prob, resolution, params))
+
+
+@numba.njit(cache=True, nogil=True)
+def _sale_pairs(rects, active, adj, sale, types, table, use_table, threshold, resolution,
+                inv_two_sigma2):  # pragma: no cover - compiled
+    total = 0.0
+    K = rects.shape[0]
+    for p in range(K):
+        if not active[p]:
+            continue
+        for q in range(p + 1, K):
+            if not (active[q] and adj[p, q]):
+                continue
+            prob = table[types[p], types[q]] if use_table else sale[p, q]
+            if prob <= threshold:
+                continue
+            rp, rq = rects[p], rects[q]
+            col_gap = max(rp[1], rq[1]) - min(rp[3], rq[3])
+            row_gap = max(rp[0], rq[0]) - min(rp[2], rq[2])
+            if col_gap >= row_gap:
+                d = abs((rp[2] - rp[0]) - (rq[2] - rq[0])) * resolution
+            else:
+                d = abs((rp[3] - rp[1]) - (rq[3] - rq[1])) * resolution
+            total -= d * d * inv_two_sigma2
+    return total
+
+
+def sale_log_factor_slots(rects, active, adj, params, resolution, sale=None, types=None,
+                          table=None) -> float:
+    """:func:`sale_log_factor` over slot-indexed arrays (K, 4), (K,), (K, K), compiled.
+
+    P(SaLe) comes from ``sale`` (K, K), or from ``table[types[p], types[q]]`` when a fixed table
+    is used (no (K, K) matrix to build per proposal).
+    """
+    K = len(active)
+    use_table = sale is None
+    if use_table:
+        sale = np.zeros((1, 1))
+    else:
+        types, table = np.zeros(K, np.int8), np.zeros((1, 1))
+    return float(_sale_pairs(np.asarray(rects, np.int64), np.asarray(active, np.bool_), adj, sale,
+                             np.asarray(types, np.int64), np.asarray(table, np.float64),
+                             use_table, float(params.sale_threshold), float(resolution),
+                             1.0 / (2.0 * params.sale_sigma_m ** 2)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _all_valid(rects, active, h, w, lo, hi):  # pragma: no cover - compiled
+    for s in range(rects.shape[0]):
+        if not active[s]:
+            continue
+        r = rects[s]
+        a, b = r[2] - r[0], r[3] - r[1]
+        if r[0] < 0 or r[1] < 0 or r[2] > h or r[3] > w or a < lo or a > hi or b < lo or b > hi:
+            return False
+    return True
+
+
+def all_valid(rects, active, shape, min_side: int, max_side: int) -> bool:
+    """Every active slot satisfies :func:`rects_valid` (compiled, for the sampler's hot path)."""
+    return bool(_all_valid(np.asarray(rects, np.int64), np.asarray(active, np.bool_),
+                           int(shape[0]), int(shape[1]), int(min_side), int(max_side)))

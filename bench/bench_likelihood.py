@@ -1,0 +1,119 @@
+"""Likelihood/posterior speed on a real map: incremental single-unit edits and full evaluations.
+
+``python bench/run.py likelihood --json``. On the cartesium lattice a seeded 20-unit world of
+room-sized rectangles is placed over the known part of the map; a *typical single-unit edit* moves
+one wall of one unit by 1..5 cells (the SHRINK/DILATE kernel), half of the proposals are accepted.
+The same world and the same edits are then repeated on a map of four times the area (the lattice
+tiled 2x2) to show that the cost follows the edit, not the map.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from semmap_pp import world as W
+from semmap_pp.frame import build_frame, build_frame_from_classes
+from semmap_pp.grid import load_map
+from semmap_pp.model import load_model
+from semmap_pp.posterior import Posterior
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--map", default=str(ROOT / "data/maps/ubremen-cartesium.yaml"))
+    parser.add_argument("--units", type=int, default=20)
+    parser.add_argument("--edits", type=int, default=5000)
+    parser.add_argument("--full", type=int, default=30, help="number of full evaluations")
+    parser.add_argument("--seed", type=int, default=0)
+
+
+def random_world(rng, classes, n, capacity, min_side, max_side=200):
+    """``n`` valid rectangles over the bounding box of the known cells."""
+    rows, cols = np.nonzero(classes != 1)
+    r_lo, r_hi, c_lo, c_hi = rows.min(), rows.max(), cols.min(), cols.max()
+    w = W.empty(capacity)
+    for s in range(n):
+        h = int(rng.integers(max(min_side, 40), max_side))
+        wd = int(rng.integers(max(min_side, 40), max_side))
+        r0 = int(rng.integers(r_lo, max(r_lo + 1, r_hi - h)))
+        c0 = int(rng.integers(c_lo, max(c_lo + 1, c_hi - wd)))
+        w = W.add(w, s, (r0, c0, r0 + h, c0 + wd))
+    return w
+
+
+def edit_sequence(rng, world, n_edits, min_side):
+    """Pre-drawn (slot, side, step, accept) one-wall moves that keep every side >= min_side."""
+    out = []
+    slots = W.active_slots(world)
+    for _ in range(n_edits):
+        out.append((int(rng.choice(slots)), int(rng.integers(4)),
+                    int(rng.choice([-5, -4, -3, -2, -1, 1, 2, 3, 4, 5])), bool(rng.random() < 0.5)))
+    return out
+
+
+def time_edits(post, world, edits, min_side):
+    tr = post.start(world)
+    times, type_changes = [], 0
+    for slot, side, step, accept in edits:
+        r = list(tr.world.rects[slot])
+        r[side] += step
+        h, w = post.frame.shape
+        if (r[2] - r[0] < min_side or r[3] - r[1] < min_side or r[0] < 0 or r[1] < 0
+                or r[2] > h or r[3] > w):
+            continue
+        nw = W.replace(tr.world, slot, r)
+        t0 = time.perf_counter()
+        prop = tr.propose(nw, [slot])
+        times.append(time.perf_counter() - t0)
+        type_changes += int(np.any(prop.world.types != tr.world.types))
+        if accept:
+            tr.accept(prop)
+    # the incremental value after all edits agrees with a full evaluation
+    full = post.evaluate(tr.world).total
+    return times, type_changes, abs(tr.logp - full) / abs(full)
+
+
+def run(args) -> dict:
+    model = load_model()
+    grid = load_map(args.map)
+    frame0 = build_frame(grid, model)
+    lattice = np.asarray(frame0.classes)
+    rng = np.random.default_rng(args.seed)
+    frame1 = build_frame_from_classes(lattice, grid.resolution, model, theta=0.0)
+    frame4 = build_frame_from_classes(np.tile(lattice, (2, 2)), grid.resolution, model, theta=0.0)
+    c = frame1.cells
+    world = random_world(rng, lattice, args.units, model.prior.k_max, c.min_side)
+    edits = edit_sequence(rng, world, args.edits, c.min_side)
+
+    out = {"map": Path(args.map).name, "lattice": list(lattice.shape),
+           "theta_deg": round(float(np.degrees(frame0.theta)), 3), "units": args.units}
+    for name, frame in (("1x", frame1), ("4x", frame4)):
+        t0 = time.perf_counter()
+        post = Posterior(frame, model)
+        prep = time.perf_counter() - t0
+        full = []
+        for _ in range(args.full):
+            t0 = time.perf_counter()
+            post.evaluate(world)
+            full.append(time.perf_counter() - t0)
+        times, type_changes, rel = time_edits(post, world, edits, c.min_side)
+        out[name] = {
+            "lattice": list(frame.shape),
+            "prepare_s": round(prep, 3),
+            "full_eval_ms_median": round(1e3 * statistics.median(full), 3),
+            "edit_us_median": round(1e6 * statistics.median(times), 2),
+            "edit_us_p90": round(1e6 * float(np.percentile(times, 90)), 2),
+            "edits_timed": len(times),
+            "edits_with_type_change": type_changes,
+            "incremental_vs_full_rel_err": rel,
+        }
+    out["edit_ratio_4x_over_1x"] = round(out["4x"]["edit_us_median"] / out["1x"]["edit_us_median"], 3)
+    out["targets"] = {"edit_us_median<=100": out["1x"]["edit_us_median"] <= 100,
+                      "full_eval_ms<=20": out["1x"]["full_eval_ms_median"] <= 20,
+                      "ratio_4x<=1.3": out["edit_ratio_4x_over_1x"] <= 1.3}
+    return out
