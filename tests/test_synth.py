@@ -6,7 +6,11 @@ never from the generator's own bookkeeping.
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -18,7 +22,7 @@ from semmap_pp.cli import main
 from semmap_pp.synth import generate_floor, write_floor
 from semmap_pp.synth.layout import partition
 from semmap_pp.synth.topology import exterior_intervals, shared_boundary
-from semmap_pp.synth.truth import read_labels
+from semmap_pp.synth.truth import encode_labels, encode_truth, read_labels
 
 TOL = 0.02  # px: truth.json rounds to 1e-3, rotation adds a little
 
@@ -69,6 +73,34 @@ def test_same_seed_same_bytes_different_seed_differs(tmp_path):
         assert a[key].read_bytes() == b[key].read_bytes(), key
     assert a["map_image"].read_bytes() != c["map_image"].read_bytes()
     assert a["truth"].read_bytes() != c["truth"].read_bytes()
+
+
+def _digest(f) -> str:
+    return hashlib.sha256(f.image.tobytes() + encode_truth(f.truth).encode()
+                          + encode_labels(f.truth_labels)).hexdigest()
+
+
+# The floor of one fixed request, frozen. A change of the generator that changes floors must
+# update this digest on purpose and say so in docs/synthetic.md (old seeds give new floors).
+GOLDEN = (dict(seed=12345, units=3, rotation_deg=30.0),
+          "118e7f4603eaa474d1cc2231671685c78b9cd9f835eb543860adf8437e3760a6")
+
+
+def test_golden_floor_is_unchanged():
+    kwargs, digest = GOLDEN
+    assert _digest(generate_floor(**kwargs)) == digest
+
+
+def test_another_process_with_another_hash_seed_makes_the_same_floor():
+    code = ("import hashlib; from semmap_pp.synth import generate_floor; "
+            "from semmap_pp.synth.truth import encode_truth, encode_labels; "
+            "f = generate_floor(**%r); "
+            "print(hashlib.sha256(f.image.tobytes() + encode_truth(f.truth).encode() "
+            "+ encode_labels(f.truth_labels)).hexdigest())" % (GOLDEN[0],))
+    env = dict(os.environ, PYTHONHASHSEED="12345")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == _digest(generate_floor(**GOLDEN[0]))
 
 
 def test_units_argument_does_not_change_the_drawn_rotation():

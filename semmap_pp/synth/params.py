@@ -72,7 +72,7 @@ class SynthParams:
     laser_range_max: float = 15.0
     laser_rays: int = 360             # rays per scan over 360 degrees
     range_sigma_min: float = 0.015    # range noise, drawn per floor (map quality varies)
-    range_sigma_max: float = 0.045
+    range_sigma_max: float = 0.035
     hit_depth_max: float = 0.1        # a reading also marks up to this far behind its end (drawn
                                       # per floor: thin map_saver walls to thick GMapping walls)
     pose_sigma_xy: float = 0.015      # registration error of a scan
