@@ -165,3 +165,18 @@ def test_derive_world_puts_doors_into_the_states():
     assert [(x.p, x.q) for x in d.doors] == [(0, 2)]
     assert d.states[3, 7] == W_FREE and d.states[6, 7] == W_WALL
     assert d.adjacency.tolist() == [[False, True], [True, False]]
+
+
+def test_compiled_adjacency_row_equals_the_closed_form():
+    from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        K = 8
+        r0, c0 = rng.integers(0, 40, K), rng.integers(0, 40, K)
+        rects = np.stack([r0, c0, r0 + rng.integers(4, 25, K), c0 + rng.integers(4, 25, K)], 1)
+        active = rng.random(K) < 0.7
+        s = int(rng.integers(K))
+        active[s] = True
+        out = np.zeros(K, bool)
+        adjacency_row(rects.astype(np.int64), active, s, 2, 1, out)
+        assert np.array_equal(out, adjacency_rows(rects, [s], 2, 1)[0] & active)

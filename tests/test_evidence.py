@@ -68,3 +68,14 @@ def test_fixed_provider_types_and_sale():
     assert r.sale[(0, 1)] == MODEL.knowledge.fixed_sale[0, 0]
     assert r.sale[(0, 2)] == MODEL.knowledge.fixed_sale[0, 1]
     assert r.types[2].tolist() == [0, 1, 0, 0]
+
+
+def test_scalar_geometry_class_equals_the_vectorised_one():
+    from semmap_pp.evidence import geometry_class_one
+    rng = np.random.default_rng(1)
+    rects = np.stack([np.zeros(500, int), np.zeros(500, int),
+                      rng.integers(20, 400, 500), rng.integers(20, 400, 500)], 1)
+    for measure in ("short_side", "long_side", "area"):
+        p = P.__class__(**{**P.__dict__, "size_measure": measure})
+        vec = geometry_class(rects, RES, p)
+        assert [geometry_class_one(r, RES, p) for r in rects] == vec.tolist()

@@ -72,3 +72,23 @@ def test_log_prior_adds_its_parts():
     expected = log_p_n(2, 8, PRIOR) - log_slots(2, 8) + 2 * log_p_rect(rects[0], shape, lo, hi)
     assert lp == pytest.approx(expected)
     assert log_prior(rects, 1, shape, lo, hi, adj, sale, 0.05, PRIOR) == -math.inf
+
+
+def test_compiled_slot_sale_sum_equals_the_reference():
+    from semmap_pp.prior import sale_log_factor_slots
+    rng = np.random.default_rng(4)
+    table = load_model().knowledge.fixed_sale
+    for _ in range(50):
+        K = 6
+        r0, c0 = rng.integers(0, 50, K), rng.integers(0, 50, K)
+        rects = np.stack([r0, c0, r0 + rng.integers(21, 60, K), c0 + rng.integers(21, 60, K)], 1)
+        active = rng.random(K) < 0.8
+        adj = rng.random((K, K)) < 0.5
+        adj = np.triu(adj, 1)
+        adj = adj | adj.T
+        types = rng.integers(0, 4, K)
+        sale = table[np.ix_(types, types)]
+        live = np.flatnonzero(active)
+        ref = sale_log_factor(rects[live], adj[np.ix_(live, live)], sale[np.ix_(live, live)], 0.05, PRIOR)
+        assert sale_log_factor_slots(rects, active, adj, PRIOR, 0.05, sale=sale) == pytest.approx(ref)
+        assert sale_log_factor_slots(rects, active, adj, PRIOR, 0.05, types=types, table=table) == pytest.approx(ref)
