@@ -131,15 +131,19 @@ def add_row(rng: np.random.Generator, draft: Draft, p: SynthParams, res: float, 
         u += w
 
 
+def _mean_width(rng: np.random.Generator, p: SynthParams) -> float:
+    return float(rng.uniform(p.room_width_mean_min, p.room_width_mean_max))
+
+
 def spine(rng: np.random.Generator, p: SynthParams, res: float, n_units: int) -> Draft:
     """A corridor with rooms on one or both sides, sometimes ending in a hall."""
     d = Draft(layout="spine")
     wc = cells(rng.uniform(p.corridor_width_min, p.corridor_width_max), res)
-    with_hall = n_units >= 5 and rng.random() < 0.35
-    both = n_units > 8 or (n_units >= 4 and rng.random() < 0.8)
+    with_hall = n_units >= 5 and rng.random() < p.p_spine_hall
+    both = n_units > 8 or (n_units >= 4 and rng.random() < p.p_spine_two_sided)
     n_rooms = max(1, n_units - 1 - int(with_hall))
     per_side = -(-n_rooms // 2) if both else n_rooms
-    length = cells(max(p.room_min, per_side * rng.uniform(3.6, 5.2)), res)
+    length = cells(max(p.room_min, per_side * _mean_width(rng, p)), res)
     corridor = d.add([0, 0, length, wc], "corridor")
     depth_top = cells(rng.uniform(p.room_depth_min, p.room_depth_max), res)
     add_row(rng, d, p, res, (0, 0), "x", -1, length, depth_top, jitter=True)
@@ -152,7 +156,7 @@ def spine(rng: np.random.Generator, p: SynthParams, res: float, n_units: int) ->
         wh = cells(rng.uniform(p.hall_min, p.hall_max), res)
         y0 = -depth_top - (hh - span) // 2
         hall = d.add([length, y0, length + wh, y0 + hh], "hall")
-        if rng.random() < 0.6:
+        if rng.random() < p.p_open_junction:
             d.open_pairs.append((corridor, hall))
     return d
 
@@ -168,7 +172,7 @@ def grid(rng: np.random.Generator, p: SynthParams, res: float, n_units: int) -> 
     blocks = (nx - 1) * (ny - 1)
     rows = 2 * blocks + outer_rows * (nx - 1)
     per_row = max(1.0, (n_units - n_corr) / max(rows, 1))
-    bw = [cells(max(2 * p.room_min, per_row * rng.uniform(3.6, 5.0)), res) for _ in range(nx - 1)]
+    bw = [cells(max(2 * p.room_min, per_row * _mean_width(rng, p)), res) for _ in range(nx - 1)]
     bh = [cells(rng.uniform(p.block_depth_min, p.block_depth_max), res) for _ in range(ny - 1)]
     xs = np.concatenate([[0], np.cumsum([w + wc for w in bw])]).astype(int)
     ys = np.concatenate([[0], np.cumsum([h + wc for h in bh])]).astype(int)
@@ -203,7 +207,7 @@ def hall(rng: np.random.Generator, p: SynthParams, res: float, n_units: int) -> 
     sides = [s for s in ("top", "bottom", "left", "right") if rng.random() < 0.75]
     if len(sides) < 2:
         sides = ["top", "bottom"]
-    mean_room = 4.4
+    mean_room = (p.room_width_mean_min + p.room_width_mean_max) / 2
     capacity = sum((w if s in ("top", "bottom") else h) * res / mean_room for s in sides)
     corridor = n_units - 1 > capacity + 2
     if corridor and "right" in sides:
@@ -222,7 +226,7 @@ def hall(rng: np.random.Generator, p: SynthParams, res: float, n_units: int) -> 
         wc = cells(rng.uniform(p.corridor_width_min, p.corridor_width_max), res)
         yc = int(rng.integers(max(1, h // 4), max(2, h - wc - h // 4)))
         rest = n_units - 1 - capacity
-        length = cells(max(p.room_min, rest / 2 * rng.uniform(3.8, 5.2)), res)
+        length = cells(max(p.room_min, rest / 2 * _mean_width(rng, p)), res)
         c = d.add([w, yc, w + length, yc + wc], "corridor")
         d.open_pairs.append((hall_id, c))
         for origin, sign in (((w, yc), -1), ((w, yc + wc), 1)):

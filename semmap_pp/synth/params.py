@@ -28,6 +28,11 @@ class SynthParams:
     hall_max: float = 20.0
     block_depth_min: float = 7.0      # grid layout: distance between parallel corridors
     block_depth_max: float = 14.0
+    room_width_mean_min: float = 3.6  # mean room width used to size a layout for a unit count
+    room_width_mean_max: float = 5.2
+    p_spine_hall: float = 0.35        # a spine ends in a hall
+    p_spine_two_sided: float = 0.8    # small spines (<= 8 units) have rooms on both sides
+    p_open_junction: float = 0.6      # a corridor opens into its hall without a wall
     p_l_shape: float = 0.35           # chance that a wide room slot becomes an L (two units)
     l_min_leftover: float = 2.0       # depth of the small unit left behind an L's short arm
     units_min_default: int = 6        # unit count drawn when the caller gives none
@@ -50,6 +55,8 @@ class SynthParams:
     p_window: float = 0.35            # an exterior wall of a room/hall has windows
     window_min: float = 0.8
     window_max: float = 2.5
+    window_spacing_min: float = 2.5   # one window per this much exterior wall
+    window_spacing_max: float = 4.5
     p_glass_reflects: float = 0.8     # a laser ray is stopped by window glass
     p_exit: float = 0.35              # a corridor/hall end on the outline has an open exit door
 
@@ -67,6 +74,8 @@ class SynthParams:
 
     # --- robot, laser, SLAM noise ------------------------------------------------------------
     pose_spacing: float = 0.5         # distance between scans along the path
+    hall_lane_min: float = 2.5        # distance between the robot's lanes through a hall
+    hall_lane_max: float = 4.0
     p_enter_room: float = 0.65        # the robot drives into a reachable room (else glimpses it)
     laser_range_min: float = 8.0
     laser_range_max: float = 15.0

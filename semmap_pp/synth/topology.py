@@ -193,6 +193,20 @@ def _draw_door(rng, a: int, b: int, boundary, p: SynthParams, res: float, is_ope
     return Door(a, b, o, c, centre, int(width), is_open)
 
 
+def _windows(rng, o: str, c: int, s0: int, s1: int, p: SynthParams, res: float) -> list:
+    """Windows spread along an exterior wall, one per slot of random length."""
+    slot = rng.uniform(p.window_spacing_min, p.window_spacing_max) / res
+    margin = p.door_margin / res
+    out = []
+    for k in range(int((s1 - s0) // slot)):
+        w = rng.uniform(p.window_min, p.window_max) / res
+        w = min(w, slot - 2 * margin)
+        mid = s0 + (k + 0.5) * slot
+        if w > 0:
+            out.append((o, c, int(mid - w / 2), int(mid + w / 2)))
+    return out
+
+
 def _doors(rng, rects, types, shared, open_pairs, p: SynthParams, res: float) -> list:
     """A spanning tree of doors (rooms preferably onto corridors and halls), then extra doors."""
     n = len(rects)
@@ -299,21 +313,18 @@ def build_plan(rng: np.random.Generator, draft: Draft, keep: np.ndarray, p: Synt
             walls.append((o, c, s0, s1, t_in[int(rng.integers(2))]))
     windows, exits = [], []
     for i in range(len(rects)):
+        x0, y0, x1, y1 = rects[i].tolist()
+        # corridors open to the outside only at their ends; halls on any side
+        end_orient = "v" if x1 - x0 >= y1 - y0 else "h"
         for o, c, s0, s1 in exterior_intervals(rects.tolist(), shared, i):
             walls.append((o, c, s0, s1, t_out))
-            length = (s1 - s0) * res
             if types[i] != "corridor" and rng.random() < p.p_window:
-                slot = rng.uniform(2.5, 4.5)
-                for k in range(int(length // slot)):
-                    w = rng.uniform(p.window_min, min(p.window_max, slot - 0.6))
-                    mid = s0 + (k + 0.5) * slot / res
-                    windows.append((o, c, int(mid - w / res / 2), int(mid + w / res / 2)))
-            if types[i] in OPEN_TYPES and length >= p.door_max + 2 * p.door_margin \
-                    and rng.random() < p.p_exit * min(1.0, 2.0 / len(rects) + 0.3):
-                w = cells(rng.uniform(p.door_min, p.door_max), res)
-                mid = int(rng.integers(s0 + cells(p.door_margin, res) + w // 2,
-                                       s1 - cells(p.door_margin, res) - w // 2 + 1))
-                exits.append((i, o, c, mid - w // 2, mid - w // 2 + w))
+                windows += _windows(rng, o, c, s0, s1, p, res)
+            exit_here = types[i] == "hall" or (types[i] == "corridor" and o == end_orient)
+            if exit_here and _door_fits((o, c, s0, s1), p, res) and rng.random() < p.p_exit:
+                d = _draw_door(rng, i, i, (o, c, s0, s1), p, res, True)
+                lo = int(d.centre - d.width / 2)
+                exits.append((i, o, c, lo, lo + d.width))
     root = _root(rects.tolist(), types, np.ones(len(rects), dtype=bool))
     explored, entered = _explore(rng, len(rects), types, doors, open_pairs, root, p)
     return Plan(rects, types, draft.layout, open_pairs, l_pairs, shared, doors, walls, windows,

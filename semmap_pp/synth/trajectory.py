@@ -58,7 +58,7 @@ def scan_poses(rng: np.random.Generator, plan: Plan, br: BuildingRasters, solid:
                 line = [(cx + rng.uniform(-jit, jit), y0 + inset), (cx + rng.uniform(-jit, jit), y1 - inset)]
             pts += _polyline(line, step)
         elif kind == "hall":
-            gap = rng.uniform(2.5, 4.0) * m
+            gap = rng.uniform(p.hall_lane_min, p.hall_lane_max) * m
             inset = min(1.0 * m, 0.3 * min(w, h))
             if w >= h:
                 for k, y in enumerate(np.arange(y0 + inset, y1 - inset + 1, gap)):
