@@ -1,7 +1,10 @@
 """Stand-in targets for the sampler tests (the Tracker contract of docs/architecture.md).
 
-They follow the prior's slot convention: a state with ``n`` units in ``K`` labelled slots has
-``log p = log p_n(n) - log(K! / (K - n)!) + sum_units f(unit)``.
+A state with ``n`` units in ``K`` labelled slots has
+``log p = log p_n(n) - log C(K, n) + sum_units log p_rect(unit) + ...``: a set of ``n`` iid units has
+density ``n! p_n(n) prod p_rect`` and is held by ``K! / (K - n)!`` slot states, so ``-log C(K, n)``
+(not ``-log(K!/(K-n)!)``, which would make the number of units follow ``p_n(n) / n!``) keeps ``p_n``
+the marginal of the number of units. ``slots="placements"`` selects the other term.
 """
 
 from __future__ import annotations
@@ -17,6 +20,11 @@ from semmap_pp import world as wm
 def log_falling(capacity: int, n: int) -> float:
     """``log(K! / (K - n)!)``."""
     return math.lgamma(capacity + 1) - math.lgamma(capacity - n + 1)
+
+
+def log_choose(capacity: int, n: int) -> float:
+    """``log C(K, n)``."""
+    return log_falling(capacity, n) - math.lgamma(n + 1)
 
 
 class Prop(NamedTuple):
@@ -51,7 +59,7 @@ class TableTarget:
         key = wm.canonical_key(world)
         if key not in self.table:
             self.table[key] = float(self.rng.normal(0.0, self.scale))
-        return self.table[key] - log_falling(self.capacity, wm.n_units(world))
+        return self.table[key] - log_choose(self.capacity, wm.n_units(world))
 
     def start(self, world):
         return Tracker(self, world)
@@ -60,8 +68,9 @@ class TableTarget:
 class PriorTarget:
     """Prior only: ``p_n`` a truncated Poisson over 0..K, each unit uniform over valid rectangles."""
 
-    def __init__(self, data, capacity: int, rate: float):
+    def __init__(self, data, capacity: int, rate: float, slots: str = "sets"):
         self.data, self.capacity = data, capacity
+        self.slot_term = log_choose if slots == "sets" else log_falling
         n = np.arange(capacity + 1)
         logpn = n * math.log(rate) - np.array([math.lgamma(k + 1) for k in n])
         self.log_pn = logpn - np.logaddexp.reduce(logpn)
@@ -74,7 +83,7 @@ class PriorTarget:
                 np.any(wm.heights_widths(world)[1] > self.data.max_side):
             return -math.inf
         n = wm.n_units(world)
-        return float(self.log_pn[n]) - log_falling(self.capacity, n) + n * self.log_rect
+        return float(self.log_pn[n]) - self.slot_term(self.capacity, n) + n * self.log_rect
 
     def start(self, world):
         return Tracker(self, world)
