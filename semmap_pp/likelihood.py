@@ -101,6 +101,7 @@ class LikelihoodData:
     log_psi: float
     wall: int
     n_free: int
+    xhist: np.ndarray   # (24,) category histogram of the empty world (every cell R_OUT)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -133,9 +134,11 @@ def prepare(frame, model) -> LikelihoodData:
     xcode.setflags(write=False)
     counts = np.bincount(cls.ravel(), minlength=3)
     baseline = float(np.dot(counts[:3], np.log(model.sensor.other[W_UNKNOWN])))
+    xhist = np.bincount(xcode.ravel(), minlength=N_CATEGORIES).astype(np.int64)
+    xhist.setflags(write=False)
     return LikelihoodData(xcode=xcode, gain=gain_table(model.sensor), baseline=baseline,
                           log_psi=float(np.log(model.sensor.psi)), wall=frame.cells.wall,
-                          n_free=int(counts[FREE]))
+                          n_free=int(counts[FREE]), xhist=xhist)
 
 
 def _add_unit(counts: np.ndarray, rect, corr: bool, wall: int, sign: int,
@@ -202,7 +205,7 @@ def full_tallies(data: LikelihoodData, rects: np.ndarray, corridor: np.ndarray):
     Only the bounding box of the units is categorised; every cell outside it is R_OUT.
     """
     rects = np.asarray(rects).reshape(-1, 4)
-    hist = np.bincount(data.xcode.ravel(), minlength=N_CATEGORIES).astype(np.int64)
+    hist = data.xhist.copy()
     box = _bbox(rects, data.shape)
     if box is None:
         return hist, 0
@@ -319,19 +322,20 @@ def _apply(cw, rect, corr, wall, sign, r_off, c_off):  # pragma: no cover - comp
 
 
 @numba.njit(cache=True, nogil=True)
-def _window_update(counts, cat, gamma, xcode, r0, c0, r1, c1, old_rects, old_corr,
-                   new_rects, new_corr, wall, hist):  # pragma: no cover - compiled
-    """Recompute one window after removing ``old_rects`` and adding ``new_rects``.
+def _window_update(counts, cat, gamma, xcode, r0, c0, r1, c1, old_units, new_units, wall,
+                   hist):  # pragma: no cover - compiled
+    """Recompute one window after removing ``old_units`` and adding ``new_units``
+    (rows ``r0, c0, r1, c1, corridor``).
 
     Returns the new count, category and γ windows and the change of Σγ; adds the change of the
     category histogram into ``hist``. Same rules as :func:`categorise`.
     """
     h, w = r1 - r0, c1 - c0
     cw = counts[:, r0:r1, c0:c1].copy()
-    for k in range(old_rects.shape[0]):
-        _apply(cw, old_rects[k], old_corr[k], wall, -1, r0, c0)
-    for k in range(new_rects.shape[0]):
-        _apply(cw, new_rects[k], new_corr[k], wall, 1, r0, c0)
+    for k in range(old_units.shape[0]):
+        _apply(cw, old_units[k], old_units[k, 4] != 0, wall, -1, r0, c0)
+    for k in range(new_units.shape[0]):
+        _apply(cw, new_units[k], new_units[k, 4] != 0, wall, 1, r0, c0)
     ncat = np.empty((h, w), np.uint8)
     ngam = np.empty((h, w), np.int16)
     dgamma = 0
@@ -355,10 +359,6 @@ def _window_update(counts, cat, gamma, xcode, r0, c0, r1, c1, old_rects, old_cor
             hist[cat[r0 + i, c0 + j]] -= 1
             dgamma += g - gamma[r0 + i, c0 + j]
     return cw, ncat, ngam, dgamma
-
-
-def _rect_array(rects) -> np.ndarray:
-    return np.array(rects, dtype=np.int64).reshape(-1, 4)
 
 
 @dataclass(frozen=True, eq=False)
@@ -399,17 +399,15 @@ class CoverTracker:
         hist = self.hist.copy()
         gamma_total = self.gamma_total
         windows = []
-        old = [ch for ch in changes if ch.old_rect is not None]
-        new = [ch for ch in changes if ch.new_rect is not None]
-        old_rects = _rect_array([ch.old_rect for ch in old])
-        new_rects = _rect_array([ch.new_rect for ch in new])
-        old_corr = np.array([ch.old_corr for ch in old], dtype=np.bool_)
-        new_corr = np.array([ch.new_corr for ch in new], dtype=np.bool_)
+        old = [tuple(ch.old_rect) + (ch.old_corr,) for ch in changes if ch.old_rect is not None]
+        new = [tuple(ch.new_rect) + (ch.new_corr,) for ch in changes if ch.new_rect is not None]
+        old_units = np.array(old, dtype=np.int64).reshape(-1, 5)
+        new_units = np.array(new, dtype=np.int64).reshape(-1, 5)
         for box in _disjoint_boxes(boxes):
             r0, c0, r1, c1 = box
             counts, cat, gamma, dg = _window_update(
                 self.counts, self.cat, self.gamma, data.xcode, r0, c0, r1, c1,
-                old_rects, old_corr, new_rects, new_corr, data.wall, hist)
+                old_units, new_units, data.wall, hist)
             gamma_total += int(dg)
             windows.append((box, counts, cat, gamma))
         return LikPatch(tuple(windows), hist, gamma_total,

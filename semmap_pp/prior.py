@@ -166,8 +166,8 @@ def sale_log_factor_slots(rects, active, adj, params, resolution, sale=None, typ
         sale = np.zeros((1, 1))
     else:
         types, table = np.zeros(K, np.int8), np.zeros((1, 1))
-    return float(_sale_pairs(np.asarray(rects, np.int64), np.asarray(active, np.bool_), adj, sale,
-                             np.asarray(types, np.int64), np.asarray(table, np.float64),
+    return float(_sale_pairs(np.asarray(rects), np.asarray(active, np.bool_), adj, sale,
+                             np.asarray(types), np.asarray(table, np.float64),
                              use_table, float(params.sale_threshold), float(resolution),
                              1.0 / (2.0 * params.sale_sigma_m ** 2)))
 
@@ -186,5 +186,5 @@ def _all_valid(rects, active, h, w, lo, hi):  # pragma: no cover - compiled
 
 def all_valid(rects, active, shape, min_side: int, max_side: int) -> bool:
     """Every active slot satisfies :func:`rects_valid` (compiled, for the sampler's hot path)."""
-    return bool(_all_valid(np.asarray(rects, np.int64), np.asarray(active, np.bool_),
+    return bool(_all_valid(np.asarray(rects), np.asarray(active, np.bool_),
                            int(shape[0]), int(shape[1]), int(min_side), int(max_side)))
