@@ -261,6 +261,11 @@ class Tracker:
         logprior = self.post._logprior(typ)
         return Proposal(new, patch.loglik + logprior, patch.loglik, logprior, typ, patch)
 
+    def resync(self) -> None:
+        """Rebuild every cache from the current geometry (call after switching
+        :attr:`Posterior.knowledge_on`: the provider, hence the types, changed)."""
+        self.__init__(self.post, self.world)
+
     def accept(self, prop: Proposal) -> None:
         """Commit a proposal (a rejected one is simply dropped)."""
         self.cover.commit(prop.patch)

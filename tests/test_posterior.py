@@ -120,3 +120,19 @@ def test_coverage_counts_free_cells_under_units():
     post = Posterior(build_frame_from_classes(cls, 0.05, MODEL, theta=0.0), MODEL)
     tr = post.start(W.add(W.empty(2), 0, (0, 0, 20, 20)))
     assert tr.coverage() == pytest.approx(0.5)
+
+
+def test_resync_after_switching_knowledge_on():
+    rng = np.random.default_rng(9)
+    provider = NeighbourProvider()
+    post = posterior(rng, provider)
+    post.knowledge_on = False
+    w = W.empty(6)
+    for s, rect in enumerate([(0, 0, 40, 30), (0, 29, 40, 60), (0, 59, 40, 90)]):
+        w = W.add(w, s, rect)
+    tr = post.start(w)
+    assert [UNIT_TYPES[t] for t in tr.world.types[:3]] == ["room"] * 3
+    post.knowledge_on = True
+    tr.resync()
+    assert UNIT_TYPES[tr.world.types[1]] == "corridor"      # two neighbours
+    assert tr.logp == pytest.approx(post.evaluate(w).total, rel=1e-12)
