@@ -100,13 +100,12 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
                           progressbar=progressbar, mp_ctx=mp_ctx)
         seconds = time.perf_counter() - t0
     best = (-math.inf, 0, None)
-    for c, (lp, rects, active) in enumerate(zip(trace.get_sampler_stats("best_logp", combine=False),
-                                                trace.get_sampler_stats("best_rects", combine=False),
-                                                trace.get_sampler_stats("best_active", combine=False))):
+    for c in range(trace.nchains):
+        lp = trace.get_sampler_stats("best_logp", chains=c)
         if best[2] is None or lp[-1] > best[0]:
             # PyMC stacks object stats of all draws: take the last draw's K slots
-            last_r = np.asarray(rects).reshape(-1, capacity, 4)[-1]
-            last_a = np.asarray(active).reshape(-1, capacity)[-1]
+            last_r = np.asarray(trace.get_sampler_stats("best_rects", chains=c)).reshape(-1, capacity, 4)[-1]
+            last_a = np.asarray(trace.get_sampler_stats("best_active", chains=c)).reshape(-1, capacity)[-1]
             best = (float(lp[-1]), c, wm.make(last_r, last_a, np.full(capacity, wm.NO_TYPE)))
     return SampleResult(trace, best[2], best[0], best[1], seconds, draws)
 

@@ -1,0 +1,96 @@
+"""Sampler speed on a real map: kernel applications per second, plain Python and through ``pm.sample``.
+
+``python bench/run.py sampler --json``. On the cartesium lattice the chain is first burnt in from the
+empty world with the plain loop (``--burn`` kernels) so that it holds units; then it measures
+
+* ``kernels_alone_us``: each kernel pair's cost without the target (proposal and exact ratio only);
+* ``loop_kernels_per_s``: :func:`semmap_pp.mcmc.run_chain` with the project's Posterior;
+* ``pymc_kernels_per_s``: one chain through ``pm.sample`` with :class:`semmap_pp.step.WorldStep`
+  (``--draws`` draws of ``--n-inner`` kernels, timed around ``pm.sample``, set-up included);
+* ``pymc_overhead_us_per_draw``: ``pm.sample`` with a constant target and one kernel per draw, minus
+  the same kernels in the plain loop: what PyMC adds per draw.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.frame import build_frame
+from semmap_pp.grid import load_map
+from semmap_pp.kernels import data_from_frame, default_mix
+from semmap_pp.mcmc import run_chain
+from semmap_pp.model import load_model
+from semmap_pp.posterior import Posterior
+from semmap_pp.sampling import _FlatTracker, sample_worlds
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--map", default=str(ROOT / "data/maps/ubremen-cartesium.yaml"))
+    parser.add_argument("--burn", type=int, default=3000, help="plain-loop kernels before timing")
+    parser.add_argument("--kernels", type=int, default=5000, help="kernels in the timed plain loop")
+    parser.add_argument("--draws", type=int, default=50)
+    parser.add_argument("--n-inner", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=0)
+
+
+class _Flat:
+    def start(self, world):
+        return _FlatTracker(world)
+
+
+def run(args) -> dict:
+    model = load_model()
+    frame = build_frame(load_map(args.map), model)
+    t0 = time.perf_counter()
+    data = data_from_frame(frame)
+    t_data = time.perf_counter() - t0
+    post = Posterior(frame, model)
+    capacity = model.prior.k_max
+    mix = default_mix(data.settings)
+    rng = np.random.default_rng(args.seed)
+
+    tracker = post.start(wm.empty(capacity))
+    run_chain(rng, tracker, mix, args.burn, data)
+    start = tracker.world
+
+    alone = {}
+    for kernel in mix.kernels:
+        t0 = time.perf_counter()
+        for _ in range(1000):
+            kernel(rng, start, data)
+        alone[kernel.kind] = round((time.perf_counter() - t0) / 1000 * 1e6, 1)
+
+    t0 = time.perf_counter()
+    stats = run_chain(rng, tracker, mix, args.kernels, data)
+    t_loop = time.perf_counter() - t0
+
+    res = sample_worlds(post, data, [start], draws=args.draws, tune=0, chains=1, cores=1,
+                        n_inner=args.n_inner, seed=args.seed)
+    n_pymc = args.draws * args.n_inner
+
+    # PyMC's own cost per draw: constant target, one kernel per draw, against the same in a loop
+    n_flat = 2000
+    flat = sample_worlds(_Flat(), data, [start], draws=n_flat, tune=0, chains=1, cores=1, n_inner=1,
+                         seed=args.seed)
+    tr = _FlatTracker(start)
+    t0 = time.perf_counter()
+    run_chain(np.random.default_rng(args.seed), tr, mix, n_flat, data)
+    t_flat_loop = time.perf_counter() - t0
+    return {
+        "map": args.map, "lattice": list(frame.shape), "capacity": capacity,
+        "units_at_start": wm.n_units(start), "data_build_s": round(t_data, 3),
+        "birth_candidates": int(len(data.birth_rects)),
+        "kernels_alone_us": alone,
+        "loop_kernels_per_s": round(args.kernels / t_loop, 1),
+        "loop_acceptance": {k: round(v, 4) for k, v in stats.acceptance().items()},
+        "pymc_kernels_per_s": round(n_pymc / res.seconds, 1),
+        "pymc_draws": args.draws, "pymc_n_inner": args.n_inner,
+        "pymc_overhead_us_per_draw": round((flat.seconds - t_flat_loop) / n_flat * 1e6, 1),
+        "units_at_end": wm.n_units(tracker.world),
+    }
