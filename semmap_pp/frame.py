@@ -1,9 +1,12 @@
 """The building lattice: the map's dominant orientation θ0 and the map resampled onto a grid rotated
 by θ0 (see docs/architecture.md, "The building lattice").
 
-Coordinates follow :mod:`semmap_pp.grid`: integer (fractional) cell indices are cell *centres*, so
-image pixel ``(x_px, y_px) = (col, row)`` is the centre of that pixel and a lattice rectangle
-``(r0, c0, r1, c1)`` spans the continuous box ``[r0 - 0.5, r1 - 0.5] x [c0 - 0.5, c1 - 0.5]``.
+Two coordinate frames, kept apart on purpose. Inside this module (``lattice_to_image``,
+``image_to_lattice``) fractional cell *indices* are used: index ``(col, row)`` is the centre of that
+cell, and a lattice rectangle ``(r0, c0, r1, c1)`` spans ``[r0 - 0.5, r1 - 0.5] x [c0 - 0.5, c1 - 0.5]``.
+Everything this module hands to the outside world in pixels (``rect_vertices_px``, and the input of
+``image_to_metres``) is in the project's continuous pixel frame of :mod:`semmap_pp.cells`: pixel
+``(row r, col c)`` spans ``x in [c, c+1)``, ``y in [r, r+1)``, so its centre is ``(c + 0.5, r + 0.5)``.
 A lattice point maps to the image by ``p_img = R(θ0) (p_lat - o_lat) + o_img`` on ``[x, y]``
 pairs, with ``o_lat`` and ``o_img`` the centres of the two grids; the lattice's column axis runs
 along the image direction ``(cos θ0, sin θ0)`` (y pointing down the image).
@@ -159,21 +162,27 @@ class Frame:
         return -s * u + c * v + oyl, c * u + s * v + oxl
 
     def rect_vertices_px(self, rect) -> np.ndarray:
-        """The four ``[x, y]`` corners of a lattice rectangle in the input image frame.
+        """The four ``[x, y]`` corners of a lattice rectangle in the continuous pixel frame.
 
-        Order: (r0, c0), (r0, c1), (r1, c1), (r1, c0) corners of the half-open cell box.
+        Order: (r0, c0), (r0, c1), (r1, c1), (r1, c0) corners of the half-open cell box. The frame is
+        that of :mod:`semmap_pp.cells` (pixel ``(r, c)`` spans ``[c, c+1) x [r, r+1)``), as written to
+        world.json.
         """
         r0, c0, r1, c1 = (float(v) for v in rect)
         rows = np.array([r0, r0, r1, r1]) - 0.5
         cols = np.array([c0, c1, c1, c0]) - 0.5
         x, y = self.lattice_to_image(rows, cols)
-        return np.stack([x, y], axis=1)
+        return np.stack([x + 0.5, y + 0.5], axis=1)
 
     def image_to_metres(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
-        """Map-frame metres of image coordinates (ROS map_server, as :mod:`semmap_pp.grid`)."""
+        """Map-frame metres of continuous pixel-frame coordinates (ROS map_server, as :mod:`semmap_pp.grid`).
+
+        ``(x_px, y_px) = (c + 0.5, r + 0.5)`` is the centre of pixel ``(r, c)``; ``(0, height)`` is the
+        bottom-left image corner, which map_server places at the origin.
+        """
         h = self.image_shape[0]
-        u = (np.asarray(x_px, dtype=np.float64) + 0.5) * self.resolution
-        v = (h - np.asarray(y_px, dtype=np.float64) - 0.5) * self.resolution
+        u = np.asarray(x_px, dtype=np.float64) * self.resolution
+        v = (h - np.asarray(y_px, dtype=np.float64)) * self.resolution
         ox, oy, yaw = self.origin
         c, s = math.cos(yaw), math.sin(yaw)
         return ox + c * u - s * v, oy + s * u + c * v

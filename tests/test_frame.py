@@ -70,7 +70,8 @@ def test_to_image_resamples_back():
 def test_rect_vertices_follow_the_rotation():
     f = build_frame_from_classes(np.zeros((10, 20), np.uint8), 0.05, MODEL, theta=0.0)
     v = f.rect_vertices_px((2, 3, 5, 9))
-    assert v.tolist() == [[2.5, 1.5], [8.5, 1.5], [8.5, 4.5], [2.5, 4.5]]
+    # continuous pixel frame: the cell box of rows 2..4, cols 3..8 spans x in [3, 9), y in [2, 5)
+    assert v.tolist() == [[3.0, 2.0], [9.0, 2.0], [9.0, 5.0], [3.0, 5.0]]
     g = build_frame_from_classes(np.zeros((10, 20), np.uint8), 0.05, MODEL, theta=math.radians(30))
     v = g.rect_vertices_px((2, 3, 5, 9))
     top = v[1] - v[0]                       # the rectangle's top edge runs at +30° in the image
@@ -80,5 +81,7 @@ def test_rect_vertices_follow_the_rotation():
 
 def test_metres_follow_map_server():
     f = build_frame_from_classes(np.zeros((4, 3), np.uint8), 0.5, MODEL, origin=(10.0, 20.0, 0.0))
-    x, y = f.image_to_metres(0, 3)   # bottom-left pixel centre
+    x, y = f.image_to_metres(0.5, 3.5)   # bottom-left pixel centre (pixel frame: c + 0.5, r + 0.5)
     assert (float(x), float(y)) == (10.25, 20.25)
+    x, y = f.image_to_metres(0, 4)       # bottom-left image corner = the map origin
+    assert (float(x), float(y)) == (10.0, 20.0)

@@ -102,7 +102,7 @@ def main() -> int:
               interpolation="nearest")
     for s in d.slots:
         v = frame.rect_vertices_px(world.rects[s])
-        cx, cy = v.mean(axis=0)
+        cx, cy = v.mean(axis=0) - 0.5   # pixel frame -> imshow's centre-of-pixel coordinates
         t = UNIT_TYPES[world.types[s]]
         ax.text(cx, cy, f"{LETTER[t]}{s}", ha="center", va="center", fontsize=7,
                 color="darkred", weight="bold")
