@@ -57,8 +57,8 @@ class SynthParams:
     window_max: float = 2.5
     window_spacing_min: float = 2.5   # one window per this much exterior wall
     window_spacing_max: float = 4.5
-    p_glass_reflects: float = 0.8     # a laser ray is stopped by window glass
-    p_exit: float = 0.35              # a corridor/hall end on the outline has an open exit door
+    p_glass_reflects: float = 0.9     # a laser ray is stopped by window glass
+    p_exit: float = 0.25              # a corridor/hall end on the outline has an open exit door
 
     # --- furniture ---------------------------------------------------------------------------
     furniture_per_m2: float = 0.18    # blobs (desks, cabinets) per square metre of room

@@ -156,8 +156,8 @@ def furnish(rng: np.random.Generator, plan: Plan, br: BuildingRasters, p: SynthP
                     x = bx0 if rng.random() < 0.5 else bx1 - t
                     place((x, y, x + t, y + s))
             continue
-        density = p.furniture_per_m2 * (0.35 if kind == "hall" else 2.0 if kind == "other" else 1.0)
-        for _ in range(int(rng.poisson(density * area))):
+        scale = 0.35 if kind == "hall" else 2.0 if kind == "other" else 1.0  # lobby / storage
+        for _ in range(int(rng.poisson(scale * p.furniture_per_m2 * area))):
             if rng.random() < 0.7:  # against a wall: desks, shelves, cabinets
                 length, depth = m(rng.uniform(0.8, 2.2)), m(rng.uniform(0.4, 0.8))
                 gap = int(rng.integers(0, 3))
@@ -175,7 +175,7 @@ def furnish(rng: np.random.Generator, plan: Plan, br: BuildingRasters, p: SynthP
                 x = int(rng.integers(bx0, max(bx0 + 1, bx1 - sx)))
                 y = int(rng.integers(by0, max(by0 + 1, by1 - sy)))
                 place((x, y, min(x + sx, bx1), min(y + sy, by1)), ellipse=rng.random() < 0.3)
-        for _ in range(int(rng.poisson(p.legs_per_m2 * area))):  # tables and chairs: only legs
+        for _ in range(int(rng.poisson(scale * p.legs_per_m2 * area))):  # tables and chairs: only legs
             sx, sy = m(rng.uniform(0.4, 1.8)), m(rng.uniform(0.4, 1.0))
             x = int(rng.integers(bx0 + 2, max(bx0 + 3, bx1 - sx - 2)))
             y = int(rng.integers(by0 + 2, max(by0 + 3, by1 - sy - 2)))
@@ -183,7 +183,7 @@ def furnish(rng: np.random.Generator, plan: Plan, br: BuildingRasters, p: SynthP
             for lx, ly in ((x, y), (x + sx, y), (x, y + sy), (x + sx, y + sy)):
                 if lx + leg <= bx1 and ly + leg <= by1:
                     place((lx, ly, lx + leg, ly + leg))
-        for _ in range(int(rng.poisson(p.clutter_per_m2 * area))):
+        for _ in range(int(rng.poisson(scale * p.clutter_per_m2 * area))):
             sx, sy = m(rng.uniform(0.1, 0.3)), m(rng.uniform(0.1, 0.3))
             x = int(rng.integers(bx0, max(bx0 + 1, bx1 - sx)))
             y = int(rng.integers(by0, max(by0 + 1, by1 - sy)))
