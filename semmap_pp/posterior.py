@@ -113,6 +113,15 @@ class Posterior:
             counts[q] += k
         return counts
 
+    def _infer(self, world: W.World, adj: np.ndarray, provider):
+        """The provider's result (types, SaLe, MAP types) for the active units of ``world``."""
+        slots = W.active_slots(world)
+        rects = world.rects[slots]
+        sub = adj[np.ix_(slots, slots)]
+        doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
+        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
+        return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
+
     def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
         """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider.
 
@@ -122,19 +131,23 @@ class Posterior:
         if isinstance(provider, FixedProvider):
             types = np.where(world.active, GEOMETRY_TYPE[geometry], W.NO_TYPE).astype(np.int8)
             return types, None
-        slots = W.active_slots(world)
+        result = self._infer(world, adj, provider)
         types = np.full(world.capacity, W.NO_TYPE, dtype=np.int8)
         sale = np.zeros((world.capacity, world.capacity))
-        rects = world.rects[slots]
-        sub = adj[np.ix_(slots, slots)]
-        doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
-        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
-        result = provider.infer(ev.to_knowledge())
-        for s in slots:
+        for s in W.active_slots(world):
             types[s] = UNIT_TYPES.index(result.map_types[int(s)])
         for (p, q), v in result.sale.items():
             sale[p, q] = sale[q, p] = v
         return types, sale
+
+    def knowledge_result(self, world: W.World):
+        """Type marginals, SaLe marginals and MAP types of ``world`` from the provider in use.
+
+        Keys are slots. With knowledge off the marginals are those of the fixed provider (one-hot
+        on the geometry class), which is what the sampler used.
+        """
+        typ = self.typing(world)
+        return self._infer(typ.world, typ.adj, self.provider)
 
     def _typed(self, world: W.World, types: np.ndarray) -> W.World:
         types.setflags(write=False)
