@@ -55,12 +55,13 @@ def ranges(a_rect, side: int, data: KernelData):
     return axis, near, far, s0, s1
 
 
-def boxes(a_rect, side: int, near: int, data: KernelData):
-    """Box values ``(s0*, s1*, far*)`` for every seed ``p`` over ``A``'s span (arrays)."""
+def boxes(a_rect, side: int, near: int, data: KernelData, p=None):
+    """Box values ``(s0*, s1*, far*)`` for the seeds ``p`` (default: every cell of ``A``'s span)."""
     axis, sign = side // 2, (1 if side % 2 == 0 else -1)
     t = data.wall_cells
     length, other = data.shape[axis], data.shape[1 - axis]
-    p = np.arange(int(a_rect[1 - axis]), int(a_rect[3 - axis]))
+    if p is None:
+        p = np.arange(int(a_rect[1 - axis]), int(a_rect[3 - axis]))
     e = near + t if sign > 0 else near - t - 1
     if not 0 <= e < length:
         none = np.full(p.size, _NONE)
@@ -104,17 +105,16 @@ def allocate_q(b_rect, a_rect, side: int, data: KernelData) -> float:
 def _sources_q(b_rect, world, data: KernelData) -> float:
     """``sum over (A, side) that b_rect touches of q_A,side(b_rect) / (4 n)`` in ``world``."""
     n = int(world.active.sum())
-    touch = attached_to(b_rect, world.rects, world.active, data.min_side, data.wall_share)
     total = 0.0
-    for a, side in zip(*np.nonzero(touch)):
-        total += allocate_q(b_rect, world.rects[a], int(side), data)
+    for a, side in attached_to(b_rect, world.rects, world.active, data.min_side, data.wall_share):
+        total += allocate_q(b_rect, world.rects[a], side, data)
     return total / (4 * n)
 
 
 def deletable(world, data: KernelData) -> np.ndarray:
     """Slots of the units that share a wall with at least one other unit."""
-    _, a, b = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
-    return np.unique(np.concatenate([a, b]))
+    pairs = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
+    return np.array(sorted({s for _, a, b in pairs for s in (a, b)}), dtype=np.int64)
 
 
 def _log(x: float) -> float:
@@ -160,11 +160,12 @@ def propose_allocate(rng, world, data: KernelData):
     if rg is None:
         return None
     axis, near, far, s0, s1 = rg
-    bs0, bs1, bfar = boxes(a_rect, side, near, data)
-    k = int(rng.random() * bs0.size)
-    x0 = _draw_coord(rng, int(bs0[k]), *s0, data)
-    x1 = _draw_coord(rng, int(bs1[k]), *s1, data)
-    xf = _draw_coord(rng, int(bfar[k]), *far, data)
+    span0, span1 = int(a_rect[1 - axis]), int(a_rect[3 - axis])
+    seed = np.array([span0 + int(rng.random() * (span1 - span0))])
+    bs0, bs1, bfar = boxes(a_rect, side, near, data, seed)
+    x0 = _draw_coord(rng, int(bs0[0]), *s0, data)
+    x1 = _draw_coord(rng, int(bs1[0]), *s1, data)
+    xf = _draw_coord(rng, int(bfar[0]), *far, data)
     if x0 is None or x1 is None or xf is None or not data.min_side <= x1 - x0 <= data.max_side:
         return None
     b = [0, 0, 0, 0]

@@ -28,61 +28,72 @@ def band_weights(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1:
     The line fraction of line ``i`` is the share of its cells in ``[s0, s1)`` that are wall (occupied)
     or door-candidate cells; lines outside the lattice count 0.
     """
-    n_lines = cum.shape[0]
-    idx = np.arange(lo + a, hi + b)
-    frac = np.zeros(idx.size)
-    ok = (idx >= 0) & (idx < n_lines)
-    iv = idx[ok]
-    frac[ok] = (cum[iv, s1] - cum[iv, s0]) / float(s1 - s0)
-    cs = np.concatenate(([0.0], np.cumsum(frac)))
+    first, last = lo + a, hi + b
+    i0, i1 = max(first, 0), min(last, cum.shape[0])
+    cs = np.zeros(last - first + 1)
+    if i1 > i0:
+        np.cumsum(cum[i0:i1, s1] - cum[i0:i1, s0], out=cs[i0 - first + 1:i1 - first + 1])
+        cs[i1 - first + 1:] = cs[i1 - first]
     width = b - a
     n = hi - lo + 1
-    return floor + (cs[width:width + n] - cs[:n]) / width
+    return floor + (cs[width:width + n] - cs[:n]) / (width * float(s1 - s0))
 
 
-def attach_pairs(rects: np.ndarray, active: np.ndarray, m: int, g: int):
-    """Slot pairs of units that share a wall: ``(axis, a, b)`` arrays, ``a`` upper (axis 0) or left.
+def attach_pairs(rects: np.ndarray, active: np.ndarray, m: int, g: int) -> list:
+    """Slot pairs of units that share a wall: a list of ``(axis, a, b)``, ``a`` upper (0) or left (1).
 
     ``b`` lies below ``a`` (axis 0) when ``b.r0 == a.r1 - g`` and their column spans overlap by at
-    least ``m`` cells; right of ``a`` (axis 1) in the same sense. Only active units are compared.
+    least ``m`` cells; right of ``a`` (axis 1) in the same sense. Units are matched through a table
+    of their edges (a world holds tens of units: plain Python beats many small array operations).
     """
-    slots = np.flatnonzero(active)
-    r = rects[slots].astype(np.int64)
-    r0, c0, r1, c1 = r[:, 0], r[:, 1], r[:, 2], r[:, 3]
-    col_ov = np.minimum(c1[:, None], c1[None, :]) - np.maximum(c0[:, None], c0[None, :])
-    row_ov = np.minimum(r1[:, None], r1[None, :]) - np.maximum(r0[:, None], r0[None, :])
-    av, bv = np.nonzero((r0[None, :] == r1[:, None] - g) & (col_ov >= m))
-    ah, bh = np.nonzero((c0[None, :] == c1[:, None] - g) & (row_ov >= m))
-    axis = np.concatenate([np.zeros(av.size, np.int64), np.ones(ah.size, np.int64)])
-    return axis, slots[np.concatenate([av, ah])], slots[np.concatenate([bv, bh])]
+    rl = rects.tolist()
+    slots = [i for i, a in enumerate(active.tolist()) if a]
+    out = []
+    for axis in (0, 1):
+        by_lo: dict[int, list] = {}
+        for i in slots:
+            by_lo.setdefault(rl[i][axis], []).append(i)
+        for i in slots:
+            ri = rl[i]
+            for j in by_lo.get(ri[axis + 2] - g, ()):
+                rj = rl[j]
+                if min(ri[3 - axis], rj[3 - axis]) - max(ri[1 - axis], rj[1 - axis]) >= m:
+                    out.append((axis, i, j))
+    return out
 
 
 def attach_matrices(rects: np.ndarray, active: np.ndarray, m: int, g: int):
     """Which units share a wall, as (K, K) bool matrices ``(V, Hz)`` (see :func:`attach_pairs`)."""
     k = rects.shape[0]
-    v, hz = np.zeros((k, k), bool), np.zeros((k, k), bool)
-    axis, a, b = attach_pairs(rects, active, m, g)
-    v[a[axis == 0], b[axis == 0]] = True
-    hz[a[axis == 1], b[axis == 1]] = True
-    return v, hz
+    mats = np.zeros((2, k, k), bool)
+    for axis, a, b in attach_pairs(rects, active, m, g):
+        mats[axis, a, b] = True
+    return mats[0], mats[1]
 
 
-def attached_to(rect, rects: np.ndarray, active: np.ndarray, m: int, g: int) -> np.ndarray:
-    """(K, 4) bool: ``out[k, side]`` when ``rect`` touches unit ``k`` on ``k``'s side ``side``.
+def attached_to(rect, rects: np.ndarray, active: np.ndarray, m: int, g: int) -> list:
+    """``(k, side)`` for every unit ``k`` that ``rect`` touches on ``k``'s side ``side``.
 
     Sides are indexed ``(axis, direction)`` as ``0: (0, +1)`` below, ``1: (0, -1)`` above,
     ``2: (1, +1)`` right, ``3: (1, -1)`` left of unit ``k``.
     """
     r0, c0, r1, c1 = (int(v) for v in rect)
-    a0, b0, a1, b1 = (rects[:, i].astype(np.int64) for i in range(4))
-    col_ov = np.minimum(b1, c1) - np.maximum(b0, c0) >= m
-    row_ov = np.minimum(a1, r1) - np.maximum(a0, r0) >= m
-    out = np.empty((rects.shape[0], 4), bool)
-    out[:, 0] = (r0 == a1 - g) & col_ov
-    out[:, 1] = (r1 == a0 + g) & col_ov
-    out[:, 2] = (c0 == b1 - g) & row_ov
-    out[:, 3] = (c1 == b0 + g) & row_ov
-    out &= active[:, None]
+    out = []
+    rl = rects.tolist()
+    for k, a in enumerate(active.tolist()):
+        if not a:
+            continue
+        a0, b0, a1, b1 = rl[k]
+        if min(b1, c1) - max(b0, c0) >= m:
+            if r0 == a1 - g:
+                out.append((k, 0))
+            if r1 == a0 + g:
+                out.append((k, 1))
+        if min(a1, r1) - max(a0, r0) >= m:
+            if c0 == b1 - g:
+                out.append((k, 2))
+            if c1 == b0 + g:
+                out.append((k, 3))
     return out
 
 

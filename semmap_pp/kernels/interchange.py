@@ -23,14 +23,13 @@ from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
 
-def adjacent_pairs(world, data: KernelData):
+def adjacent_pairs(world, data: KernelData) -> list:
     """``(axis, a, b)`` of every pair sharing a wall, ``a`` the upper or left unit."""
-    axis, a, b = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
-    return list(zip(axis.tolist(), a.tolist(), b.tolist()))
+    return attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
 
 
 def n_adjacent(world, data: KernelData) -> int:
-    return int(attach_pairs(world.rects, world.active, data.min_side, data.wall_share)[0].size)
+    return len(attach_pairs(world.rects, world.active, data.min_side, data.wall_share))
 
 
 def shared_wall_range(ra, rb, axis: int, data: KernelData):
@@ -44,10 +43,10 @@ def shared_wall_range(ra, rb, axis: int, data: KernelData):
     return s, lo, hi, w
 
 
-def _proposal(world, pair, s2, n_pairs, data):
+def _proposal(world, pair, s2, n_pairs, wall, data):
     axis, a, b = pair
     set_ = data.settings
-    s, lo, hi, w = shared_wall_range(world.rects[a], world.rects[b], axis, data)
+    s, lo, hi, w = wall
     ra, rb = [int(v) for v in world.rects[a]], [int(v) for v in world.rects[b]]
     ra[axis + 2], rb[axis] = s2, s2 - data.wall_share
     new = wm.replace(wm.replace(world, a, ra), b, rb)
@@ -64,12 +63,13 @@ def propose_interchange(rng, world, data: KernelData):
         return None
     pair = pairs[int(rng.random() * len(pairs))]
     axis, a, b = pair
-    s, lo, hi, w = shared_wall_range(world.rects[a], world.rects[b], axis, data)
+    wall = shared_wall_range(world.rects[a], world.rects[b], axis, data)
+    s, lo, hi, w = wall
     set_ = data.settings
     s2 = position_draw(rng, s, lo, hi, w, set_.local_prob, set_.local_radius)
     if s2 is None:
         return None
-    return _proposal(world, pair, s2, len(pairs), data)
+    return _proposal(world, pair, s2, len(pairs), wall, data)
 
 
 def enumerate_interchange(world, data: KernelData):
@@ -78,9 +78,10 @@ def enumerate_interchange(world, data: KernelData):
     out = []
     for pair in pairs:
         axis, a, b = pair
-        s, lo, hi, w = shared_wall_range(world.rects[a], world.rects[b], axis, data)
+        wall = shared_wall_range(world.rects[a], world.rects[b], axis, data)
+        s, lo, hi, w = wall
         for s2, q in position_enumerate(s, lo, hi, w, set_.local_prob, set_.local_radius).items():
-            out.append((_proposal(world, pair, s2, len(pairs), data), q / len(pairs)))
+            out.append((_proposal(world, pair, s2, len(pairs), wall, data), q / len(pairs)))
     return out
 
 

@@ -44,23 +44,22 @@ def pieces(rect, axis: int, s: int, g: int):
     return tuple(first), tuple(second)
 
 
-def split_log_q(rect, axis: int, s: int, n: int, capacity: int, data: KernelData) -> float:
+def split_log_q(rect, axis: int, s: int, n: int, capacity: int, data: KernelData, cut=None) -> float:
     """Log probability that SPLIT (given its direction) cuts ``rect`` at ``s`` into a given free slot."""
-    lo, hi, w = cut_weights(rect, axis, data)
+    lo, hi, w = cut if cut is not None else cut_weights(rect, axis, data)
     return (-math.log(n) + LOG_HALF + math.log(w[s - lo] / w.sum()) - math.log(capacity - n))
 
 
-def mergeable(world, data: KernelData):
+def mergeable(world, data: KernelData) -> list:
     """``(axis, a, b)`` of every pair MERGE may join, ``a`` the first (upper or left) unit."""
-    axis, a, b = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
-    r = world.rects
-    ra, rb = r[a].astype(np.int64), r[b].astype(np.int64)
-    other = 1 - axis
-    same = (ra[np.arange(a.size), other] == rb[np.arange(a.size), other]) & \
-        (ra[np.arange(a.size), other + 2] == rb[np.arange(a.size), other + 2])
-    fits = rb[np.arange(a.size), axis + 2] - ra[np.arange(a.size), axis] <= data.max_side
-    ok = same & fits
-    return list(zip(axis[ok].tolist(), a[ok].tolist(), b[ok].tolist()))
+    rl = world.rects.tolist()
+    out = []
+    for axis, a, b in attach_pairs(world.rects, world.active, data.min_side, data.wall_share):
+        ra, rb = rl[a], rl[b]
+        if ra[1 - axis] == rb[1 - axis] and ra[3 - axis] == rb[3 - axis] \
+                and rb[axis + 2] - ra[axis] <= data.max_side:
+            out.append((axis, a, b))
+    return out
 
 
 def _split_world(world, slot, new_slot, axis, s, data):
@@ -68,9 +67,9 @@ def _split_world(world, slot, new_slot, axis, s, data):
     return wm.add(wm.replace(world, slot, first), new_slot, second)
 
 
-def _split_proposal(world, slot, new_slot, axis, s, n, data):
+def _split_proposal(world, slot, new_slot, axis, s, n, data, cut=None):
     new = _split_world(world, slot, new_slot, axis, s, data)
-    lq = split_log_q(world.rects[slot], axis, s, n, world.capacity, data)
+    lq = split_log_q(world.rects[slot], axis, s, n, world.capacity, data, cut)
     return Proposal(new, -math.log(len(mergeable(new, data))) - lq, (slot, new_slot))
 
 
@@ -87,7 +86,7 @@ def propose_split(rng, world, data: KernelData):
     cdf = np.cumsum(w)
     s = lo + min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), hi - lo)
     new_slot = int(free[int(rng.random() * free.size)])
-    return _split_proposal(world, slot, new_slot, axis, s, act.size, data)
+    return _split_proposal(world, slot, new_slot, axis, s, act.size, data, (lo, hi, w))
 
 
 def _merge_proposal(world, pair, n_pairs, data):
