@@ -134,12 +134,12 @@ def test_placement_slot_term_shifts_the_number_of_units():
     target = PriorTarget(data, 4, 1.5, slots="placements")
     tr = target.start(wm.empty(4))
     seen = []
-    run_chain(np.random.default_rng(8), tr, default_mix(data.settings), 15_000, data,
+    run_chain(np.random.default_rng(8), tr, default_mix(data.settings), 36_000, data,
               callback=lambda i, t, ok: seen.append(wm.n_units(t.world)) if i % 15 == 0 else None)
     obs = np.bincount(seen, minlength=5)
     shifted = np.exp(target.log_pn - np.array([math.lgamma(k + 1) for k in range(5)]))
     assert chisquare_ess(obs, shifted, ess(seen)) > 1e-3
-    assert chisquare_ess(obs, np.exp(target.log_pn), ess(seen)) < 1e-6
+    assert chisquare_ess(obs, np.exp(target.log_pn), ess(seen)) < 1e-5
 
 
 def test_prior_recovery_detects_a_biased_kernel(monkeypatch):
@@ -153,10 +153,10 @@ def test_prior_recovery_detects_a_biased_kernel(monkeypatch):
     target = PriorTarget(data, 4, 1.5)
     tr = target.start(wm.empty(4))
     seen = []
-    run_chain(np.random.default_rng(5), tr, default_mix(data.settings), 15_000, data,
+    run_chain(np.random.default_rng(5), tr, default_mix(data.settings), 36_000, data,
               callback=lambda i, t, ok: seen.append(wm.n_units(t.world)) if i % 15 == 0 else None)
     obs = np.bincount(seen, minlength=5)
-    assert chisquare_ess(obs, np.exp(target.log_pn), ess(seen)) < 1e-6
+    assert chisquare_ess(obs, np.exp(target.log_pn), ess(seen)) < 1e-5
 
 
 def test_incremental_target_matches_full_after_100k_kernels():
