@@ -1,10 +1,11 @@
 """The prior p(W): number of units, unit parameters, and the SaLe factor (paper Sec. III-C.1).
 
-``log p(W) = log p_n(n) - log(K! / (K - n)!) + Σ_units log p_rect(rect) + Σ_pairs log b(p, q)``
+``log p(W) = log p_n(n) - log C(K, n) + Σ_units log p_rect(rect) + Σ_pairs log b(p, q)``
 
 * ``p_n``: truncated Poisson (or geometric) on ``0..K`` with the model's mean, ``K`` the world's
-  number of slots. Units sit in ``K`` labelled slots, so a set of ``n`` units is one of
-  ``K!/(K-n)!`` ordered placements: the second term keeps the prior over *sets* proper.
+  number of slots. Units sit in ``K`` labelled slots: a set of ``n`` units (density
+  ``n! p_n(n) Π p_rect``) is held by ``K!/(K-n)!`` slot states, so each has ``p_n(n) Π p_rect / C(K, n)``
+  and ``p_n`` stays the law of the number of units (:func:`log_slots`).
 * ``p_rect``: uniform over every lattice rectangle inside the lattice whose two sides (wall band
   included) lie in ``[min_side, max_side]`` cells; the count is in closed form
   (:func:`n_rects`). A rectangle outside that set has probability 0.
@@ -78,8 +79,14 @@ def log_p_n(n: int, capacity: int, params) -> float:
 
 
 def log_slots(n: int, capacity: int) -> float:
-    """``log(K! / (K - n)!)``: the number of ways to place ``n`` units in ``K`` labelled slots."""
-    return math.lgamma(capacity + 1) - math.lgamma(capacity - n + 1)
+    """``log C(K, n)``: the slot term that keeps ``p_n`` the law of the number of units.
+
+    A set of ``n`` distinct units has density ``n! p_n(n) prod p_rect`` (any of its ``n!`` orders),
+    and ``K! / (K - n)!`` slot states hold it; dividing the first by the second leaves
+    ``p_n(n) prod p_rect / C(K, n)`` per slot state. Dividing by ``K! / (K - n)!`` alone would make
+    the number of units follow ``p_n(n) / n!`` instead (tests/test_mcmc.py shows both).
+    """
+    return math.lgamma(capacity + 1) - math.lgamma(capacity - n + 1) - math.lgamma(n + 1)
 
 
 def connecting_length_difference(rp, rq, resolution: float) -> np.ndarray:

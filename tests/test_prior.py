@@ -42,7 +42,8 @@ def test_p_n_is_normalised_with_the_given_mean(kind):
 
 
 def test_slots_term_counts_ordered_placements():
-    assert math.exp(log_slots(2, 5)) == pytest.approx(20.0)
+    assert math.exp(log_slots(2, 5)) == pytest.approx(10.0)   # C(5, 2)
+    assert math.exp(log_slots(5, 5)) == pytest.approx(1.0)
     assert log_slots(0, 5) == 0.0
 
 
