@@ -116,6 +116,27 @@ class CellParams:
 
 
 @dataclass(frozen=True)
+class SamplerParams:
+    """Run lengths of ``semmap map`` (command-line options override them)."""
+
+    chains: int
+    cores: int
+    tune: int
+    draws: int
+    n_inner: int
+    anneal: float
+    start_factor: int
+
+
+@dataclass(frozen=True)
+class DiagnosticsParams:
+    """Thresholds by which label-invariant summaries are judged converged."""
+
+    rhat_max: float
+    ess_min: float
+
+
+@dataclass(frozen=True)
 class Model:
     path: Path
     lattice: LatticeParams
@@ -125,6 +146,9 @@ class Model:
     prior: PriorParams
     knowledge: KnowledgeParams
     evaluate: EvaluateParams
+    sampler: SamplerParams
+    diagnostics: DiagnosticsParams
+    kernels: dict  # the [kernels] table: proposal tuning, read by kernels.settings_from_mapping
 
     def cells(self, resolution: float) -> CellParams:
         """Convert the model's lengths to whole lattice cells at ``resolution`` metres per cell.
@@ -290,8 +314,19 @@ def load_model(path: str | Path | None = None) -> Model:
         coverage_threshold=r.number("knowledge.coverage_threshold", lo=0.0, hi=1.0),
         fixed_sale=fixed)
     evaluate = EvaluateParams(roi_closing_m=r.number("evaluate.roi_closing_m", lo=0.0))
+    sampler = SamplerParams(
+        chains=r.integer("sampler.chains", lo=1), cores=r.integer("sampler.cores", lo=1),
+        tune=r.integer("sampler.tune", lo=0), draws=r.integer("sampler.draws", lo=4),
+        n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
+        start_factor=r.integer("sampler.start_factor", lo=1))
+    diagnostics = DiagnosticsParams(rhat_max=r.number("diagnostics.rhat_max", lo=1.0),
+                                    ess_min=r.number("diagnostics.ess_min", lo=0.0))
+    kernels = r.raw("kernels")
+    if not isinstance(kernels, dict):
+        raise r.error("kernels", "must be a table")
     return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
-                 prior=prior, knowledge=knowledge, evaluate=evaluate)
+                 prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
+                 diagnostics=diagnostics, kernels=dict(kernels))
 
 
 def _row(r: _Reader, key: str, raw: list, i: int, n: int) -> np.ndarray:

@@ -56,6 +56,7 @@ class SampleResult(NamedTuple):
 
 def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: int = 4, cores: int = 1,
                   n_inner: int = 100, seed=None, anneal: float = 1.0, mix=None, cpr_fn=None,
+                  resolution: float = 1.0, knowledge_threshold: float | None = None,
                   progressbar: bool = False, mp_ctx=None) -> SampleResult:
     """Run ``chains`` chains of ``tune + draws`` PyMC draws, ``n_inner`` kernels each.
 
@@ -92,7 +93,8 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
         warnings.filterwarnings("ignore", message=".*return_inferencedata=False.*")
         warnings.filterwarnings("ignore", message="Tuning samples will be included.*")
         step = WorldStep(model.value_vars, target=target, data=data, mix=mix, n_inner=n_inner,
-                         anneal=anneal, cpr_fn=cpr_fn, rng=seed)
+                         anneal=anneal, cpr_fn=cpr_fn, resolution=resolution,
+                         knowledge_threshold=knowledge_threshold, rng=seed)
         t0 = time.perf_counter()
         trace = pm.sample(draws=draws, tune=tune, chains=chains, cores=cores, step=step,
                           initvals=initvals, random_seed=seed, compute_convergence_checks=False,

@@ -54,6 +54,7 @@ def point_to_world(point: dict) -> wm.World:
 
 def _scalar_stats() -> dict:
     stats = {"logp": (np.float64, []), "n_units": (np.int64, []), "cpr": (np.float64, []),
+             "wall_length": (np.float64, []), "knowledge": (np.int64, []),
              "accept": (np.float64, []), "temperature": (np.float64, []), "best_logp": (np.float64, [])}
     stats.update({f"accept_{k}": (np.float64, []) for k in KIND_NAMES})
     stats.update({f"n_{t}": (np.int64, []) for t in UNIT_TYPES})
@@ -77,15 +78,23 @@ class WorldStep(BlockedStep):
         Kernels applied per PyMC draw.
     anneal : float
         Start temperature of the burn-in (1 = no annealing).
-    cpr_fn : callable(world) -> float, optional
-        Cell prediction rate of a world, recorded per draw (NaN without it).
+    cpr_fn : callable(tracker) -> float, optional
+        Cell prediction rate of the tracker's current world, recorded per draw (NaN without it).
+    resolution : float
+        Metres per lattice cell, for the ``wall_length`` summary (total unit perimeter).
+    knowledge_threshold : float, optional
+        Knowledge phase (paper: knowledge is switched on once the world covers enough of the map).
+        When given and the target has a knowledge engine, every chain starts with knowledge off; it
+        is switched on during burn-in at the first draw whose coverage reaches the threshold, and at
+        the first recorded draw at the latest, so every recorded draw has the same target.
     """
 
     name = "semmap_world"
     stats_dtypes_shapes = _scalar_stats()
 
     def __init__(self, vars=None, target=None, data=None, *, mix=None, n_inner: int = 100,
-                 anneal: float = 1.0, cpr_fn=None, model=None, blocked: bool = True, rng=None):
+                 anneal: float = 1.0, cpr_fn=None, resolution: float = 1.0,
+                 knowledge_threshold: float | None = None, model=None, blocked: bool = True, rng=None):
         model = pm.modelcontext(model)
         self.vars = [model.rvs_to_values.get(v, v) for v in (vars or model.value_vars)]
         names = sorted(v.name for v in self.vars)
@@ -107,13 +116,20 @@ class WorldStep(BlockedStep):
         self.n_inner = int(n_inner)
         self.anneal = float(anneal)
         self.cpr_fn = cpr_fn
+        self.resolution = float(resolution)
+        self.knowledge_threshold = knowledge_threshold
         self.rng = np.random.default_rng(rng)
         self.tune = False
         self._reset_chain(0)
 
     # -------------------------------------------------------------- chain set-up
+    def _phased(self) -> bool:
+        return self.knowledge_threshold is not None and getattr(self.target, "knowledge", None) is not None
+
     def _reset_chain(self, tune: int) -> None:
         self._tracker = None
+        if self._phased():
+            self.target.knowledge_on = False  # sequential chains share the target: each starts off
         self._n_tune = int(tune)
         self._draw = 0
         self._best = (-math.inf, None, None)
@@ -160,8 +176,20 @@ class WorldStep(BlockedStep):
         return self.anneal ** (1.0 - self._draw / self._n_tune)
 
     # -------------------------------------------------------------- one draw
+    def _switch_knowledge(self, tr) -> None:
+        """Turn knowledge on once coverage reaches the threshold, or when recording starts."""
+        if not self._phased() or self.target.knowledge_on:
+            return
+        recording = not self.tune or self._draw >= self._n_tune
+        if recording or tr.coverage() >= self.knowledge_threshold:
+            self.target.knowledge_on = True
+            tr.resync()
+            self._best = (-math.inf, None, None)  # W* is judged under the full target only
+            self._remember(tr)
+
     def step(self, point):
         tr = self._sync(point)
+        self._switch_knowledge(tr)
         temp = self.temperature()
         rng, mix, data = self.rng, self.mix, self.data
         k = len(mix)
@@ -178,7 +206,10 @@ class WorldStep(BlockedStep):
         self._draw += 1
         world = tr.world
         stats = {"logp": float(tr.logp), "n_units": wm.n_units(world), "temperature": temp,
-                 "cpr": float(self.cpr_fn(world)) if self.cpr_fn is not None else math.nan,
+                 "cpr": float(self.cpr_fn(tr)) if self.cpr_fn is not None else math.nan,
+                 "wall_length": float(2 * np.sum((world.rects[:, 2] - world.rects[:, 0])
+                                                 + (world.rects[:, 3] - world.rects[:, 1]))) * self.resolution,
+                 "knowledge": int(bool(getattr(self.target, "knowledge_on", False))),
                  "accept": float(accepted.sum()) / self.n_inner, "best_logp": float(self._best[0])}
         for kind in KIND_NAMES:
             stats[f"accept_{kind}"] = math.nan

@@ -12,6 +12,7 @@ import io
 import json
 import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -129,9 +130,24 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
     }
 
 
+_NUMBER_LIST = re.compile(r"\[\s*(-?[\d.eE+-]+(?:,\s*-?[\d.eE+-]+)*)\s*\]")
+
+
 def dumps(doc: dict) -> str:
-    """Canonical JSON text (stable key order as built, 1-space indent, trailing newline)."""
-    return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False) + "\n"
+    """Canonical JSON text: stable key order as built, 1-space indent, lists of numbers on one line.
+
+    >>> print(dumps({"a": [1, 2.5], "b": [[0, 1], [2, 3]]}), end="")
+    {
+     "a": [1, 2.5],
+     "b": [
+      [0, 1],
+      [2, 3]
+     ]
+    }
+    """
+    text = json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False)
+    text = _NUMBER_LIST.sub(lambda m: "[" + ", ".join(v.strip() for v in m.group(1).split(",")) + "]", text)
+    return text + "\n"
 
 
 def write_world_json(path: str | os.PathLike, doc: dict) -> Path:

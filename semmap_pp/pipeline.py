@@ -1,0 +1,246 @@
+"""The main job: an occupancy grid in, the most probable semantic world W* and its diagnostics out.
+
+::
+
+    load_inputs ─► Inputs(grid, model, rules, frame) ─► run_map ─► MapRun(W*, semantic map, summaries)
+
+:func:`run_map` builds the target (:class:`~semmap_pp.posterior.Posterior` with the knowledge engine),
+one data-driven start world per chain (the first deterministic, the others dispersed), samples the
+chains through PyMC with :class:`~semmap_pp.step.WorldStep`, keeps the best world seen across chains
+under the full target, and derives its semantic map. Knowledge is switched on during burn-in once
+the world covers ``knowledge.coverage_threshold`` of the free cells (paper: 80 %), so every recorded
+draw has the same target. Before that, types come from the geometry class alone.
+
+Rules are read once, at the start: a rule file edited while a run is going does not change the run.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.diagnostics import SUMMARIES, ConvergenceReport, convergence
+from semmap_pp.errors import SemmapError
+from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
+from semmap_pp.frame import Frame, build_frame
+from semmap_pp.grid import OccupancyGrid, load_map
+from semmap_pp.init import dispersed_world, start_world
+from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
+from semmap_pp.model import Model, load_model
+from semmap_pp.outputs import SemanticMap, semantic_map
+from semmap_pp.posterior import Posterior
+
+DEFAULT_RULES = Path(__file__).resolve().parents[1] / "rules" / "table3.lp"
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """Everything read from disk, validated, before any sampling."""
+
+    grid: OccupancyGrid
+    model: Model
+    rules: object | None      # knowledge.RuleSet, or None for no knowledge engine at all
+    frame: Frame
+    roi: np.ndarray           # (H, W) bool, image frame
+    roi_name: str
+
+
+def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path=None,
+                map_options: dict | None = None) -> Inputs:
+    """Read and validate the map, model, rules and region of interest (each error names its file)."""
+    from semmap_pp.knowledge import load_rules
+
+    grid = load_map(map_path, **(map_options or {}))
+    model = load_model(model_path)
+    rules = load_rules(rules_path) if rules_path is not None else None
+    frame = build_frame(grid, model)
+    if roi_path is not None:
+        roi, roi_name = load_roi(roi_path, grid.shape), Path(roi_path).name
+    else:
+        roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
+        roi_name = "default"
+    return Inputs(grid, model, rules, frame, roi, roi_name)
+
+
+@dataclass(frozen=True)
+class TargetFactory:
+    """Builds the target in each sampling process (the knowledge engine's solver state does not pickle)."""
+
+    frame: Frame
+    model: Model
+    rules: object | None
+
+    def __call__(self) -> Posterior:
+        engine = None
+        if self.rules is not None:
+            from semmap_pp.knowledge import KnowledgeEngine
+            engine = KnowledgeEngine(self.rules)
+        return Posterior(self.frame, self.model, engine)
+
+
+# Which (extended input code, region) pairs count as correctly explained (DESIGN.md, CPR): the sampler's
+# cell categories are x + N_X * (region + 3 * corridor).
+_CORRECT = np.zeros((N_X, 3), bool)
+_CORRECT[X_UNKNOWN, R_OUT] = True
+_CORRECT[[X_OBJECTLIKE, X_WALLLIKE], R_WALL] = True
+_CORRECT[[X_FREE, X_UNKNOWN, X_OBJECTLIKE], R_INTERIOR] = True
+CORRECT_CATEGORY = np.concatenate([_CORRECT.T.ravel()] * 2)  # corridor or not: same verdict
+
+
+def category_hist(tracker) -> np.ndarray:
+    """The tracker's (24,) category histogram of the current world."""
+    hist = getattr(tracker, "hist", None)
+    if hist is None:  # older trackers kept it on their likelihood cover
+        hist = tracker.cover.hist
+    return hist
+
+
+@dataclass(frozen=True, eq=False)
+class LatticeCPR:
+    """Per-draw cell prediction rate from the likelihood's category tallies — O(1) per draw.
+
+    The tracker keeps how many lattice cells fall in each (input code, region, corridor) category.
+    Cells outside the ROI are unknown by construction (the default ROI contains every known cell),
+    so as long as no unit reaches beyond the ROI each of them counts as correct (unknown, outside
+    every unit), and ``CPR = (correct cells - cells outside the ROI) / ROI cells``. A unit reaching past
+    the ROI makes this a slight under-estimate. It is a proxy for the convergence diagnostics; the
+    reported CPR of W* is computed exactly on the input image by :func:`~semmap_pp.outputs.semantic_map`.
+    """
+
+    n_roi: int
+    n_outside: int
+
+    @classmethod
+    def from_roi(cls, frame: Frame, roi_image: np.ndarray) -> "LatticeCPR":
+        hl, wl = frame.shape
+        rows, cols = np.mgrid[0:hl, 0:wl]
+        x, y = frame.lattice_to_image(rows, cols)
+        xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
+        h, w = roi_image.shape
+        ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h) & ~frame.outside
+        n_roi = int(np.count_nonzero(roi_image[yi[ok], xi[ok]]))
+        return cls(n_roi, hl * wl - n_roi)
+
+    def __call__(self, tracker) -> float:
+        if self.n_roi == 0:
+            return math.nan
+        correct = int(np.dot(category_hist(tracker), CORRECT_CATEGORY))
+        return (correct - self.n_outside) / self.n_roi
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How long and how wide to sample (defaults from the model file's [sampler] table)."""
+
+    chains: int
+    cores: int
+    tune: int
+    draws: int
+    n_inner: int
+    anneal: float
+    seed: int
+
+    @classmethod
+    def from_model(cls, model: Model, seed: int = 0, **overrides) -> "RunSettings":
+        s = model.sampler
+        values = dict(chains=s.chains, cores=s.cores, tune=s.tune, draws=s.draws, n_inner=s.n_inner,
+                      anneal=s.anneal, seed=seed)
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        values["cores"] = max(1, min(values["cores"], values["chains"], os.cpu_count() or 1))
+        return cls(**values)
+
+
+@dataclass
+class MapRun:
+    """The result of :func:`run_map`."""
+
+    inputs: Inputs
+    settings: RunSettings
+    world: wm.World                 # W*, types assigned
+    semantic: SemanticMap
+    summaries: dict                 # name -> (chains, draws) label-invariant summaries (recorded draws)
+    sample_stats: dict              # name -> (chains, draws) sampler statistics
+    report: ConvergenceReport
+    seconds: float
+    kernels_per_second: float
+    best_chain: int
+    notes: list = field(default_factory=list)
+
+
+def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[wm.World]:
+    """One start world per chain: the greedy data-driven world, then dispersed variants of it."""
+    frame, model = inputs.frame, inputs.model
+    c = frame.cells
+    base = start_world(frame.classes, model.prior.k_max, min_side=c.min_side, wall_cells=c.wall,
+                       factor=model.sampler.start_factor)
+    # keep the start inside the prior's support (sides within [min_side, max_side])
+    ok = [s for s in wm.active_slots(base)
+          if np.all(np.diff(base.rects[s].reshape(2, 2), axis=0) <= c.max_side)]
+    clean = wm.empty(base.capacity)
+    for i, s in enumerate(ok):
+        clean = wm.add(clean, i, base.rects[s])
+    worlds = [clean]
+    for _ in range(1, chains):
+        worlds.append(dispersed_world(rng, clean, frame.shape, min_side=c.min_side))
+    return worlds
+
+
+def _stats(trace, name: str, chains: int, skip: int) -> np.ndarray:
+    return np.stack([np.asarray(trace.get_sampler_stats(name, chains=c), dtype=float)[skip:]
+                     for c in range(chains)])
+
+
+def run_map(inputs: Inputs, settings: RunSettings, *, log=print) -> MapRun:
+    """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report."""
+    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.sampling import sample_worlds
+
+    model, frame = inputs.model, inputs.frame
+    kernel_settings = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+    data = data_from_frame(frame, kernel_settings)
+    factory = TargetFactory(frame, model, inputs.rules)
+    rng = np.random.default_rng(settings.seed)
+    starts = start_worlds(inputs, settings.chains, rng)
+    log(f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
+        f"orientation {math.degrees(frame.theta):.1f} deg; start world: {wm.n_units(starts[0])} units")
+    log(f"sampling: {settings.chains} chains on {settings.cores} core(s), {settings.tune} burn-in + "
+        f"{settings.draws} draws x {settings.n_inner} kernels")
+    t0 = time.perf_counter()
+    result = sample_worlds(factory, data, starts, draws=settings.draws, tune=settings.tune,
+                           chains=settings.chains, cores=settings.cores, n_inner=settings.n_inner,
+                           seed=settings.seed, anneal=settings.anneal, mix=default_mix(kernel_settings),
+                           cpr_fn=LatticeCPR.from_roi(frame, inputs.roi), resolution=frame.cells.resolution,
+                           knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None)
+    seconds = time.perf_counter() - t0
+    total_kernels = settings.chains * (settings.tune + settings.draws) * settings.n_inner
+    trace, C, skip = result.trace, result.trace.nchains, settings.tune
+    summaries = {"log_posterior": _stats(trace, "logp", C, skip)}
+    for name in SUMMARIES[1:]:
+        summaries[name] = _stats(trace, name, C, skip)
+    sample_stats = {k: _stats(trace, k, C, skip) for k in trace.stat_names
+                    if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")}
+    report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min)
+
+    post = factory()
+    post.knowledge_on = inputs.rules is not None
+    best = result.best_world if result.best_world is not None else starts[0]
+    sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
+    log(f"W*: {len(sm.unit_ids)} units, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
+        f"(ROI {inputs.roi_name}); {total_kernels / seconds:.0f} kernels/s over {seconds:.1f} s")
+    return MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, seconds,
+                  total_kernels / seconds, result.best_chain)
+
+
+def check_out_dir(out: Path, force: bool) -> None:
+    """Refuse a non-empty output directory unless ``force``; refuse a file."""
+    if out.exists() and not out.is_dir():
+        raise SemmapError(out, "output path exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise SemmapError(out, "output directory is not empty (use --force to overwrite)")

@@ -1,0 +1,66 @@
+import numpy as np
+import pytest
+
+from semmap_pp import world as W
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.evaluate import closing_radius_cells, default_roi
+from semmap_pp.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.kernels import data_from_frame
+from semmap_pp.model import load_model
+from semmap_pp.outputs import semantic_map
+from semmap_pp.pipeline import DEFAULT_RULES, LatticeCPR, TargetFactory
+from semmap_pp.posterior import Posterior
+
+MODEL = load_model()
+
+
+def rooms_grid(door=False):
+    c = np.full((60, 120), UNKNOWN, np.uint8)
+    c[6:54, 6:114] = OCCUPIED
+    c[8:52, 8:58] = FREE
+    c[8:52, 60:112] = FREE
+    if door:
+        c[20:40, 58:60] = FREE
+    return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                         origin=(0.0, 0.0, 0.0), source=None, image_path=None)
+
+
+@pytest.mark.parametrize("rects", [
+    [(6, 6, 54, 60), (6, 58, 54, 114)],       # the true world
+    [(6, 6, 54, 60)],                          # one room missing
+    [(10, 10, 40, 50), (6, 58, 54, 114)],      # one room too small
+    [],
+])
+def test_tally_cpr_equals_image_cpr_without_doors(rects):
+    g = rooms_grid()
+    f = build_frame(g, MODEL)
+    post = Posterior(f, MODEL)
+    world = W.empty(4)
+    for i, r in enumerate(rects):
+        world = W.add(world, i, r)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    exact = semantic_map(g, f, post, world, roi=roi).cpr
+    proxy = LatticeCPR.from_roi(f, roi)(post.start(world))
+    assert proxy == pytest.approx(exact, abs=1e-12)
+
+
+def test_knowledge_switches_on_in_burn_in_and_stays_on_for_recorded_draws():
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.sampling import sample_worlds
+
+    g = rooms_grid(door=True)
+    f = build_frame(g, MODEL)
+    factory = TargetFactory(f, MODEL, load_rules(DEFAULT_RULES))
+    start = W.add(W.empty(4), 0, (6, 6, 54, 60))    # covers about half of the free cells
+    data = data_from_frame(f)
+
+    def knowledge_flags(threshold):
+        res = sample_worlds(factory, data, [start], draws=4, tune=6, chains=1, cores=1, n_inner=5,
+                            seed=3, knowledge_threshold=threshold)
+        return np.asarray(res.trace.get_sampler_stats("knowledge", chains=0))
+
+    never = knowledge_flags(1.01)              # coverage can never reach it: on from the first recorded draw
+    assert never[:6].tolist() == [0] * 6 and never[6:].tolist() == [1] * 4
+    always = knowledge_flags(0.0)
+    assert always.tolist() == [1] * 10
