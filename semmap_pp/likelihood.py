@@ -16,10 +16,12 @@ units that have it in their wall band, ``n_int`` the number that have it in thei
 Every term depends on the cell only through a *category* (input code x region x corridor flag, 24
 of them) and the integer ``γ``, so the log-likelihood is an exact function of integer counts:
 ``baseline + Σ_cat N_cat · gain_cat + log ψ · Σ γ``, where ``baseline`` is the log-likelihood of
-the empty world and ``gain`` the change a category makes relative to an uncovered cell. The
-incremental tracker keeps the per-cell count, category and γ rasters and updates the integer
-tallies only in the changed windows, so full and incremental evaluations agree exactly (up to the
-one final dot product), however many edits are made.
+the empty world and ``gain`` the change a category makes relative to an uncovered cell. The full
+evaluation rasterises the counts over the units' bounding box. The incremental update needs no
+raster: the edges of the units near an edit cut the changed box into pieces of constant cover, and
+the cells of each input code in a piece come from per-map prefix sums; only the integer tallies
+change, so full and incremental evaluations agree exactly (up to the one final dot product),
+however many edits are made.
 
 Examples
 --------
@@ -93,6 +95,10 @@ class LikelihoodData:
         Wall band thickness in cells.
     n_free : int
         Number of input-free lattice cells (for coverage).
+    xhist : (24,) int64
+        Category histogram of the empty world (every cell R_OUT).
+    xsum : (H'+1, W'+1, 4) int32
+        Prefix sums of the extended codes (:func:`prefix_sums`), for the incremental update.
     """
 
     xcode: np.ndarray
@@ -102,6 +108,7 @@ class LikelihoodData:
     wall: int
     n_free: int
     xhist: np.ndarray   # (24,) category histogram of the empty world (every cell R_OUT)
+    xsum: np.ndarray    # (H'+1, W'+1, 4) int32 prefix sums of the extended codes (prefix_sums)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -138,7 +145,7 @@ def prepare(frame, model) -> LikelihoodData:
     xhist.setflags(write=False)
     return LikelihoodData(xcode=xcode, gain=gain_table(model.sensor), baseline=baseline,
                           log_psi=float(np.log(model.sensor.psi)), wall=frame.cells.wall,
-                          n_free=int(counts[FREE]), xhist=xhist)
+                          n_free=int(counts[FREE]), xhist=xhist, xsum=prefix_sums(xcode))
 
 
 def _add_unit(counts: np.ndarray, rect, corr: bool, wall: int, sign: int,
@@ -227,6 +234,13 @@ def full_loglik(data: LikelihoodData, rects, corridor) -> float:
 
 
 # --------------------------------------------------------------------------- incremental
+#
+# The incremental update works on rectangles, not rasters. Inside a box the rectangles' edges
+# (outer edges and wall-band inner edges) cut the lattice into *pieces* on which every unit's
+# cover is constant, so each piece has one category offset and one γ; the number of input cells
+# of each extended code in a piece is read from per-map prefix sums (``LikelihoodData.xsum``).
+# An edit of one unit changes the tallies only on the pieces where that unit's cover changes,
+# so its cost grows with the number of units near the edit, not with the edited area.
 
 
 @dataclass(frozen=True)
@@ -247,132 +261,220 @@ def changed_box(change: Change, wall: int) -> tuple[int, int, int, int] | None:
     (birth, death, type change, several sides) is the union of the two rectangles.
     """
     a, b = change.old_rect, change.new_rect
-    if a is not None:
-        a = tuple(int(v) for v in a)
-    if b is not None:
-        b = tuple(int(v) for v in b)
-    if a is not None and b is not None and change.old_corr == change.new_corr:
-        diff = [i for i in range(4) if a[i] != b[i]]
-        if not diff:
-            return None
-        if len(diff) == 1:
-            i = diff[0]
-            lo, hi = min(a[i], b[i]), max(a[i], b[i])
-            if i in (0, 1):          # r0 or c0 moved: the band starts at the new/old edge
-                lo2, hi2 = lo, hi + wall
-            else:                    # r1 or c1 moved
-                lo2, hi2 = lo - wall, hi
-            box = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
-            if i in (0, 2):
-                box[0], box[2] = max(lo2, box[0]), min(hi2, box[2])
-            else:
-                box[1], box[3] = max(lo2, box[1]), min(hi2, box[3])
-            return tuple(box)
-    rects = [r for r in (a, b) if r is not None]
-    if not rects:
-        return None
-    return (min(r[0] for r in rects), min(r[1] for r in rects),
-            max(r[2] for r in rects), max(r[3] for r in rects))
-
-
-def _clip(box, shape):
-    r0, c0, r1, c1 = box
-    r0, c0, r1, c1 = max(r0, 0), max(c0, 0), min(r1, shape[0]), min(c1, shape[1])
-    return (r0, c0, r1, c1) if r0 < r1 and c0 < c1 else None
-
-
-def _disjoint_boxes(boxes: list) -> list:
-    """Merge intersecting boxes into their bounding boxes until all are disjoint."""
-    boxes = list(boxes)
-    merged = True
-    while merged and len(boxes) > 1:
-        merged = False
-        for i in range(len(boxes)):
-            for j in range(i + 1, len(boxes)):
-                p, q = boxes[i], boxes[j]
-                if p[0] < q[2] and q[0] < p[2] and p[1] < q[3] and q[1] < p[3]:
-                    boxes[i] = (min(p[0], q[0]), min(p[1], q[1]), max(p[2], q[2]), max(p[3], q[3]))
-                    del boxes[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return boxes
+    a = np.zeros(4, np.int64) if a is None else np.array([int(v) for v in a], np.int64)
+    b = np.zeros(4, np.int64) if b is None else np.array([int(v) for v in b], np.int64)
+    box = np.zeros(4, np.int64)
+    ok = _changed_box(a, change.old_rect is not None, bool(change.old_corr),
+                      b, change.new_rect is not None, bool(change.new_corr), int(wall), box)
+    return tuple(int(v) for v in box) if ok else None
 
 
 @numba.njit(cache=True, nogil=True)
-def _apply(cw, rect, corr, wall, sign, r_off, c_off):  # pragma: no cover - compiled
-    """:func:`_add_unit` for the compiled window update (same clipping, same channels)."""
-    h, w = cw.shape[1], cw.shape[2]
-    a0, b0 = max(rect[0] - r_off, 0), max(rect[1] - c_off, 0)
-    a1, b1 = min(rect[2] - r_off, h), min(rect[3] - c_off, w)
-    if a0 >= a1 or b0 >= b1:
-        return
-    for i in range(a0, a1):
-        for j in range(b0, b1):
-            cw[0, i, j] += sign
-            if corr:
-                cw[2, i, j] += sign
-    i0, j0 = max(rect[0] + wall - r_off, 0), max(rect[1] + wall - c_off, 0)
-    i1, j1 = min(rect[2] - wall - r_off, h), min(rect[3] - wall - c_off, w)
-    for i in range(i0, i1):
-        for j in range(j0, j1):
-            cw[0, i, j] -= sign
-            cw[1, i, j] += sign
+def _changed_box(a, a_on, a_corr, b, b_on, b_corr, wall, box):  # pragma: no cover - compiled
+    """:func:`changed_box` into ``box`` (4,); False when nothing changes."""
+    if a_on and b_on:
+        box[0], box[1] = min(a[0], b[0]), min(a[1], b[1])
+        box[2], box[3] = max(a[2], b[2]), max(a[3], b[3])
+        if a_corr == b_corr:
+            nd, k = 0, -1
+            for i in range(4):
+                if a[i] != b[i]:
+                    nd += 1
+                    k = i
+            if nd == 0:
+                return False
+            if nd == 1:
+                lo, hi = min(a[k], b[k]), max(a[k], b[k])
+                if k < 2:            # r0 or c0 moved: the band starts at the new/old edge
+                    lo2, hi2 = lo, hi + wall
+                else:                # r1 or c1 moved
+                    lo2, hi2 = lo - wall, hi
+                if k == 0 or k == 2:
+                    box[0], box[2] = max(lo2, box[0]), min(hi2, box[2])
+                else:
+                    box[1], box[3] = max(lo2, box[1]), min(hi2, box[3])
+        return True
+    if a_on:
+        box[:] = a[:4]
+        return True
+    if b_on:
+        box[:] = b[:4]
+        return True
+    return False
+
+
+def prefix_sums(xcode: np.ndarray) -> np.ndarray:
+    """(H'+1, W'+1, 4) int32: ``S[r, c, x]`` = cells of code ``x`` in rows < r and columns < c."""
+    h, w = xcode.shape
+    s = np.zeros((h + 1, w + 1, N_X), dtype=np.int32)
+    for x in range(N_X):
+        s[1:, 1:, x] = np.cumsum(np.cumsum(xcode == x, axis=0, dtype=np.int32), axis=1,
+                                 dtype=np.int32)
+    s.setflags(write=False)
+    return s
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _state(r, wall, i, j):  # pragma: no cover - compiled
+    """Cover of cell (i, j) by rectangle ``r``: 0 none, 1 wall band, 2 interior."""
+    if i < r[0] or i >= r[2] or j < r[1] or j >= r[3]:
+        return 0
+    if r[0] + wall <= i < r[2] - wall and r[1] + wall <= j < r[3] - wall:
+        return 2
+    return 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _offset_gamma(nw, ni, nc):  # pragma: no cover - compiled
+    """Category offset (``N_X * (region + 3 corridor)``) and γ of a cell's counts."""
+    if nw > 0:
+        region = R_WALL
+    elif ni > 0:
+        region = R_INTERIOR
+    else:
+        return 0, 0
+    corr = 1 if nc == nw + ni else 0
+    g = ni + (1 if nw > 0 else 0) - 1
+    return N_X * (region + 3 * corr), (g if g > 0 else 0)
 
 
 @numba.njit(cache=True, nogil=True)
-def _window_update(counts, cat, gamma, xcode, r0, c0, r1, c1, old_units, new_units, wall,
-                   hist):  # pragma: no cover - compiled
-    """Recompute one window after removing ``old_units`` and adding ``new_units``
-    (rows ``r0, c0, r1, c1, corridor``).
+def _breaks(lo, hi, rects, idx, n, a, a_on, b, b_on, wall, axis):  # pragma: no cover - compiled
+    """Sorted distinct cut positions in ``[lo, hi]`` of the listed rectangles along ``axis``."""
+    out = np.empty(2 + 4 * (n + 2), np.int64)
+    out[0], out[1] = lo, hi
+    m = 2
+    for k in range(n + 2):
+        if k < n:
+            r = rects[idx[k]]
+        elif k == n:
+            if not a_on:
+                continue
+            r = a
+        else:
+            if not b_on:
+                continue
+            r = b
+        for v in (r[axis], r[axis] + wall, r[axis + 2] - wall, r[axis + 2]):
+            if lo < v < hi:
+                out[m] = v
+                m += 1
+    out = np.sort(out[:m])
+    u = 1
+    for k in range(1, m):
+        if out[k] != out[u - 1]:
+            out[u] = out[k]
+            u += 1
+    return out[:u]
 
-    Returns the new count, category and γ windows and the change of Σγ; adds the change of the
-    category histogram into ``hist``. Same rules as :func:`categorise`.
+
+@numba.njit(cache=True, nogil=True)
+def _change_delta(xsum, rects, corr, on, skip, a, a_on, a_corr, b, b_on, b_corr, wall,
+                  hist):  # pragma: no cover - compiled
+    """Tally change of one unit's edit ``a -> b`` among the units ``on`` (slot ``skip`` excluded).
+
+    Adds the change of the category histogram into ``hist`` and returns the change of Σγ.
     """
-    h, w = r1 - r0, c1 - c0
-    cw = counts[:, r0:r1, c0:c1].copy()
-    for k in range(old_units.shape[0]):
-        _apply(cw, old_units[k], old_units[k, 4] != 0, wall, -1, r0, c0)
-    for k in range(new_units.shape[0]):
-        _apply(cw, new_units[k], new_units[k, 4] != 0, wall, 1, r0, c0)
-    ncat = np.empty((h, w), np.uint8)
-    ngam = np.empty((h, w), np.int16)
+    box = np.empty(4, np.int64)
+    if not _changed_box(a, a_on, a_corr, b, b_on, b_corr, wall, box):
+        return 0
+    H, W = xsum.shape[0] - 1, xsum.shape[1] - 1
+    R0, C0, R1, C1 = max(box[0], 0), max(box[1], 0), min(box[2], H), min(box[3], W)
+    if R0 >= R1 or C0 >= C1:
+        return 0
+    idx = np.empty(rects.shape[0], np.int64)
+    n = 0
+    for t in range(rects.shape[0]):
+        if on[t] and t != skip:
+            r = rects[t]
+            if r[0] < R1 and r[2] > R0 and r[1] < C1 and r[3] > C0:
+                idx[n] = t
+                n += 1
+    rows = _breaks(R0, R1, rects, idx, n, a, a_on, b, b_on, wall, 0)
+    cols = _breaks(C0, C1, rects, idx, n, a, a_on, b, b_on, wall, 1)
     dgamma = 0
-    for i in range(h):
-        for j in range(w):
-            nw, ni, nc = cw[0, i, j], cw[1, i, j], cw[2, i, j]
-            if nw > 0:
-                region = R_WALL
-            elif ni > 0:
-                region = R_INTERIOR
-            else:
-                region = R_OUT
-            corr = 1 if (region != R_OUT and nc == nw + ni) else 0
-            c = xcode[r0 + i, c0 + j] + N_X * (region + 3 * corr)
-            g = ni + (1 if nw > 0 else 0) - 1
-            if g < 0:
-                g = 0
-            ncat[i, j] = c
-            ngam[i, j] = g
-            hist[c] += 1
-            hist[cat[r0 + i, c0 + j]] -= 1
-            dgamma += g - gamma[r0 + i, c0 + j]
-    return cw, ncat, ngam, dgamma
+    for i in range(rows.shape[0] - 1):
+        ra, rb = rows[i], rows[i + 1]
+        for j in range(cols.shape[0] - 1):
+            ca, cb = cols[j], cols[j + 1]
+            sa = _state(a, wall, ra, ca) if a_on else 0
+            sb = _state(b, wall, ra, ca) if b_on else 0
+            if sa == sb and (sa == 0 or a_corr == b_corr):
+                continue
+            nw = ni = nc = 0
+            for k in range(n):
+                t = idx[k]
+                st = _state(rects[t], wall, ra, ca)
+                if st == 1:
+                    nw += 1
+                elif st == 2:
+                    ni += 1
+                if st > 0 and corr[t]:
+                    nc += 1
+            off_a, g_a = _offset_gamma(nw + (sa == 1), ni + (sa == 2),
+                                       nc + (sa > 0 and a_corr))
+            off_b, g_b = _offset_gamma(nw + (sb == 1), ni + (sb == 2),
+                                       nc + (sb > 0 and b_corr))
+            if off_a == off_b and g_a == g_b:
+                continue
+            dgamma += (g_b - g_a) * (rb - ra) * (cb - ca)
+            if off_a != off_b:
+                for x in range(N_X):
+                    cnt = xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
+                    hist[x + off_b] += cnt
+                    hist[x + off_a] -= cnt
+    return dgamma
+
+
+@numba.njit(cache=True, nogil=True)
+def world_delta(xsum, old_rects, old_on, old_corr, new_rects, new_on, new_corr, wall,
+                hist):  # pragma: no cover - compiled
+    """Tally change from one slot-indexed set of units to another (the sampler's hot path).
+
+    Slots whose unit differs (rectangle, presence or corridor flag) are edited one after the
+    other; adds the histogram change into ``hist`` (24,) and returns the change of Σγ.
+    """
+    K = old_rects.shape[0]
+    cur = np.empty((K, 4), np.int64)
+    on = np.empty(K, np.bool_)
+    corr = np.empty(K, np.bool_)
+    for s in range(K):
+        on[s] = old_on[s]
+        corr[s] = old_corr[s] and old_on[s]
+        for k in range(4):
+            cur[s, k] = old_rects[s, k]
+    b = np.empty(4, np.int64)
+    dgamma = 0
+    for s in range(K):
+        b_on = new_on[s]
+        if not on[s] and not b_on:
+            continue
+        b_corr = new_corr[s] and b_on
+        for k in range(4):
+            b[k] = new_rects[s, k]
+        if on[s] == b_on and corr[s] == b_corr and cur[s, 0] == b[0] and cur[s, 1] == b[1] \
+                and cur[s, 2] == b[2] and cur[s, 3] == b[3]:
+            continue
+        dgamma += _change_delta(xsum, cur, corr, on, s, cur[s].copy(), on[s], corr[s],
+                                b, b_on, b_corr, wall, hist)
+        on[s], corr[s] = b_on, b_corr
+        for k in range(4):
+            cur[s, k] = b[k]
+    return dgamma
 
 
 @dataclass(frozen=True, eq=False)
 class LikPatch:
-    """A proposed likelihood update: new windows and the tallies they give."""
+    """A proposed likelihood update: the units and the tallies they give."""
 
-    windows: tuple
+    units: tuple
     hist: np.ndarray
     gamma_total: int
     loglik: float
 
 
 class CoverTracker:
-    """Incremental ``log p(M|W)`` for one chain: cover-count, category and γ rasters.
+    """Incremental ``log p(M|W)`` for one chain: the units and the integer tallies.
 
     Parameters
     ----------
@@ -385,40 +487,40 @@ class CoverTracker:
 
     def __init__(self, data: LikelihoodData, rects, corridor):
         self.data = data
-        self.counts = cover_counts(data.shape, rects, corridor, data.wall)
-        self.cat, self.gamma = categorise(self.counts, data.xcode)
-        self.hist = np.bincount(self.cat.ravel(), minlength=N_CATEGORIES).astype(np.int64)
-        self.gamma_total = int(self.gamma.sum(dtype=np.int64))
+        rects = np.asarray(rects).reshape(-1, 4)
+        corridor = np.asarray(corridor, dtype=bool).reshape(-1)
+        self.units = tuple((tuple(int(v) for v in r), bool(c)) for r, c in zip(rects, corridor))
+        self.hist, self.gamma_total = full_tallies(data, rects, corridor)
         self.loglik = loglik_from_tallies(data, self.hist, self.gamma_total)
 
     def propose(self, changes) -> LikPatch:
-        """The likelihood after ``changes`` (a sequence of :class:`Change`), without committing."""
-        data, shape = self.data, self.data.shape
-        boxes = [b for b in (changed_box(ch, data.wall) for ch in changes) if b is not None]
-        boxes = [b for b in (_clip(b, shape) for b in boxes) if b is not None]
+        """The likelihood after ``changes`` (a sequence of :class:`Change`, applied in order;
+        each ``old_rect`` must be a current unit), without committing."""
+        units = list(self.units)
         hist = self.hist.copy()
         gamma_total = self.gamma_total
-        windows = []
-        old = [tuple(ch.old_rect) + (ch.old_corr,) for ch in changes if ch.old_rect is not None]
-        new = [tuple(ch.new_rect) + (ch.new_corr,) for ch in changes if ch.new_rect is not None]
-        old_units = np.array(old, dtype=np.int64).reshape(-1, 5)
-        new_units = np.array(new, dtype=np.int64).reshape(-1, 5)
-        for box in _disjoint_boxes(boxes):
-            r0, c0, r1, c1 = box
-            counts, cat, gamma, dg = _window_update(
-                self.counts, self.cat, self.gamma, data.xcode, r0, c0, r1, c1,
-                old_units, new_units, data.wall, hist)
-            gamma_total += int(dg)
-            windows.append((box, counts, cat, gamma))
-        return LikPatch(tuple(windows), hist, gamma_total,
-                        loglik_from_tallies(data, hist, gamma_total))
+        for ch in changes:
+            a = None if ch.old_rect is None else (tuple(int(v) for v in ch.old_rect),
+                                                  bool(ch.old_corr))
+            if a is not None:
+                units.remove(a)
+            n = len(units)
+            rects = np.array([r for r, _ in units], np.int64).reshape(n, 4)
+            corr = np.array([c for _, c in units], np.bool_).reshape(n)
+            ar = np.array(a[0] if a is not None else (0, 0, 0, 0), np.int64)
+            br = np.array(ch.new_rect if ch.new_rect is not None else (0, 0, 0, 0), np.int64)
+            gamma_total += int(_change_delta(
+                self.data.xsum, rects, corr, np.ones(n, np.bool_), -1, ar, a is not None,
+                bool(ch.old_corr), br, ch.new_rect is not None, bool(ch.new_corr),
+                self.data.wall, hist))
+            if ch.new_rect is not None:
+                units.append((tuple(int(v) for v in ch.new_rect), bool(ch.new_corr)))
+        return LikPatch(tuple(units), hist, gamma_total,
+                        loglik_from_tallies(self.data, hist, gamma_total))
 
     def commit(self, patch: LikPatch) -> None:
         """Make a proposed update the current state."""
-        for (r0, c0, r1, c1), counts, cat, gamma in patch.windows:
-            self.counts[:, r0:r1, c0:c1] = counts
-            self.cat[r0:r1, c0:c1] = cat
-            self.gamma[r0:r1, c0:c1] = gamma
+        self.units = patch.units
         self.hist = patch.hist
         self.gamma_total = patch.gamma_total
         self.loglik = patch.loglik
@@ -429,7 +531,10 @@ class CoverTracker:
         return covered_free(hist)
 
 
+_FREE_COVERED = np.array([category(X_FREE, reg, corr) for reg in (R_WALL, R_INTERIOR)
+                          for corr in (False, True)])
+
+
 def covered_free(hist: np.ndarray) -> int:
     """Input-free cells in a wall band or interior, from a category histogram."""
-    return int(sum(hist[category(X_FREE, reg, corr)]
-                   for reg in (R_WALL, R_INTERIOR) for corr in (False, True)))
+    return int(hist[_FREE_COVERED].sum())

@@ -25,19 +25,19 @@ True
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
-from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_class,
-                                geometry_class_one)
-from semmap_pp.likelihood import (Change, CoverTracker, LikPatch, full_tallies,
-                                  loglik_from_tallies, prepare)
-from semmap_pp.prior import all_valid, log_p_n_table, log_p_rect_const, log_slots, sale_log_factor_slots
+from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_args,
+                                geometry_class, geometry_class_compiled)
+from semmap_pp.likelihood import covered_free, full_tallies, loglik_from_tallies, prepare, world_delta
+from semmap_pp.prior import _all_valid, _sale_pairs, all_valid, log_p_n_table, log_p_rect_const, \
+    log_slots, sale_log_factor_slots
 
 CORRIDOR = UNIT_TYPES.index("corridor")
 
@@ -51,14 +51,16 @@ class Terms(NamedTuple):
     world: W.World
 
 
-@dataclass(frozen=True)
 class _Typing:
-    """Types, adjacency and SaLe marginals of one world (all slot-indexed, (K,) / (K, K))."""
+    """Types, adjacency and SaLe marginals of one world (all slot-indexed, (K,) / (K, K)).
 
-    world: W.World
-    geometry: np.ndarray
-    adj: np.ndarray
-    sale: np.ndarray | None   # None: P(SaLe) = fixed_sale[type p, type q]
+    ``sale`` is ``None`` when P(SaLe) = fixed_sale[type p, type q].
+    """
+
+    __slots__ = ("world", "geometry", "adj", "sale")
+
+    def __init__(self, world: W.World, geometry: np.ndarray, adj: np.ndarray, sale):
+        self.world, self.geometry, self.adj, self.sale = world, geometry, adj, sale
 
 
 class Posterior:
@@ -80,8 +82,12 @@ class Posterior:
         self.fixed = FixedProvider(model.knowledge.fixed_sale)
         self.knowledge_on = False
         self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side)
-        self._log_pn: dict[int, np.ndarray] = {}
+        self._prior_n: dict[int, np.ndarray] = {}
         self._door_cache: dict = {}
+        c, p = self.cells, model.prior
+        self._geometry_args = geometry_args(c.resolution, model.evidence)
+        self._sale_args = (float(p.sale_threshold), float(c.resolution),
+                           1.0 / (2.0 * p.sale_sigma_m ** 2))
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -91,27 +97,38 @@ class Posterior:
             return self.knowledge
         return self.fixed
 
-    def _log_pn_table(self, capacity: int) -> np.ndarray:
-        if capacity not in self._log_pn:
-            self._log_pn[capacity] = log_p_n_table(capacity, self.model.prior)
-        return self._log_pn[capacity]
+    def prior_n(self, capacity: int) -> np.ndarray:
+        """``log p_n(n) - log C(K, n) + n log p_rect`` for ``n = 0..K`` (the prior without SaLe)."""
+        table = self._prior_n.get(capacity)
+        if table is None:
+            log_pn = log_p_n_table(capacity, self.model.prior)
+            table = np.array([float(log_pn[n] - log_slots(n, capacity) + n * self.log_rect)
+                              for n in range(capacity + 1)])
+            table.setflags(write=False)
+            self._prior_n[capacity] = table
+        return table
 
     def door_counts(self, rects: np.ndarray, adj: np.ndarray) -> np.ndarray:
         """Doors of each unit (cached per pair of rectangles)."""
-        from semmap_pp.derive.doors import doors_between
         n = len(rects)
         counts = np.zeros(n, dtype=np.int64)
         for p, q in zip(*np.nonzero(np.triu(adj, 1))):
-            key = (tuple(int(v) for v in rects[p]), tuple(int(v) for v in rects[q]))
-            k = self._door_cache.get(key)
-            if k is None:
-                if len(self._door_cache) > 200_000:
-                    self._door_cache.clear()
-                k = len(doors_between(self.frame.classes, rects[p], rects[q], self.cells))
-                self._door_cache[key] = k
+            k = self.pair_doors(rects[p], rects[q])
             counts[p] += k
             counts[q] += k
         return counts
+
+    def pair_doors(self, rp, rq) -> int:
+        """Number of doors between two rectangles (cached per pair)."""
+        from semmap_pp.derive.doors import doors_between
+        key = (tuple(int(v) for v in rp), tuple(int(v) for v in rq))
+        k = self._door_cache.get(key)
+        if k is None:
+            if len(self._door_cache) > 200_000:
+                self._door_cache.clear()
+            k = len(doors_between(self.frame.classes, rp, rq, self.cells))
+            self._door_cache[key] = k
+        return k
 
     def _infer(self, world: W.World, adj: np.ndarray, provider):
         """The provider's result (types, SaLe, MAP types) for the active units of ``world``."""
@@ -179,7 +196,7 @@ class Posterior:
         else:
             sale = sale_log_factor_slots(w.rects, w.active, typ.adj, self.model.prior,
                                          c.resolution, sale=typ.sale)
-        return float(self._log_pn_table(K)[n] - log_slots(n, K) + n * self.log_rect + sale)
+        return float(self.prior_n(K)[n] + sale)
 
     # ------------------------------------------------------------------ full
     def evaluate(self, world: W.World) -> Terms:
@@ -197,30 +214,100 @@ class Posterior:
         return Tracker(self, world)
 
 
-@dataclass(frozen=True, eq=False)
-class Proposal:
-    """A proposed world with its log posterior; pass it to :meth:`Tracker.accept` to commit."""
+# ---------------------------------------------------------------------- incremental (compiled)
 
-    world: W.World
-    logp: float
-    loglik: float
-    logprior: float
-    typing: _Typing
-    patch: LikPatch
+
+@numba.njit(cache=True, nogil=True)
+def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, resolution,
+                    measure, hall_min, ratio_min, wall, dilation):  # pragma: no cover - compiled
+    """Geometry class and adjacency row (in place) of each ``changed`` slot of a world; with
+    ``fixed_types`` (the fixed provider's type per geometry class, empty otherwise) its type too."""
+    K = rects.shape[0]
+    row = np.empty(K, np.bool_)
+    fixed = fixed_types.shape[0] > 0
+    for s in changed:
+        for t in range(K):
+            adj[s, t] = False
+            adj[t, s] = False
+        if active[s]:
+            g = geometry_class_compiled(rects[s], resolution, measure, hall_min, ratio_min)
+            geometry[s] = g
+            adjacency_row(rects, active, s, wall, dilation, row)
+            for t in range(K):
+                if row[t]:
+                    adj[s, t] = True
+                    adj[t, s] = True
+            if fixed:
+                types[s] = fixed_types[g]
+        elif fixed:
+            types[s] = -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _score(xsum, old_rects, old_active, old_types, new_rects, new_active, new_types, corridor,
+           wall, hist, adj, sale, table, use_table, threshold, resolution, inv_two_sigma2,
+           h, w, lo, hi):  # pragma: no cover - compiled
+    """Likelihood tally change (into ``hist``; returns the change of Σγ), validity, SaLe sum and
+    number of units of a proposed world."""
+    K = old_rects.shape[0]
+    old_corr = np.empty(K, np.bool_)
+    new_corr = np.empty(K, np.bool_)
+    n = 0
+    for s in range(K):
+        old_corr[s] = old_types[s] == corridor
+        new_corr[s] = new_types[s] == corridor
+        n += 1 if new_active[s] else 0
+    dgamma = world_delta(xsum, old_rects, old_active, old_corr, new_rects, new_active, new_corr,
+                         wall, hist)
+    valid = _all_valid(new_rects, new_active, h, w, lo, hi)
+    s_sum = 0.0
+    if valid:
+        s_sum = _sale_pairs(new_rects, new_active, adj, sale, new_types, table, use_table,
+                            threshold, resolution, inv_two_sigma2)
+    return dgamma, valid, s_sum, n
+
+
+class Proposal:
+    """A proposed world with its log posterior; pass it to :meth:`Tracker.accept` to commit.
+
+    Attributes: ``world`` (types assigned), ``logp``, ``loglik``, ``logprior``, ``typing``
+    (its :class:`_Typing`) and ``patch`` (the likelihood tallies).
+    """
+
+    __slots__ = ("world", "logp", "loglik", "logprior", "typing", "patch")
+
+    def __init__(self, world, logp, loglik, logprior, typing, patch):
+        self.world, self.logp, self.loglik, self.logprior = world, logp, loglik, logprior
+        self.typing, self.patch = typing, patch
+
+
+_NO_TYPES = np.zeros(0, np.int8)
+_NO_SALE = np.zeros((1, 1))
 
 
 class Tracker:
-    """Incremental log posterior of one chain (the one stateful object; see architecture.md)."""
+    """Incremental log posterior of one chain (the one stateful object; see architecture.md).
+
+    A proposal re-derives the geometry class and adjacency row of the changed slots only, the
+    types of every unit from the provider (with the fixed provider only the changed slots can
+    change type), the likelihood tallies from the units whose rectangle, presence or corridor
+    flag changed, and the prior's validity and SaLe sum over the slots (compiled).
+    """
 
     def __init__(self, post: Posterior, world: W.World):
         self.post = post
         self._typ = post.typing(world)
         w = self._typ.world
         slots = W.active_slots(w)
-        self.cover = CoverTracker(post.data, w.rects[slots], w.types[slots] == CORRIDOR)
-        self.loglik = self.cover.loglik
+        self.hist, self.gamma_total = full_tallies(post.data, w.rects[slots],
+                                                   w.types[slots] == CORRIDOR)
+        self.loglik = loglik_from_tallies(post.data, self.hist, self.gamma_total)
         self.logprior = post._logprior(self._typ)
         self.logp = self.loglik + self.logprior
+        c = post.cells
+        self._shape_args = (int(post.frame.shape[0]), int(post.frame.shape[1]),
+                            int(c.min_side), int(c.max_side))
+        self._prior_n = post.prior_n(w.capacity)
 
     @property
     def world(self) -> W.World:
@@ -228,27 +315,8 @@ class Tracker:
 
     def coverage(self, hist=None) -> float:
         """Fraction of the input-free lattice cells covered by some unit."""
-        return self.cover.covered_free(hist) / max(self.post.data.n_free, 1)
-
-    def _retype(self, new_world: W.World, changed: list) -> _Typing:
-        """Types after an edit of ``changed`` slots: geometry and adjacency rows of the changed
-        slots are recomputed, then the provider types *every* unit again."""
-        post, old = self.post, self._typ
-        geometry = old.geometry.copy()
-        adj = old.adj.copy()
-        act, rects = new_world.active, new_world.rects
-        c = post.cells
-        row = np.empty(new_world.capacity, dtype=np.bool_)
-        for s in changed:
-            adj[s, :] = False
-            adj[:, s] = False
-            if act[s]:
-                geometry[s] = geometry_class_one(rects[s], c.resolution, post.model.evidence)
-                adjacency_row(rects, act, s, c.wall, c.adjacency_dilation, row)
-                adj[s, :] = row
-                adj[:, s] = row
-        types, sale = post._types(new_world, geometry, adj)
-        return _Typing(post._typed(new_world, types), geometry, adj, sale)
+        hist = self.hist if hist is None else hist
+        return covered_free(hist) / max(self.post.data.n_free, 1)
 
     def propose(self, new_world: W.World, changed_slots) -> Proposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
@@ -256,23 +324,35 @@ class Tracker:
         Types of *every* unit are re-derived (evidence of a neighbour may change with the edit);
         units whose type changed are recomputed in the likelihood along with the edited ones.
         """
-        old = self._typ.world
-        changed = sorted({int(s) for s in changed_slots})
-        typ = self._retype(new_world, changed)
-        new = typ.world
-        touched = set(changed)
-        touched.update(np.flatnonzero(new.types != old.types).tolist())
-        changes = []
-        for s in sorted(touched):
-            a = tuple(old.rects[s].tolist()) if old.active[s] else None
-            b = tuple(new.rects[s].tolist()) if new.active[s] else None
-            ca = bool(old.active[s] and old.types[s] == CORRIDOR)
-            cb = bool(new.active[s] and new.types[s] == CORRIDOR)
-            if a != b or ca != cb:
-                changes.append(Change(a, ca, b, cb))
-        patch = self.cover.propose(changes)
-        logprior = self.post._logprior(typ)
-        return Proposal(new, patch.loglik + logprior, patch.loglik, logprior, typ, patch)
+        post, old = self.post, self._typ
+        ow = old.world
+        fixed = not (post.knowledge_on and post.knowledge is not None)
+        geometry = old.geometry.copy()
+        adj = old.adj.copy()
+        c = post.cells
+        if fixed:
+            types = ow.types.copy()
+            _retype_changed(new_world.rects, new_world.active,
+                            np.asarray(changed_slots, dtype=np.int64), geometry, adj, types,
+                            GEOMETRY_TYPE, *post._geometry_args, c.wall, c.adjacency_dilation)
+            sale = None
+        else:
+            _retype_changed(new_world.rects, new_world.active,
+                            np.asarray(changed_slots, dtype=np.int64), geometry, adj, _NO_TYPES,
+                            _NO_TYPES, *post._geometry_args, c.wall, c.adjacency_dilation)
+            types, sale = post._types(new_world, geometry, adj)
+        types.setflags(write=False)
+        new = W.World(new_world.rects, new_world.active, types)
+        hist = self.hist.copy()
+        dgamma, valid, s_sum, n = _score(
+            post.data.xsum, ow.rects, ow.active, ow.types, new.rects, new.active, types, CORRIDOR,
+            post.data.wall, hist, adj, _NO_SALE if sale is None else sale, post.fixed.fixed_sale,
+            sale is None, *post._sale_args, *self._shape_args)
+        gamma_total = self.gamma_total + int(dgamma)
+        loglik = loglik_from_tallies(post.data, hist, gamma_total)
+        logprior = float(self._prior_n[n] + s_sum) if valid else -math.inf
+        return Proposal(new, loglik + logprior, loglik, logprior,
+                        _Typing(new, geometry, adj, sale), (hist, gamma_total))
 
     def resync(self) -> None:
         """Rebuild every cache from the current geometry (call after switching
@@ -281,6 +361,6 @@ class Tracker:
 
     def accept(self, prop: Proposal) -> None:
         """Commit a proposal (a rejected one is simply dropped)."""
-        self.cover.commit(prop.patch)
+        self.hist, self.gamma_total = prop.patch
         self._typ = prop.typing
         self.loglik, self.logprior, self.logp = prop.loglik, prop.logprior, prop.logp
