@@ -167,6 +167,7 @@ class MapRun:
     summaries: dict                 # name -> (chains, draws) label-invariant summaries (recorded draws)
     sample_stats: dict              # name -> (chains, draws) sampler statistics
     report: ConvergenceReport
+    samples: dict                   # "rects" (chains, draws, K, 4), "active" (chains, draws, K): recorded worlds
     seconds: float
     kernels_per_second: float
     best_chain: int
@@ -227,6 +228,11 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print) -> MapRun:
     sample_stats = {k: _stats(trace, k, C, skip) for k in trace.stat_names
                     if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")}
     report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min)
+    K = starts[0].capacity
+    samples = {"rects": np.stack([np.asarray(trace.get_values("rects", chains=c))[skip:].reshape(-1, K, 4)
+                                  for c in range(C)]).astype(np.int32),
+               "active": np.stack([np.asarray(trace.get_values("active", chains=c))[skip:].reshape(-1, K)
+                                   for c in range(C)]).astype(bool)}
 
     post = factory()
     post.knowledge_on = inputs.rules is not None
@@ -234,8 +240,17 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print) -> MapRun:
     sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
     log(f"W*: {len(sm.unit_ids)} units, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
         f"(ROI {inputs.roi_name}); {total_kernels / seconds:.0f} kernels/s over {seconds:.1f} s")
-    return MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, seconds,
+    return MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, samples, seconds,
                   total_kernels / seconds, result.best_chain)
+
+
+def sampled_worlds(run: MapRun, n: int) -> list[wm.World]:
+    """Up to ``n`` recorded worlds, evenly thinned over all chains and draws (types not assigned)."""
+    rects = run.samples["rects"].reshape(-1, *run.samples["rects"].shape[2:])
+    active = run.samples["active"].reshape(-1, run.samples["active"].shape[-1])
+    idx = np.unique(np.linspace(0, len(rects) - 1, num=min(n, len(rects))).round().astype(int))
+    K = active.shape[1]
+    return [wm.make(rects[i], active[i], np.full(K, wm.NO_TYPE)) for i in idx]
 
 
 def check_out_dir(out: Path, force: bool) -> None:

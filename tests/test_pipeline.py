@@ -64,3 +64,20 @@ def test_knowledge_switches_on_in_burn_in_and_stays_on_for_recorded_draws():
     assert never[:6].tolist() == [0] * 6 and never[6:].tolist() == [1] * 4
     always = knowledge_flags(0.0)
     assert always.tolist() == [1] * 10
+
+
+def test_run_map_keeps_recorded_worlds():
+    from semmap_pp.pipeline import Inputs, RunSettings, run_map, sampled_worlds
+
+    g = rooms_grid(door=True)
+    f = build_frame(g, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    inputs = Inputs(g, MODEL, None, f, roi, "default")
+    run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=3, draws=5,
+                                                 n_inner=10), log=lambda m: None)
+    assert run.samples["rects"].shape == (2, 5, MODEL.prior.k_max, 4)
+    assert run.summaries["n_units"].shape == (2, 5)
+    # the recorded unit counts are those of the recorded worlds
+    assert (run.samples["active"].sum(axis=2) == run.summaries["n_units"]).all()
+    worlds = sampled_worlds(run, 4)
+    assert len(worlds) == 4 and all(W.is_valid(w, f.shape, f.cells.min_side) for w in worlds)
