@@ -73,18 +73,11 @@ def geometry_class_one(rect, resolution: float, params) -> int:
     return COLIKE if long_ / max(short, 1e-12) >= params.corridor_min_ratio else ROLIKE
 
 
-def geometry_args(resolution: float, params) -> tuple:
-    """The arguments after ``rect`` of :func:`geometry_class_compiled` for these parameters."""
-    measure = ("short_side", "long_side", "area").index(params.size_measure)
-    return (float(resolution), measure, float(params.hall_min_size),
-            float(params.corridor_min_ratio))
-
-
 @numba.njit(cache=True, nogil=True)
 def geometry_class_compiled(rect, resolution, measure, hall_min_size,
                             corridor_min_ratio):  # pragma: no cover - compiled
-    """:func:`geometry_class_one` compiled (``measure``: 0 short side, 1 long side, 2 area; see
-    :func:`geometry_args`); the same floating-point operations, so they always agree."""
+    """:func:`geometry_class_one` compiled (``measure``: 0 short side, 1 long side, 2 area, the
+    order of ``model.SIZE_MEASURES``); the same floating-point operations, so they always agree."""
     h = (rect[2] - rect[0]) * resolution
     w = (rect[3] - rect[1]) * resolution
     short, long_ = min(h, w), max(h, w)

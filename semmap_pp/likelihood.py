@@ -190,9 +190,18 @@ def cover_counts(shape, rects: np.ndarray, corridor: np.ndarray, wall: int) -> n
 
 
 def loglik_from_tallies(data: LikelihoodData, hist: np.ndarray, gamma_total: int) -> float:
-    """``baseline + hist · gain + log ψ · Σγ`` (the one place the float is formed)."""
-    return float(data.baseline + np.dot(hist.astype(np.float64), data.gain)
-                 + data.log_psi * float(gamma_total))
+    """``baseline + hist · gain + log ψ · Σγ`` (the one place the float is formed:
+    :func:`tallies_loglik`, which the compiled hot path calls too)."""
+    return float(tallies_loglik(hist, data.gain, data.baseline, data.log_psi, int(gamma_total)))
+
+
+@numba.njit(cache=True, nogil=True)
+def tallies_loglik(hist, gain, baseline, log_psi, gamma_total):  # pragma: no cover - compiled
+    """:func:`loglik_from_tallies` on plain arguments (a fixed summation order)."""
+    dot = 0.0
+    for k in range(hist.shape[0]):
+        dot += hist[k] * gain[k]
+    return baseline + dot + log_psi * gamma_total
 
 
 def _bbox(rects: np.ndarray, shape) -> tuple[int, int, int, int] | None:

@@ -33,9 +33,11 @@ import numpy as np
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
-from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_args,
-                                geometry_class, geometry_class_compiled)
-from semmap_pp.likelihood import covered_free, full_tallies, loglik_from_tallies, prepare, world_delta
+from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_class,
+                                geometry_class_compiled)
+from semmap_pp.likelihood import (covered_free, full_tallies, loglik_from_tallies, prepare,
+                                  tallies_loglik, world_delta)
+from semmap_pp.model import SIZE_MEASURES
 from semmap_pp.prior import _all_valid, _sale_pairs, all_valid, log_p_n_table, log_p_rect_const, \
     log_slots, sale_log_factor_slots
 
@@ -84,10 +86,13 @@ class Posterior:
         self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side)
         self._prior_n: dict[int, np.ndarray] = {}
         self._door_cache: dict = {}
-        c, p = self.cells, model.prior
-        self._geometry_args = geometry_args(c.resolution, model.evidence)
-        self._sale_args = (float(p.sale_threshold), float(c.resolution),
-                           1.0 / (2.0 * p.sale_sigma_m ** 2))
+        c, p, e = self.cells, model.prior, model.evidence
+        self._ip = np.array([CORRIDOR, c.wall, c.adjacency_dilation, frame.shape[0], frame.shape[1],
+                             c.min_side, c.max_side,
+                             SIZE_MEASURES.index(e.size_measure)], np.int64)
+        self._fp = np.array([c.resolution, e.hall_min_size, e.corridor_min_ratio, p.sale_threshold,
+                             1.0 / (2.0 * p.sale_sigma_m ** 2), self.data.baseline,
+                             self.data.log_psi], np.float64)
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -215,11 +220,18 @@ class Posterior:
 
 
 # ---------------------------------------------------------------------- incremental (compiled)
+#
+# Packed arguments of the compiled hot path (one call per proposal; fewer arguments, cheaper call).
+# ints: corridor type, wall, adjacency dilation, lattice height, width, min side, max side, size
+# measure; floats: resolution, hall_min_size, corridor_min_ratio, sale threshold, 1/(2 σ²),
+# likelihood baseline, log ψ.
+I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE = range(8)
+F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI = range(7)
 
 
 @numba.njit(cache=True, nogil=True)
-def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, resolution,
-                    measure, hall_min, ratio_min, wall, dilation):  # pragma: no cover - compiled
+def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, ip,
+                    fp):  # pragma: no cover - compiled
     """Geometry class and adjacency row (in place) of each ``changed`` slot of a world; with
     ``fixed_types`` (the fixed provider's type per geometry class, empty otherwise) its type too."""
     K = rects.shape[0]
@@ -230,9 +242,10 @@ def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, r
             adj[s, t] = False
             adj[t, s] = False
         if active[s]:
-            g = geometry_class_compiled(rects[s], resolution, measure, hall_min, ratio_min)
+            g = geometry_class_compiled(rects[s], fp[F_RES], ip[I_MEASURE], fp[F_HALL],
+                                        fp[F_RATIO])
             geometry[s] = g
-            adjacency_row(rects, active, s, wall, dilation, row)
+            adjacency_row(rects, active, s, ip[I_WALL], ip[I_DIL], row)
             for t in range(K):
                 if row[t]:
                     adj[s, t] = True
@@ -244,27 +257,37 @@ def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, r
 
 
 @numba.njit(cache=True, nogil=True)
-def _score(xsum, old_rects, old_active, old_types, new_rects, new_active, new_types, corridor,
-           wall, hist, adj, sale, table, use_table, threshold, resolution, inv_two_sigma2,
-           h, w, lo, hi):  # pragma: no cover - compiled
-    """Likelihood tally change (into ``hist``; returns the change of Σγ), validity, SaLe sum and
-    number of units of a proposed world."""
+def _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, new_types, hist,
+           gamma_total, adj, sale, table, use_table, prior_n, ip, fp):  # pragma: no cover
+    """Log-likelihood and log-prior of a proposed world; the new tallies go into ``hist``
+    (returns the new Σγ as well)."""
     K = old_rects.shape[0]
     old_corr = np.empty(K, np.bool_)
     new_corr = np.empty(K, np.bool_)
     n = 0
+    corridor = ip[I_CORR]
     for s in range(K):
         old_corr[s] = old_types[s] == corridor
         new_corr[s] = new_types[s] == corridor
         n += 1 if new_active[s] else 0
-    dgamma = world_delta(xsum, old_rects, old_active, old_corr, new_rects, new_active, new_corr,
-                         wall, hist)
-    valid = _all_valid(new_rects, new_active, h, w, lo, hi)
-    s_sum = 0.0
-    if valid:
-        s_sum = _sale_pairs(new_rects, new_active, adj, sale, new_types, table, use_table,
-                            threshold, resolution, inv_two_sigma2)
-    return dgamma, valid, s_sum, n
+    gamma_total += world_delta(xsum, old_rects, old_active, old_corr, new_rects, new_active,
+                               new_corr, ip[I_WALL], hist)
+    loglik = tallies_loglik(hist, gain, fp[F_BASE], fp[F_LOGPSI], gamma_total)
+    logprior = -np.inf
+    if _all_valid(new_rects, new_active, ip[I_H], ip[I_W], ip[I_LO], ip[I_HI]):
+        logprior = prior_n[n] + _sale_pairs(new_rects, new_active, adj, sale, new_types, table,
+                                            use_table, fp[F_THRESH], fp[F_RES], fp[F_INV2S2])
+    return loglik, logprior, gamma_total
+
+
+@numba.njit(cache=True, nogil=True)
+def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, changed,
+                   geometry, adj, types, fixed_types, hist, gamma_total, table, prior_n, ip,
+                   fp):  # pragma: no cover - compiled
+    """:func:`_retype_changed` then :func:`_score` with the fixed provider, in one call."""
+    _retype_changed(new_rects, new_active, changed, geometry, adj, types, fixed_types, ip, fp)
+    return _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, types,
+                  hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp)
 
 
 class Proposal:
@@ -282,7 +305,6 @@ class Proposal:
 
 
 _NO_TYPES = np.zeros(0, np.int8)
-_NO_SALE = np.zeros((1, 1))
 
 
 class Tracker:
@@ -304,9 +326,6 @@ class Tracker:
         self.loglik = loglik_from_tallies(post.data, self.hist, self.gamma_total)
         self.logprior = post._logprior(self._typ)
         self.logp = self.loglik + self.logprior
-        c = post.cells
-        self._shape_args = (int(post.frame.shape[0]), int(post.frame.shape[1]),
-                            int(c.min_side), int(c.max_side))
         self._prior_n = post.prior_n(w.capacity)
 
     @property
@@ -326,31 +345,28 @@ class Tracker:
         """
         post, old = self.post, self._typ
         ow = old.world
-        fixed = not (post.knowledge_on and post.knowledge is not None)
         geometry = old.geometry.copy()
         adj = old.adj.copy()
-        c = post.cells
-        if fixed:
+        changed = np.array(changed_slots, dtype=np.int64)
+        hist = self.hist.copy()
+        data = post.data
+        if not (post.knowledge_on and post.knowledge is not None):
             types = ow.types.copy()
-            _retype_changed(new_world.rects, new_world.active,
-                            np.asarray(changed_slots, dtype=np.int64), geometry, adj, types,
-                            GEOMETRY_TYPE, *post._geometry_args, c.wall, c.adjacency_dilation)
             sale = None
+            loglik, logprior, gamma_total = _propose_fixed(
+                data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
+                new_world.active, changed, geometry, adj, types, GEOMETRY_TYPE, hist,
+                self.gamma_total, post.fixed.fixed_sale, self._prior_n, post._ip, post._fp)
         else:
-            _retype_changed(new_world.rects, new_world.active,
-                            np.asarray(changed_slots, dtype=np.int64), geometry, adj, _NO_TYPES,
-                            _NO_TYPES, *post._geometry_args, c.wall, c.adjacency_dilation)
+            _retype_changed(new_world.rects, new_world.active, changed, geometry, adj, _NO_TYPES,
+                            _NO_TYPES, post._ip, post._fp)
             types, sale = post._types(new_world, geometry, adj)
+            loglik, logprior, gamma_total = _score(
+                data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
+                new_world.active, types, hist, self.gamma_total, adj, sale,
+                post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp)
         types.setflags(write=False)
         new = W.World(new_world.rects, new_world.active, types)
-        hist = self.hist.copy()
-        dgamma, valid, s_sum, n = _score(
-            post.data.xsum, ow.rects, ow.active, ow.types, new.rects, new.active, types, CORRIDOR,
-            post.data.wall, hist, adj, _NO_SALE if sale is None else sale, post.fixed.fixed_sale,
-            sale is None, *post._sale_args, *self._shape_args)
-        gamma_total = self.gamma_total + int(dgamma)
-        loglik = loglik_from_tallies(post.data, hist, gamma_total)
-        logprior = float(self._prior_n[n] + s_sum) if valid else -math.inf
         return Proposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale), (hist, gamma_total))
 
