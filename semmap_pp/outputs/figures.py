@@ -1,0 +1,269 @@
+"""Figures of a semantic map as PNG bytes: the paper's Fig. 5b (graph), Fig. 5c (overlay), Fig. 7
+(posterior), per-cell probability maps, the region of interest and the regions.
+
+Every figure is drawn in the input image's continuous pixel frame (x = column, y = row, y down, as
+:mod:`semmap_pp.cells`), cropped to the known part of the map, with matplotlib's Agg backend on
+``Figure`` objects (no pyplot state, nothing left open). Each function returns PNG bytes, so the
+same bytes are written to a file and embedded in report.html.
+"""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless; also set before any pyplot import elsewhere in the process
+
+import numpy as np  # noqa: E402
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+
+from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN, W_OBJECT, W_WALL  # noqa: E402
+from semmap_pp.outputs.graphml import TYPE_LETTER  # noqa: E402
+
+# Colours of the paper's Fig. 5 (classified map: black occupied, gray unknown, white free).
+RGB = {"free": (255, 255, 255), "unknown": (160, 160, 160), "occupied": (0, 0, 0),
+       "wall": (0, 0, 255), "door": (0, 230, 230), "object": (0, 170, 0)}
+MAGENTA = "#e000e0"
+TYPE_FACE = {"room": "#fff3b0", "corridor": "#bde0ff", "hall": "#ffd1a6", "other": "#e4e4e4"}
+LONG_SIDE_PX = 1400     # a figure's longer side on screen, in pixels (at DPI)
+DPI = 100
+
+
+def png(fig: Figure) -> bytes:
+    """PNG bytes of a figure (then the figure is dropped)."""
+    buf = io.BytesIO()
+    FigureCanvasAgg(fig)
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
+
+
+def classified_rgb(classes: np.ndarray, light: bool = False) -> np.ndarray:
+    """(H, W, 3) uint8 picture of input classes; ``light`` greys it so drawings on top stand out."""
+    colours = {FREE: RGB["free"], UNKNOWN: (215, 215, 215) if light else RGB["unknown"],
+               OCCUPIED: (110, 110, 110) if light else RGB["occupied"]}
+    out = np.zeros(classes.shape + (3,), np.uint8)
+    for code, rgb in colours.items():
+        out[classes == code] = rgb
+    return out
+
+
+def door_mask_image(sm) -> np.ndarray:
+    """(H, W) bool door cells of W* in the image frame."""
+    lat = np.zeros(sm.frame.shape, bool)
+    for d in sm.derived.doors:
+        r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
+        lat[r0:r1, c0:c1] = True
+    return sm.frame.to_image(lat, fill=False)
+
+
+def overlay_rgb(sm) -> np.ndarray:
+    """(H, W, 3) uint8: the classified map with W*'s walls (blue), doors (cyan) and objects (green)."""
+    rgb = classified_rgb(sm.grid.classes)
+    rgb[sm.states_image == W_WALL] = RGB["wall"]
+    rgb[sm.states_image == W_OBJECT] = RGB["object"]
+    rgb[door_mask_image(sm)] = RGB["door"]
+    return rgb
+
+
+def crop_box(sm, margin_px: int = 10) -> tuple[int, int, int, int]:
+    """``(y0, y1, x0, x1)``: the known part of the map and every unit, plus a margin, in the image."""
+    keep = (sm.grid.classes != UNKNOWN) | (sm.labels_image > 0)
+    if not keep.any():
+        return 0, sm.grid.classes.shape[0], 0, sm.grid.classes.shape[1]
+    rows, cols = np.flatnonzero(keep.any(axis=1)), np.flatnonzero(keep.any(axis=0))
+    h, w = keep.shape
+    return (max(rows[0] - margin_px, 0), min(rows[-1] + 1 + margin_px, h),
+            max(cols[0] - margin_px, 0), min(cols[-1] + 1 + margin_px, w))
+
+
+def _axes(box, *, extra_h: float = 0.0, ncols: int = 1, nrows: int = 1, long_side: int = LONG_SIDE_PX):
+    """A figure whose panels show ``box`` at a readable scale; returns (fig, axes list)."""
+    y0, y1, x0, x1 = box
+    h, w = (y1 - y0) * nrows, (x1 - x0) * ncols
+    scale = long_side / max(h, w)
+    fig = Figure(figsize=(w * scale / DPI, h * scale / DPI + extra_h), dpi=DPI)
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel().tolist()
+    for ax in axes:
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y1, y0)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return fig, axes
+
+
+def _show(ax, rgb, box, **kw):
+    y0, y1, x0, x1 = box
+    ax.imshow(rgb[y0:y1, x0:x1], extent=(x0, x1, y1, y0), interpolation="nearest", **kw)
+
+
+def _unit_centres(doc) -> dict[int, tuple[float, float]]:
+    return {u["id"]: tuple(np.asarray(u["vertices_px"], float).mean(axis=0)) for u in doc["units"]}
+
+
+def _legend(fig, handles, ncol=None):
+    fig.legend(handles=handles, loc="lower center", ncol=ncol or len(handles), frameon=False, fontsize=9)
+
+
+def overlay_png(sm, doc: dict) -> bytes:
+    """overlay.png (paper Fig. 5c): W* on the classified map, type letter and id at each unit's
+    centre (R room, C corridor, H hall, E other), magenta N at unexplored areas."""
+    box = crop_box(sm)
+    fig, (ax,) = _axes(box, extra_h=0.4)
+    _show(ax, overlay_rgb(sm), box)
+    for uid, (x, y) in _unit_centres(doc).items():
+        ax.text(x, y, f"{TYPE_LETTER[sm.type_of(uid)]}{uid}", ha="center", va="center", fontsize=9,
+                fontweight="bold", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.75))
+    for n in doc["unexplored"]:
+        ax.text(*n["center_px"], f"N{n['id']}", ha="center", va="center", color=MAGENTA, fontsize=9,
+                fontweight="bold")
+    handles = [Patch(fc=np.array(RGB[k]) / 255, ec="0.5", label=k) for k in
+               ("occupied", "unknown", "free", "wall", "door", "object")]
+    _legend(fig, handles)
+    fig.subplots_adjust(0.005, 0.4 / fig.get_figheight(), 0.995, 0.995)
+    return png(fig)
+
+
+def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
+    """graph.png (paper Fig. 5b): units as ellipses at their centres, doors solid, adjacency without
+    a door dashed, objects blue squares, unexplored areas magenta squares.
+
+    Objects are drawn one node each when there are at most ``max_object_nodes`` of them; otherwise
+    one node per unit holding its object count (a map with hundreds of objects would bury the graph).
+    """
+    import networkx as nx
+
+    box = crop_box(sm)
+    fig, (ax,) = _axes(box, extra_h=0.4)
+    _show(ax, classified_rgb(sm.grid.classes, light=True), box, alpha=0.35)
+    pos = {n: (a["x_px"], a["y_px"]) for n, a in graph.nodes(data=True)}
+    kind = nx.get_node_attributes(graph, "kind")
+    rel = nx.get_edge_attributes(graph, "relation")
+    units = [n for n in graph if kind[n] == "unit"]
+    objects = [n for n in graph if kind[n] == "object"]
+    common = dict(pos=pos, ax=ax, edge_color="black")
+    nx.draw_networkx_edges(graph, edgelist=[e for e, r in rel.items() if r == "door"], width=1.8, **common)
+    nx.draw_networkx_edges(graph, edgelist=[e for e, r in rel.items() if r == "adjacent"], width=1.2,
+                           style="dashed", **common)
+    nx.draw_networkx_edges(graph, pos=pos, ax=ax, edgelist=[e for e, r in rel.items() if r == "next_to"],
+                           width=0.8, style="dotted", edge_color=MAGENTA)
+    square = dict(boxstyle="square,pad=0.2", lw=0.8)
+    if len(objects) <= max_object_nodes:
+        nx.draw_networkx_edges(graph, pos=pos, ax=ax, edge_color="tab:blue", width=0.6,
+                               edgelist=[e for e, r in rel.items() if r == "contains"])
+        for n in objects:
+            ax.text(*pos[n], str(graph.nodes[n]["id"]), ha="center", va="center", fontsize=6, color="white",
+                    bbox=dict(fc="tab:blue", ec="navy", **square))
+    else:
+        for u in units:
+            count = sum(1 for v in graph[u] if kind[v] == "object")
+            if count:
+                ax.annotate(f"{count} obj", pos[u], xytext=(0, -22), textcoords="offset points", ha="center",
+                            va="center", fontsize=7, color="white", bbox=dict(fc="tab:blue", ec="navy", **square),
+                            arrowprops=dict(arrowstyle="-", color="tab:blue", lw=0.8, shrinkA=0, shrinkB=0))
+    for n, a in graph.nodes(data=True):
+        if a["kind"] == "unexplored":
+            ax.text(*pos[n], a["label"], ha="center", va="center", fontsize=7, color="white",
+                    bbox=dict(fc=MAGENTA, ec="purple", **square))
+    for u in units:
+        a = graph.nodes[u]
+        ax.text(*pos[u], a["label"], ha="center", va="center", fontsize=9, fontweight="bold", zorder=5,
+                bbox=dict(boxstyle="ellipse,pad=0.35", fc=TYPE_FACE[a["type"]], ec="black", lw=1.0))
+    handles = [Line2D([], [], color="black", lw=1.8, label="door"),
+               Line2D([], [], color="black", lw=1.2, ls="--", label="adjacent, no door"),
+               Patch(fc="tab:blue", label="objects" if len(objects) <= max_object_nodes else "objects per unit"),
+               Patch(fc=MAGENTA, label="unexplored (N)")]
+    handles += [Patch(fc=TYPE_FACE[t], ec="black", label=f"{TYPE_LETTER[t]} = {t}") for t in UNIT_TYPES]
+    _legend(fig, handles, ncol=8)
+    fig.subplots_adjust(0.005, 0.4 / fig.get_figheight(), 0.995, 0.995)
+    return png(fig)
+
+
+def world_outlines(frame, worlds) -> np.ndarray:
+    """(n, 5, 2) closed outlines ``[x, y]`` in the image of every unit of every world."""
+    lines = [frame.rect_vertices_px(w.rects[s]) for w in worlds for s in np.flatnonzero(w.active)]
+    if not lines:
+        return np.zeros((0, 5, 2))
+    v = np.stack(lines)
+    return np.concatenate([v, v[:, :1]], axis=1)
+
+
+def posterior_png(sm, worlds) -> bytes:
+    """posterior.png (paper Fig. 7): every sampled world drawn with a very thin, translucent line."""
+    box = crop_box(sm)
+    fig, (ax,) = _axes(box, extra_h=0.35)
+    _show(ax, classified_rgb(sm.grid.classes, light=True), box)
+    lines = world_outlines(sm.frame, worlds)
+    alpha = float(np.clip(10.0 / max(len(worlds), 1), 0.02, 0.6))
+    ax.add_collection(LineCollection(lines, colors=[(0.85, 0.0, 0.1, alpha)], linewidths=0.5))
+    fig.text(0.5, 0.12 / fig.get_figheight(), f"{len(worlds)} sampled worlds, each unit drawn with a thin "
+             f"line (opacity {alpha:.2f}): where lines pile up, the chains agree", ha="center", fontsize=9)
+    fig.subplots_adjust(0.005, 0.35 / fig.get_figheight(), 0.995, 0.995)
+    return png(fig)
+
+
+def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, n_worlds: int) -> bytes:
+    """posterior_cells.png: per-cell probability of wall and of each unit type over sampled worlds.
+
+    ``p_wall_image`` (H, W) and ``p_type_image`` (4, H, W) in the input image's frame.
+    """
+    box = crop_box(sm)
+    fig, axes = _axes(box, ncols=3, nrows=2, extra_h=0.9, long_side=1500)
+    _show(axes[0], classified_rgb(sm.grid.classes), box)
+    axes[0].set_title("classified map", fontsize=10)
+    panels = [("wall", p_wall_image)] + [(t, p_type_image[k]) for k, t in enumerate(UNIT_TYPES)]
+    im = None
+    for ax, (name, p) in zip(axes[1:], panels):
+        y0, y1, x0, x1 = box
+        im = ax.imshow(p[y0:y1, x0:x1], extent=(x0, x1, y1, y0), cmap="magma", vmin=0.0, vmax=1.0,
+                       interpolation="nearest")
+        ax.set_title(f"p({name})", fontsize=10)
+    fig.subplots_adjust(0.005, 0.6 / fig.get_figheight(), 0.995, 0.97, wspace=0.02, hspace=0.12)
+    cax = fig.add_axes((0.3, 0.2 / fig.get_figheight(), 0.4, 0.12 / fig.get_figheight()))
+    fig.colorbar(im, cax=cax, orientation="horizontal").set_label(
+        f"probability over {n_worlds} sampled worlds", fontsize=9)
+    return png(fig)
+
+
+def roi_png(sm, roi_name: str) -> bytes:
+    """The region of interest of the CPR (paper Fig. 5a): magenta dashed outline on the classified map."""
+    box = crop_box(sm)
+    fig, (ax,) = _axes(box, extra_h=0.3, long_side=900)
+    _show(ax, classified_rgb(sm.grid.classes), box)
+    h, w = sm.roi.shape
+    if sm.roi.any() and not sm.roi.all():
+        ax.contour(np.arange(w) + 0.5, np.arange(h) + 0.5, sm.roi.astype(float), levels=[0.5],
+                   colors=[MAGENTA], linewidths=1.5, linestyles="dashed")
+    fig.text(0.5, 0.1 / fig.get_figheight(), f"region of interest: {roi_name}", ha="center", fontsize=9)
+    fig.subplots_adjust(0.005, 0.3 / fig.get_figheight(), 0.995, 0.995)
+    return png(fig)
+
+
+def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
+    """regions.png made visible: one colour per region, its id at its centre."""
+    box = crop_box(sm)
+    fig, (ax,) = _axes(box, extra_h=0.1, long_side=900)
+    _show(ax, classified_rgb(sm.grid.classes, light=True), box)
+    ids = np.unique(regions_image[regions_image > 0])
+    if ids.size:
+        palette = matplotlib.colormaps["tab20"](np.arange(20))
+        colours = np.zeros((int(ids.max()) + 1, 4))
+        colours[ids] = palette[(ids - 1) % 20]
+        colours[ids, 3] = 0.7
+        _show(ax, colours[regions_image], box)
+        for rid in ids:
+            ys, xs = np.nonzero(regions_image == rid)
+            ax.text(xs.mean() + 0.5, ys.mean() + 0.5, str(int(rid)), ha="center", va="center", fontsize=8,
+                    fontweight="bold")
+    fig.subplots_adjust(0.005, 0.1 / fig.get_figheight(), 0.995, 0.995)
+    return png(fig)
+
+
+__all__ = ["png", "classified_rgb", "overlay_rgb", "door_mask_image", "crop_box", "overlay_png",
+           "graph_png", "world_outlines", "posterior_png", "posterior_cells_png", "roi_png",
+           "regions_preview_png"]

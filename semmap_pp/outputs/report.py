@@ -1,0 +1,204 @@
+"""report.html: one self-contained page about a run of ``semmap map``.
+
+Every figure is embedded as a ``data:image/png;base64`` URI, the style sheet is inline, and nothing
+is loaded from the network, so the page opens offline and can be mailed on its own. Every string
+that comes from the inputs (file names, paths, notes) goes through :func:`html.escape`.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+from pathlib import Path
+
+from semmap_pp import __version__, atomic
+from semmap_pp.cells import UNIT_TYPES
+
+#: What each output file holds (name -> one line), in the order the report lists them.
+FILES = {
+    "world.json": "W*: units (type, type marginals, corners in pixels and metres), doors, objects, "
+                  "adjacency, unexplored areas, CPR (schema: docs/world.schema.json)",
+    "labels.png": "16-bit unit id per pixel of the input image (walls included), 0 = none",
+    "regions.png": "16-bit region id per pixel: units joined through open walls (rooms as drawn by a person)",
+    "world.geojson": "W* as GeoJSON in the map's local metric frame (metres, ROS map frame, not WGS84)",
+    "graph.graphml": "the abstract model (paper Fig. 5b) for networkx, Gephi or yEd",
+    "overlay.png": "W* on the classified map (paper Fig. 5c)",
+    "graph.png": "the abstract model drawn at the unit centres (paper Fig. 5b)",
+    "posterior.png": "sampled worlds drawn thin on the classified map (paper Fig. 7)",
+    "posterior_cells.png": "per-cell probability of wall and of each unit type over the sampled worlds",
+    "trace.nc": "ArviZ trace of the label-invariant summaries and sampler statistics (open with arviz)",
+    "diagnostics.txt": "R-hat, ESS and the convergence verdict as text",
+    "report.html": "this page",
+}
+
+CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",Helvetica,Arial,sans-serif;margin:1.5em auto;
+max-width:1400px;padding:0 1em;color:#222;line-height:1.4}
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.5em 0;font-size:.92em}
+th,td{border:1px solid #ccc;padding:.25em .6em;text-align:left;vertical-align:top}
+th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums}
+tr.fail td{background:#fde2e2}tr.ok td.v{color:#17692c;font-weight:600}tr.fail td.v{color:#a40000;font-weight:600}
+figure{margin:1em 0}figure img{max-width:100%;height:auto;border:1px solid #ccc}
+figcaption{font-size:.9em;color:#555;margin-top:.3em}.muted{color:#666}code{background:#f4f4f4;padding:0 .2em}
+.verdict{display:inline-block;padding:.15em .6em;border-radius:.3em;font-weight:700}
+.verdict.ok{background:#d8f3dc;color:#17692c}.verdict.fail{background:#fde2e2;color:#a40000}
+"""
+
+
+def e(value) -> str:
+    """HTML-escaped text of any value."""
+    return html.escape(str(value), quote=True)
+
+
+def data_uri(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+def _num(v, fmt: str) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return format(v, fmt)
+
+
+def _table(header, rows, classes=None) -> str:
+    head = "".join(f"<th>{e(h)}</th>" for h in header)
+    body = []
+    for i, row in enumerate(rows):
+        cls = f' class="{classes[i]}"' if classes else ""
+        body.append(f"<tr{cls}>" + "".join(row) + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+
+
+def _td(v, num: bool = False, cls: str = "") -> str:
+    c = " ".join(x for x in ("num" if num else "", cls) if x)
+    return f'<td class="{c}">{e(v)}</td>' if c else f"<td>{e(v)}</td>"
+
+
+def _figure(png: bytes | None, alt: str, caption: str) -> str:
+    if png is None:
+        return ""
+    return (f'<figure><img src="{data_uri(png)}" alt="{e(alt)}"><figcaption>{e(caption)}</figcaption>'
+            f"</figure>")
+
+
+def _kv(pairs) -> str:
+    return "<table><tbody>" + "".join(f"<tr><th>{e(k)}</th>{_td(v)}</tr>" for k, v in pairs) + "</tbody></table>"
+
+
+def units_table(doc: dict, regions: dict[int, int]) -> str:
+    """The W* table: one row per unit."""
+    door_units = {d["id"]: d["units"] for d in doc["doors"]}
+    rows = []
+    for u in doc["units"]:
+        m = u["type_marginals"]
+        to = [str(b if a == u["id"] else a) for d in u["doors"] for a, b in [door_units[d]]]
+        rows.append([_td(u["id"], True), _td(u["type"])] + [_td(f"{m[t]:.2f}", True) for t in UNIT_TYPES] +
+                    [_td(f"{u['size_m'][0]:.2f} × {u['size_m'][1]:.2f}", True),
+                     _td(f"{u['size_m'][0] * u['size_m'][1]:.1f}", True), _td(regions.get(u["id"], ""), True),
+                     _td(", ".join(to) if to else "–"), _td(len(u["objects"]), True)])
+    header = ["id", "type"] + [f"p({t})" for t in UNIT_TYPES] + ["size (m)", "area (m²)", "region",
+                                                                  "doors to units", "objects"]
+    return _table(header, rows)
+
+
+def convergence_table(report) -> str:
+    rows, classes = [], []
+    for q in report.quantities:
+        rows.append([_td(q.name), _td(_num(q.mean, ".4g"), True), _td(_num(q.sd, ".3g"), True),
+                     _td(_num(q.rhat, ".3f"), True), _td(_num(q.ess_bulk, ".0f"), True),
+                     _td(_num(q.ess_tail, ".0f"), True), _td("ok" if q.ok else q.reason, cls="v")])
+        classes.append("ok" if q.ok else "fail")
+    return _table(["quantity", "mean", "sd", "R-hat", "ESS bulk", "ESS tail", "verdict"], rows, classes)
+
+
+def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, int], *, rules_name: str,
+                files: list[str] | None = None) -> str:
+    """The page.
+
+    Parameters
+    ----------
+    run : MapRun
+    doc : dict
+        The world.json content.
+    figures : dict
+        PNG bytes by name: ``overlay``, ``graph``, ``posterior``, ``posterior_cells``, ``regions``,
+        ``roi`` (any may be missing).
+    regions : dict
+        Unit id -> region id.
+    rules_name : str
+        The rule file's name.
+    files : list of str, optional
+        Output file names to describe (default: every file of :data:`FILES`).
+    """
+    inputs, s, sm, rep = run.inputs, run.settings, run.semantic, run.report
+    grid = inputs.grid
+    map_name = doc["map"]["yaml"] or doc["map"]["image"] or str(grid.source)
+    counts = {t: sum(1 for u in doc["units"] if u["type"] == t) for t in UNIT_TYPES}
+    cpr = "–" if doc["cpr"] is None else f"{100 * doc['cpr']:.1f} %"
+    verdict = (f'<span class="verdict ok">converged</span>' if rep.ok else
+               f'<span class="verdict fail">NOT converged</span>')
+    summary = _kv([
+        ("map", grid.source), ("image", f"{grid.width} × {grid.height} cells at {grid.resolution} m/cell"),
+        ("building orientation", f"{doc['map']['orientation_deg']:.1f}°"),
+        ("rules", rules_name), ("model", inputs.model.path.name), ("seed", s.seed),
+        ("chains", f"{s.chains} on {s.cores} core(s)"),
+        ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
+        ("sampling time", f"{run.seconds:.1f} s ({run.kernels_per_second:.0f} kernels/s)"),
+        ("W* from chain", run.best_chain), ("generator", f"semmap_pp {__version__}"),
+    ] + [("note", n) for n in run.notes])
+    world = _kv([
+        ("units", f"{len(doc['units'])} (" + ", ".join(f"{counts[t]} {t}" for t in UNIT_TYPES) + ")"),
+        ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])), ("objects", len(doc["objects"])),
+        ("unexplored areas", len(doc["unexplored"])), ("log posterior", f"{sm.log_posterior:.2f}"),
+        ("cell prediction rate", f"{cpr} over the region of interest “{inputs.roi_name}”"),
+    ])
+    names = files if files is not None else list(FILES)
+    listing = "".join(f'<li><a href="{e(n)}"><code>{e(n)}</code></a> — {e(FILES.get(n, ""))}</li>' for n in names)
+    f = figures.get
+    parts = [
+        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>semmap: {e(map_name)}</title><style>{CSS}</style></head><body>",
+        f"<h1>Semantic map of <code>{e(map_name)}</code></h1>",
+        f'<p class="muted">{len(doc["units"])} units, CPR {e(cpr)}, chains {verdict}</p>',
+        "<h2>Run</h2>", summary,
+        "<h2>The most probable world W*</h2>", world,
+        _figure(f("overlay"), "W* on the classified map",
+                "W* on the classified map (black occupied, gray unknown, white free; blue wall, cyan door, "
+                "green object). Unit type and id at each centre: R room, C corridor, H hall, E other; "
+                "magenta N: unexplored area (paper Fig. 5c)."),
+        units_table(doc, regions),
+        _figure(f("graph"), "abstract model graph",
+                "Abstract model (paper Fig. 5b): ellipses are units at their centres, solid edges doors, "
+                "dashed edges adjacency without a door, blue squares objects, magenta squares unexplored "
+                "areas."),
+        _figure(f("regions"), "regions",
+                "Regions (regions.png): units joined where the wall between them is open, one colour each."),
+        "<h2>Posterior spread</h2>",
+        _figure(f("posterior"), "sampled worlds", "Sampled worlds drawn thin on the map (paper Fig. 7)."),
+        _figure(f("posterior_cells"), "per-cell probabilities",
+                "Per-cell probability of wall and of each unit type over the sampled worlds."),
+        "<h2>Convergence</h2>",
+        f"<p>{verdict} — {rep.n_chains} chains × {rep.n_draws} draws; a label-invariant summary passes when "
+        f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (NaN fails).</p>",
+        convergence_table(rep),
+        "<h2>Cell prediction rate</h2>",
+        f"<p>CPR = <b>{e(cpr)}</b>: the share of cells in the region of interest "
+        f"(<code>{e(inputs.roi_name)}</code>) that W* explains correctly (free as free, occupied as wall "
+        "or object, unknown as object or outside every unit).</p>",
+        _figure(f("roi"), "region of interest", "Region of interest of the CPR (magenta dashed)."),
+        "<h2>Files</h2>", f"<ul>{listing}</ul>",
+        "</body></html>",
+    ]
+    return "\n".join(p for p in parts if p) + "\n"
+
+
+def write_report(path: str | os.PathLike, text: str) -> Path:
+    atomic.write_text(path, text)
+    return Path(path)
+
+
+__all__ = ["FILES", "report_html", "write_report", "units_table", "convergence_table", "data_uri"]

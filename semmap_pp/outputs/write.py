@@ -1,0 +1,116 @@
+"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.pipeline.MapRun`.
+
+Each file is written atomically (:mod:`semmap_pp.atomic`): a reader, or a crash, sees the previous
+complete file or the new one. world.json, labels.png, trace.nc and diagnostics.txt come first, so
+they exist even if a figure fails; report.html comes last and embeds the figures' PNG bytes.
+docs/outputs.md describes every file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from semmap_pp import atomic
+from semmap_pp.outputs import figures as fig
+from semmap_pp.outputs.geojson import geojson_dict, write_geojson
+from semmap_pp.outputs.graphml import world_graph, write_graphml
+from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
+from semmap_pp.outputs.report import FILES, report_html, write_report
+from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
+from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
+
+#: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
+N_SAMPLED_WORLDS = 1000
+
+
+def diagnostics_text(run, rules_path) -> str:
+    """diagnostics.txt: provenance, timing, W* in one line, then the convergence table."""
+    inputs, settings, sm = run.inputs, run.settings, run.semantic
+    return (f"map: {inputs.grid.source}\nrules: {rules_path}\nmodel: {inputs.model.path}\n"
+            f"seed: {settings.seed}; sampling took {run.seconds:.1f} s "
+            f"({run.kernels_per_second:.0f} kernels/s)\n"
+            f"W*: {len(sm.unit_ids)} units, log posterior {sm.log_posterior:.2f}, "
+            f"CPR {sm.cpr:.4f} (ROI {inputs.roi_name})\n\n{run.report.to_text()}\n")
+
+
+def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
+    """world.json, labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
+    from semmap_pp.diagnostics import to_datatree, write_trace
+
+    inputs, settings, sm = run.inputs, run.settings, run.semantic
+    doc = world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
+                     roi_name=inputs.roi_name)
+    written = [write_world_json(out / "world.json", doc), write_labels_png(out / "labels.png", sm.labels_image)]
+    tree = to_datatree(run.summaries, sample_stats=run.sample_stats,
+                       attrs={"map": str(inputs.grid.source), "rules": rules_name, "seed": settings.seed,
+                              "chains": settings.chains, "tune": settings.tune, "draws": settings.draws,
+                              "n_inner": settings.n_inner})
+    written.append(write_trace(tree, out / "trace.nc"))
+    atomic.write_text(out / "diagnostics.txt", diagnostics_text(run, rules_path))
+    written.append(out / "diagnostics.txt")
+    return written, doc
+
+
+def posterior_worlds(run, n: int) -> list:
+    """Up to ``n`` recorded worlds of ``run``, typed as the sampler typed them."""
+    from semmap_pp.pipeline import TargetFactory, sampled_worlds
+
+    inputs = run.inputs
+    post = TargetFactory(inputs.frame, inputs.model, inputs.rules)()
+    post.knowledge_on = inputs.rules is not None
+    return typed_worlds(post, sampled_worlds(run, n))
+
+
+def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
+              n_worlds: int = N_SAMPLED_WORLDS) -> list[Path]:
+    """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
+
+    Parameters
+    ----------
+    out_dir : path
+    run : MapRun
+    rules_name : str
+        The rule file's name (world.json, trace.nc, report).
+    rules_path : path, optional
+        Its path as given (diagnostics.txt); ``rules_name`` when omitted.
+    n_worlds : int
+        Sampled worlds in posterior.png and posterior_cells.png.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    sm = run.semantic
+    written, doc = write_core(out, run, rules_name=rules_name,
+                              rules_path=rules_path if rules_path is not None else rules_name)
+
+    passages = passage_pairs(sm)
+    regions = join_regions(sm.unit_ids, passages)
+    region_img = regions_image(sm, regions)
+    graph = world_graph(sm, doc, regions, passages)
+    written.append(write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)))
+    written.append(write_graphml(out / "graph.graphml", graph))
+    written.append(write_regions_png(out / "regions.png", region_img))
+
+    worlds = posterior_worlds(run, n_worlds)
+    p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
+    pngs = {
+        "overlay": fig.overlay_png(sm, doc),
+        "graph": fig.graph_png(sm, graph),
+        "posterior": fig.posterior_png(sm, worlds),
+        "posterior_cells": fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0),
+                                                   sm.frame.to_image(p_type.transpose(1, 2, 0), fill=0.0)
+                                                   .transpose(2, 0, 1), len(worlds)),
+    }
+    for name, data in pngs.items():
+        atomic.write_bytes(out / f"{name}.png", data)
+        written.append(out / f"{name}.png")
+    pngs["regions"] = fig.regions_preview_png(sm, region_img)
+    pngs["roi"] = fig.roi_png(sm, run.inputs.roi_name)
+    names = [p.name for p in written] + ["report.html"]
+    files = [n for n in FILES if n in names] + [n for n in names if n not in FILES]
+    written.append(write_report(out / "report.html",
+                                report_html(run, doc, pngs, regions, rules_name=rules_name, files=files)))
+    return written
+
+
+__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "diagnostics_text", "posterior_worlds"]
