@@ -1,0 +1,242 @@
+"""The output files of `semmap map` beyond world.json: GeoJSON, GraphML, regions, figures, report.
+
+One literal floor explains every case (0.05 m cells, walls 2 cells, doors 12..50 cells)::
+
+    +------+------+------+      A | B : a 1 m door          -> separate regions, edge "door"
+    |  A o |  B   :  C   |      B : C : wall open for 3.1 m -> one region (an open passage)
+    |      D      :      |      A / D : closed wall         -> separate regions, edge "adjacent"
+    +------+------+------+      o : an object in A;  n : a small free patch below B (unexplored)
+    |  D   |   n
+    +------+
+
+Ids follow reading order of the unit centres: A = 1, B = 2, C = 3, D = 4.
+"""
+
+import io
+import json
+import re
+
+import networkx as nx
+import numpy as np
+import pytest
+from PIL import Image
+
+from semmap_pp import world as W
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.diagnostics import SUMMARIES, convergence
+from semmap_pp.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.model import load_model
+from semmap_pp.outputs import dumps, semantic_map, world_dict
+from semmap_pp.outputs import figures
+from semmap_pp.outputs.geojson import geojson_dict, ring_area, write_geojson
+from semmap_pp.outputs.graphml import world_graph, write_graphml
+from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, unit_regions, write_regions_png
+from semmap_pp.outputs.write import write_all
+from semmap_pp.pipeline import Inputs, MapRun, RunSettings
+from semmap_pp.posterior import Posterior
+
+MODEL = load_model()
+HOSTILE = "<script>alert(1)</script>.yaml"
+RECTS = {"A": (4, 4, 70, 56), "B": (4, 54, 70, 106), "C": (4, 104, 70, 156), "D": (68, 4, 110, 56)}
+
+
+def floor_grid(source=None):
+    c = np.full((116, 162), UNKNOWN, np.uint8)
+    c[4:70, 4:156] = OCCUPIED
+    c[68:110, 4:56] = OCCUPIED
+    c[6:68, 6:54] = FREE        # A
+    c[6:68, 56:104] = FREE      # B
+    c[6:68, 106:154] = FREE     # C
+    c[70:108, 6:54] = FREE      # D
+    c[25:45, 54:56] = FREE      # door A|B, 20 cells = 1 m
+    c[6:68, 104:106] = FREE     # B:C open over 62 cells > door_max
+    c[20:24, 20:24] = OCCUPIED  # an object in A
+    c[73:83, 70:82] = FREE      # unexplored patch, 3 rows below B
+    return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                         origin=(-1.0, 0.5, 0.0), source=source, image_path=None)
+
+
+def floor_world():
+    w = W.empty(6)
+    for slot, key in zip((0, 2, 3, 5), "ABCD"):  # slots scattered: ids must not depend on them
+        w = W.add(w, slot, RECTS[key])
+    return w
+
+
+@pytest.fixture(scope="module")
+def floor():
+    g = floor_grid()
+    f = build_frame(g, MODEL)
+    assert f.theta == 0.0
+    sm = semantic_map(g, f, Posterior(f, MODEL), floor_world())
+    return sm, world_dict(sm)
+
+
+def test_the_literal_floor_is_what_the_picture_says(floor):
+    sm, doc = floor
+    assert doc["adjacency"] == [[1, 2], [1, 4], [2, 3], [2, 4]]
+    assert [d["units"] for d in doc["doors"]] == [[1, 2]]
+    assert [o["unit"] for o in doc["objects"]] == [1]
+    assert len(doc["unexplored"]) == 1
+
+
+def test_join_regions_is_union_find_numbered_by_smallest_unit():
+    assert join_regions([5, 1, 2, 3, 4], [(4, 5), (2, 3)]) == {1: 1, 2: 2, 3: 2, 4: 3, 5: 3}
+    assert join_regions([1, 2, 3], [(3, 1), (1, 3), (2, 2)]) == {1: 1, 2: 2, 3: 1}  # repeats, self
+    assert join_regions([1, 2, 3, 4], [(1, 2), (3, 4), (2, 4)]) == {1: 1, 2: 1, 3: 1, 4: 1}
+    assert join_regions([], []) == {}
+
+
+def test_regions_join_only_through_an_open_wall(floor, tmp_path):
+    sm, _ = floor
+    assert passage_pairs(sm) == [(2, 3)]                     # not the door A|B, not the closed wall A/D
+    regions = unit_regions(sm)
+    assert regions == {1: 1, 2: 2, 3: 2, 4: 3}
+    img = regions_image(sm, regions)
+    assert img.dtype == np.uint16 and img.shape == sm.grid.classes.shape
+    assert (img[30, 30], img[30, 80], img[30, 130], img[90, 30], img[112, 160]) == (1, 2, 2, 3, 0)
+    back = np.asarray(Image.open(write_regions_png(tmp_path / "regions.png", img)))
+    np.testing.assert_array_equal(back.astype(np.uint16), img)
+
+
+def test_geojson_is_closed_ccw_in_the_stated_local_frame(floor, tmp_path):
+    sm, doc = floor
+    path = write_geojson(tmp_path / "world.geojson", geojson_dict(sm, doc))
+    gj = json.loads(path.read_text())
+    assert gj["type"] == "FeatureCollection"
+    assert gj["properties"]["frame"] == "map" and gj["properties"]["units"] == "m"
+    assert "WGS84" in gj["properties"]["note"]
+    kinds = [f["properties"]["kind"] for f in gj["features"]]
+    assert kinds == ["unit"] * 4 + ["door", "object", "unexplored"]
+    by_id = {f["id"]: f for f in gj["features"]}
+    assert len(by_id) == len(gj["features"])
+    for u in doc["units"]:
+        ring = by_id[f"unit/{u['id']}"]["geometry"]["coordinates"][0]
+        assert len(ring) == 5 and ring[0] == ring[-1]
+        assert ring_area(ring[:-1]) > 0                              # counter-clockwise
+        assert sorted(map(tuple, ring[:-1])) == sorted(map(tuple, u["vertices_m"]))
+    a = by_id["unit/1"]["properties"]
+    assert a["type"] == doc["units"][0]["type"] and a["region"] == 1 and a["doors"] == [1]
+    assert abs(a["area_m2"] - 3.3 * 2.6) < 1e-9 and abs(sum(a[f"p_{t}"] for t in
+                                                          ("room", "corridor", "hall", "other")) - 1) < 1e-6
+    door = by_id["door/1"]["geometry"]
+    assert door["type"] == "LineString"
+    (x0, y0), (x1, y1) = door["coordinates"]
+    assert abs(np.hypot(x1 - x0, y1 - y0) - 1.0) < 1e-9          # the 1 m opening
+    assert abs(x0 - (-1.0 + 55 * 0.05)) < 1e-9                   # on the wall's centre line, metres
+    assert by_id["object/1"]["geometry"]["type"] == "Point" and by_id["object/1"]["properties"]["unit"] == 1
+
+
+def test_graphml_reads_back_with_nodes_and_edges(floor, tmp_path):
+    sm, doc = floor
+    path = write_graphml(tmp_path / "graph.graphml", world_graph(sm, doc))
+    g = nx.read_graphml(path)
+    assert set(g.nodes) == {"u1", "u2", "u3", "u4", "o1", "n1"}
+    assert g.nodes["u1"]["kind"] == "unit" and g.nodes["u1"]["label"][1:] == "1"
+    assert abs(g.nodes["u1"]["area_m2"] - 3.3 * 2.6) < 1e-9
+    rel = {tuple(sorted(e)): a for *e, a in g.edges(data=True)}
+    assert rel[("u1", "u2")]["relation"] == "door" and rel[("u1", "u2")]["doors"] == "1"
+    assert rel[("u2", "u3")] == {"relation": "adjacent", "passage": True}
+    assert rel[("u1", "u4")] == {"relation": "adjacent", "passage": False}
+    assert rel[("o1", "u1")]["relation"] == "contains"
+    assert rel[("n1", "u2")]["relation"] == "next_to"
+    assert len(rel) == 6
+
+
+def _png_size(data: bytes) -> tuple[int, int]:
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return Image.open(io.BytesIO(data)).size
+
+
+def test_overlay_colours_walls_doors_objects(floor):
+    sm, _ = floor
+    rgb = figures.overlay_rgb(sm)
+    assert tuple(rgb[30, 5]) == figures.RGB["wall"]        # A's left wall band
+    assert tuple(rgb[30, 55]) == figures.RGB["door"]       # in the door A|B
+    assert tuple(rgb[21, 21]) == figures.RGB["object"]
+    assert tuple(rgb[30, 30]) == figures.RGB["free"] and tuple(rgb[0, 0]) == figures.RGB["unknown"]
+    assert figures.crop_box(sm) == (0, 116, 0, 162)       # known part + margin, clipped
+
+
+def make_run(sm, source_name=HOSTILE, n_draws=6):
+    rng = np.random.default_rng(1)
+    grid = sm.grid
+    summaries = {k: rng.normal(size=(2, n_draws)) for k in SUMMARIES}
+    world = sm.world
+    K = world.capacity
+    rects = np.broadcast_to(world.rects, (2, n_draws, K, 4)).copy()
+    rects[:, ::2, 3, 3] -= 6                      # every other draw, C is shorter: visible spread
+    active = np.broadcast_to(world.active, (2, n_draws, K)).copy()
+    model = MODEL
+    inputs = Inputs(grid, model, None, sm.frame, sm.roi, "default")
+    settings = RunSettings(chains=2, cores=1, tune=0, draws=n_draws, n_inner=1, anneal=1.0, seed=4)
+    report = convergence(summaries, rhat_max=1.05, ess_min=100)
+    return MapRun(inputs, settings, world, sm, summaries, {"accept": np.ones((2, n_draws))}, report,
+                  {"rects": rects.astype(np.int32), "active": active}, 1.5, 1000.0, 0,
+                  notes=["<img src=x onerror=alert(2)>"])
+
+
+@pytest.fixture(scope="module")
+def hostile_run(tmp_path_factory):
+    from pathlib import Path
+
+    g = floor_grid(source=Path("/maps") / HOSTILE)
+    f = build_frame(g, MODEL)
+    sm = semantic_map(g, f, Posterior(f, MODEL), floor_world())
+    out = tmp_path_factory.mktemp("out")
+    run = make_run(sm)
+    written = write_all(out, run, rules_name="<b>rules</b>.lp")
+    return out, run, written
+
+
+def test_write_all_writes_every_file_once(hostile_run):
+    out, run, written = hostile_run
+    names = [p.name for p in written]
+    assert names[:4] == ["world.json", "labels.png", "trace.nc", "diagnostics.txt"]
+    assert sorted(names) == sorted(p.name for p in out.iterdir()) and len(set(names)) == len(names)
+    assert {"world.geojson", "graph.graphml", "regions.png", "overlay.png", "graph.png", "posterior.png",
+            "posterior_cells.png", "report.html"} <= set(names)
+    doc = world_dict(run.semantic, rules="<b>rules</b>.lp", model=MODEL.path.name, seed=4, roi_name="default")
+    assert (out / "world.json").read_text() == dumps(doc)     # world.json as before write_all existed
+    assert (out / "diagnostics.txt").read_text().startswith(f"map: /maps/{HOSTILE}\nrules: <b>rules</b>.lp\n")
+
+
+def test_figures_are_pngs_of_sane_size(hostile_run):
+    out, _, _ = hostile_run
+    for name in ("overlay", "graph", "posterior", "posterior_cells"):
+        data = (out / f"{name}.png").read_bytes()
+        w, h = _png_size(data)
+        assert 300 <= w <= 3000 and 200 <= h <= 3000, (name, w, h)
+        assert len(data) < 3_000_000
+        img = np.asarray(Image.open(io.BytesIO(data)).convert("L"))
+        assert img.std() > 10, name                                 # not a blank canvas
+
+
+def test_posterior_cells_see_the_spread(hostile_run):
+    from semmap_pp.outputs.spread import cell_probabilities
+
+    _, run, _ = hostile_run
+    from semmap_pp.pipeline import sampled_worlds
+    worlds = sampled_worlds(run, 1000)
+    p_wall, p_type = cell_probabilities(run.semantic.frame.shape, worlds, wall=2)
+    assert len(worlds) == 12
+    assert p_wall[30, 5] == 1.0 and p_wall[30, 30] == 0.0
+    assert p_wall[30, 148] == 0.5                    # C's right wall moves by 6 cells every other draw
+    assert p_type.shape == (4,) + p_wall.shape and p_type.sum(axis=0).max() == 0.0  # untyped worlds
+
+
+def test_report_is_self_contained_and_escapes_inputs(hostile_run):
+    out, run, written = hostile_run
+    text = (out / "report.html").read_text()
+    srcs = re.findall(r'src="([^"]*)"', text)
+    assert len(srcs) == 6 and all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert "http" not in text and "<link" not in text and "<script" not in text
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;.yaml" in text
+    assert "<b>rules</b>" not in text and "&lt;b&gt;rules&lt;/b&gt;.lp" in text
+    assert "onerror=alert(2)>" not in text
+    for p in written:                                             # the file list names every file
+        assert f'href="{p.name}"' in text
+    for q in run.report.quantities:
+        assert f"<td>{q.name}</td>" in text
+    assert "default" in text and "CPR" in text
