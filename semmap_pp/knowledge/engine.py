@@ -30,6 +30,7 @@ from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.local import LocalModel, is_pairwise
 from semmap_pp.knowledge.map import map_clingo, map_rc2
 from semmap_pp.knowledge.mcsat import mcsat_marginals
+from semmap_pp.knowledge.mcsat_local import LocalClauses, mcsat_local
 
 METHODS = ("exact", "mcsat")
 MAP_METHODS = ("jt", "clingo", "rc2")
@@ -80,8 +81,9 @@ class KnowledgeEngine:
         Mixed with a hash of the rules and the evidence: MC-SAT results are a deterministic
         function of (rules, evidence, settings).
     fast : bool
-        Use cached unit/pair templates (:mod:`~semmap_pp.knowledge.local`) when the rule set is
-        pairwise-local and the method is exact with junction-tree MAP.
+        Use cached unit/pair templates (:mod:`~semmap_pp.knowledge.local`, and for MC-SAT
+        :mod:`~semmap_pp.knowledge.mcsat_local`) when the rule set is pairwise-local and the MAP
+        method is the junction tree.
     """
 
     def __init__(self, rules: RuleSet, method: str = "exact", map_method: str = "jt",
@@ -96,8 +98,10 @@ class KnowledgeEngine:
         self.mcsat_settings = (int(n_chains), int(n_iter), int(burn_in))
         self.cache_size, self.seed = int(cache_size), int(seed)
         self._cache: OrderedDict = OrderedDict()
-        self.local = (LocalModel(rules) if fast and method == "exact" and map_method == "jt"
-                      and is_pairwise(rules) else None)
+        self.local = (LocalModel(rules) if fast and map_method == "jt" and is_pairwise(rules)
+                      else None)
+        self.local_clauses = (LocalClauses(rules) if self.local is not None and method == "mcsat"
+                              else None)
         self.hits = self.misses = 0
 
     @classmethod
@@ -168,6 +172,14 @@ class KnowledgeEngine:
         card, sum_pots, max_pots, softs, conds = self.local.reduced(ev)
         path = self.rules.path
         jt = JunctionTree(card, [s for s, _ in sum_pots], path)
+        if self.local_clauses is not None:
+            x, best = decode_max(jt, max_pots)
+            if not np.isfinite(best):
+                raise RuleError(path, "the hard rules admit no world for this evidence")
+            rng = np.random.default_rng(self.signature_seed(ev))
+            types, sale = mcsat_local(self.local_clauses, ev, rng, *self.mcsat_settings, jt=jt)
+            map_types = {u: UNIT_TYPES[int(x[i]) >> softs[i]] for i, u in enumerate(ev.units)}
+            return InferenceResult(types, sale, map_types, -float(best) + 0.0, None, self.method)
         log_z, marg, full = calibrate(jt, sum_pots, return_beliefs=True)
         if marg is None:
             raise RuleError(path, "the hard rules admit no world for this evidence")

@@ -1,20 +1,225 @@
-"""MC-SAT marginals (Poon & Domingos 2006), run as many chains at once.
+"""MC-SAT marginals (Poon & Domingos 2006), all chains at once.
 
-Each iteration keeps every soft rule that the current world satisfies with probability
-``1 - e^-w`` and draws the next world uniformly from the worlds that satisfy the hard rules and
-the kept soft rules. The uniform draw is exact here, not SampleSAT's near-uniform one: the slice
-is a 0/1 factor network on the junction tree of :mod:`~semmap_pp.knowledge.exact`, so counting
-(upward pass) and drawing (downward pass) cost what exact inference costs, and MC-SAT is then a
-slice sampler whose only error is Monte Carlo error. ``n_chains`` chains run vectorised; each
-starts from a uniform draw over the hard-feasible worlds and discards ``burn_in`` iterations.
+Each iteration keeps every soft clause (ground weak-constraint tuple) that the current world
+satisfies with probability ``1 - e^-w`` and draws the next world uniformly from the worlds that
+satisfy the hard clauses and the kept soft clauses. The uniform draw is exact, not SampleSAT's
+near-uniform one: the slice is a 0/1 factor network on a junction tree, so a counting (upward)
+pass and a sampling (downward) pass draw a uniform solution (forward filtering, backward
+sampling). MC-SAT is then a slice sampler whose only error is Monte Carlo error.
+
+All chains move together: every array has the chain axis last, so one iteration is a few numpy
+operations per clause block and per clique. Clauses come in :class:`ClauseBlock` s, instances of
+one :class:`ClauseTemplate`: the clauses on a scope of junction-tree variables plus *private*
+atoms that occur in no other block (e.g. the SaLe atoms of an adjacent pair on the pairwise fast
+path), which are counted inside the block and drawn uniformly among the allowed ones once the
+scope is drawn. A template's clauses are bits of an integer word; the kept clauses of an instance
+in a chain are one word, and its 0/1 table is read from a table indexed by that word.
+
+The estimate is Rao-Blackwellised: every kept iteration adds, for each variable, its exact
+conditional distribution given the other variables of the drawn world and the kept clauses (a
+product of the counts of the blocks around it), and for each reported private atom its
+probability given the drawn scope. Each is the conditional expectation of the indicator it
+replaces, so the estimate keeps its mean and loses part of its variance.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from semmap_pp.errors import RuleError
+from semmap_pp.knowledge.dialect import WEIGHT_SCALE
 from semmap_pp.knowledge.exact import JunctionTree
+from semmap_pp.knowledge.mcsat_tree import BatchTree, pick
+
+_NO_WORLD = "the hard rules admit no world for this evidence"
+WORD_BITS = 62        # clauses per int64 word (bit 62 marks hard-forbidden states)
+CHUNK_BITS = 8        # clauses whose keep coins are drawn together from one alias table
+LUT_BITS = 16         # a template with at most this many clauses counts by table look-up ...
+LUT_ENTRIES = 1 << 22  # ... if the table has at most this many entries
+_HARD_BIT = np.int64(1) << np.int64(WORD_BITS)   # marks (scope, private) states hard rules forbid
+
+
+def keep_probability(weights) -> np.ndarray:
+    """``1 - e^-w`` for weights ``w`` in thousandths (the rule files' integers)."""
+    return -np.expm1(-np.asarray(weights, dtype=np.float64) / WEIGHT_SCALE)
+
+
+def _alias(prob):
+    """Walker/Vose alias table ``(q, alias)`` of a discrete distribution."""
+    n = len(prob)
+    scaled = np.asarray(prob, dtype=np.float64) * n / np.sum(prob)
+    q, alias = np.ones(n), np.arange(n)
+    small = [i for i in range(n) if scaled[i] < 1.0]
+    large = [i for i in range(n) if scaled[i] >= 1.0]
+    while small and large:
+        s, g = small.pop(), large.pop()
+        q[s], alias[s] = scaled[s], g
+        scaled[g] -= 1.0 - scaled[s]
+        (small if scaled[g] < 1.0 else large).append(g)
+    return q, alias
+
+
+class ClauseTemplate:
+    """The clauses of one kind of block, compiled for batched MC-SAT.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Cardinalities of the scope variables.
+    n_aux : int
+        Joint states of the private atoms (1 if none).
+    hard : ndarray of bool, shape (D,)
+        Assignments of (scope, private atoms) allowed by the hard clauses, ``D =
+        prod(shape) * n_aux``, row-major with the private atoms last.
+    viol : ndarray of bool, shape (k, D)
+        Violation table of each soft clause.
+    weights : sequence of int
+        Weight (thousandths) of each soft clause.
+    aux_on : ndarray of bool, shape (n_aux,), optional
+        Private states in which the reported private atom (e.g. ``sale(p,q)``) holds.
+    """
+
+    def __init__(self, shape, n_aux, hard, viol, weights, aux_on=None):
+        self.shape = tuple(int(c) for c in shape)
+        self.n_states = S = int(np.prod(self.shape, dtype=np.int64))
+        hard = np.asarray(hard, dtype=bool).reshape(S, int(n_aux))
+        # private states no scope state allows are never drawn: drop them
+        live = np.flatnonzero(hard.any(axis=0))
+        if len(live) == 0:
+            live = np.array([0])
+        self.n_aux = A = len(live)
+        self.hard = np.ascontiguousarray(hard[:, live].T)                         # (A, S)
+        viol = np.asarray(viol, dtype=bool).reshape(len(weights), S, int(n_aux))[:, :, live]
+        viol = viol.transpose(0, 2, 1) & self.hard                                # (k, A, S)
+        cost = (np.asarray(weights, dtype=np.float64)[:, None, None] * viol).sum(axis=0)
+        # a clause's only effect on the slice is the set of states it forbids when kept, and
+        # two clauses with one violation set are kept together with probability
+        # 1 - e^-(w1 + w2): merge them; drop clauses that no reachable state violates or
+        # satisfies (never constraining, or never kept)
+        merged: dict = {}
+        n_live = int(self.hard.sum())
+        for t, w in zip(viol, weights):
+            n_bad = int(t.sum())
+            if 0 < n_bad < n_live:
+                key = t.tobytes()
+                merged[key] = (t, merged.get(key, (t, 0))[1] + int(w))
+        viol = np.array([t for t, _ in merged.values()], dtype=bool).reshape(-1, A, S)
+        k = len(viol)
+        self.k = k
+        keep_p = keep_probability([w for _, w in merged.values()])
+        # weights of the states by this block's clauses alone (a chain's starting distribution)
+        finite = np.where(self.hard, cost, np.inf)
+        low = finite.min() if np.isfinite(finite).any() else 0.0
+        self.prior = np.where(self.hard, np.exp(-(cost - low) / WEIGHT_SCALE), 0.0).sum(axis=0)
+        # masks[w][a, s]: bit c set when clause 62 w + c is violated; the first word also has
+        # bit 62 set where the hard clauses forbid (a, s), so "allowed" is one test
+        self.masks, self.chunks = [], []
+        for w0 in range(0, max(k, 1), WORD_BITS):
+            n = min(WORD_BITS, k - w0)
+            bits = np.int64(1) << np.arange(n, dtype=np.int64)
+            mask = np.bitwise_or.reduce(np.where(viol[w0:w0 + n], bits[:, None, None],
+                                                 np.int64(0)), axis=0) if n else \
+                np.zeros((A, S), dtype=np.int64)
+            chunks = []
+            for c0 in range(0, n, CHUNK_BITS):
+                p = keep_p[w0 + c0:w0 + min(n, c0 + CHUNK_BITS)]
+                outcomes = np.arange(1 << len(p))
+                on = ((outcomes[:, None] >> np.arange(len(p))) & 1).astype(bool)
+                q, alias = _alias(np.where(on, p, 1.0 - p).prod(axis=1))
+                chunks.append((c0, len(outcomes), q, alias))
+            self.masks.append(mask)
+            self.chunks.append(chunks)
+        self.masks[0] = np.where(self.hard, self.masks[0], self.masks[0] | _HARD_BIT)
+        self.aux_on = None if aux_on is None else np.asarray(aux_on, dtype=bool)[live]
+        self.lut = None
+        if len(self.masks) == 1 and k <= LUT_BITS and S << k <= LUT_ENTRIES:
+            words = np.arange(1 << k, dtype=np.int64) | _HARD_BIT
+            dtype = np.uint8 if A < 256 else np.float32
+            table = np.zeros((S, len(words)), dtype=dtype)
+            for a in range(A):
+                table += (self.masks[0][a][:, None] & words[None, :]) == 0
+            self.lut = table
+
+    def draw_words(self, rng, shape):
+        """Independent keep coins of every clause, packed in words: list of int64 ``shape``."""
+        out = []
+        for chunks in self.chunks:
+            word = np.zeros(shape, dtype=np.int64)
+            for c0, n, q, alias in chunks:
+                u = rng.random(shape) * n
+                i = u.astype(np.int64)
+                word |= np.where(u - i < q[i], i, alias[i]) << c0
+            out.append(word)
+        return out
+
+    def kept(self, rng, s, aux):
+        """Kept-clause words ``(I, B)``: the coin came up and the clause holds at ``(aux, s)``."""
+        return [w & ~m[aux, s] for w, m in zip(self.draw_words(rng, s.shape), self.masks)]
+
+    def counts(self, kept, n_inst, B):
+        """Allowed private assignments per scope state, ``(S, I, B)`` float32."""
+        if kept is None:
+            ok = (self.masks[0] & _HARD_BIT) == 0
+            return np.broadcast_to(ok.sum(axis=0, dtype=np.float32)[:, None, None],
+                                   (self.n_states, n_inst, B))
+        if self.lut is not None:   # a uint8 gather is fast; products need float32
+            return self.lut.take(kept[0], axis=1).astype(np.float32)
+        ok = None
+        for w, (mask, word) in enumerate(zip(self.masks, kept)):
+            word = word | _HARD_BIT if w == 0 else word
+            t = (mask[:, :, None, None] & word[None, None]) == 0
+            ok = t if ok is None else ok & t
+        return ok.sum(axis=0, dtype=np.float32)
+
+    def allowed_at(self, kept, s):
+        """Allowed private states ``(A, I, B)`` at the drawn scope states ``s`` ``(I, B)``."""
+        ok = None
+        for w, (mask, word) in enumerate(zip(self.masks, kept)):
+            word = word | _HARD_BIT if w == 0 else word
+            t = (mask[:, s] & word) == 0
+            ok = t if ok is None else ok & t
+        return ok
+
+
+@dataclass(frozen=True)
+class ClauseBlock:
+    """Instances of one clause template.
+
+    Attributes
+    ----------
+    template : ClauseTemplate
+    scopes : ndarray of int, shape (I, r)
+        Junction-tree variables of each instance, in the template's axis order.
+    """
+
+    template: ClauseTemplate
+    scopes: np.ndarray
+
+
+def blocks_from_network(net) -> list[ClauseBlock]:
+    """Clause blocks of a ground network: one instance per factor scope, grouped by template.
+
+    Every variable of ``net`` is a junction-tree variable (no private atoms).
+    """
+    by_scope: dict = {}
+    for scope, viol in net.hard:
+        entry = by_scope.setdefault(scope, [np.zeros(viol.shape, dtype=bool), []])
+        entry[0] |= viol
+    for scope, t, w in net.soft:
+        entry = by_scope.setdefault(scope, [np.zeros(t.shape, dtype=bool), []])
+        entry[1].append((t, int(w)))
+    groups: dict = {}
+    for scope, (bad, soft) in by_scope.items():
+        key = (bad.shape, bad.tobytes(), tuple((t.tobytes(), w) for t, w in soft))
+        groups.setdefault(key, (bad, soft, []))[2].append(scope)
+    blocks = []
+    for bad, soft, scopes in groups.values():
+        viol = np.array([t.reshape(-1) for t, _ in soft], dtype=bool).reshape(len(soft), bad.size)
+        tpl = ClauseTemplate(bad.shape, 1, ~bad.reshape(-1), viol, [w for _, w in soft])
+        blocks.append(ClauseBlock(tpl, np.array(scopes, dtype=np.int64)))
+    return blocks
 
 
 def _strides(shape):
@@ -25,91 +230,161 @@ def _strides(shape):
     return np.array(out[::-1], dtype=np.int64)
 
 
-def mcsat_marginals(net, rng, n_chains=256, n_iter=24, burn_in=4, jt=None):
-    """Marginals of every variable of ``net`` by MC-SAT.
+class _Blanket:
+    """Rao-Blackwell sums: each variable's distribution given the rest of the drawn world.
+
+    Under the uniform distribution on the slice's solutions, a variable's conditional given all
+    other variables is proportional to the product, over the blocks around it, of their counts
+    with the other scope variables fixed (private atoms summed out inside their blocks).
+    """
+
+    def __init__(self, card, blocks, B):
+        self.B = B
+        self.by_card: dict = {}
+        for v, c in enumerate(card):
+            self.by_card.setdefault(c, []).append(v)
+        row = {v: r for vs in self.by_card.values() for r, v in enumerate(vs)}
+        self.sum = {c: np.zeros((c, len(vs), B)) for c, vs in self.by_card.items()}
+        self.plan = []          # per block: per scope position (stride, card, order, starts, rows)
+        for blk in blocks:
+            st = _strides(blk.template.shape)
+            plans = []
+            for pos in range(blk.scopes.shape[1]):
+                vs = blk.scopes[:, pos]
+                order = np.argsort(vs, kind="stable")
+                sv = vs[order]
+                starts = np.flatnonzero(np.r_[True, sv[1:] != sv[:-1]])
+                rows = np.array([row[int(v)] for v in sv[starts]])
+                sorted_ = bool(np.all(order == np.arange(len(order))))
+                plans.append((int(st[pos]), blk.template.shape[pos], None if sorted_ else order,
+                              None if len(starts) == len(order) else starts, rows))
+            self.plan.append(plans)
+        self.cell = None
+
+    def add(self, blocks, counts, states, x):
+        """Add each variable's conditional given the others of ``x`` and the kept clauses."""
+        B = self.B
+        cond = {c: np.ones((c, len(vs), B), dtype=np.float32) for c, vs in self.by_card.items()}
+        for blk, cnt, s, plans in zip(blocks, counts, states, self.plan):
+            n_inst = len(blk.scopes)
+            flat = np.ascontiguousarray(cnt).reshape(-1)
+            cell = np.arange(n_inst * B).reshape(n_inst, B)          # (instance, chain) offset
+            for pos, (stride, c, order, starts, rows) in enumerate(plans):
+                base = (s - x[blk.scopes[:, pos]] * stride) * (n_inst * B) + cell
+                idx = base[None] + (np.arange(c) * (stride * n_inst * B))[:, None, None]
+                vals = flat.take(idx)                                   # (c, I, B)
+                if order is not None:
+                    vals = vals[:, order]
+                if starts is not None:
+                    vals = np.multiply.reduceat(vals, starts, axis=1, dtype=np.float32)
+                cond[c][:, rows] *= vals
+        for c, arr in cond.items():
+            self.sum[c] += arr / arr.sum(axis=0)
+
+    def marginals(self, card, total):
+        out = [None] * len(card)
+        for c, vs in self.by_card.items():
+            m = self.sum[c].sum(axis=2) / total
+            for r, v in enumerate(vs):
+                out[v] = m[:, r]
+        return out
+
+
+def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
+    """MC-SAT over junction-tree variables of cardinalities ``card`` and clause ``blocks``.
+
+    Parameters
+    ----------
+    card : sequence of int
+    blocks : list of ClauseBlock
+    rng : numpy.random.Generator
+    n_chains, n_iter, burn_in : int
+        Chains run together, iterations per chain, iterations discarded per chain.
+    path : str, optional
+        Named in the error when the hard clauses admit no world.
+    jt : JunctionTree, optional
+        A tree over the block scopes (built if absent).
+
+    Returns
+    -------
+    marg : list of ndarray
+        Estimated distribution of each junction-tree variable.
+    aux : list of ndarray or None
+        Per block whose template has ``aux_on``: estimated probability of the reported private
+        atom of each instance.
+    """
+    card = [int(c) for c in card]
+    B, n_iter, burn_in = int(n_chains), int(n_iter), int(burn_in)
+    if B < 1 or n_iter <= burn_in or burn_in < 0:
+        raise RuleError(path, f"MC-SAT needs n_chains >= 1 and 0 <= burn_in < n_iter "
+                        f"(got {B}, {n_iter}, {burn_in})")
+    if jt is None:
+        jt = JunctionTree(card, [tuple(int(v) for v in s) for blk in blocks for s in blk.scopes],
+                          path)
+    tpls = [blk.template for blk in blocks]
+    sizes = [len(blk.scopes) for blk in blocks]
+    strides = [_strides(t.shape) for t in tpls]
+    tree = BatchTree(card, [blk.scopes for blk in blocks], jt, B, [t.n_aux for t in tpls])
+
+    def scope_states(x):
+        out = []
+        for blk, st in zip(blocks, strides):
+            s = x[blk.scopes[:, 0]] * st[0]
+            for r in range(1, len(st)):
+                s = s + x[blk.scopes[:, r]] * st[r]
+            out.append(s)
+        return out
+
+    def draw_aux(allowed, states):
+        return [pick(ok.view(np.uint8), rng.random(s.shape)) for ok, s in zip(allowed, states)]
+
+    # start: a world of the hard clauses weighted by the single-variable clauses alone
+    start = [np.broadcast_to(t.prior.astype(np.float32)[:, None, None], (t.n_states, n, B))
+             if blk.scopes.shape[1] == 1 else t.counts(None, n, B)
+             for t, n, blk in zip(tpls, sizes, blocks)]
+    if not tree.upward(start, check=True):
+        raise RuleError(path, _NO_WORLD)
+    x = tree.sample(rng)
+    states = scope_states(x)
+    aux = draw_aux([t.allowed_at([np.zeros(s.shape, dtype=np.int64)], s)
+                    for t, s in zip(tpls, states)], states)
+    blanket = _Blanket(card, blocks, B)
+    aux_sum = [None if t.aux_on is None else np.zeros(n) for t, n in zip(tpls, sizes)]
+    for it in range(n_iter):
+        kept = [t.kept(rng, s, a) for t, s, a in zip(tpls, states, aux)]
+        counts = [t.counts(k, n, B) for t, k, n in zip(tpls, kept, sizes)]
+        tree.upward(counts)
+        x = tree.sample(rng)
+        states = scope_states(x)
+        allowed = [t.allowed_at(k, s) for t, k, s in zip(tpls, kept, states)]
+        aux = draw_aux(allowed, states)
+        if it >= burn_in:
+            blanket.add(blocks, counts, states, x)
+            for b, (t, ok) in enumerate(zip(tpls, allowed)):
+                if t.aux_on is not None:
+                    ok = ok.view(np.uint8)
+                    aux_sum[b] += (ok[t.aux_on].sum(axis=0) / ok.sum(axis=0)).sum(axis=1)
+    total = (n_iter - burn_in) * B
+    return blanket.marginals(card, total), [None if a is None else a / total for a in aux_sum]
+
+
+def mcsat_marginals(net, rng, n_chains=128, n_iter=150, burn_in=40, jt=None):
+    """Marginals of every variable of a ground network by MC-SAT.
 
     Parameters
     ----------
     net : Network
     rng : numpy.random.Generator
     n_chains, n_iter, burn_in : int
-        Chains run in parallel, iterations per chain, iterations discarded per chain.
+        Chains run together, iterations per chain, iterations discarded per chain.
     jt : JunctionTree, optional
-        A tree over the scopes of ``net`` (built if absent).
+        A tree over the factor scopes of ``net`` (built if absent).
 
     Returns
     -------
     list of ndarray
         ``marg[v]`` is the estimated distribution of variable ``v``.
     """
-    card = [int(c) for c in net.card]
-    n = len(card)
-    scopes = [s for s, _ in net.hard] + [s for s, _t, _w in net.soft]
-    if jt is None:
-        jt = JunctionTree(card, scopes, net.path)
-    B = int(n_chains)
-    # fixed hard potentials per clique (linear space, 0/1)
-    base = [np.ones((1,) + sh) for sh in jt.shapes]
-    for (s, viol), pl in zip(net.hard, jt.assign([s for s, _ in net.hard])):
-        i, perm, shape = pl
-        base[i] = base[i] * np.transpose(~viol, perm).reshape((1,) + shape)
-    # soft factors grouped by scope
-    groups: dict = {}
-    for s, t, w in net.soft:
-        groups.setdefault(s, []).append((t.reshape(-1), w))
-    soft = []
-    for s, items in groups.items():
-        V = np.array([t for t, _ in items], dtype=np.float64)          # (k, D)
-        keep_p = 1.0 - np.exp(-np.array([w for _, w in items]) / 1000.0)
-        i, perm, shape = jt.assign([s])[0]
-        shp = tuple(card[v] for v in s)
-        soft.append((list(s), _strides(shp), V, keep_p, i, shp, (0,) + tuple(p + 1 for p in perm),
-                     (B,) + shape))
-    sep_strides = [_strides(tuple(card[a] for a in sep)) for sep in jt.seps]
-    rows = np.arange(B)
-
-    def draw(pots):
-        beliefs = list(pots)
-        for i in range(n):
-            b = beliefs[i]
-            msg = b.sum(axis=1)
-            scale = msg.reshape(B, -1).max(axis=1)
-            if not np.all(scale > 0):
-                raise RuleError(net.path, "the hard rules admit no world for this evidence")
-            msg = msg / scale.reshape((B,) + (1,) * (msg.ndim - 1))
-            p = jt.parent[i]
-            if p >= 0:
-                perm, shape = jt.msg_place[i]
-                beliefs[p] = beliefs[p] * np.transpose(
-                    msg, (0,) + tuple(q + 1 for q in perm)).reshape((B,) + shape)
-        x = np.zeros((B, n), dtype=np.int64)
-        u = rng.random((n, B))
-        for i in range(n - 1, -1, -1):
-            b = beliefs[i].reshape(B, card[jt.order[i]], -1)
-            sep = jt.seps[i]
-            sidx = x[:, list(sep)] @ sep_strides[i] if sep else np.zeros(B, dtype=np.int64)
-            probs = b[rows, :, sidx]
-            cum = np.cumsum(probs, axis=1)
-            pick = (u[i][:, None] * cum[:, -1:] >= cum).sum(axis=1)
-            x[:, jt.order[i]] = np.minimum(pick, card[jt.order[i]] - 1)
-        return x
-
-    pots0 = [np.broadcast_to(b, (B,) + b.shape[1:]) for b in base]
-    x = draw(pots0)
-    counts = [np.zeros(c) for c in card]
-    kept_iters = 0
-    for it in range(int(n_iter)):
-        pots = list(pots0)
-        for scope, strides, V, keep_p, i, shp, perm, shape in soft:
-            idx = x[:, scope] @ strides
-            viol_now = V[:, idx].T                                   # (B, k)
-            keep = (viol_now == 0) & (rng.random(viol_now.shape) < keep_p)
-            allowed = (keep.astype(np.float64) @ V) == 0              # (B, D)
-            pots[i] = pots[i] * np.transpose(allowed.reshape((B,) + shp), perm).reshape(shape)
-        x = draw(pots)
-        if it >= burn_in:
-            kept_iters += 1
-            for v in range(n):
-                counts[v] += np.bincount(x[:, v], minlength=card[v])
-    total = kept_iters * B
-    return [c / total for c in counts]
+    marg, _ = run_mcsat(net.card, blocks_from_network(net), rng, n_chains, n_iter, burn_in,
+                        net.path, jt)
+    return marg
