@@ -172,6 +172,10 @@ class MapRun:
     kernels_per_second: float
     best_chain: int
     notes: list = field(default_factory=list)
+    stopped: str | None = None      # "interrupted", "budget" or None (every planned draw made)
+    records: list = field(default_factory=list)   # per chain: every real draw so far (resume.merge_records)
+    starts: list = field(default_factory=list)    # the start world of each chain
+    kept: tuple = ()                # (chain numbers, draws per chain) behind summaries and samples
 
 
 def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[wm.World]:
@@ -192,56 +196,92 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[
     return worlds
 
 
-def _stats(trace, name: str, chains: int, skip: int) -> np.ndarray:
-    return np.stack([np.asarray(trace.get_sampler_stats(name, chains=c), dtype=float)[skip:]
-                     for c in range(chains)])
+def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,
+            budget: float | None = None, resume=None) -> MapRun:
+    """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report.
 
-
-def run_map(inputs: Inputs, settings: RunSettings, *, log=print) -> MapRun:
-    """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report."""
+    Parameters
+    ----------
+    callback : callable(dict), optional
+        Progress of every draw (:func:`semmap_pp.step.draw_info`), in this process.
+    stop : StopFlag, optional
+        Set (by a SIGINT handler) to end sampling early; the draws so far are kept.
+    budget : float, optional
+        Seconds of sampling wall time (see :func:`semmap_pp.sampling.sample_worlds`).
+    resume : semmap_pp.resume.ResumeState, optional
+        Continue an earlier run: its chains go on from their last worlds and random states, and
+        the new draws are appended to the old ones (``settings`` must be the stored ones).
+    """
     from semmap_pp.kernels import data_from_frame, default_mix
     from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.resume import keep_common_draws, merge_records
     from semmap_pp.sampling import sample_worlds
 
     model, frame = inputs.model, inputs.frame
     kernel_settings = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
     data = data_from_frame(frame, kernel_settings)
     factory = TargetFactory(frame, model, inputs.rules)
-    rng = np.random.default_rng(settings.seed)
-    starts = start_worlds(inputs, settings.chains, rng)
+    if resume is None:
+        rng = np.random.default_rng(settings.seed)
+        starts = start_worlds(inputs, settings.chains, rng)
+        first = starts
+        pm_tune, pm_draws, schedule, chain_starts = settings.tune, settings.draws, None, None
+        history = [None] * settings.chains
+    else:
+        first, starts = resume.starts, resume.last_worlds()
+        schedule = (settings.tune, resume.total_draws)
+        chain_starts = resume.chain_starts()
+        pm_tune, pm_draws = 0, max(1, resume.remaining())
+        history = resume.history
     log(f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
         f"orientation {math.degrees(frame.theta):.1f} deg; start world: {wm.n_units(starts[0])} units")
-    log(f"sampling: {settings.chains} chains on {settings.cores} core(s), {settings.tune} burn-in + "
-        f"{settings.draws} draws x {settings.n_inner} kernels")
+    if resume is None:
+        log(f"sampling: {settings.chains} chains on {settings.cores} core(s), {settings.tune} burn-in + "
+            f"{settings.draws} draws x {settings.n_inner} kernels")
+    else:
+        log(f"resuming: {settings.chains} chains on {settings.cores} core(s), up to {pm_draws} more draws "
+            f"per chain (to {resume.total_draws} in all, {settings.tune} of them burn-in) "
+            f"x {settings.n_inner} kernels")
     t0 = time.perf_counter()
-    result = sample_worlds(factory, data, starts, draws=settings.draws, tune=settings.tune,
+    result = sample_worlds(factory, data, starts, draws=pm_draws, tune=pm_tune,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.n_inner,
                            seed=settings.seed, anneal=settings.anneal, mix=default_mix(kernel_settings),
                            cpr_fn=LatticeCPR.from_roi(frame, inputs.roi), resolution=frame.cells.resolution,
-                           knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None)
+                           knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None,
+                           callback=callback, stop=stop, budget=budget, resume=chain_starts,
+                           schedule=schedule)
     seconds = time.perf_counter() - t0
-    total_kernels = settings.chains * (settings.tune + settings.draws) * settings.n_inner
-    trace, C, skip = result.trace, result.trace.nchains, settings.tune
-    summaries = {"log_posterior": _stats(trace, "logp", C, skip)}
+    new_draws = sum(len(r.stats.get("logp", ())) for r in result.records)
+    total_kernels = new_draws * settings.n_inner
+    records = merge_records(history, result.records)
+    kept_chains, n_kept, recorded, notes = keep_common_draws(records)
+    summaries = {"log_posterior": np.stack([records[c].stats["logp"][recorded[c]] for c in kept_chains])}
     for name in SUMMARIES[1:]:
-        summaries[name] = _stats(trace, name, C, skip)
-    sample_stats = {k: _stats(trace, k, C, skip) for k in trace.stat_names
-                    if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")}
+        summaries[name] = np.stack([records[c].stats[name][recorded[c]] for c in kept_chains])
+    stat_names = [k for k in records[kept_chains[0]].stats
+                  if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")]
+    sample_stats = {k: np.stack([records[c].stats[k][recorded[c]] for c in kept_chains]).astype(float)
+                    for k in stat_names}
     report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min)
-    K = starts[0].capacity
-    samples = {"rects": np.stack([np.asarray(trace.get_values("rects", chains=c))[skip:].reshape(-1, K, 4)
-                                  for c in range(C)]).astype(np.int32),
-               "active": np.stack([np.asarray(trace.get_values("active", chains=c))[skip:].reshape(-1, K)
-                                   for c in range(C)]).astype(bool)}
+    samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
+               "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
 
     post = factory()
     post.knowledge_on = inputs.rules is not None
     best = result.best_world if result.best_world is not None else starts[0]
+    best_chain = result.best_chain
+    if resume is not None:   # W* of the earlier segments may still be the best
+        best, best_chain = resume.better_best(best, result.best_logp, best_chain)
     sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
+    rate = total_kernels / seconds if seconds > 0 else 0.0
+    if result.stopped:
+        notes.insert(0, f"{result.stopped}: sampling stopped early after {seconds:.1f} s; kept "
+                        f"{len(kept_chains)} chain(s) x {n_kept} draws")
     log(f"W*: {len(sm.unit_ids)} units, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
-        f"(ROI {inputs.roi_name}); {total_kernels / seconds:.0f} kernels/s over {seconds:.1f} s")
+        f"(ROI {inputs.roi_name}); {rate:.0f} kernels/s over {seconds:.1f} s")
     return MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, samples, seconds,
-                  total_kernels / seconds, result.best_chain)
+                  rate, best_chain, notes, result.stopped, records, list(first),
+                  (tuple(kept_chains), n_kept))
 
 
 def sampled_worlds(run: MapRun, n: int) -> list[wm.World]:

@@ -2,13 +2,19 @@
 
 Writes ``world.json`` (schema: docs/world.schema.json), ``labels.png`` (16-bit unit ids, the input
 image's frame), ``trace.nc`` (ArviZ: label-invariant summaries and sampler statistics per chain and
-draw) and ``diagnostics.txt`` (R-hat, ESS and the verdict). Every file is written atomically; a
-non-empty DIR is refused without ``--force``. The same inputs and seed give the same world.json.
+draw), ``diagnostics.txt`` (R-hat, ESS and the verdict), the other outputs of
+:func:`semmap_pp.outputs.write.write_all`, and last ``resume.npz`` (what ``--resume`` needs). Every
+file is written atomically; a non-empty DIR is refused without ``--force``. The same inputs and seed
+give the same world.json, unless ``--budget`` (or Ctrl-C) ends sampling early: then the run's
+length depends on the machine. Ctrl-C stops sampling cleanly, writes what was done and exits 130.
+docs/cli.md has every option.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import signal
 import sys
 from pathlib import Path
 
@@ -30,64 +36,161 @@ def _non_negative_int(text: str) -> int:
     return value
 
 
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
+    return value
+
+
+#: Options a resumed run takes from the resume file (giving them with --resume is an error).
+FIXED_WHEN_RESUMING = ("chains", "tune", "n_inner", "seed", "rules", "model", "roi")
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("map", help="build the semantic map of an occupancy grid",
                               description=__doc__.splitlines()[0])
-    p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
-    p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
+    p.add_argument("map", metavar="MAP", nargs="?", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="output directory (required, except with --resume: default the resumed DIR)")
     p.add_argument("--rules", metavar="FILE", default=None,
                    help="rule file (default rules/table3.lp; rules/none.lp = no knowledge)")
     p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
     p.add_argument("--roi", metavar="MASK", default=None,
                    help="region-of-interest mask image for the CPR (default: the known part, closed)")
-    p.add_argument("--seed", type=_non_negative_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=_non_negative_int, default=None, help="random seed (default 0)")
     p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
     p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
     p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
-    p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
+    p.add_argument("--draws", type=_positive_int, default=None,
+                   help="recorded draws per chain (with --resume: this many more per chain)")
     p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
+    p.add_argument("--budget", type=_seconds, metavar="SECONDS",
+                   help="stop sampling after SECONDS of wall time and keep the draws made "
+                        "(the result then depends on the machine's speed)")
+    p.add_argument("--resume", type=Path, metavar="DIR",
+                   help="continue the run in DIR (its resume.npz): the chains go on and draws are appended")
+    p.add_argument("--progress", choices=("auto", "rich", "plain", "none"), default="auto",
+                   help="live progress on stderr (auto: rich on a terminal, plain lines otherwise)")
+    p.add_argument("--progress-every", type=_seconds, default=5.0, metavar="SECONDS",
+                   help="seconds between plain progress lines (default 5)")
     add_map_options(p)
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
-    from semmap_pp import atomic
-    from semmap_pp.diagnostics import to_datatree, write_trace
-    from semmap_pp.outputs import world_dict, write_labels_png, write_world_json
-    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
+def _usage(message: str) -> int:
+    print(f"semmap map: error: {message}", file=sys.stderr)
+    return 2
 
-    out: Path = args.out
-    check_out_dir(out, args.force)
-    rules = Path(args.rules) if args.rules else DEFAULT_RULES
-    inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                         map_options=map_options(args))
-    settings = RunSettings.from_model(inputs.model, seed=args.seed, chains=args.chains, cores=args.cores,
-                                      tune=args.tune, draws=args.draws, n_inner=args.n_inner)
-    if settings.draws < 4:
-        raise SystemExit("semmap: error: --draws must be at least 4 (R-hat and ESS need them)")
+
+def _resume_inputs(args):
+    """Inputs, settings and resume state of ``--resume DIR``."""
+    from semmap_pp.pipeline import RunSettings, load_inputs
+    from semmap_pp.resume import read_resume
+
+    state = read_resume(args.resume, extra_draws=args.draws)
+    m = state.meta["inputs"]
+    inputs = load_inputs(m["map"], model_path=m["model"],
+                         rules_path=Path(m["rules"]) if m["rules"] else None, roi_path=m["roi"],
+                         map_options=m["map_options"])
+    values = dict(state.meta["settings"])
+    if args.cores is not None:
+        values["cores"] = args.cores
+    values["cores"] = max(1, min(values["cores"], values["chains"]))
+    return inputs, RunSettings(**values), state, Path(m["rules"]) if m["rules"] else None
+
+
+def _install_sigint(stop):
+    """Ctrl-C sets ``stop`` (sampling ends cleanly); a second Ctrl-C restores the default."""
+
+    def handler(signum, frame):
+        if stop():
+            print("semmap: stopping; press Ctrl-C again to quit without writing", file=sys.stderr, flush=True)
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            return
+        stop.set("interrupted")
+        print("semmap: interrupted: stopping the chains, then writing the results so far",
+              file=sys.stderr, flush=True)
+
+    return signal.signal(signal.SIGINT, handler)
+
+
+def run(args) -> int:
+    from semmap_pp.cli.progress import Progress
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.outputs.write import write_all
+    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
+    from semmap_pp.resume import write_resume
+    from semmap_pp.step import StopFlag
+
+    state = None
+    if args.resume is not None:
+        given = [f"--{k.replace('_', '-')}" for k in FIXED_WHEN_RESUMING if getattr(args, k) is not None]
+        if given or args.map is not None:
+            what = ", ".join(given + (["MAP"] if args.map is not None else []))
+            return _usage(f"{what} cannot be given with --resume (the run keeps its own; "
+                          "--draws, --cores, --budget and --out can)")
+        inputs, settings, state, rules = _resume_inputs(args)
+        out: Path = args.out if args.out is not None else args.resume
+        if out.resolve() != args.resume.resolve():
+            check_out_dir(out, args.force)
+    else:
+        if args.map is None or args.out is None:
+            return _usage("MAP and --out DIR are required (or --resume DIR)")
+        out = args.out
+        check_out_dir(out, args.force)
+        rules = Path(args.rules) if args.rules else DEFAULT_RULES
+        inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
+                             map_options=map_options(args))
+        settings = RunSettings.from_model(inputs.model, seed=args.seed or 0, chains=args.chains,
+                                          cores=args.cores, tune=args.tune, draws=args.draws,
+                                          n_inner=args.n_inner)
+        if settings.draws < 4:
+            return _usage("--draws must be at least 4 (R-hat and ESS need them)")
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
-    result = run_map(inputs, settings, log=log)
-    out.mkdir(parents=True, exist_ok=True)
-    doc = world_dict(result.semantic, rules=rules.name, model=inputs.model.path.name, seed=settings.seed,
-                     roi_name=inputs.roi_name)
-    written = [write_world_json(out / "world.json", doc),
-               write_labels_png(out / "labels.png", result.semantic.labels_image)]
-    tree = to_datatree(result.summaries, sample_stats=result.sample_stats,
-                       attrs={"map": str(inputs.grid.source), "rules": rules.name, "seed": settings.seed,
-                              "chains": settings.chains, "tune": settings.tune, "draws": settings.draws,
-                              "n_inner": settings.n_inner})
-    written.append(write_trace(tree, out / "trace.nc"))
-    text = (f"map: {inputs.grid.source}\nrules: {rules}\nmodel: {inputs.model.path}\n"
-            f"seed: {settings.seed}; sampling took {result.seconds:.1f} s "
-            f"({result.kernels_per_second:.0f} kernels/s)\n"
-            f"W*: {len(result.semantic.unit_ids)} units, log posterior {result.semantic.log_posterior:.2f}, "
-            f"CPR {result.semantic.cpr:.4f} (ROI {inputs.roi_name})\n\n{result.report.to_text()}\n")
-    atomic.write_text(out / "diagnostics.txt", text)
-    written.append(out / "diagnostics.txt")
+    if state is None:
+        left = settings.chains * (settings.tune + settings.draws)
+    else:
+        left = sum(max(state.total_draws - d, 0) for d in state.done())
+    stop = StopFlag()
+    previous = _install_sigint(stop)
+    try:
+        with Progress(settings.chains, left, budget=args.budget, mode=args.progress,
+                      every=args.progress_every) as progress:
+            result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
+                             stop=stop, budget=args.budget, resume=state)
+    except SemmapError as exc:
+        if stop():
+            log(f"semmap: interrupted: nothing written ({exc.message})")
+            return 130
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    for note in result.notes:
+        log(f"note: {note}")
+    written = write_all(out, result, rules_name=rules.name, rules_path=rules)
+    meta = {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
+            "model": str(Path(inputs.model.path).resolve()),
+            "rules": str(Path(rules).resolve()) if rules is not None else None,
+            "roi": None if state is None and args.roi is None else
+            (state.meta["inputs"]["roi"] if state is not None else str(Path(args.roi).resolve())),
+            "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args)}
+    written.append(write_resume(out, result, meta))
     for path in written:
         print(path)
+    kept_chains, kept_draws = result.kept
+    if result.stopped == "interrupted":
+        log(f"semmap: interrupted: wrote partial results ({len(kept_chains)} chain(s) x {kept_draws} draws) "
+            f"to {out}; continue with `semmap map --resume {out}`")
+        return 130
+    if result.stopped == "budget":
+        log(f"semmap: budget of {args.budget:g} s reached: kept {len(kept_chains)} chain(s) x {kept_draws} "
+            f"draws; continue with `semmap map --resume {out}`")
     return 0
