@@ -117,10 +117,10 @@ def overlay_png(sm, doc: dict) -> bytes:
     fig, (ax,) = _axes(box, extra_h=0.4)
     _show(ax, overlay_rgb(sm), box)
     for uid, (x, y) in _unit_centres(doc).items():
-        ax.text(x, y, f"{TYPE_LETTER[sm.type_of(uid)]}{uid}", ha="center", va="center", fontsize=9,
-                fontweight="bold", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.75))
+        ax.text(x, y, f"{TYPE_LETTER[sm.type_of(uid)]}{uid}", ha="center", va="center", fontsize=11,
+                fontweight="bold", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
     for n in doc["unexplored"]:
-        ax.text(*n["center_px"], f"N{n['id']}", ha="center", va="center", color=MAGENTA, fontsize=9,
+        ax.text(*n["center_px"], f"N{n['id']}", ha="center", va="center", color=MAGENTA, fontsize=11,
                 fontweight="bold")
     handles = [Patch(fc=np.array(RGB[k]) / 255, ec="0.5", label=k) for k in
                ("occupied", "unknown", "free", "wall", "door", "object")]

@@ -42,7 +42,10 @@ th,td{border:1px solid #ccc;padding:.25em .6em;text-align:left;vertical-align:to
 th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums}
 tr.fail td{background:#fde2e2}tr.ok td.v{color:#17692c;font-weight:600}tr.fail td.v{color:#a40000;font-weight:600}
 figure{margin:1em 0}figure img{max-width:100%;height:auto;border:1px solid #ccc}
-figcaption{font-size:.9em;color:#555;margin-top:.3em}.muted{color:#666}code{background:#f4f4f4;padding:0 .2em}
+figcaption{font-size:.9em;color:#555;margin-top:.3em}h3{margin:1.2em 0 .2em}
+nav{position:sticky;top:0;background:#fff;padding:.4em 0;border-bottom:1px solid #ddd;z-index:1}
+nav a{margin-right:1em;color:#1a4f8b;text-decoration:none;font-weight:600}
+.cols{display:flex;flex-wrap:wrap;gap:2em;align-items:flex-start}.muted{color:#666}code{background:#f4f4f4;padding:0 .2em}
 .verdict{display:inline-block;padding:.15em .6em;border-radius:.3em;font-weight:700}
 .verdict.ok{background:#d8f3dc;color:#17692c}.verdict.fail{background:#fde2e2;color:#a40000}
 """
@@ -77,11 +80,11 @@ def _td(v, num: bool = False, cls: str = "") -> str:
     return f'<td class="{c}">{e(v)}</td>' if c else f"<td>{e(v)}</td>"
 
 
-def _figure(png: bytes | None, alt: str, caption: str) -> str:
+def _figure(png: bytes | None, title: str, caption: str) -> str:
     if png is None:
         return ""
-    return (f'<figure><img src="{data_uri(png)}" alt="{e(alt)}"><figcaption>{e(caption)}</figcaption>'
-            f"</figure>")
+    return (f'<h3>{e(title)}</h3><figure><img src="{data_uri(png)}" alt="{e(title)}">'
+            f"<figcaption>{e(caption)}</figcaption></figure>")
 
 
 def _kv(pairs) -> str:
@@ -148,7 +151,8 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
         ("sampling time", f"{run.seconds:.1f} s ({run.kernels_per_second:.0f} kernels/s)"),
         ("W* from chain", run.best_chain), ("generator", f"semmap_pp {__version__}"),
-    ] + [("note", n) for n in run.notes])
+    ] + ([("stopped early", getattr(run, "stopped"))] if getattr(run, "stopped", None) else [])
+      + [("note", n) for n in run.notes])
     world = _kv([
         ("units", f"{len(doc['units'])} (" + ", ".join(f"{counts[t]} {t}" for t in UNIT_TYPES) + ")"),
         ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])), ("objects", len(doc["objects"])),
@@ -164,33 +168,38 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         f"<title>semmap: {e(map_name)}</title><style>{CSS}</style></head><body>",
         f"<h1>Semantic map of <code>{e(map_name)}</code></h1>",
         f'<p class="muted">{len(doc["units"])} units, CPR {e(cpr)}, chains {verdict}</p>',
-        "<h2>Run</h2>", summary,
-        "<h2>The most probable world W*</h2>", world,
-        _figure(f("overlay"), "W* on the classified map",
-                "W* on the classified map (black occupied, gray unknown, white free; blue wall, cyan door, "
-                "green object). Unit type and id at each centre: R room, C corridor, H hall, E other; "
-                "magenta N: unexplored area (paper Fig. 5c)."),
-        units_table(doc, regions),
-        _figure(f("graph"), "abstract model graph",
-                "Abstract model (paper Fig. 5b): ellipses are units at their centres, solid edges doors, "
-                "dashed edges adjacency without a door, blue squares objects, magenta squares unexplored "
-                "areas."),
-        _figure(f("regions"), "regions",
-                "Regions (regions.png): units joined where the wall between them is open, one colour each."),
-        "<h2>Posterior spread</h2>",
-        _figure(f("posterior"), "sampled worlds", "Sampled worlds drawn thin on the map (paper Fig. 7)."),
-        _figure(f("posterior_cells"), "per-cell probabilities",
-                "Per-cell probability of wall and of each unit type over the sampled worlds."),
-        "<h2>Convergence</h2>",
+        '<nav><a href="#run">Run</a><a href="#world">W*</a><a href="#spread">Posterior spread</a>'
+        '<a href="#convergence">Convergence</a><a href="#cpr">CPR</a><a href="#files">Files</a></nav>',
+        '<div class="cols"><div><h2 id="run">Run</h2>', summary, '</div>',
+        '<div><h2 id="world">The most probable world W*</h2>', world, "</div></div>",
+        _figure(f("overlay"), "W* on the classified map (overlay.png)",
+                "Black occupied, gray unknown, white free; blue wall, cyan door, green object. Unit type and "
+                "id at each centre: R room, C corridor, H hall, E other; magenta N: unexplored area "
+                "(paper Fig. 5c)."),
+        "<h3>Units</h3>", units_table(doc, regions),
+        _figure(f("graph"), "Abstract model (graph.png, graph.graphml)",
+                "Paper Fig. 5b: ellipses are units at their centres, solid edges doors, dashed edges "
+                "adjacency without a door, blue squares objects, magenta squares unexplored areas."),
+        _figure(f("regions"), "Regions (regions.png)",
+                "Units joined where the wall between them is open (wider than a door), one colour each: "
+                "the rooms a person would draw."),
+        '<h2 id="spread">Posterior spread</h2>',
+        _figure(f("posterior"), "Sampled worlds (posterior.png)",
+                "Each sampled world drawn with very thin lines on the map (paper Fig. 7)."),
+        _figure(f("posterior_cells"), "Per-cell probabilities (posterior_cells.png)",
+                "Probability over the sampled worlds that a cell is wall, and that it belongs to a unit of "
+                "each type."),
+        '<h2 id="convergence">Convergence</h2>',
         f"<p>{verdict} — {rep.n_chains} chains × {rep.n_draws} draws; a label-invariant summary passes when "
         f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (NaN fails).</p>",
         convergence_table(rep),
-        "<h2>Cell prediction rate</h2>",
+        '<h2 id="cpr">Cell prediction rate</h2>',
         f"<p>CPR = <b>{e(cpr)}</b>: the share of cells in the region of interest "
         f"(<code>{e(inputs.roi_name)}</code>) that W* explains correctly (free as free, occupied as wall "
         "or object, unknown as object or outside every unit).</p>",
-        _figure(f("roi"), "region of interest", "Region of interest of the CPR (magenta dashed)."),
-        "<h2>Files</h2>", f"<ul>{listing}</ul>",
+        _figure(f("roi"), "Region of interest", "The region of interest of the CPR, magenta dashed "
+                "(paper Fig. 5a)."),
+        '<h2 id="files">Files</h2>', f"<ul>{listing}</ul>",
         "</body></html>",
     ]
     return "\n".join(p for p in parts if p) + "\n"
