@@ -94,7 +94,7 @@ def keep_common_draws(records, min_draws: int = MIN_DRAWS):
                      "cover burn-in draws (annealed, knowledge possibly off)")
     index = {c: recorded[c][:n] for c in chains}
     if len(chains) < len(records) or any(len(recorded[c]) > n for c in chains):
-        notes.append(f"chains of unequal length: kept chains {', '.join(map(str, chains))}, "
+        notes.append(f"chains of unequal length: kept chain(s) {', '.join(str(c + 1) for c in chains)} of {len(records)}, "
                      f"{n} draws each (DIR/{FILE_NAME} keeps every draw)")
     return chains, n, index, notes
 

@@ -119,9 +119,8 @@ class _Recorder:
             scalars = [k for k, v in rows[0][0].items() if np.ndim(v) == 0 and not isinstance(v, dict)]
             stats = {k: np.array([r[0][k] for r in rows]) for k in scalars}
             last = rows[-1][0]
-            recorded = np.flatnonzero(stats["burn_in"] == 0)
-            n_tune = int(stats["draw_index"][recorded[0]]) if recorded.size else int(last["n_tune"])
-            start = ChainStart(draw=int(last["draw_index"]) + 1, n_tune=n_tune, rng_state=last["rng_state"],
+            start = ChainStart(draw=int(last["draw_index"]) + 1, n_tune=int(last["n_tune"]),
+                               rng_state=last["rng_state"],
                                knowledge_on=bool(last["knowledge"]), best_logp=float(last["best_logp"]),
                                best_rects=np.asarray(last["best_rects"]),
                                best_active=np.asarray(last["best_active"], bool))

@@ -18,8 +18,8 @@ Stopping early (docs/cli.md, ``--budget`` and Ctrl-C): the step checks a ``stop`
 main process's signal handler) before every kernel and a per-chain deadline (``--budget``). Once it
 stops, every further draw is *empty*: no kernel runs, the point is returned unchanged and the stat
 ``stopped`` is 1, so ``pm.sample`` ends normally, in one process or many, and the caller keeps the
-draws with ``stopped == 0``. A chain never stops before ``min_draws`` real draws (R-hat and ESS need
-four). A deadline reached during burn-in ends the burn-in there (temperature 1, knowledge on) and
+draws with ``stopped == 0``. A chain that has begun is not stopped before ``min_draws`` real draws
+(R-hat and ESS need four); one that has not begun makes none. A deadline reached during burn-in ends the burn-in there (temperature 1, knowledge on) and
 the chain records ``min_draws`` draws before it stops. A chain can continue an earlier run
 (:class:`ChainStart`): its draw index, random state, knowledge phase and best world are restored.
 """
@@ -184,7 +184,8 @@ class WorldStep(BlockedStep):
     resume : mapping of int to ChainStart, optional
         Per chain number: where that chain continues an earlier run.
     min_draws : int
-        A chain is never stopped (by ``stop`` or the deadline) before this many real draws.
+        A chain that has begun is not stopped (by ``stop`` or the deadline) before this many real
+        draws; a chain stopped before its first draw makes none.
     """
 
     name = "semmap_world"
@@ -322,8 +323,8 @@ class WorldStep(BlockedStep):
         if self._total is not None and self._draw >= self._total:
             self._stopped = True
             return True
-        if self._draw < self.min_draws:
-            return False
+        if 0 < self._draw < self.min_draws:
+            return False  # a chain that has begun makes its min_draws; one that has not stays empty
         if self.stop is not None and self.stop():
             self._stopped = True
         elif self._chain_deadline is not None and time.time() >= self._chain_deadline:
