@@ -134,6 +134,9 @@ class DiagnosticsParams:
 
     rhat_max: float
     ess_min: float
+    #: Adjacent rooms whose connecting walls differ by more than this (metres) are a topological
+    #: defect (semmap_pp.derive.defects); a missing key means 2 * prior.sale_sigma_m.
+    defect_tolerance_m: float
 
 
 @dataclass(frozen=True)
@@ -319,8 +322,12 @@ def load_model(path: str | Path | None = None) -> Model:
         tune=r.integer("sampler.tune", lo=0), draws=r.integer("sampler.draws", lo=4),
         n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
         start_factor=r.integer("sampler.start_factor", lo=1))
+    diag = r.raw("diagnostics")
+    defect_tol = (r.number("diagnostics.defect_tolerance_m", lo=0.0)
+                  if isinstance(diag, dict) and "defect_tolerance_m" in diag else 2.0 * prior.sale_sigma_m)
     diagnostics = DiagnosticsParams(rhat_max=r.number("diagnostics.rhat_max", lo=1.0),
-                                    ess_min=r.number("diagnostics.ess_min", lo=0.0))
+                                    ess_min=r.number("diagnostics.ess_min", lo=0.0),
+                                    defect_tolerance_m=defect_tol)
     kernels = r.raw("kernels")
     if not isinstance(kernels, dict):
         raise r.error("kernels", "must be a table")
