@@ -1,0 +1,174 @@
+"""Comparing knowledge sets (``semmap compare``): the same map and seed sampled under two rule files.
+
+Pure functions over :class:`~semmap_pp.pipeline.MapRun` objects. Per rule set:
+
+* W*: its number of units, cell prediction rate (CPR) and log posterior. The log posteriors of two
+  rule sets are values of *different* targets (the knowledge changes the types, hence the prior),
+  so only CPR and the defects below compare the two worlds on the same scale.
+* convergence: R-hat and bulk / tail ESS of every label-invariant summary, and the verdict.
+* posterior spread: ``n`` sampled worlds (evenly thinned over chains and draws), rasterised on the
+  building lattice and accumulated in :class:`~semmap_pp.diagnostics.SpreadAccumulator`;
+  ``wall_spread`` is its mean Bernoulli variance of the wall indicator (0 = every world agrees).
+* topological defects (:mod:`semmap_pp.derive.defects`): adjacent rooms whose connecting walls
+  differ by more than ``[diagnostics] defect_tolerance_m``, in W* and averaged over the sampled
+  worlds (typed as the sampler typed them).
+
+Examples
+--------
+>>> rows = [RuleSetSummary("table3", "table3.lp", 10, 0.9, -100.0, False, {"cpr": 1.2}, {"cpr": 40.0},
+...                        {"cpr": 30.0}, 0.05, 8, 1, 1.5, 3.0),
+...         RuleSetSummary("none", "none.lp", 12, 0.8, -120.0, False, {"cpr": 1.1}, {"cpr": 50.0},
+...                        {"cpr": 45.0}, 0.09, 8, 3, 2.5, 2.0)]
+>>> print(compare_table(rows).splitlines()[4])
+| CPR of W* | 0.9000 | 0.8000 |
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from semmap_pp.derive.defects import count_defects
+from semmap_pp.diagnostics import SpreadAccumulator
+
+
+@dataclass(frozen=True)
+class RuleSetSummary:
+    """One column of the comparison table (see the module docstring)."""
+
+    name: str
+    rules: str
+    n_units: int
+    cpr: float
+    log_posterior: float
+    converged: bool
+    rhat: dict            # summary name -> R-hat
+    ess_bulk: dict
+    ess_tail: dict
+    wall_spread: float
+    n_worlds: int
+    defects_best: int     # in W*
+    defects_mean: float   # mean over the sampled worlds
+    seconds: float
+
+
+def typed_sampled_worlds(run, n: int) -> list:
+    """Up to ``n`` recorded worlds of ``run``, typed by its own target (knowledge on when it had rules)."""
+    from semmap_pp.outputs.spread import typed_worlds
+    from semmap_pp.pipeline import TargetFactory, sampled_worlds
+
+    inputs = run.inputs
+    post = TargetFactory(inputs.frame, inputs.model, inputs.rules)()
+    post.knowledge_on = inputs.rules is not None
+    return typed_worlds(post, sampled_worlds(run, n))
+
+
+def wall_spread(worlds, shape, wall: int) -> float:
+    """Mean Bernoulli variance of the wall indicator of ``worlds`` on a lattice of ``shape``."""
+    from semmap_pp.outputs.spread import rasterise, sampled_box
+
+    box = sampled_box(worlds, shape)
+    acc = SpreadAccumulator((box[2] - box[0], box[3] - box[1]))
+    for w in worlds:
+        acc.add(*rasterise(w, box, wall))
+    return acc.wall_spread()
+
+
+def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
+    """The comparison column of one run, with ``worlds`` its typed sampled worlds."""
+    frame, model = run.inputs.frame, run.inputs.model
+    c = frame.cells
+    tol = model.diagnostics.defect_tolerance_m
+    defects = count_defects(worlds, c.resolution, c.wall, c.adjacency_dilation, tol)
+    best = count_defects([run.world], c.resolution, c.wall, c.adjacency_dilation, tol)
+    q = run.report.quantities
+    return RuleSetSummary(
+        name=name, rules=rules, n_units=len(run.semantic.unit_ids), cpr=float(run.semantic.cpr),
+        log_posterior=float(run.semantic.log_posterior), converged=bool(run.report.ok),
+        rhat={x.name: x.rhat for x in q}, ess_bulk={x.name: x.ess_bulk for x in q},
+        ess_tail={x.name: x.ess_tail for x in q},
+        wall_spread=wall_spread(worlds, frame.shape, c.wall), n_worlds=len(worlds),
+        defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
+        seconds=float(run.seconds))
+
+
+def _fmt(v, spec: str) -> str:
+    if isinstance(v, float) and not math.isfinite(v):
+        return "nan"
+    return format(v, spec)
+
+
+def compare_table(rows: list[RuleSetSummary]) -> str:
+    """A Markdown table: one row per quantity, one column per rule set."""
+    lines = ["| quantity | " + " | ".join(r.name for r in rows) + " |",
+             "|---|" + "---:|" * len(rows)]
+
+    def add(label, values):
+        lines.append(f"| {label} | " + " | ".join(values) + " |")
+
+    add("rule file", [r.rules for r in rows])
+    add("units in W*", [str(r.n_units) for r in rows])
+    add("CPR of W*", [_fmt(r.cpr, ".4f") for r in rows])
+    add("log posterior of W* (own target)", [_fmt(r.log_posterior, ".1f") for r in rows])
+    add("converged", ["yes" if r.converged else "no" for r in rows])
+    add("topological defects in W*", [str(r.defects_best) for r in rows])
+    add("defects, mean over sampled worlds", [_fmt(r.defects_mean, ".2f") for r in rows])
+    add("wall spread (mean p(1-p))", [_fmt(r.wall_spread, ".4f") for r in rows])
+    add("sampled worlds", [str(r.n_worlds) for r in rows])
+    names = list(rows[0].rhat)
+    for n in names:
+        add(f"R-hat {n}", [_fmt(r.rhat.get(n, math.nan), ".3f") for r in rows])
+    for n in names:
+        add(f"ESS bulk / tail {n}", [f"{_fmt(r.ess_bulk.get(n, math.nan), '.0f')} / "
+                                     f"{_fmt(r.ess_tail.get(n, math.nan), '.0f')}" for r in rows])
+    add("sampling seconds", [_fmt(r.seconds, ".1f") for r in rows])
+    return "\n".join(lines)
+
+
+def compare_dict(rows: list[RuleSetSummary], *, map_path: str, settings: dict) -> dict:
+    """compare.json: the settings shared by the runs and one object per rule set (NaN as null)."""
+    def clean(v):
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        return v
+
+    return {"format": "semmap_pp.compare/1", "map": map_path, "settings": settings,
+            "rule_sets": [clean(asdict(r)) for r in rows]}
+
+
+def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
+    """compare.png: the sampled worlds of each run drawn thin on the map, side by side (paper Fig. 7)."""
+    from matplotlib.collections import LineCollection
+
+    from semmap_pp.outputs.figures import DPI, Figure, classified_rgb, crop_box, png, world_outlines
+
+    boxes = [crop_box(r.semantic) for r in runs]
+    y0, y1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+    x0, x1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
+    n = len(runs)
+    panel = 700 / max(y1 - y0, x1 - x0)
+    fig = Figure(figsize=(n * (x1 - x0) * panel / DPI, (y1 - y0) * panel / DPI + 0.6), dpi=DPI)
+    axes = fig.subplots(1, n, squeeze=False).ravel()
+    for ax, run, ws, row in zip(axes, runs, worlds, rows):
+        ax.imshow(classified_rgb(run.semantic.grid.classes, light=True)[y0:y1, x0:x1],
+                  extent=(x0, x1, y1, y0), interpolation="nearest")
+        alpha = float(np.clip(10.0 / max(len(ws), 1), 0.02, 0.6))
+        ax.add_collection(LineCollection(world_outlines(run.semantic.frame, ws),
+                                         colors=[(0.85, 0.0, 0.1, alpha)], linewidths=0.5))
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y1, y0)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"{row.name}: {row.n_worlds} worlds, wall spread {_fmt(row.wall_spread, '.3f')}, "
+                     f"defects {_fmt(row.defects_mean, '.2f')}", fontsize=9)
+    fig.subplots_adjust(0.01, 0.01, 0.99, 1 - 0.5 / fig.get_figheight(), wspace=0.03)
+    return png(fig)
+
+
+__all__ = ["RuleSetSummary", "typed_sampled_worlds", "wall_spread", "summarise", "compare_table",
+           "compare_dict", "compare_png"]

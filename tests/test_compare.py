@@ -1,0 +1,85 @@
+"""The knowledge-set comparison: spread, defects and the table, on literal worlds and a tiny run."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from semmap_pp import world as W
+from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN
+from semmap_pp.compare import RuleSetSummary, compare_dict, compare_table, summarise, wall_spread
+from semmap_pp.evaluate import closing_radius_cells, default_roi
+from semmap_pp.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.model import load_model
+
+ROOM = UNIT_TYPES.index("room")
+MODEL = load_model()
+
+
+def test_identical_worlds_have_no_spread():
+    w = W.add(W.empty(2), 0, (0, 0, 6, 6), ROOM)
+    assert wall_spread([w, w, w], (10, 10), wall=1) == 0.0
+
+
+def test_spread_of_two_worlds_differing_in_one_wall():
+    a = W.add(W.empty(2), 0, (0, 0, 4, 4), ROOM)
+    b = W.add(W.empty(2), 0, (0, 0, 4, 6), ROOM)
+    # a's wall cells: 12 of the 4x4 box; b's: 16 of the 4x6 box. Cells wall in both (p=1): rows 0 and
+    # 3 of columns 0..3 and column 0 (10 cells); wall in one only (p=1/2): column 3 rows 1-2 (a), columns
+    # 4, 5 of rows 0 and 3 and column 5 rows 1-2 (b) -> 8 cells. Mean p(1-p) = 8 * 0.25 / 18.
+    assert wall_spread([a, b], (10, 10), wall=1) == pytest.approx(8 * 0.25 / 18)
+
+
+def row(name, defects_best, cpr=0.9, rhat=1.01):
+    return RuleSetSummary(name, f"{name}.lp", 5, cpr, -10.0, rhat < 1.05, {"log_posterior": rhat},
+                          {"log_posterior": 200.0}, {"log_posterior": math.nan}, 0.1, 20, defects_best,
+                          defects_best + 0.5, 1.0)
+
+
+def test_table_has_one_column_per_rule_set_and_the_defects():
+    text = compare_table([row("a", 0), row("b", 3, cpr=0.8, rhat=1.2)])
+    lines = text.splitlines()
+    assert lines[0] == "| quantity | a | b |"
+    assert "| topological defects in W* | 0 | 3 |" in lines
+    assert "| CPR of W* | 0.9000 | 0.8000 |" in lines
+    assert "| converged | yes | no |" in lines
+    assert "| ESS bulk / tail log_posterior | 200 / nan | 200 / nan |" in lines
+
+
+def test_json_turns_nan_into_null():
+    doc = compare_dict([row("a", 1)], map_path="m.yaml", settings={"seed": 3})
+    text = json.dumps(doc, allow_nan=False)          # would raise on a NaN
+    back = json.loads(text)
+    assert back["rule_sets"][0]["ess_tail"]["log_posterior"] is None
+    assert back["rule_sets"][0]["defects_best"] == 1 and back["settings"] == {"seed": 3}
+
+
+def two_rooms_grid():
+    c = np.full((60, 120), UNKNOWN, np.uint8)
+    c[6:54, 6:114] = OCCUPIED
+    c[8:52, 8:58] = FREE
+    c[8:52, 60:112] = FREE
+    c[20:40, 58:60] = FREE
+    return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                         origin=(0.0, 0.0, 0.0), source=None, image_path=None)
+
+
+def test_summarise_a_tiny_run():
+    from semmap_pp.compare import typed_sampled_worlds
+    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+
+    g = two_rooms_grid()
+    f = build_frame(g, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    inputs = Inputs(g, MODEL, None, f, roi, "default")
+    run = run_map(inputs, RunSettings.from_model(MODEL, seed=1, chains=2, cores=1, tune=2, draws=4,
+                                                 n_inner=10), log=lambda m: None)
+    worlds = typed_sampled_worlds(run, 5)
+    s = summarise(run, "none", "none.lp", worlds)
+    assert s.n_worlds == len(worlds) == 5
+    assert s.cpr == pytest.approx(run.semantic.cpr) and s.n_units == len(run.semantic.unit_ids)
+    assert set(s.rhat) == {q.name for q in run.report.quantities}
+    assert 0.0 <= s.wall_spread <= 0.25 and s.defects_best >= 0 and s.defects_mean >= 0
+    assert all((w.types[w.active] >= 0).all() for w in worlds)   # typed as the sampler typed them
