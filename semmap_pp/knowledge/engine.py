@@ -87,7 +87,7 @@ class KnowledgeEngine:
     """
 
     def __init__(self, rules: RuleSet, method: str = "exact", map_method: str = "jt",
-                 n_chains: int = 128, n_iter: int = 150, burn_in: int = 40,
+                 n_chains: int = 768, n_iter: int = 38, burn_in: int = 12,
                  cache_size: int = 4096, seed: int = 0, fast: bool = True):
         if method not in METHODS:
             raise RuleError(rules.path, f"unknown inference method {method!r}; use one of {METHODS}")

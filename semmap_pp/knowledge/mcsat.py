@@ -128,7 +128,7 @@ class ClauseTemplate:
                 outcomes = np.arange(1 << len(p))
                 on = ((outcomes[:, None] >> np.arange(len(p))) & 1).astype(bool)
                 q, alias = _alias(np.where(on, p, 1.0 - p).prod(axis=1))
-                chunks.append((c0, len(outcomes), q, alias))
+                chunks.append((c0, len(outcomes), outcomes + q, alias))
             self.masks.append(mask)
             self.chunks.append(chunks)
         self.masks[0] = np.where(self.hard, self.masks[0], self.masks[0] | _HARD_BIT)
@@ -147,10 +147,11 @@ class ClauseTemplate:
         out = []
         for chunks in self.chunks:
             word = np.zeros(shape, dtype=np.int64)
-            for c0, n, q, alias in chunks:
+            for c0, n, cut, alias in chunks:
+                # alias method: slot i = floor(u n) keeps i if the fraction is below q[i]
                 u = rng.random(shape) * n
                 i = u.astype(np.int64)
-                word |= np.where(u - i < q[i], i, alias[i]) << c0
+                word |= np.where(u < cut[i], i, alias[i]) << c0
             out.append(word)
         return out
 
@@ -230,66 +231,6 @@ def _strides(shape):
     return np.array(out[::-1], dtype=np.int64)
 
 
-class _Blanket:
-    """Rao-Blackwell sums: each variable's distribution given the rest of the drawn world.
-
-    Under the uniform distribution on the slice's solutions, a variable's conditional given all
-    other variables is proportional to the product, over the blocks around it, of their counts
-    with the other scope variables fixed (private atoms summed out inside their blocks).
-    """
-
-    def __init__(self, card, blocks, B):
-        self.B = B
-        self.by_card: dict = {}
-        for v, c in enumerate(card):
-            self.by_card.setdefault(c, []).append(v)
-        row = {v: r for vs in self.by_card.values() for r, v in enumerate(vs)}
-        self.sum = {c: np.zeros((c, len(vs), B)) for c, vs in self.by_card.items()}
-        self.plan = []          # per block: per scope position (stride, card, order, starts, rows)
-        for blk in blocks:
-            st = _strides(blk.template.shape)
-            plans = []
-            for pos in range(blk.scopes.shape[1]):
-                vs = blk.scopes[:, pos]
-                order = np.argsort(vs, kind="stable")
-                sv = vs[order]
-                starts = np.flatnonzero(np.r_[True, sv[1:] != sv[:-1]])
-                rows = np.array([row[int(v)] for v in sv[starts]])
-                sorted_ = bool(np.all(order == np.arange(len(order))))
-                plans.append((int(st[pos]), blk.template.shape[pos], None if sorted_ else order,
-                              None if len(starts) == len(order) else starts, rows))
-            self.plan.append(plans)
-        self.cell = None
-
-    def add(self, blocks, counts, states, x):
-        """Add each variable's conditional given the others of ``x`` and the kept clauses."""
-        B = self.B
-        cond = {c: np.ones((c, len(vs), B), dtype=np.float32) for c, vs in self.by_card.items()}
-        for blk, cnt, s, plans in zip(blocks, counts, states, self.plan):
-            n_inst = len(blk.scopes)
-            flat = np.ascontiguousarray(cnt).reshape(-1)
-            cell = np.arange(n_inst * B).reshape(n_inst, B)          # (instance, chain) offset
-            for pos, (stride, c, order, starts, rows) in enumerate(plans):
-                base = (s - x[blk.scopes[:, pos]] * stride) * (n_inst * B) + cell
-                idx = base[None] + (np.arange(c) * (stride * n_inst * B))[:, None, None]
-                vals = flat.take(idx)                                   # (c, I, B)
-                if order is not None:
-                    vals = vals[:, order]
-                if starts is not None:
-                    vals = np.multiply.reduceat(vals, starts, axis=1, dtype=np.float32)
-                cond[c][:, rows] *= vals
-        for c, arr in cond.items():
-            self.sum[c] += arr / arr.sum(axis=0)
-
-    def marginals(self, card, total):
-        out = [None] * len(card)
-        for c, vs in self.by_card.items():
-            m = self.sum[c].sum(axis=2) / total
-            for r, v in enumerate(vs):
-                out[v] = m[:, r]
-        return out
-
-
 def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
     """MC-SAT over junction-tree variables of cardinalities ``card`` and clause ``blocks``.
 
@@ -336,7 +277,14 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
         return out
 
     def draw_aux(allowed, states):
-        return [pick(ok.view(np.uint8), rng.random(s.shape)) for ok, s in zip(allowed, states)]
+        return [np.zeros(s.shape, dtype=np.int64) if ok is None else
+                pick(ok.view(np.uint8), rng.random(s.shape))[0].astype(np.int64)
+                for ok, s in zip(allowed, states)]
+
+    def allowed_at(kept, states):
+        """Allowed private states of blocks that have them (None for the others)."""
+        return [None if t.n_aux == 1 else t.allowed_at(k, s)
+                for t, k, s in zip(tpls, kept, states)]
 
     # start: a world of the hard clauses weighted by the single-variable clauses alone
     start = [np.broadcast_to(t.prior.astype(np.float32)[:, None, None], (t.n_states, n, B))
@@ -346,29 +294,33 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
         raise RuleError(path, _NO_WORLD)
     x = tree.sample(rng)
     states = scope_states(x)
-    aux = draw_aux([t.allowed_at([np.zeros(s.shape, dtype=np.int64)], s)
-                    for t, s in zip(tpls, states)], states)
-    blanket = _Blanket(card, blocks, B)
-    aux_sum = [None if t.aux_on is None else np.zeros(n) for t, n in zip(tpls, sizes)]
+    aux = draw_aux(allowed_at([[np.zeros(s.shape, dtype=np.int64)] for s in states], states),
+                   states)
+    marg = [np.zeros((c, B)) for c in card]
+    aux_sum = [None if t.aux_on is None else np.zeros((n, B)) for t, n in zip(tpls, sizes)]
+    aux_on = [None if t.aux_on is None else np.flatnonzero(t.aux_on) for t in tpls]
     for it in range(n_iter):
         kept = [t.kept(rng, s, a) for t, s, a in zip(tpls, states, aux)]
         counts = [t.counts(k, n, B) for t, k, n in zip(tpls, kept, sizes)]
         tree.upward(counts)
-        x = tree.sample(rng)
+        x = tree.sample(rng, marg if it >= burn_in else None)
         states = scope_states(x)
-        allowed = [t.allowed_at(k, s) for t, k, s in zip(tpls, kept, states)]
+        allowed = allowed_at(kept, states)
         aux = draw_aux(allowed, states)
         if it >= burn_in:
-            blanket.add(blocks, counts, states, x)
-            for b, (t, ok) in enumerate(zip(tpls, allowed)):
-                if t.aux_on is not None:
+            for b, (on, ok) in enumerate(zip(aux_on, allowed)):
+                if on is not None and ok is None:        # one private state: fixed
+                    aux_sum[b] += float(len(on))
+                elif on is not None:
                     ok = ok.view(np.uint8)
-                    aux_sum[b] += (ok[t.aux_on].sum(axis=0) / ok.sum(axis=0)).sum(axis=1)
+                    num = sum(ok[a] for a in on) if len(on) else np.zeros(ok.shape[1:])
+                    aux_sum[b] += num / sum(ok[a] for a in range(len(ok)))
     total = (n_iter - burn_in) * B
-    return blanket.marginals(card, total), [None if a is None else a / total for a in aux_sum]
+    return ([m.sum(axis=1) / total for m in marg],
+            [None if a is None else a.sum(axis=1) / total for a in aux_sum])
 
 
-def mcsat_marginals(net, rng, n_chains=128, n_iter=150, burn_in=40, jt=None):
+def mcsat_marginals(net, rng, n_chains=768, n_iter=38, burn_in=12, jt=None):
     """Marginals of every variable of a ground network by MC-SAT.
 
     Parameters

@@ -55,11 +55,15 @@ class LocalClauses:
     def __init__(self, rules: RuleSet):
         self.rules = rules
         self._units: dict = {}
+        self._unit_raw: dict = {}
         self._pairs: dict = {}
 
     def _unit_clauses(self, key):
-        net = ground(self.rules, _pattern_evidence([(1, key)], [])).network
-        return _clauses(net, LocalModel._unit_order(net, 1))
+        hit = self._unit_raw.get(key)
+        if hit is None:
+            net = ground(self.rules, _pattern_evidence([(1, key)], [])).network
+            hit = self._unit_raw[key] = _clauses(net, LocalModel._unit_order(net, 1))
+        return hit
 
     def unit(self, key) -> ClauseTemplate:
         """Clauses of a lone unit with evidence pattern ``key`` over its super-state."""

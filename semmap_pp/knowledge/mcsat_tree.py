@@ -20,21 +20,23 @@ _LOG2_LIMIT = 60.0     # rescale messages before their entries could exceed 2^60
 def pick(probs, u):
     """Inverse-CDF draw along axis 0 of ``probs`` ``(c, B)`` with uniforms ``u`` ``(B,)``.
 
+    Returns the drawn indices and the totals ``probs.sum(axis=0)``.
+
     Running sums are written out (``np.cumsum`` along a leading axis is slow); ``u < 1`` in
     float64 keeps ``u * total`` below the total, so a state of zero weight (whose running sum
     equals the previous one) is never picked.
     """
     c = probs.shape[0]
-    if c == 1:
-        return np.zeros(probs.shape[1:], dtype=np.int64)
     run = [probs[0]]
     for j in range(1, c):
         run.append(run[-1] + probs[j])
+    if c == 1:
+        return np.zeros(probs.shape[1:], dtype=np.int64), run[-1]
     thr = u * run[-1]
-    out = (thr >= run[0]).astype(np.int64)
+    out = (thr >= run[0]).view(np.uint8)
     for j in range(1, c - 1):
-        out += thr >= run[j]
-    return out
+        out = out + (thr >= run[j]).view(np.uint8)
+    return out, run[-1]
 
 
 def _view(perm, present):
@@ -115,18 +117,21 @@ class BatchTree:
             with_v = [m for axes, m in ordered]
             without = [m for axes, m in groups if v_axis[i] not in axes]
             # for sampling: (variable, stride) of each separator axis a group spans
+            # sampling reads each group at the drawn separator: flat offsets of (state, chain)
+            # plus (variable, stride x B) of each separator axis the group spans
             gather = []
             for axes, m in ordered:
                 span, acc = [], 1
                 for a in reversed(jt.axes[i][1:]):
                     if a in axes:
-                        span.append((a, acc))
+                        span.append((a, acc * B))
                         acc *= card[a]
-                gather.append(span)
+                c = card[v_axis[i]]
+                base = (np.arange(c) * (acc * B))[:, None] + np.arange(B)[None, :]
+                gather.append((span, base))
             self.plan.append((with_v, without, gather))
         self.sep_shapes = [tuple(card[a] for a in sep) for sep in jt.seps]
         self.tables = [tuple(card[v] for v in sc[0]) if len(sc) else () for sc in scopes]
-        self.cols = np.arange(B)
         self.groups = [None] * n
         self.sent = [None] * n
 
@@ -182,8 +187,13 @@ class BatchTree:
             self.sent[i] = msg
         return ok
 
-    def sample(self, rng):
-        """Draw one solution per chain from the last :meth:`upward`: ``(n, B)`` states."""
+    def sample(self, rng, marginals=None):
+        """Draw one solution per chain from the last :meth:`upward`: ``(n, B)`` states.
+
+        With ``marginals`` (a list of ``(card, B)`` arrays), each variable's distribution given
+        the variables drawn before it (its separator) is added to its entry: backward sampling
+        draws from exactly that distribution, so it is a Rao-Blackwellised indicator.
+        """
         B, jt = self.B, self.jt
         x = np.zeros((self.n, B), dtype=np.int64)
         u = rng.random((self.n, B))
@@ -191,15 +201,22 @@ class BatchTree:
             v = jt.order[i]
             c = self.card[v]
             probs = None
-            for g, span in zip(self.groups[i], self.plan[i][2]):
-                g = g.reshape(c, -1, B)
+            for g, (span, base) in zip(self.groups[i], self.plan[i][2]):
+                g = np.ascontiguousarray(g).reshape(-1)
                 if span:
-                    sidx = None
+                    off = None
                     for a, st in span:
-                        sidx = x[a] * st if sidx is None else sidx + x[a] * st
-                    t = g[:, sidx, self.cols]
+                        off = x[a] * st if off is None else off + x[a] * st
+                    t = g.take(base + off)
                 else:
-                    t = g[:, 0]
+                    t = g.take(base)
                 probs = t if probs is None else probs * t
-            x[v] = (u[i] * c).astype(np.int64) if probs is None else pick(probs, u[i])
+            if probs is None:
+                x[v] = (u[i] * c).astype(np.int64)
+                if marginals is not None:
+                    marginals[v] += 1.0 / c
+                continue
+            x[v], total = pick(probs, u[i])
+            if marginals is not None:
+                marginals[v] += probs / total
         return x
