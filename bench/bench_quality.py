@@ -1,0 +1,341 @@
+"""Quality of the whole pipeline: synthetic truth, real-map CPR, ipa segmentation and typing.
+
+``python bench/run.py quality --json [--subset synthetic|real|ipa|types|all] [--floors N] [--budget B]``
+
+Every map goes through :func:`semmap_pp.pipeline.run_map` with the model file's defaults (``--budget
+model``) or a shorter run (``--budget quick``); per-map rows, the means and the published figures
+(/work/shared/data/README.md) are printed, the JSON summary on the last line.
+
+* **synthetic**: floors ``semmap_pp.synth.generate_floor(seed)`` for seeds ``0..N-1`` (rotations
+  drawn by the generator), scored with :func:`semmap_pp.evaluate.score_world` against the floor's
+  truth; CPR on the floor's map with the default ROI.
+* **real**: ``data/maps/*.yaml`` of the repository (cartesium, intel), CPR with the default ROI, and
+  the time to W*.
+* **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation``, loaded with the benchmark's own
+  pixel rule (grey >= 250 free, anything else obstacle: ``free_thresh=0.0197``,
+  ``occupied_thresh=0.0198``; the YAML's 0.65 / 0.03 would make grey obstacles unknown). Segments are
+  *regions*: units joined where their connecting wall is open wider than a door (one space cut in
+  two units), see :func:`regions_of`. Precision / recall micro, published protocol and restricted.
+* **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
+  corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
+
+Missing data directories are skipped with a note. **Time to W\\*** is the wall time from the start of
+sampling until the best chain's ``best_logp`` first reached its final value, clocked per draw through
+``run_map``'s ``callback`` (start worlds and the final semantic map are not included).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = Path("/work/shared/data")
+IPA_FREE = dict(free_thresh=0.0197, occupied_thresh=0.0198)  # grey >= 250 free, else obstacle
+PUBLISHED = {
+    "cpr": {"ubremen-cartesium": 0.868, "intel-lab": 0.914},
+    "rose2_real": {"ubremen-cartesium": (0.878, 0.896), "intel-lab": (0.866, 0.926),
+                   "average_11_maps": (0.890, 0.939)},
+    "bormann_real_average": {"morphological": (0.850, 0.823), "distance": (0.883, 0.798),
+                             "voronoi": (0.859, 0.719)},
+    "paper_minutes_per_map": 20,
+}
+TARGETS = {"synthetic_cpr": 0.95, "unit_f1": 0.9, "type_accuracy": 0.9, "door_f1": 0.85,
+           "cartesium_cpr": 0.90, "intel_cpr": 0.93, "time_to_wstar_s": 60.0}
+BUDGETS = {"model": {}, "quick": dict(chains=2, tune=100, draws=50, n_inner=100)}
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--subset", default="all", choices=["synthetic", "real", "ipa", "types", "all"])
+    parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
+    parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
+    parser.add_argument("--budget", default="model", choices=sorted(BUDGETS),
+                        help="run lengths: the model file's [sampler] or a quick run")
+    parser.add_argument("--seed", type=int, default=0, help="sampler seed")
+    for name in ("chains", "cores", "tune", "draws", "n-inner"):
+        parser.add_argument(f"--{name}", type=int, default=None, help=f"override {name}")
+    parser.add_argument("--maps", default=None, help="comma-separated map names to keep (real/ipa/types)")
+    parser.add_argument("--save", type=Path, default=None, help="write W* pictures/world.json here")
+    parser.add_argument("--quiet", action="store_true")
+
+
+# ------------------------------------------------------------------ helpers
+
+def _settings(model, args):
+    from semmap_pp.pipeline import RunSettings
+    over = dict(BUDGETS[args.budget])
+    for key in ("chains", "cores", "tune", "draws", "n_inner"):
+        v = getattr(args, key)
+        if v is not None:
+            over[key] = v
+    return RunSettings.from_model(model, seed=args.seed, **over)
+
+
+def _inputs_from_grid(grid, model, rules):
+    from semmap_pp.evaluate import closing_radius_cells, default_roi
+    from semmap_pp.frame import build_frame
+    from semmap_pp.pipeline import Inputs
+    frame = build_frame(grid, model)
+    roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
+    return Inputs(grid, model, rules, frame, roi, "default")
+
+
+def time_to_best(run, clock) -> dict:
+    """When the best chain first reached the log posterior of W* (seconds from the start of sampling).
+
+    ``clock`` is ``[(seconds, chain, best_logp), ...]``, one entry per draw as the main process received
+    it (the pipeline's per-draw ``callback``); the final best is the best chain's last ``best_logp``.
+    """
+    c = run.best_chain
+    mine = [(t, lp) for t, ch, lp in clock if ch == c and lp == lp]
+    if not mine:
+        return {"seconds": None, "draw": None}
+    final = max(lp for _, lp in mine)
+    for k, (t, lp) in enumerate(mine):
+        if lp >= final - 1e-9:
+            return {"seconds": round(t, 1), "draw": k, "of": len(mine), "run_s": round(run.seconds, 1)}
+    return {"seconds": None, "draw": None}
+
+
+def _run(inputs, settings, quiet):
+    """``run_map`` and the per-draw clock ``[(seconds since start, chain, best_logp)]``."""
+    from semmap_pp import pipeline
+    clock = []
+    t0 = time.perf_counter()
+
+    def tick(info):
+        clock.append((time.perf_counter() - t0, info["chain"], info["best_logp"]))
+
+    run = pipeline.run_map(inputs, settings, callback=tick, log=(lambda m: None) if quiet else
+                           (lambda m: print("   ", m, file=sys.stderr, flush=True)))
+    return run, clock
+
+
+def regions_of(sm) -> tuple[np.ndarray, dict]:
+    """Image-frame region labels: units joined (union-find) where adjacent without a door between them.
+
+    Two adjacent units are one region when their connecting wall holds an open run (lines of free
+    cells across the wall) wider than the widest door: one space cut into two rectangles. Returns
+    ``(labels_image, unit id -> region id)``.
+    """
+    from semmap_pp.derive.doors import connecting_wall, open_runs
+    from semmap_pp.cells import FREE
+    frame, world, d = sm.frame, sm.world, sm.derived
+    c = frame.cells
+    slots = [int(s) for s in d.slots]
+    parent = {s: s for s in slots}
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    H, W = frame.classes.shape
+    adj = np.asarray(d.adjacency, bool)
+    for i, j in zip(*np.nonzero(np.triu(adj, 1))):
+        p, q = slots[i], slots[j]
+        cw = connecting_wall(world.rects[p], world.rects[q], c.wall)
+        if cw is None:
+            continue
+        (r0, c0, r1, c1), vertical = cw
+        a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
+        if a0 >= a1 or b0 >= b1:
+            continue
+        strip = frame.classes[a0:a1, b0:b1] == FREE
+        line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
+        if any(e - s > c.door_max for s, e in open_runs(line_open)):
+            parent[find(p)] = find(q)
+    roots = sorted({find(s) for s in slots})
+    rid = {r: k + 1 for k, r in enumerate(roots)}
+    unit_region = {sm.slot_ids[s]: rid[find(s)] for s in slots}
+    lut = np.zeros(max(sm.slot_ids.values(), default=0) + 1, np.int32)
+    for uid, r in unit_region.items():
+        lut[uid] = r
+    return lut[sm.labels_image], unit_region
+
+
+def _mean(rows, key):
+    vals = [r[key] for r in rows if r.get(key) is not None and not (isinstance(r[key], float) and math.isnan(r[key]))]
+    return round(float(np.mean(vals)), 4) if vals else None
+
+
+def _keep(name, args):
+    return args.maps is None or any(k in name for k in args.maps.split(","))
+
+
+def _log(args, msg):
+    if not args.quiet:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def _save(args, name, sm, extra=None):
+    if args.save is None:
+        return
+    from semmap_pp.outputs import world_dict, write_labels_png, write_world_json
+    out = args.save / name
+    out.mkdir(parents=True, exist_ok=True)
+    write_world_json(out / "world.json", world_dict(sm))
+    write_labels_png(out / "labels.png", sm.labels_image)
+
+
+# ------------------------------------------------------------------ subsets
+
+def bench_synthetic(args, model, rules) -> dict:
+    from semmap_pp.evaluate import score_world
+    from semmap_pp.grid import OccupancyGrid
+    from semmap_pp.outputs import world_dict
+    from semmap_pp.synth import generate_floor
+    rows = []
+    for seed in range(args.first_floor, args.first_floor + args.floors):
+        t0 = time.perf_counter()
+        floor = generate_floor(seed)
+        grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
+                             source=Path(f"synth-{seed}"))
+        inputs = _inputs_from_grid(grid, model, rules)
+        settings = _settings(model, args)
+        run, clock = _run(inputs, settings, args.quiet)
+        sm = run.semantic
+        sc = score_world(world_dict(sm), floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
+        dp, dr = sc.door_precision, sc.door_recall
+        door_f1 = 2 * dp * dr / (dp + dr) if dp == dp and dr == dr and dp + dr > 0 else (
+            0.0 if dp == dp or dr == dr else math.nan)
+        row = {"seed": seed, "rotation": round(float(floor.truth.get("rotation_deg", math.nan)), 1)
+               if isinstance(floor.truth.get("rotation_deg"), (int, float)) else None,
+               "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
+               "units": len(sm.unit_ids), "cpr": round(sm.cpr, 4), "unit_f1": round(sc.unit_f1, 4),
+               "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
+               "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
+               "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
+               "seconds": round(time.perf_counter() - t0, 1)}
+        rows.append(row)
+        _save(args, f"synth-{seed}", sm)
+        _log(args, f"synth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f}  "
+                   f"F1 {row['unit_f1']:.3f}  types {row['type_accuracy']}  doors {row['door_f1']}  "
+                   f"{row['seconds']} s")
+    means = {k: _mean(rows, k) for k in ("cpr", "unit_f1", "type_accuracy", "door_f1", "seconds")}
+    return {"rows": rows, "means": means,
+            "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
+                "cpr": TARGETS["synthetic_cpr"]}}
+
+
+def bench_real(args, model, rules) -> dict:
+    from semmap_pp.pipeline import load_inputs
+    rows = []
+    for path in sorted((ROOT / "data" / "maps").glob("*.yaml")):
+        if not _keep(path.stem, args):
+            continue
+        inputs = load_inputs(path)
+        settings = _settings(model, args)
+        run, clock = _run(inputs, settings, args.quiet)
+        sm = run.semantic
+        ttb = time_to_best(run, clock)
+        row = {"map": path.stem, "units": len(sm.unit_ids), "cpr": round(sm.cpr, 4),
+               "paper_cpr": PUBLISHED["cpr"].get(path.stem), "log_posterior": round(sm.log_posterior, 1),
+               "run_s": round(run.seconds, 1), "time_to_wstar_s": ttb.get("seconds"),
+               "wstar_draw": ttb.get("draw"), "draws_per_chain": ttb.get("of"),
+               "types": {t: sum(1 for u in sm.unit_ids if sm.type_of(u) == t)
+                         for t in ("room", "corridor", "hall", "other")}}
+        rows.append(row)
+        _save(args, path.stem, sm)
+        _log(args, f"real {path.stem}: CPR {row['cpr']:.3f} (paper {row['paper_cpr']}), {row['units']} units, "
+                   f"run {row['run_s']} s, W* at {row['time_to_wstar_s']} s")
+    return {"rows": rows, "targets": {"ubremen-cartesium": TARGETS["cartesium_cpr"],
+                                      "intel-lab": TARGETS["intel_cpr"],
+                                      "time_to_wstar_s": TARGETS["time_to_wstar_s"]}}
+
+
+def bench_ipa(args, model, rules) -> dict:
+    from semmap_pp.evaluate import read_ipa_gt, segmentation_scores
+    from semmap_pp.grid import load_map
+    base = SHARED / "ipa-segmentation"
+    if not base.is_dir():
+        return {"skipped": f"{base} not found"}
+    rows = []
+    for gt_path in sorted(base.glob("*_gt_segmentation.png")):
+        name = gt_path.name[:-len("_gt_segmentation.png")]
+        if not _keep(name, args):
+            continue
+        grid = load_map(base / f"{name}.yaml", **IPA_FREE)
+        inputs = _inputs_from_grid(grid, model, rules)
+        run, clock = _run(inputs, _settings(model, args), args.quiet)
+        sm = run.semantic
+        gt = read_ipa_gt(gt_path)
+        seg, _ = regions_of(sm)
+        pub = segmentation_scores(gt, seg, restrict_to_gt=False)
+        res = segmentation_scores(gt, seg, restrict_to_gt=True)
+        units = segmentation_scores(gt, sm.labels_image.astype(np.int64), restrict_to_gt=False)
+        row = {"map": name, "units": len(sm.unit_ids), "regions": int(len(np.unique(seg)) - (seg == 0).any()),
+               "precision": round(pub.precision, 4), "recall": round(pub.recall, 4),
+               "precision_restricted": round(res.precision, 4), "recall_restricted": round(res.recall, 4),
+               "precision_units": round(units.precision, 4), "recall_units": round(units.recall, 4),
+               "run_s": round(run.seconds, 1)}
+        rows.append(row)
+        _save(args, name, sm)
+        _log(args, f"ipa {name}: P {row['precision']:.3f} R {row['recall']:.3f} (restricted "
+                   f"{row['precision_restricted']:.3f}/{row['recall_restricted']:.3f}), {row['units']} units")
+    keys = ("precision", "recall", "precision_restricted", "recall_restricted", "precision_units", "recall_units")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys},
+            "published_real_maps": {"rose2_average_11": PUBLISHED["rose2_real"]["average_11_maps"],
+                                    **PUBLISHED["bormann_real_average"]},
+            "pixel_rule": "grey >= 250 free, else obstacle (free_thresh=0.0197, occupied_thresh=0.0198)"}
+
+
+TYPE_MAPS = [("Fr52_original.png", "training_Fr52.png"), ("NLB_original.png", "training_NLB_furniture.png"),
+             ("lab_c_furnitures_original.png", "training_lab_c_furnitures.png"),
+             ("lab_d_furnitures_original.png", "training_lab_d_furniture.png"),
+             ("lab_ipa_original.png", "training_lab_ipa.png")]
+
+
+def bench_types(args, model, rules) -> dict:
+    from semmap_pp.cells import UNIT_TYPES
+    from semmap_pp.evaluate import read_ipa_types, type_accuracy, type_map_from_labels
+    from semmap_pp.grid import load_map
+    base = SHARED / "ipa-types"
+    if not base.is_dir():
+        return {"skipped": f"{base} not found"}
+    rows = []
+    for map_name, truth_name in TYPE_MAPS:
+        if not (base / map_name).exists() or not _keep(map_name, args):
+            continue
+        grid = load_map(base / map_name, resolution=0.05, **IPA_FREE)
+        inputs = _inputs_from_grid(grid, model, rules)
+        run, clock = _run(inputs, _settings(model, args), args.quiet)
+        sm = run.semantic
+        types = {uid: UNIT_TYPES.index(sm.type_of(uid)) for uid in sm.unit_ids}
+        pred = type_map_from_labels(sm.labels_image, types)
+        sc = type_accuracy(pred, read_ipa_types(base / truth_name))
+        row = {"map": map_name[:-len("_original.png")], "accuracy": round(sc.accuracy, 4),
+               "balanced_accuracy": round(sc.balanced_accuracy, 4), "recall_room": round(sc.recall_room, 4),
+               "recall_corridor": round(sc.recall_corridor, 4), "coverage": round(sc.coverage, 4),
+               "accuracy_covered": round(sc.accuracy_covered, 4), "units": len(sm.unit_ids),
+               "run_s": round(run.seconds, 1)}
+        rows.append(row)
+        _save(args, row["map"], sm)
+        _log(args, f"types {row['map']}: acc {row['accuracy']:.3f} balanced {row['balanced_accuracy']:.3f} "
+                   f"coverage {row['coverage']:.3f}")
+    keys = ("accuracy", "balanced_accuracy", "recall_room", "recall_corridor", "coverage", "accuracy_covered")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys},
+            "pixel_rule": "grey >= 250 free, else obstacle; resolution 0.05 m assumed"}
+
+
+def run(args) -> dict:
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.model import load_model
+    from semmap_pp.pipeline import DEFAULT_RULES
+    model = load_model()
+    rules = load_rules(DEFAULT_RULES)
+    s = _settings(model, args)
+    out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal")},
+           "published": PUBLISHED, "targets": TARGETS}
+    subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
+    fns = {"synthetic": bench_synthetic, "real": bench_real, "ipa": bench_ipa, "types": bench_types}
+    for name in subsets:
+        t0 = time.perf_counter()
+        out[name] = fns[name](args, model, rules)
+        out[name]["wall_s"] = round(time.perf_counter() - t0, 1)
+    return out
