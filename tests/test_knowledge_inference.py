@@ -8,10 +8,14 @@ import clingo
 import numpy as np
 import pytest
 
-from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
+from semmap_pp.errors import RuleError
+from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules, mcsat
 from semmap_pp.knowledge.evidence import ground_facts
 from semmap_pp.knowledge.ground import FRAME, ground
+from semmap_pp.knowledge.exact import JunctionTree
 from semmap_pp.knowledge.map import map_clingo, map_rc2
+from semmap_pp.knowledge.mcsat import ClauseTemplate
+from semmap_pp.knowledge.mcsat_tree import BatchTree, pick
 
 RULE_FILES = ["rules/table3.lp", "rules/halls_to_corridors.lp", "rules/none.lp"]
 TYPES = ("room", "corr", "hall", "other")
@@ -157,3 +161,100 @@ def test_contradictory_hard_rules_name_the_file(tmp_path):
     with pytest.raises(Exception) as exc:
         engine.infer(Evidence.build([1], rolike={1}))
     assert str(f) in str(exc.value) and "no world" in str(exc.value)
+
+
+def test_mcsat_general_path_close_to_enumeration_on_table3():
+    # the same rules through the ground network (no fast path): SaLe atoms are tree variables
+    rules = load_rules("rules/table3.lp")
+    engine = KnowledgeEngine(rules, method="mcsat", fast=False)
+    assert engine.local is None
+    worst = 0.0
+    for ev in cases(4, 3):
+        types, sale, _, _, _ = oracle(rules, ev)
+        r = engine.infer(ev)
+        worst = max([worst] + [np.abs(r.types[u] - types[u]).max() for u in ev.units]
+                    + [abs(r.sale[pq] - sale[pq]) for pq in ev.adj])
+    assert worst < 0.03
+
+
+def test_mcsat_contradictory_hard_rules_name_the_file(tmp_path):
+    f = tmp_path / "contra.lp"
+    f.write_text(":- rolike(U), not room(U).\n:- rolike(U), room(U).\n")
+    engine = KnowledgeEngine.from_file(f, method="mcsat")
+    with pytest.raises(RuleError) as exc:
+        engine.infer(Evidence.build([1], rolike={1}))
+    assert str(f) in str(exc.value) and "no world" in str(exc.value)
+
+
+def test_mcsat_rejects_a_burn_in_as_long_as_the_run():
+    engine = KnowledgeEngine.from_file("rules/table3.lp", method="mcsat", n_iter=5, burn_in=5)
+    with pytest.raises(RuleError, match="burn_in"):
+        engine.infer(Evidence.build([1], rolike={1}))
+
+
+def test_pick_never_draws_a_state_of_zero_weight():
+    # zero weights first, in the middle and last; u close to 1 must not run past the last
+    # positive state, u = 0 must skip the leading zeros
+    probs = np.array([[0, 0, 1], [2, 0, 0], [0, 3, 0], [1, 0, 0]], dtype=np.float32)
+    u = np.array([1 - 2.0 ** -53, 0.0, 0.5])
+    idx, total = pick(probs, u)
+    assert idx.tolist() == [3, 2, 0]
+    assert total.tolist() == [3, 3, 1]
+
+
+def test_equal_clauses_merge_and_inert_clauses_drop():
+    # one binary scope variable; clause a and b both forbid state 1, c forbids nothing, d
+    # forbids both states (never satisfied, so never kept)
+    viol = np.array([[0, 1], [0, 1], [0, 0], [1, 1]], dtype=bool)
+    t = ClauseTemplate((2,), 1, np.ones(2, dtype=bool), viol, [1000, 500, 700, 900])
+    assert t.k == 1
+    # kept together with probability 1 - e^-(w_a + w_b): outcome 1 of the alias table (slot i
+    # keeps i with probability q[i], else gives alias[i])
+    (_c0, n, cut, alias), = t.chunks[0]
+    q = cut - np.arange(n)
+    outcome = (q + np.bincount(alias, weights=1 - q, minlength=n)) / n
+    assert abs(outcome[1] - (1 - np.exp(-1.5))) < 1e-12
+    # weights of the states by the block alone: state 1 violates the merged clause
+    np.testing.assert_allclose(t.prior / t.prior.sum(), [1 / (1 + np.exp(-1.5)),
+                                                         np.exp(-1.5) / (1 + np.exp(-1.5))])
+
+
+def test_count_table_matches_the_direct_count(monkeypatch):
+    rng = np.random.default_rng(5)
+    # scope (3 states) x private atoms (2 states); hard forbids (2, 1)
+    hard = np.ones(6, dtype=bool)
+    hard[5] = False
+    viol = rng.random((5, 6)) < 0.4
+    with_lut = ClauseTemplate((3,), 2, hard, viol, [800, 1200, 300, 2000, 50])
+    monkeypatch.setattr(mcsat, "LUT_BITS", 0)
+    direct = ClauseTemplate((3,), 2, hard, viol, [800, 1200, 300, 2000, 50])
+    assert with_lut.lut is not None and direct.lut is None
+    words = [rng.integers(0, 1 << with_lut.k, size=(4, 7))]
+    np.testing.assert_array_equal(with_lut.counts(words, 4, 7), direct.counts(words, 4, 7))
+    # the direct count by hand for one word
+    w = int(words[0][1, 2])
+    bits = with_lut.masks[0]
+    hand = [sum(bool(hard.reshape(3, 2)[s, a]) and not (int(bits[a, s]) & w)
+                for a in range(bits.shape[0])) for s in range(3)]
+    assert direct.counts(words, 4, 7)[:, 1, 2].tolist() == hand
+
+
+def test_slice_draw_is_uniform_over_the_solutions():
+    # two 3-state variables, the table allows 5 of the 9 pairs; with a private atom of two
+    # states on (0, 0) the solution (0, 0) counts twice
+    counts = np.array([[2, 1, 0], [0, 1, 0], [1, 0, 1]], dtype=np.float32)
+    scopes = [np.array([[0, 1]])]
+    B = 20000
+    jt = JunctionTree([3, 3], [(0, 1)])
+    tree = BatchTree([3, 3], scopes, jt, B)
+    table = np.broadcast_to(counts.reshape(9, 1, 1), (9, 1, B))
+    assert tree.upward([table], check=True)
+    marg = [np.zeros((3, B)), np.zeros((3, B))]
+    x = tree.sample(np.random.default_rng(0), marg)
+    freq = np.bincount(x[0] * 3 + x[1], minlength=9) / B
+    np.testing.assert_allclose(freq, counts.reshape(-1) / counts.sum(), atol=0.015)
+    # the Rao-Blackwell terms average to the exact marginals of the uniform solution
+    np.testing.assert_allclose(marg[0].mean(axis=1), counts.sum(axis=1) / counts.sum(),
+                               atol=0.015)
+    np.testing.assert_allclose(marg[1].mean(axis=1), counts.sum(axis=0) / counts.sum(),
+                               atol=0.015)
