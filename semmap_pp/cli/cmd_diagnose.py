@@ -1,0 +1,108 @@
+"""``semmap diagnose DIR [--model FILE] [--json]``: re-read a run's trace.nc and judge convergence.
+
+Reads ``DIR/trace.nc`` (or a trace file given directly) with
+:func:`semmap_pp.diagnostics.read_trace` and prints the run's provenance (its attributes), R-hat
+and bulk / tail ESS of every label-invariant summary with the verdict, the posterior spread of
+each summary (mean, sd, 5 % / 50 % / 95 % quantiles over all chains and draws), the acceptance
+rates, and any spread numbers stored as trace attributes. The thresholds are the model file's
+``[diagnostics]`` (``rhat_max``, ``ess_min``), as ``semmap map`` uses them.
+
+Exit status: 0 converged, 1 not converged (so scripts can write ``semmap diagnose DIR && ...``),
+2 when DIR holds no readable trace.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("diagnose", help="R-hat, ESS, verdict and spread of a run's trace.nc",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("dir", metavar="DIR", type=Path, help="output folder of `semmap map` (or its trace.nc)")
+    p.add_argument("--model", metavar="FILE", default=None,
+                   help="model file with the [diagnostics] thresholds (default models/default.toml)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def _clean(v):
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return v if math.isfinite(v) else None
+    if isinstance(v, np.ndarray):
+        return _clean(v.tolist())
+    if isinstance(v, list):
+        return [_clean(x) for x in v]
+    return v
+
+
+def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
+    """Everything ``semmap diagnose`` reports, from a trace DataTree."""
+    from semmap_pp.diagnostics import convergence
+
+    report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min)
+    post = tree["posterior"]
+    spread = {}
+    for name in post.data_vars:
+        a = np.asarray(post[name].values, float).ravel()
+        a = a[np.isfinite(a)]
+        spread[name] = ({"mean": float(a.mean()), "sd": float(a.std()),
+                         "q05": float(np.quantile(a, 0.05)), "q50": float(np.quantile(a, 0.5)),
+                         "q95": float(np.quantile(a, 0.95))} if a.size else
+                        {"mean": math.nan, "sd": math.nan, "q05": math.nan, "q50": math.nan, "q95": math.nan})
+    accept = {}
+    if "sample_stats" in tree.children:
+        stats = tree["sample_stats"]
+        for name in stats.data_vars:
+            if name.startswith("accept"):
+                a = np.asarray(stats[name].values, float)
+                accept[name] = float(np.nanmean(a)) if np.isfinite(a).any() else math.nan
+    attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in tree.attrs.items()}
+    return {"attrs": attrs, "convergence": report.to_dict(), "spread": spread, "acceptance": accept,
+            "stored_spread": {k: v for k, v in attrs.items() if "spread" in k}, "text": report.to_text()}
+
+
+def format_text(d: dict) -> str:
+    a = d["attrs"]
+    lines = ["run: " + ", ".join(f"{k} {v}" for k, v in a.items() if "spread" not in k), "", d["text"], "",
+             "posterior spread of the summaries (all chains and draws)",
+             f"{'quantity':<16}{'mean':>12}{'sd':>10}{'5 %':>12}{'50 %':>12}{'95 %':>12}"]
+    for name, s in d["spread"].items():
+        lines.append(f"{name:<16}{s['mean']:>12.4g}{s['sd']:>10.3g}{s['q05']:>12.4g}{s['q50']:>12.4g}"
+                     f"{s['q95']:>12.4g}")
+    if d["acceptance"]:
+        lines += ["", "acceptance (mean over draws): " + ", ".join(
+            f"{k.removeprefix('accept_') if k != 'accept' else 'all'} {v:.3f}" for k, v in d["acceptance"].items())]
+    for k, v in d["stored_spread"].items():
+        lines.append(f"{k}: {v}")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from semmap_pp.diagnostics import read_trace
+    from semmap_pp.model import load_model
+
+    path = args.dir / "trace.nc" if args.dir.is_dir() else args.dir
+    tree = read_trace(path)
+    model = load_model(args.model)
+    try:
+        d = diagnose(tree, model.diagnostics.rhat_max, model.diagnostics.ess_min)
+    except (ValueError, KeyError) as exc:
+        from semmap_pp.errors import SemmapError
+        raise SemmapError(path, f"trace has no usable summaries ({exc})") from None
+    if args.json:
+        out = {k: v for k, v in d.items() if k != "text"}
+        out["trace"] = str(path)
+        print(json.dumps(_clean(out)))
+    else:
+        print(format_text(d))
+    return 0 if d["convergence"]["ok"] else 1

@@ -1,0 +1,172 @@
+"""``semmap eval DIR --truth T [--json]``: score a run's world.json and labels.png against a truth.
+
+``T`` is recognised by name, then by content:
+
+* a synthetic floor (``semmap synth``): its folder, or its ``truth.json`` — units matched by polygon
+  IoU (unit precision / recall / F1), type accuracy over matched units, adjacency and door
+  precision / recall (:func:`semmap_pp.evaluate.score_world`), the CPR of W* from world.json, and,
+  when ``truth_labels.png`` sits beside it, room segmentation of labels.png against it;
+* an ipa ground-truth segmentation (``*_gt_segmentation.png``, white rooms): precision / recall
+  ("micro" and "macro") and mean IoU of ``labels.png``, and of ``regions.png`` when the run wrote
+  one (:func:`semmap_pp.evaluate.segmentation_scores`);
+* an ipa place-type image (``training_*.png``, grey 77 room / 115 corridor / 179 doorway): per-cell
+  room / corridor accuracy of the unit types painted over labels.png
+  (:func:`semmap_pp.evaluate.type_accuracy`).
+
+Any other PNG is read as a segmentation when it holds only black and white, as place types when it
+holds the ipa type grey levels. Prints a table, or one JSON object with ``--json``. docs/evaluation.md
+defines every score.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from semmap_pp.errors import MapError
+
+KINDS = ("synthetic", "ipa-segmentation", "ipa-types")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("eval", help="score a run against ground truth (synthetic or ipa)",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("dir", metavar="DIR", type=Path, help="output folder of `semmap map`")
+    p.add_argument("--truth", required=True, type=Path, metavar="T",
+                   help="synthetic floor folder or truth.json, ipa *_gt_segmentation.png or training_*.png")
+    p.add_argument("--kind", choices=KINDS, default=None, help="say what T is instead of detecting it")
+    p.add_argument("--published", action="store_true",
+                   help="segmentation: the published ipa protocol (segments taken whole, not cut to the rooms)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def detect_kind(truth: Path) -> str:
+    """Which kind of truth ``truth`` is (see the module docstring)."""
+    from semmap_pp.evaluate.io import read_image
+
+    if truth.is_dir():
+        if (truth / "truth.json").is_file():
+            return "synthetic"
+        raise MapError(truth, "folder holds no truth.json (expected a `semmap synth` folder)")
+    if not truth.exists():
+        raise MapError(truth, "truth file does not exist")
+    name = truth.name.lower()
+    if name.endswith(".json"):
+        return "synthetic"
+    if name.endswith("_gt_segmentation.png"):
+        return "ipa-segmentation"
+    if name.startswith("training_"):
+        return "ipa-types"
+    image = np.asarray(read_image(truth))
+    grey = image if image.ndim == 2 else image[..., :3].mean(axis=-1)
+    values = set(np.unique(grey).astype(int).tolist())
+    if values & {77, 115, 179}:
+        return "ipa-types"
+    if values <= {0, 255}:
+        return "ipa-segmentation"
+    raise MapError(truth, "cannot tell what this truth is (expected truth.json, *_gt_segmentation.png "
+                          "or training_*.png; use --kind)")
+
+
+def _read_run(run_dir: Path) -> tuple[dict, np.ndarray]:
+    from semmap_pp.evaluate import read_json, read_label_image
+
+    if not run_dir.is_dir():
+        raise MapError(run_dir, "not a run folder (expected the --out folder of `semmap map`)")
+    world, labels = run_dir / "world.json", run_dir / "labels.png"
+    for f in (world, labels):
+        if not f.is_file():
+            raise MapError(f, "missing (expected the output of `semmap map`)")
+    return read_json(world), read_label_image(labels)
+
+
+def _same_shape(pred: np.ndarray, truth: np.ndarray, pred_path: Path, truth_path: Path) -> None:
+    if pred.shape != truth.shape:
+        raise MapError(truth_path, f"truth is {truth.shape[1]}x{truth.shape[0]} cells but {pred_path.name} is "
+                                   f"{pred.shape[1]}x{pred.shape[0]}: not the same map")
+
+
+def _seg(prefix: str, s) -> dict:
+    return {f"{prefix}precision": s.precision, f"{prefix}recall": s.recall,
+            f"{prefix}precision_macro": s.precision_macro, f"{prefix}recall_macro": s.recall_macro,
+            f"{prefix}iou": s.iou, f"{prefix}iou_best": s.iou_best, f"{prefix}rooms": s.n_rooms,
+            f"{prefix}segments": s.n_segments}
+
+
+def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, published: bool = False) -> dict:
+    """Scores of the run in ``run_dir`` against ``truth``: ``{"kind", "scores": {name: value}}``."""
+    from semmap_pp.evaluate import (read_ipa_gt, read_ipa_types, read_json, read_label_image, score_world,
+                                    segmentation_scores, type_accuracy, type_map_from_labels)
+
+    kind = kind or detect_kind(truth)
+    world, labels = _read_run(run_dir)
+    scores: dict = {"units_predicted": len(world.get("units", [])), "cpr": world.get("cpr")}
+    if kind == "synthetic":
+        truth_json = truth / "truth.json" if truth.is_dir() else truth
+        t = read_json(truth_json)
+        s = score_world(world, t, pred_source=str(run_dir / "world.json"), truth_source=str(truth_json))
+        scores.update({"units_true": s.n_true_units, "unit_precision": s.unit_precision,
+                       "unit_recall": s.unit_recall, "unit_f1": s.unit_f1, "type_accuracy": s.type_accuracy,
+                       "adjacency_precision": s.adjacency_precision, "adjacency_recall": s.adjacency_recall,
+                       "door_precision": s.door_precision, "door_recall": s.door_recall})
+        truth_labels = truth_json.parent / "truth_labels.png"
+        if truth_labels.is_file():
+            gt = read_label_image(truth_labels)
+            _same_shape(labels, gt, run_dir / "labels.png", truth_labels)
+            scores.update(_seg("segmentation_", segmentation_scores(gt, labels, restrict_to_gt=not published)))
+    elif kind == "ipa-segmentation":
+        gt = read_ipa_gt(truth)
+        _same_shape(labels, gt, run_dir / "labels.png", truth)
+        scores.update(_seg("", segmentation_scores(gt, labels, restrict_to_gt=not published)))
+        regions = run_dir / "regions.png"
+        if regions.is_file():
+            scores.update(_seg("regions_", segmentation_scores(gt, read_label_image(regions),
+                                                               restrict_to_gt=not published)))
+    elif kind == "ipa-types":
+        t = read_ipa_types(truth)
+        _same_shape(labels, t, run_dir / "labels.png", truth)
+        types = {int(u["id"]): u["type"] for u in world.get("units", [])}
+        s = type_accuracy(type_map_from_labels(labels, types), t)
+        scores.update({"type_accuracy": s.accuracy, "recall_room": s.recall_room,
+                       "recall_corridor": s.recall_corridor, "balanced_accuracy": s.balanced_accuracy,
+                       "coverage": s.coverage, "accuracy_covered": s.accuracy_covered, "cells": s.n_cells})
+    else:  # pragma: no cover - argparse restricts --kind
+        raise MapError(truth, f"unknown truth kind {kind!r}")
+    return {"run": str(run_dir), "truth": str(truth), "kind": kind, "protocol":
+            "published" if published else "restricted to ground-truth rooms", "scores": scores}
+
+
+def _clean(v):
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return v if math.isfinite(v) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def format_text(result: dict) -> str:
+    lines = [f"run {result['run']} against {result['kind']} truth {result['truth']}", f"{'score':<28}{'value':>10}"]
+    for k, v in result["scores"].items():
+        if v is None or (isinstance(v, float) and not math.isfinite(v)):
+            text = "n/a"
+        elif isinstance(v, (int, np.integer)):
+            text = str(v)
+        else:
+            text = f"{v:.4f}"
+        lines.append(f"{k:<28}{text:>10}")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    result = evaluate_run(args.dir, args.truth, args.kind, published=args.published)
+    if args.json:
+        result = dict(result, scores={k: _clean(v) for k, v in result["scores"].items()})
+        print(json.dumps(result))
+    else:
+        print(format_text(result))
+    return 0
