@@ -27,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Mapping, Protocol
 
@@ -177,11 +178,10 @@ def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float,
         Doors per unit; ``None`` when doors were not detected (no MulDoor evidence).
     """
     units = [int(u) for u in units]
-    cls = geometry_class(rects, resolution, params)
-    probs = geometry_probabilities(rects, resolution, params)
-    geometry = tuple((u, GEOMETRY_CLASSES[c]) for u, c in zip(units, cls))
-    soft = tuple((u, tuple(round(float(v), 6) for v in pr))
-                 for u, c, pr in zip(units, cls, probs) if pr[c] < params.hard_above)
+    items = [unit_geometry(int(r[2]) - int(r[0]), int(r[3]) - int(r[1]), resolution, params)
+             for r in np.asarray(rects).reshape(-1, 4)]
+    geometry = tuple((u, GEOMETRY_CLASSES[c]) for u, (c, _) in zip(units, items))
+    soft = tuple((u, pr) for u, (_, pr) in zip(units, items) if pr is not None)
     muldoor = frozenset()
     if door_counts is not None:
         muldoor = frozenset(u for u, k in zip(units, door_counts) if k >= params.multiple_doors)
@@ -191,6 +191,41 @@ def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float,
     return Evidence(units=tuple(sorted(units)), geometry=tuple(geometry[i] for i in order),
                     soft=tuple(sorted(soft)), muldoor=muldoor, adj=pairs,
                     with_doors=door_counts is not None)
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def unit_geometry(height: int, width: int, resolution: float, params) -> tuple:
+    """Geometry evidence of one unit of ``height`` x ``width`` cells (cached by size).
+
+    Returns ``(class index, None)`` for hard evidence, or ``(class index, (p_rolike, p_colike,
+    p_halike))`` (rounded to 6 decimals) when the class's probability is below ``hard_above``.
+    Every evidence of the project is built from this function, so the sampler's incremental
+    evidence and :func:`build_evidence` always agree.
+    """
+    rect = np.array([[0, 0, height, width]])
+    c = int(geometry_class(rect, resolution, params)[0])
+    pr = geometry_probabilities(rect, resolution, params)[0]
+    return c, (tuple(round(float(v), 6) for v in pr) if pr[c] < params.hard_above else None)
+
+
+def knowledge_evidence(units, items, muldoor, adj):
+    """The knowledge engine's evidence straight from canonical parts (the sampler's fast path).
+
+    Equal to ``build_evidence(...).to_knowledge()`` of the same world: ``units`` sorted slot ids,
+    ``items`` their :func:`unit_geometry` values, ``muldoor`` the sorted units with multiple
+    doors, ``adj`` the sorted pairs ``(p, q)``, ``p < q``.
+    """
+    from semmap_pp.knowledge.evidence import Evidence as KEvidence  # imports clingo
+    lists = ([], [], [])
+    for u, (c, soft) in zip(units, items):
+        if soft is None:
+            lists[c].append((u, 1.0))
+        else:
+            for lst, p in zip(lists, soft):
+                if p > 0.0:
+                    lst.append((u, p))
+    return KEvidence(tuple(units), tuple(lists[ROLIKE]), tuple(lists[COLIKE]),
+                     tuple(lists[HALIKE]), tuple((u, 1.0) for u in muldoor), tuple(adj))
 
 
 class Result(Protocol):

@@ -25,6 +25,7 @@ True
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from typing import NamedTuple
 
 import numba
@@ -34,7 +35,7 @@ from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_class,
-                                geometry_class_compiled)
+                                geometry_class_compiled, knowledge_evidence, unit_geometry)
 from semmap_pp.likelihood import (covered_free, full_tallies, loglik_from_tallies, prepare,
                                   tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
@@ -86,6 +87,7 @@ class Posterior:
         self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side)
         self._prior_n: dict[int, np.ndarray] = {}
         self._door_cache: dict = {}
+        self._typing_cache: OrderedDict = OrderedDict()   # (provider, evidence key, K) -> arrays
         c, p, e = self.cells, model.prior, model.evidence
         self._ip = np.array([CORRIDOR, c.wall, c.adjacency_dilation, frame.shape[0], frame.shape[1],
                              c.min_side, c.max_side,
@@ -144,6 +146,28 @@ class Posterior:
         ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
         return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
 
+    def _result_arrays(self, provider, evidence, capacity: int):
+        """Slot-indexed MAP types (K,) and P(SaLe) (K, K) of the provider's result for a
+        knowledge evidence (cached by the evidence: the provider is a function of it)."""
+        key = (id(provider), evidence.key, capacity)
+        hit = self._typing_cache.get(key)
+        if hit is not None and hit[0] is provider:
+            self._typing_cache.move_to_end(key)
+            return hit[1], hit[2]
+        result = provider.infer(evidence)
+        types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
+        sale = np.zeros((capacity, capacity))
+        for s in evidence.units:
+            types[s] = UNIT_TYPES.index(result.map_types[int(s)])
+        for (p, q), v in result.sale.items():
+            sale[p, q] = sale[q, p] = v
+        types.setflags(write=False)
+        sale.setflags(write=False)
+        self._typing_cache[key] = (provider, types, sale)
+        if len(self._typing_cache) > 4096:
+            self._typing_cache.popitem(last=False)
+        return types, sale
+
     def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
         """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider.
 
@@ -153,14 +177,13 @@ class Posterior:
         if isinstance(provider, FixedProvider):
             types = np.where(world.active, GEOMETRY_TYPE[geometry], W.NO_TYPE).astype(np.int8)
             return types, None
-        result = self._infer(world, adj, provider)
-        types = np.full(world.capacity, W.NO_TYPE, dtype=np.int8)
-        sale = np.zeros((world.capacity, world.capacity))
-        for s in W.active_slots(world):
-            types[s] = UNIT_TYPES.index(result.map_types[int(s)])
-        for (p, q), v in result.sale.items():
-            sale[p, q] = sale[q, p] = v
-        return types, sale
+        slots = W.active_slots(world)
+        rects = world.rects[slots]
+        sub = adj[np.ix_(slots, slots)]
+        doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
+        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
+        types, sale = self._result_arrays(provider, ev.to_knowledge(), world.capacity)
+        return types.copy(), sale
 
     def knowledge_result(self, world: W.World):
         """Type marginals, SaLe marginals and MAP types of ``world`` from the provider in use.
@@ -312,12 +335,15 @@ class Tracker:
 
     A proposal re-derives the geometry class and adjacency row of the changed slots only, the
     types of every unit from the provider (with the fixed provider only the changed slots can
-    change type), the likelihood tallies from the units whose rectangle, presence or corridor
-    flag changed, and the prior's validity and SaLe sum over the slots (compiled).
+    change type; with knowledge the evidence is rebuilt from per-size and per-pair caches and the
+    provider is asked only when it differs from the current world's), the likelihood tallies
+    from the units whose rectangle, presence or corridor flag changed, and the prior's validity
+    and SaLe sum over the slots (compiled).
     """
 
     def __init__(self, post: Posterior, world: W.World):
         self.post = post
+        self._provider = post.provider
         self._typ = post.typing(world)
         w = self._typ.world
         slots = W.active_slots(w)
@@ -327,6 +353,15 @@ class Tracker:
         self.logprior = post._logprior(self._typ)
         self.logp = self.loglik + self.logprior
         self._prior_n = post.prior_n(w.capacity)
+        self._fixed = isinstance(self._provider, FixedProvider)
+        self._doors = self._evidence = None
+        if not self._fixed:
+            self._with_doors = getattr(self._provider, "needs_doors", True)
+            self._doors = np.zeros((w.capacity, w.capacity), np.int32)
+            if self._with_doors:
+                for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
+                    self._doors[p, q] = self._doors[q, p] = post.pair_doors(w.rects[p], w.rects[q])
+            self._evidence = self._knowledge_evidence(w, self._typ.adj, self._doors)
 
     @property
     def world(self) -> W.World:
@@ -337,38 +372,77 @@ class Tracker:
         hist = self.hist if hist is None else hist
         return covered_free(hist) / max(self.post.data.n_free, 1)
 
+    def _knowledge_evidence(self, world, adj, doors):
+        post = self.post
+        c, p = post.cells, post.model.evidence
+        units = np.flatnonzero(world.active).tolist()
+        rects = world.rects.tolist()
+        items = [unit_geometry(rects[u][2] - rects[u][0], rects[u][3] - rects[u][1],
+                               c.resolution, p) for u in units]
+        muldoor = []
+        if self._with_doors:
+            counts = doors.sum(axis=1).tolist()
+            muldoor = [u for u in units if counts[u] >= p.multiple_doors]
+        iu, ju = np.nonzero(np.triu(adj, 1))
+        return knowledge_evidence(units, items, muldoor, list(zip(iu.tolist(), ju.tolist())))
+
+    def _knowledge_types(self, world, adj, changed):
+        """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on)."""
+        post = self.post
+        doors = self._doors
+        if self._with_doors:
+            doors = doors.copy()
+            rects, active = world.rects, world.active
+            for s in changed.tolist():
+                doors[s, :] = 0
+                doors[:, s] = 0
+                if active[s]:
+                    for t in np.flatnonzero(adj[s]).tolist():
+                        p, q = (s, t) if s < t else (t, s)
+                        doors[p, q] = doors[q, p] = post.pair_doors(rects[p], rects[q])
+        ev = self._knowledge_evidence(world, adj, doors)
+        if ev.key == self._evidence.key:
+            cur = self._typ
+            return cur.world.types, cur.sale, doors, self._evidence
+        types, sale = post._result_arrays(self._provider, ev, world.capacity)
+        return types, sale, doors, ev
+
     def propose(self, new_world: W.World, changed_slots) -> Proposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
 
         Types of *every* unit are re-derived (evidence of a neighbour may change with the edit);
         units whose type changed are recomputed in the likelihood along with the edited ones.
         """
-        post, old = self.post, self._typ
+        post = self.post
+        if post.provider is not self._provider:   # knowledge switched without a resync
+            self.resync()
+        old = self._typ
         ow = old.world
         geometry = old.geometry.copy()
         adj = old.adj.copy()
         changed = np.array(changed_slots, dtype=np.int64)
         hist = self.hist.copy()
         data = post.data
-        if not (post.knowledge_on and post.knowledge is not None):
+        if self._fixed:
             types = ow.types.copy()
-            sale = None
             loglik, logprior, gamma_total = _propose_fixed(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, changed, geometry, adj, types, GEOMETRY_TYPE, hist,
                 self.gamma_total, post.fixed.fixed_sale, self._prior_n, post._ip, post._fp)
+            types.setflags(write=False)
+            knowledge = sale = None
         else:
             _retype_changed(new_world.rects, new_world.active, changed, geometry, adj, _NO_TYPES,
                             _NO_TYPES, post._ip, post._fp)
-            types, sale = post._types(new_world, geometry, adj)
+            types, sale, doors, ev = self._knowledge_types(new_world, adj, changed)
             loglik, logprior, gamma_total = _score(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
                 post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp)
-        types.setflags(write=False)
+            knowledge = (doors, ev)
         new = W.World(new_world.rects, new_world.active, types)
         return Proposal(new, loglik + logprior, loglik, logprior,
-                        _Typing(new, geometry, adj, sale), (hist, gamma_total))
+                        _Typing(new, geometry, adj, sale), (hist, gamma_total, knowledge))
 
     def resync(self) -> None:
         """Rebuild every cache from the current geometry (call after switching
@@ -377,6 +451,8 @@ class Tracker:
 
     def accept(self, prop: Proposal) -> None:
         """Commit a proposal (a rejected one is simply dropped)."""
-        self.hist, self.gamma_total = prop.patch
+        self.hist, self.gamma_total, knowledge = prop.patch
+        if knowledge is not None:
+            self._doors, self._evidence = knowledge
         self._typ = prop.typing
         self.loglik, self.logprior, self.logp = prop.loglik, prop.logprior, prop.logp
