@@ -15,11 +15,13 @@ path), which are counted inside the block and drawn uniformly among the allowed 
 scope is drawn. A template's clauses are bits of an integer word; the kept clauses of an instance
 in a chain are one word, and its 0/1 table is read from a table indexed by that word.
 
-The estimate is Rao-Blackwellised: every kept iteration adds, for each variable, its exact
-conditional distribution given the other variables of the drawn world and the kept clauses (a
-product of the counts of the blocks around it), and for each reported private atom its
-probability given the drawn scope. Each is the conditional expectation of the indicator it
-replaces, so the estimate keeps its mean and loses part of its variance.
+The estimate is Rao-Blackwellised: every kept iteration adds, for each variable, the
+distribution the backward pass draws it from (its conditional given the variables drawn before
+it, in the slice), and for each reported private atom its probability given the drawn scope.
+Each is the conditional expectation of the indicator it replaces, so the estimate keeps its mean
+and loses part of its variance. Chains start from a world of the hard clauses weighted by the
+single-variable blocks' clauses alone (the unit rules, pair rules ignored), closer to the target
+than a uniform world, so a shorter burn-in suffices.
 """
 
 from __future__ import annotations
