@@ -1,0 +1,130 @@
+"""Faults of `semmap map`: Ctrl-C (SIGINT) on one and two cores, --resume, --budget (subprocesses)."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+
+from semmap_pp.cli import main
+from semmap_pp.diagnostics import read_trace
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA = json.loads((ROOT / "docs" / "world.schema.json").read_text())
+LONG = ["--tune", "2", "--draws", "5000", "--n-inner", "5", "--progress", "plain", "--progress-every", "0.2"]
+
+
+@pytest.fixture(scope="module")
+def floor(tmp_path_factory):
+    out = tmp_path_factory.mktemp("floor") / "f"
+    assert main(["synth", "--seed", "3", "--units", "4", "--out", str(out)]) == 0
+    return out / "map.yaml"
+
+
+def interrupt(map_path, out, cores):
+    """Start a long `semmap map`, wait until it samples, send SIGINT; return (code, stderr)."""
+    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", str(map_path), "--out", str(out),
+                          "--chains", "2", "--cores", str(cores), *LONG],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = []
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        line = p.stderr.readline()
+        if not line:
+            break
+        seen.append(line)
+        if "sampling started" in line:
+            break
+    assert any("sampling started" in s for s in seen), "".join(seen)
+    time.sleep(0.5)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=300)
+    return p.returncode, "".join(seen) + err
+
+
+def resume_meta(out):
+    with np.load(out / "resume.npz") as z:
+        return json.loads(str(z["meta"]))
+
+
+def chain_logp(out, c):
+    with np.load(out / "resume.npz") as z:
+        return z[f"stat_{c}_logp"]
+
+
+def check_partial(out, code, err):
+    assert code == 130, err
+    assert "interrupted: wrote partial results" in err and "Traceback" not in err
+    doc = json.loads((out / "world.json").read_text())
+    jsonschema.validate(doc, SCHEMA)
+    assert len(doc["units"]) >= 1
+    tree = read_trace(out / "trace.nc")
+    lp = tree["posterior"]["log_posterior"].values
+    assert lp.shape[1] >= 4 and np.isfinite(lp).all()
+    meta = resume_meta(out)
+    assert meta["stopped"] == "interrupted"
+    return tree, meta
+
+
+@pytest.fixture(scope="module")
+def interrupted(floor, tmp_path_factory):
+    out = tmp_path_factory.mktemp("sigint") / "run"
+    code, err = interrupt(floor, out, cores=1)
+    tree, meta = check_partial(out, code, err)
+    return out, tree, meta
+
+
+def test_sigint_one_core_writes_partial_results(interrupted):
+    out, tree, meta = interrupted
+    done = [c["draw"] for c in meta["chains"]]
+    assert 4 <= max(done) < 5002                 # stopped long before the 5002 planned draws
+    assert (out / "diagnostics.txt").is_file() and (out / "labels.png").is_file()
+
+
+@pytest.mark.slow
+def test_sigint_two_cores_writes_partial_results(floor, tmp_path):
+    out = tmp_path / "run2"
+    code, err = interrupt(floor, out, cores=2)
+    tree, meta = check_partial(out, code, err)
+    assert meta["settings"]["cores"] == 2
+
+
+def test_resume_appends_draws_until_the_budget(interrupted, capsys):
+    out, tree, meta = interrupted
+    interrupted_logp = chain_logp(out, 0)
+    before = [c["draw"] for c in meta["chains"]]
+    # in this process (no signal needed): the budget ends the continued run
+    assert main(["map", "--resume", str(out), "--budget", "3", "--progress", "none"]) == 0
+    err = capsys.readouterr().err
+    assert "budget of 3 s reached" in err and "resuming:" in err
+    after = resume_meta(out)["chains"]
+    assert all(a["draw"] >= b for a, b in zip(after, before)) and sum(a["draw"] for a in after) > sum(before)
+    assert resume_meta(out)["stopped"] == "budget"
+    # the draws of the interrupted run are still the first ones of chain 1: new ones were appended
+    old, new = interrupted_logp, chain_logp(out, 0)
+    assert len(new) > len(old)
+    np.testing.assert_array_equal(new[:len(old)], old)
+    assert read_trace(out / "trace.nc")["posterior"]["log_posterior"].values.shape[1] >= 4
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--chains", "3"], "--chains cannot be given with --resume"),
+    (["MAP.yaml"], "MAP cannot be given with --resume"),
+])
+def test_resume_refuses_changed_settings(interrupted, extra, needle, capsys):
+    out, _, _ = interrupted
+    args = ["map", "--resume", str(out)] + [a for a in extra if a != "MAP.yaml"]
+    if "MAP.yaml" in extra:
+        args.insert(1, "some_map.yaml")
+    assert main(args) == 2
+    assert needle in capsys.readouterr().err
+
+
+def test_resume_of_a_folder_without_resume_file(tmp_path, capsys):
+    assert main(["map", "--resume", str(tmp_path)]) == 2
+    assert "no resume file here" in capsys.readouterr().err
