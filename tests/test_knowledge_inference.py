@@ -14,7 +14,7 @@ from semmap_pp.knowledge.evidence import ground_facts
 from semmap_pp.knowledge.ground import FRAME, ground
 from semmap_pp.knowledge.exact import JunctionTree
 from semmap_pp.knowledge.map import map_clingo, map_rc2
-from semmap_pp.knowledge.mcsat import ClauseTemplate
+from semmap_pp.knowledge.mcsat import ClauseStack, ClauseTemplate
 from semmap_pp.knowledge.mcsat_tree import BatchTree, pick
 
 RULE_FILES = ["rules/table3.lp", "rules/halls_to_corridors.lp", "rules/none.lp"]
@@ -210,7 +210,7 @@ def test_equal_clauses_merge_and_inert_clauses_drop():
     assert t.k == 1
     # kept together with probability 1 - e^-(w_a + w_b): outcome 1 of the alias table (slot i
     # keeps i with probability q[i], else gives alias[i])
-    (_c0, n, cut, alias), = t.chunks[0]
+    (_c0, n, cut, alias), = ClauseStack([t]).chunks[0]
     q = cut - np.arange(n)
     outcome = (q + np.bincount(alias, weights=1 - q, minlength=n)) / n
     assert abs(outcome[1] - (1 - np.exp(-1.5))) < 1e-12
@@ -221,22 +221,28 @@ def test_equal_clauses_merge_and_inert_clauses_drop():
 
 def test_count_table_matches_the_direct_count(monkeypatch):
     rng = np.random.default_rng(5)
-    # scope (3 states) x private atoms (2 states); hard forbids (2, 1)
+    # scope (3 states) x private atoms (2 states); hard forbids (2, 1); two templates stacked
     hard = np.ones(6, dtype=bool)
     hard[5] = False
-    viol = rng.random((5, 6)) < 0.4
-    with_lut = ClauseTemplate((3,), 2, hard, viol, [800, 1200, 300, 2000, 50])
+    viols = [rng.random((5, 6)) < 0.4, rng.random((3, 6)) < 0.5]
+    weights = [[800, 1200, 300, 2000, 50], [400, 900, 1500]]
+    tpls = [ClauseTemplate((3,), 2, hard, v, w) for v, w in zip(viols, weights)]
+    with_lut = ClauseStack(tpls)
     monkeypatch.setattr(mcsat, "LUT_BITS", 0)
-    direct = ClauseTemplate((3,), 2, hard, viol, [800, 1200, 300, 2000, 50])
+    direct = ClauseStack(tpls)
     assert with_lut.lut is not None and direct.lut is None
+    tids = np.array([0, 1, 1, 0])
+    off = with_lut.offsets(tids)
     words = [rng.integers(0, 1 << with_lut.k, size=(4, 7))]
-    np.testing.assert_array_equal(with_lut.counts(words, 4, 7), direct.counts(words, 4, 7))
-    # the direct count by hand for one word
-    w = int(words[0][1, 2])
-    bits = with_lut.masks[0]
-    hand = [sum(bool(hard.reshape(3, 2)[s, a]) and not (int(bits[a, s]) & w)
-                for a in range(bits.shape[0])) for s in range(3)]
-    assert direct.counts(words, 4, 7)[:, 1, 2].tolist() == hand
+    np.testing.assert_array_equal(with_lut.counts(words, 4, 7, off),
+                                  direct.counts(words, 4, 7, off))
+    # the count by hand for instance 1 (template 1) in chain 2: bit c of the word keeps the
+    # template's (merged) clause c
+    w, t = int(words[0][1, 2]), tpls[1]
+    hand = [sum(bool(hard.reshape(3, 2)[s, a]) and not any(
+        t.viol[c, a, s] and (w >> c) & 1 for c in range(t.k)) for a in range(2))
+        for s in range(3)]
+    assert direct.counts(words, 4, 7, off)[:, 1, 2].tolist() == hand
 
 
 def test_slice_draw_is_uniform_over_the_solutions():

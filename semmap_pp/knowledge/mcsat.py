@@ -64,7 +64,7 @@ def _alias(prob):
 
 
 class ClauseTemplate:
-    """The clauses of one kind of block, compiled for batched MC-SAT.
+    """The clauses of one kind of block (hard allowed states, merged soft clauses).
 
     Parameters
     ----------
@@ -107,44 +107,94 @@ class ClauseTemplate:
             if 0 < n_bad < n_live:
                 key = t.tobytes()
                 merged[key] = (t, merged.get(key, (t, 0))[1] + int(w))
-        viol = np.array([t for t, _ in merged.values()], dtype=bool).reshape(-1, A, S)
-        k = len(viol)
-        self.k = k
-        keep_p = keep_probability([w for _, w in merged.values()])
+        self.viol = np.array([t for t, _ in merged.values()], dtype=bool).reshape(-1, A, S)
+        self.k = len(self.viol)
+        self.keep_p = keep_probability([w for _, w in merged.values()])
         # weights of the states by this block's clauses alone (a chain's starting distribution)
         finite = np.where(self.hard, cost, np.inf)
         low = finite.min() if np.isfinite(finite).any() else 0.0
         self.prior = np.where(self.hard, np.exp(-(cost - low) / WEIGHT_SCALE), 0.0).sum(axis=0)
-        # masks[w][a, s]: bit c set when clause 62 w + c is violated; the first word also has
-        # bit 62 set where the hard clauses forbid (a, s), so "allowed" is one test
+        self.aux_on = None if aux_on is None else np.asarray(aux_on, dtype=bool)[live]
+        self._alias: dict = {}
+
+    def stack_key(self):
+        """Templates with equal keys can share one :class:`ClauseStack`."""
+        on = None if self.aux_on is None else self.aux_on.tobytes()
+        return (self.shape, self.n_aux, on, self.k <= WORD_BITS)
+
+    def alias(self, c0, width):
+        """Alias table ``(i + q, alias)`` of the keep coins of clauses ``c0 .. c0+width-1``."""
+        hit = self._alias.get((c0, width))
+        if hit is None:
+            p = np.zeros(width)
+            part = self.keep_p[c0:c0 + width]
+            p[:len(part)] = part                      # clauses beyond k: never kept
+            outcomes = np.arange(1 << width)
+            on = ((outcomes[:, None] >> np.arange(width)) & 1).astype(bool)
+            q, alias = _alias(np.where(on, p, 1.0 - p).prod(axis=1))
+            hit = self._alias[(c0, width)] = (outcomes + q, alias)
+        return hit
+
+
+class ClauseStack:
+    """Clause templates of one shape compiled together for batched MC-SAT.
+
+    Each instance of a block names its template; tables are laid side by side so that one
+    gather serves every template: clause masks ``(A, T*S)``, alias tables ``T*n`` and count
+    tables ``(S, T * 2^k)``, read at offsets ``tid * S``, ``tid * n`` and ``tid << k``.
+    """
+
+    def __init__(self, templates):
+        t0 = templates[0]
+        self.templates = templates
+        self.shape, self.n_states, self.n_aux = t0.shape, t0.n_states, t0.n_aux
+        self.aux_on = t0.aux_on
+        T, S, A = len(templates), self.n_states, self.n_aux
+        self.T = T
+        k = max(t.k for t in templates)
+        self.k = k
+        hard = np.concatenate([t.hard for t in templates], axis=1)              # (A, T*S)
+        self.prior = np.array([t.prior for t in templates])                     # (T, S)
+        # masks[w][a, tid * S + s]: bit c set when clause 62 w + c of template tid is violated;
+        # the first word also has bit 62 set where the hard clauses forbid (a, s)
         self.masks, self.chunks = [], []
         for w0 in range(0, max(k, 1), WORD_BITS):
             n = min(WORD_BITS, k - w0)
-            bits = np.int64(1) << np.arange(n, dtype=np.int64)
-            mask = np.bitwise_or.reduce(np.where(viol[w0:w0 + n], bits[:, None, None],
-                                                 np.int64(0)), axis=0) if n else \
-                np.zeros((A, S), dtype=np.int64)
+            bits = np.int64(1) << np.arange(max(n, 0), dtype=np.int64)
+            parts = []
+            for t in templates:
+                v = t.viol[w0:w0 + n]
+                parts.append(np.bitwise_or.reduce(
+                    np.where(v, bits[:len(v), None, None], np.int64(0)), axis=0)
+                    if len(v) else np.zeros((A, S), dtype=np.int64))
+            self.masks.append(np.concatenate(parts, axis=1))
             chunks = []
             for c0 in range(0, n, CHUNK_BITS):
-                p = keep_p[w0 + c0:w0 + min(n, c0 + CHUNK_BITS)]
-                outcomes = np.arange(1 << len(p))
-                on = ((outcomes[:, None] >> np.arange(len(p))) & 1).astype(bool)
-                q, alias = _alias(np.where(on, p, 1.0 - p).prod(axis=1))
-                chunks.append((c0, len(outcomes), outcomes + q, alias))
-            self.masks.append(mask)
+                width = min(CHUNK_BITS, n - c0)
+                tables = [t.alias(w0 + c0, width) for t in templates]
+                chunks.append((c0, 1 << width, np.concatenate([c for c, _ in tables]),
+                               np.concatenate([a for _, a in tables])))
             self.chunks.append(chunks)
-        self.masks[0] = np.where(self.hard, self.masks[0], self.masks[0] | _HARD_BIT)
-        self.aux_on = None if aux_on is None else np.asarray(aux_on, dtype=bool)[live]
+        self.masks[0] = np.where(hard, self.masks[0], self.masks[0] | _HARD_BIT)
+        self.hard = hard
         self.lut = None
-        if len(self.masks) == 1 and k <= LUT_BITS and S << k <= LUT_ENTRIES:
+        if len(self.masks) == 1 and k <= LUT_BITS and (T * S) << k <= LUT_ENTRIES:
             words = np.arange(1 << k, dtype=np.int64) | _HARD_BIT
-            dtype = np.uint8 if A < 256 else np.float32
-            table = np.zeros((S, len(words)), dtype=dtype)
-            for a in range(A):
-                table += (self.masks[0][a][:, None] & words[None, :]) == 0
+            table = np.zeros((S, T << k), dtype=np.uint8 if A < 256 else np.float32)
+            for tid in range(T):
+                m = self.masks[0][:, tid * S:(tid + 1) * S]
+                for a in range(A):
+                    table[:, tid << k:(tid + 1) << k] += (m[a][:, None] & words[None, :]) == 0
             self.lut = table
 
-    def draw_words(self, rng, shape):
+    def offsets(self, tids):
+        """Per-instance offsets ``(states, alias, count table)`` for template ids ``tids``."""
+        if self.T == 1:
+            return None
+        t = np.asarray(tids, dtype=np.int64)[:, None]
+        return t * self.n_states, t, t << self.k
+
+    def draw_words(self, rng, shape, off):
         """Independent keep coins of every clause, packed in words: list of int64 ``shape``."""
         out = []
         for chunks in self.chunks:
@@ -153,52 +203,98 @@ class ClauseTemplate:
                 # alias method: slot i = floor(u n) keeps i if the fraction is below q[i]
                 u = rng.random(shape) * n
                 i = u.astype(np.int64)
-                word |= np.where(u < cut[i], i, alias[i]) << c0
+                j = i if off is None else i + off[1] * n
+                word |= np.where(u < cut[j], i, alias[j]) << c0
             out.append(word)
         return out
 
-    def kept(self, rng, s, aux):
+    def kept(self, rng, s, aux, off):
         """Kept-clause words ``(I, B)``: the coin came up and the clause holds at ``(aux, s)``."""
-        return [w & ~m[aux, s] for w, m in zip(self.draw_words(rng, s.shape), self.masks)]
+        cell = s if off is None else s + off[0]
+        return [w & ~m[aux, cell] for w, m in zip(self.draw_words(rng, s.shape, off), self.masks)]
 
-    def counts(self, kept, n_inst, B):
+    def counts(self, kept, n_inst, B, off):
         """Allowed private assignments per scope state, ``(S, I, B)`` float32."""
+        S = self.n_states
         if kept is None:
-            ok = (self.masks[0] & _HARD_BIT) == 0
-            return np.broadcast_to(ok.sum(axis=0, dtype=np.float32)[:, None, None],
-                                   (self.n_states, n_inst, B))
+            ok = ((self.masks[0] & _HARD_BIT) == 0).sum(axis=0, dtype=np.float32)  # (T*S,)
+            rows = ok.reshape(self.T, S)[np.zeros(n_inst, dtype=np.int64) if off is None
+                                         else off[1][:, 0]].T
+            return np.broadcast_to(rows[:, :, None], (S, n_inst, B))
         if self.lut is not None:   # a uint8 gather is fast; products need float32
-            return self.lut.take(kept[0], axis=1).astype(np.float32)
+            word = kept[0] if off is None else kept[0] + off[2]
+            return self.lut.take(word, axis=1).astype(np.float32)
+        tid = np.zeros(n_inst, dtype=np.int64) if off is None else off[1][:, 0]
         ok = None
         for w, (mask, word) in enumerate(zip(self.masks, kept)):
             word = word | _HARD_BIT if w == 0 else word
-            t = (mask[:, :, None, None] & word[None, None]) == 0
+            m = mask.reshape(self.n_aux, self.T, S)[:, tid]                     # (A, I, S)
+            t = (m.transpose(0, 2, 1)[:, :, :, None] & word[None, None]) == 0     # (A, S, I, B)
             ok = t if ok is None else ok & t
         return ok.sum(axis=0, dtype=np.float32)
 
-    def allowed_at(self, kept, s):
+    def allowed_at(self, kept, s, off):
         """Allowed private states ``(A, I, B)`` at the drawn scope states ``s`` ``(I, B)``."""
+        cell = s if off is None else s + off[0]
         ok = None
         for w, (mask, word) in enumerate(zip(self.masks, kept)):
             word = word | _HARD_BIT if w == 0 else word
-            t = (mask[:, s] & word) == 0
+            t = (mask[:, cell] & word) == 0
             ok = t if ok is None else ok & t
         return ok
+
+    def start_counts(self, n_inst, B, off):
+        """Weights of the scope states by each template's clauses alone, ``(S, I, B)``."""
+        tid = np.zeros(n_inst, dtype=np.int64) if off is None else off[1][:, 0]
+        return np.broadcast_to(self.prior[tid].T.astype(np.float32)[:, :, None],
+                               (self.n_states, n_inst, B))
 
 
 @dataclass(frozen=True)
 class ClauseBlock:
-    """Instances of one clause template.
+    """Instances of the templates of one :class:`ClauseStack`.
 
     Attributes
     ----------
-    template : ClauseTemplate
+    stack : ClauseStack
     scopes : ndarray of int, shape (I, r)
-        Junction-tree variables of each instance, in the template's axis order.
+        Junction-tree variables of each instance, in the templates' axis order.
+    tids : ndarray of int, shape (I,)
+        Template of each instance (an index into ``stack.templates``).
     """
 
-    template: ClauseTemplate
+    stack: ClauseStack
     scopes: np.ndarray
+    tids: np.ndarray
+
+
+def stack_blocks(instances, cache=None):
+    """Blocks from ``[(template, scope), ...]``: one per group of stackable templates.
+
+    Returns the blocks and, per block, the positions in ``instances`` of its instances.
+    ``cache`` (a dict) keeps compiled stacks by their templates, for reuse across calls.
+    """
+    groups: dict = {}
+    for pos, (tpl, _scope) in enumerate(instances):
+        key = tpl.stack_key()
+        if not key[-1]:
+            key = key + (id(tpl),)      # more than one word of clauses: a stack of its own
+        groups.setdefault(key, []).append(pos)
+    blocks = []
+    for members in groups.values():
+        templates = sorted({id(instances[m][0]): instances[m][0] for m in members}.values(),
+                           key=id)
+        tid = {id(t): i for i, t in enumerate(templates)}
+        key = tuple(tid)
+        stack = None if cache is None else cache.get(key)
+        if stack is None:
+            stack = ClauseStack(templates)
+            if cache is not None:
+                cache[key] = stack
+        blocks.append(ClauseBlock(
+            stack, np.array([instances[m][1] for m in members], dtype=np.int64),
+            np.array([tid[id(instances[m][0])] for m in members], dtype=np.int64)))
+    return blocks, list(groups.values())
 
 
 def blocks_from_network(net) -> list[ClauseBlock]:
@@ -217,12 +313,12 @@ def blocks_from_network(net) -> list[ClauseBlock]:
     for scope, (bad, soft) in by_scope.items():
         key = (bad.shape, bad.tobytes(), tuple((t.tobytes(), w) for t, w in soft))
         groups.setdefault(key, (bad, soft, []))[2].append(scope)
-    blocks = []
+    instances = []
     for bad, soft, scopes in groups.values():
         viol = np.array([t.reshape(-1) for t, _ in soft], dtype=bool).reshape(len(soft), bad.size)
         tpl = ClauseTemplate(bad.shape, 1, ~bad.reshape(-1), viol, [w for _, w in soft])
-        blocks.append(ClauseBlock(tpl, np.array(scopes, dtype=np.int64)))
-    return blocks
+        instances.extend((tpl, scope) for scope in scopes)
+    return stack_blocks(instances)[0]
 
 
 def _strides(shape):
@@ -253,7 +349,7 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
     marg : list of ndarray
         Estimated distribution of each junction-tree variable.
     aux : list of ndarray or None
-        Per block whose template has ``aux_on``: estimated probability of the reported private
+        Per block whose templates have ``aux_on``: estimated probability of the reported private
         atom of each instance.
     """
     card = [int(c) for c in card]
@@ -264,10 +360,11 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
     if jt is None:
         jt = JunctionTree(card, [tuple(int(v) for v in s) for blk in blocks for s in blk.scopes],
                           path)
-    tpls = [blk.template for blk in blocks]
+    stacks = [blk.stack for blk in blocks]
+    offs = [st.offsets(blk.tids) for st, blk in zip(stacks, blocks)]
     sizes = [len(blk.scopes) for blk in blocks]
-    strides = [_strides(t.shape) for t in tpls]
-    tree = BatchTree(card, [blk.scopes for blk in blocks], jt, B, [t.n_aux for t in tpls])
+    strides = [_strides(st.shape) for st in stacks]
+    tree = BatchTree(card, [blk.scopes for blk in blocks], jt, B, [st.n_aux for st in stacks])
 
     def scope_states(x):
         out = []
@@ -285,13 +382,12 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
 
     def allowed_at(kept, states):
         """Allowed private states of blocks that have them (None for the others)."""
-        return [None if t.n_aux == 1 else t.allowed_at(k, s)
-                for t, k, s in zip(tpls, kept, states)]
+        return [None if st.n_aux == 1 else st.allowed_at(k, s, o)
+                for st, k, s, o in zip(stacks, kept, states, offs)]
 
     # start: a world of the hard clauses weighted by the single-variable clauses alone
-    start = [np.broadcast_to(t.prior.astype(np.float32)[:, None, None], (t.n_states, n, B))
-             if blk.scopes.shape[1] == 1 else t.counts(None, n, B)
-             for t, n, blk in zip(tpls, sizes, blocks)]
+    start = [st.start_counts(n, B, o) if blk.scopes.shape[1] == 1 else st.counts(None, n, B, o)
+             for st, n, blk, o in zip(stacks, sizes, blocks, offs)]
     if not tree.upward(start, check=True):
         raise RuleError(path, _NO_WORLD)
     x = tree.sample(rng)
@@ -299,11 +395,11 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
     aux = draw_aux(allowed_at([[np.zeros(s.shape, dtype=np.int64)] for s in states], states),
                    states)
     marg = [np.zeros((c, B)) for c in card]
-    aux_sum = [None if t.aux_on is None else np.zeros((n, B)) for t, n in zip(tpls, sizes)]
-    aux_on = [None if t.aux_on is None else np.flatnonzero(t.aux_on) for t in tpls]
+    aux_sum = [None if st.aux_on is None else np.zeros((n, B)) for st, n in zip(stacks, sizes)]
+    aux_on = [None if st.aux_on is None else np.flatnonzero(st.aux_on) for st in stacks]
     for it in range(n_iter):
-        kept = [t.kept(rng, s, a) for t, s, a in zip(tpls, states, aux)]
-        counts = [t.counts(k, n, B) for t, k, n in zip(tpls, kept, sizes)]
+        kept = [st.kept(rng, s, a, o) for st, s, a, o in zip(stacks, states, aux, offs)]
+        counts = [st.counts(k, n, B, o) for st, k, n, o in zip(stacks, kept, sizes, offs)]
         tree.upward(counts)
         x = tree.sample(rng, marg if it >= burn_in else None)
         states = scope_states(x)

@@ -23,7 +23,7 @@ from semmap_pp.knowledge.dialect import SOFT_PREDICATES, RuleSet
 from semmap_pp.knowledge.evidence import Evidence
 from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.local import LocalModel, _pattern_evidence, _unit_key
-from semmap_pp.knowledge.mcsat import ClauseBlock, ClauseTemplate, run_mcsat
+from semmap_pp.knowledge.mcsat import ClauseTemplate, run_mcsat, stack_blocks
 
 
 def _expand(scope, table, order, card):
@@ -57,6 +57,7 @@ class LocalClauses:
         self._units: dict = {}
         self._unit_raw: dict = {}
         self._pairs: dict = {}
+        self._stacks: dict = {}
 
     def _unit_clauses(self, key):
         hit = self._unit_raw.get(key)
@@ -111,26 +112,20 @@ class LocalClauses:
         return hit
 
     def blocks(self, ev: Evidence):
-        """Cardinalities of the unit super-states, clause blocks, and the pairs of each block."""
+        """Cardinalities of the unit super-states, clause blocks, and per block the pair
+        ``(p, q)`` (or None for a unit) of each instance."""
         maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
         keys = [_unit_key(maps, u) for u in ev.units]
         index = {u: i for i, u in enumerate(ev.units)}
-        by_unit: dict = {}
-        for i, key in enumerate(keys):
-            by_unit.setdefault(key, []).append(i)
-        by_pair: dict = {}
-        for p, q in ev.adj:
-            by_pair.setdefault((keys[index[p]], keys[index[q]]), []).append((p, q))
         card = [self.unit(key).n_states for key in keys]
-        blocks, pairs = [], []
-        for key, members in by_unit.items():
-            blocks.append(ClauseBlock(self.unit(key), np.array([[i] for i in members])))
-            pairs.append(None)
-        for (kp, kq), members in by_pair.items():
-            scopes = np.array([[index[p], index[q]] for p, q in members])
-            blocks.append(ClauseBlock(self.pair(kp, kq), scopes))
-            pairs.append(members)
-        return card, blocks, pairs
+        instances = [(self.unit(key), [i]) for i, key in enumerate(keys)]
+        labels = [None] * len(keys)
+        for p, q in ev.adj:
+            instances.append((self.pair(keys[index[p]], keys[index[q]]), [index[p], index[q]]))
+            labels.append((p, q))
+        # templates of one shape share a block; compiled stacks are cached by their templates
+        blocks, members = stack_blocks(instances, self._stacks)
+        return card, blocks, [[labels[m] for m in ms] for ms in members]
 
 
 def _template(shape, n_aux, allowed, soft, aux_on=None):
@@ -156,7 +151,7 @@ def mcsat_local(clauses: LocalClauses, ev: Evidence, rng, n_chains, n_iter, burn
     types : dict int -> ndarray (4,)
     sale : dict (p, q) -> float
     """
-    card, blocks, pairs = clauses.blocks(ev)
+    card, blocks, labels = clauses.blocks(ev)
     marg, aux = run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, clauses.rules.path, jt)
     types = {}
     for i, u in enumerate(ev.units):
@@ -164,8 +159,8 @@ def mcsat_local(clauses: LocalClauses, ev: Evidence, rng, n_chains, n_iter, burn
         p.setflags(write=False)
         types[u] = p
     sale = {}
-    for members, est in zip(pairs, aux):
-        if members is not None:
-            for pq, e in zip(members, est):
+    for members, est in zip(labels, aux):
+        for pq, e in zip(members, est if est is not None else [0.0] * len(members)):
+            if pq is not None:
                 sale[pq] = float(e)
     return types, {pq: sale[pq] for pq in ev.adj}
