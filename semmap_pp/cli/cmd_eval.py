@@ -13,8 +13,8 @@
   room / corridor accuracy of the unit types painted over labels.png
   (:func:`semmap_pp.evaluate.type_accuracy`).
 
-Any other PNG is read as a segmentation when it holds only black and white, as place types when it
-holds the ipa type grey levels. Prints a table, or one JSON object with ``--json``. docs/evaluation.md
+Any other PNG is read as place types when it holds nothing but the ipa type grey levels (0, 77,
+115, 179, 255), else as a segmentation when it has white (room) cells. Prints a table, or one JSON object with ``--json``. docs/evaluation.md
 defines every score.
 """
 
@@ -46,7 +46,9 @@ def register(subparsers) -> None:
 
 def detect_kind(truth: Path) -> str:
     """Which kind of truth ``truth`` is (see the module docstring)."""
-    from semmap_pp.evaluate.io import read_image
+    from semmap_pp.evaluate.io import IPA_TYPE_PIXELS, IPA_WHITE_ABOVE, read_image
+
+    IPA_TYPE_LEVELS = set(IPA_TYPE_PIXELS) | {255}
 
     if truth.is_dir():
         if (truth / "truth.json").is_file():
@@ -63,11 +65,11 @@ def detect_kind(truth: Path) -> str:
         return "ipa-types"
     image = np.asarray(read_image(truth))
     grey = image if image.ndim == 2 else image[..., :3].mean(axis=-1)
-    values = set(np.unique(grey).astype(int).tolist())
-    if values & {77, 115, 179}:
-        return "ipa-types"
-    if values <= {0, 255}:
-        return "ipa-segmentation"
+    values = set(np.unique(grey).tolist())
+    if values <= IPA_TYPE_LEVELS and values & {77, 115}:
+        return "ipa-types"           # nothing but the place-type grey levels
+    if (grey > IPA_WHITE_ABOVE).any():
+        return "ipa-segmentation"    # white rooms (anti-aliased edges give other greys)
     raise MapError(truth, "cannot tell what this truth is (expected truth.json, *_gt_segmentation.png "
                           "or training_*.png; use --kind)")
 
