@@ -215,7 +215,10 @@ def knowledge_evidence(units, items, muldoor, adj):
     ``items`` their :func:`unit_geometry` values, ``muldoor`` the sorted units with multiple
     doors, ``adj`` the sorted pairs ``(p, q)``, ``p < q``.
     """
-    from semmap_pp.knowledge.evidence import Evidence as KEvidence  # imports clingo
+    global _KEvidence
+    if _KEvidence is None:
+        from semmap_pp.knowledge.evidence import Evidence as KEvidence  # imports clingo
+        _KEvidence = KEvidence
     lists = ([], [], [])
     for u, (c, soft) in zip(units, items):
         if soft is None:
@@ -224,8 +227,11 @@ def knowledge_evidence(units, items, muldoor, adj):
             for lst, p in zip(lists, soft):
                 if p > 0.0:
                     lst.append((u, p))
-    return KEvidence(tuple(units), tuple(lists[ROLIKE]), tuple(lists[COLIKE]),
-                     tuple(lists[HALIKE]), tuple((u, 1.0) for u in muldoor), tuple(adj))
+    return _KEvidence(tuple(units), tuple(lists[ROLIKE]), tuple(lists[COLIKE]),
+                      tuple(lists[HALIKE]), tuple((u, 1.0) for u in muldoor), tuple(adj))
+
+
+_KEvidence = None   # semmap_pp.knowledge.evidence.Evidence, imported on first use (clingo)
 
 
 class Result(Protocol):

@@ -34,6 +34,7 @@ import numpy as np
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
+from semmap_pp.derive.doors import door_count
 from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_class,
                                 geometry_class_compiled, knowledge_evidence, unit_geometry)
 from semmap_pp.likelihood import (covered_free, full_tallies, loglik_from_tallies, prepare,
@@ -127,13 +128,12 @@ class Posterior:
 
     def pair_doors(self, rp, rq) -> int:
         """Number of doors between two rectangles (cached per pair)."""
-        from semmap_pp.derive.doors import doors_between
-        key = (tuple(int(v) for v in rp), tuple(int(v) for v in rq))
+        key = (*np.asarray(rp).tolist(), *np.asarray(rq).tolist())
         k = self._door_cache.get(key)
         if k is None:
             if len(self._door_cache) > 200_000:
                 self._door_cache.clear()
-            k = len(doors_between(self.frame.classes, rp, rq, self.cells))
+            k = door_count(self.frame.classes, rp, rq, self.cells)
             self._door_cache[key] = k
         return k
 

@@ -224,3 +224,26 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels():
     assert checked["proposals"] >= 300 and checked["soft"] > 0
     assert checked["other_type_changes"] > 0     # knowledge retyped a unit the kernel left alone
     assert W.n_units(tr.world) >= 2
+
+
+def test_pair_doors_equal_the_door_detector():
+    """The compiled, cached door count of a pair equals ``len(doors_between(...))``, in both
+    orders, for pairs around the true rooms of a floor (doors present) and random pairs."""
+    from semmap_pp.derive.doors import doors_between
+
+    post = Posterior(build_frame_from_classes(knowledge_floor(), 0.25, MODEL, theta=0.0), MODEL)
+    rng = np.random.default_rng(12)
+    truth = [(1, 1, 19, 27), (1, 25, 19, 51), (18, 1, 28, 99), (26, 1, 67, 99)]
+    seen = set()
+    for _ in range(400):
+        if rng.random() < 0.7:
+            i, j = rng.choice(len(truth), 2, replace=False)
+            rp = np.array(truth[i]) + rng.integers(-2, 3, 4)
+            rq = np.array(truth[j]) + rng.integers(-2, 3, 4)
+        else:
+            rp, rq = (np.array(random_rect(rng, post.frame.shape, lo=4)) for _ in range(2))
+        for a, b in ((rp, rq), (rq, rp)):
+            expected = len(doors_between(post.frame.classes, a, b, post.cells))
+            assert post.pair_doors(a.astype(np.int32), b.astype(np.int32)) == expected
+            seen.add(expected)
+    assert {0, 1} <= seen and max(seen) >= 2

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from semmap_pp.cells import FREE
@@ -123,3 +124,62 @@ def find_doors(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
     for i, j in zip(*np.nonzero(np.triu(np.asarray(adj, bool), 1))):
         out += doors_between(classes, rects[i], rects[j], cells, int(slots[i]), int(slots[j]))
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover - compiled
+    """``len(doors_between(...))`` compiled: the same strip, lines and widths."""
+    col_gap = max(rp[1], rq[1]) - min(rp[3], rq[3])
+    row_gap = max(rp[0], rq[0]) - min(rp[2], rq[2])
+    vertical = col_gap >= row_gap
+    a, b = (1, 0) if vertical else (0, 1)
+    if rp[a] <= rq[a]:
+        left, right = rp, rq
+    else:
+        left, right = rq, rp
+    lo = min(left[a + 2] - wall, right[a])
+    hi = max(left[a + 2], right[a] + wall)
+    s0 = max(rp[b], rq[b]) + wall
+    s1 = min(rp[b + 2], rq[b + 2]) - wall
+    if s1 <= s0 or hi <= lo:
+        return 0
+    if vertical:
+        r0, c0, r1, c1 = s0, lo, s1, hi
+    else:
+        r0, c0, r1, c1 = lo, s0, hi, s1
+    H, W = classes.shape
+    a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
+    if a0 >= a1 or b0 >= b1:
+        return 0
+    if vertical:
+        if (b1 - b0) != (c1 - c0):
+            return 0
+        n_lines, n_across = a1 - a0, b1 - b0
+    else:
+        if (a1 - a0) != (r1 - r0):
+            return 0
+        n_lines, n_across = b1 - b0, a1 - a0
+    count = 0
+    run = 0
+    for k in range(n_lines + 1):
+        is_open = False
+        if k < n_lines:
+            is_open = True
+            for m in range(n_across):
+                v = classes[a0 + k, b0 + m] if vertical else classes[a0 + m, b0 + k]
+                if v != FREE:
+                    is_open = False
+                    break
+        if is_open:
+            run += 1
+        else:
+            if run > 0 and door_min <= run <= door_max:
+                count += 1
+            run = 0
+    return count
+
+
+def door_count(classes: np.ndarray, rp, rq, cells) -> int:
+    """``len(doors_between(classes, rp, rq, cells))``, compiled (the sampler's hot path)."""
+    return int(_door_count(classes, np.asarray(rp, np.int64), np.asarray(rq, np.int64),
+                           int(cells.wall), int(cells.door_min), int(cells.door_max)))
