@@ -84,14 +84,18 @@ class SampleResult(NamedTuple):
 class _Recorder:
     """``pm.sample``'s per-draw callback: keeps the real draws, reports progress, ends a stop.
 
-    Runs in the main process for sequential and parallel chains alike. When the stop flag is set it
-    ends ``pm.sample`` (a KeyboardInterrupt, which PyMC turns into a clean end) once the chains
-    that have begun have their ``min_draws``, or a chain reports that it stopped.
+    Runs in the main process for sequential and parallel chains alike. A KeyboardInterrupt raised
+    here is PyMC's documented way to end sampling cleanly: with sequential chains it ends the
+    current chain (PyMC goes on with the next), in parallel it ends them all. So a sequential chain
+    that reports it stopped is ended at once (no empty draws), and when the stop flag is set the
+    parallel chains are ended once those that have begun have their ``min_draws``. A parallel chain
+    stopped by its budget while others still run makes empty draws (PyMC's cost per draw) instead.
     """
 
-    def __init__(self, chains: int, callback, stop, min_draws: int):
+    def __init__(self, chains: int, callback, stop, min_draws: int, sequential: bool):
         self.draws = [[] for _ in range(chains)]
         self.callback, self.stop, self.min_draws = callback, stop, min_draws
+        self.sequential = sequential
 
     def __call__(self, trace=None, draw=None):
         from semmap_pp.step import draw_info
@@ -103,6 +107,8 @@ class _Recorder:
                                   np.asarray(draw.point["active"]) > 0))
         if self.callback is not None:
             self.callback(draw_info(stats))
+        if stats["stopped"] and self.sequential:
+            raise KeyboardInterrupt  # PyMC ends this chain (keeping what it recorded) and starts the next
         if self.stop is not None and self.stop():
             begun = [len(d) for d in self.draws if d]
             if stats["stopped"] or all(n >= self.min_draws for n in begun):
@@ -182,7 +188,7 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     if budget is not None:
         deadline = time.time() + budget
         chain_seconds = budget * min(cores, chains) / chains
-    recorder = _Recorder(chains, callback, stop, min_draws)
+    recorder = _Recorder(chains, callback, stop, min_draws, sequential=not (cores > 1 and chains > 1))
     trace = None
     with model, warnings.catch_warnings():
         # We want the MultiTrace with the burn-in kept (W* may be found while annealing).

@@ -96,6 +96,9 @@ class Progress:
         total = info["total"] if info["total"] >= 0 else "?"
         left = self.seconds_left()
         left_s = "?" if not math.isfinite(left) else f"~{left:.1f} s left"
+        if info["stopped"]:
+            return (f"chain {info['chain'] + 1}/{self.chains} stopped after {info['draw']} draws"
+                    f" | best log p {info['best_logp']:.1f} | {self.elapsed():.1f} s")
         cpr = "-" if math.isnan(info["cpr"]) else f"{info['cpr']:.3f}"
         return (f"chain {info['chain'] + 1}/{self.chains} {info['phase']} draw {info['draw'] + 1}/{total}"
                 f" | log p {info['logp']:.1f} | units {info['n_units']} | CPR {cpr}"
