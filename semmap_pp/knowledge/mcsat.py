@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from semmap_pp.errors import RuleError
@@ -46,6 +47,57 @@ _HARD_BIT = np.int64(1) << np.int64(WORD_BITS)   # marks (scope, private) states
 def keep_probability(weights) -> np.ndarray:
     """``1 - e^-w`` for weights ``w`` in thousandths (the rule files' integers)."""
     return -np.expm1(-np.asarray(weights, dtype=np.float64) / WEIGHT_SCALE)
+
+
+@numba.njit(cache=True, nogil=True)
+def _alias_draw(u, n, cut, alias, tid, shift, word):
+    """Alias method: slot ``i = floor(u n)`` keeps ``i`` if the fraction is below ``q[i]``."""
+    I, B = u.shape
+    for r in range(I):
+        base = tid[r] * n
+        for b in range(B):
+            v = u[r, b] * n
+            i = int(v)
+            j = base + i
+            word[r, b] |= (i if v < cut[j] else alias[j]) << shift
+
+
+@numba.njit(cache=True, nogil=True)
+def _drop_violated(word, mask, aux, cell):
+    """Clear the bits of clauses the current state ``(aux, cell)`` violates (never kept)."""
+    I, B = word.shape
+    for r in range(I):
+        for b in range(B):
+            word[r, b] &= ~mask[aux[r, b], cell[r, b]]
+
+
+@numba.njit(cache=True, nogil=True)
+def _draw_private(mask, hard_bit, cell, word, u, on, aux, est, acc):
+    """Private state drawn uniformly among the allowed ones at the drawn scope state, and
+    (with ``acc``) the fraction of them in which the reported atom holds added to ``est``."""
+    A = mask.shape[0]
+    I, B = cell.shape
+    for r in range(I):
+        for b in range(B):
+            c = cell[r, b]
+            w = word[r, b] | hard_bit
+            n = 0
+            n_on = 0
+            for a in range(A):
+                if (mask[a, c] & w) == 0:
+                    n += 1
+                    if on[a]:
+                        n_on += 1
+            target = int(u[r, b] * n)
+            seen = 0
+            for a in range(A):
+                if (mask[a, c] & w) == 0:
+                    if seen == target:
+                        aux[r, b] = a
+                        break
+                    seen += 1
+            if acc:
+                est[r, b] += n_on / n
 
 
 def _alias(prob):
@@ -196,22 +248,42 @@ class ClauseStack:
 
     def draw_words(self, rng, shape, off):
         """Independent keep coins of every clause, packed in words: list of int64 ``shape``."""
+        tid = np.zeros(shape[0], dtype=np.int64) if off is None else off[1][:, 0]
         out = []
         for chunks in self.chunks:
             word = np.zeros(shape, dtype=np.int64)
             for c0, n, cut, alias in chunks:
-                # alias method: slot i = floor(u n) keeps i if the fraction is below q[i]
-                u = rng.random(shape) * n
-                i = u.astype(np.int64)
-                j = i if off is None else i + off[1] * n
-                word |= np.where(u < cut[j], i, alias[j]) << c0
+                _alias_draw(rng.random(shape), n, cut, alias, tid, c0, word)
             out.append(word)
         return out
 
     def kept(self, rng, s, aux, off):
         """Kept-clause words ``(I, B)``: the coin came up and the clause holds at ``(aux, s)``."""
         cell = s if off is None else s + off[0]
-        return [w & ~m[aux, cell] for w, m in zip(self.draw_words(rng, s.shape, off), self.masks)]
+        words = self.draw_words(rng, s.shape, off)
+        for w, m in zip(words, self.masks):
+            _drop_violated(w, m, aux, cell)
+        return words
+
+    def draw_private(self, rng, kept, s, off, est=None):
+        """Private states ``(I, B)`` drawn uniformly among those the kept clauses allow at the
+        drawn scope states; with ``est``, add the probability of the reported atom to it."""
+        if self.n_aux == 1:
+            if est is not None:
+                est += float(self.aux_on[0])
+            return np.zeros(s.shape, dtype=np.int64)
+        u = rng.random(s.shape)
+        on = np.zeros(self.n_aux, dtype=bool) if self.aux_on is None else self.aux_on
+        cell = s if off is None else s + off[0]
+        if len(self.masks) == 1:
+            aux = np.zeros(s.shape, dtype=np.int64)
+            _draw_private(self.masks[0], _HARD_BIT, cell, kept[0], u, on, aux,
+                          np.zeros((1, 1)) if est is None else est, est is not None)
+            return aux
+        ok = self.allowed_at(kept, s, off).view(np.uint8)
+        if est is not None:
+            est += ok[on].sum(axis=0) / ok.sum(axis=0)
+        return pick(ok, u)
 
     def counts(self, kept, n_inst, B, off):
         """Allowed private assignments per scope state, ``(S, I, B)`` float32."""
@@ -375,16 +447,6 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
             out.append(s)
         return out
 
-    def draw_aux(allowed, states):
-        return [np.zeros(s.shape, dtype=np.int64) if ok is None else
-                pick(ok.view(np.uint8), rng.random(s.shape))[0].astype(np.int64)
-                for ok, s in zip(allowed, states)]
-
-    def allowed_at(kept, states):
-        """Allowed private states of blocks that have them (None for the others)."""
-        return [None if st.n_aux == 1 else st.allowed_at(k, s, o)
-                for st, k, s, o in zip(stacks, kept, states, offs)]
-
     # start: a world of the hard clauses weighted by the single-variable clauses alone
     start = [st.start_counts(n, B, o) if blk.scopes.shape[1] == 1 else st.counts(None, n, B, o)
              for st, n, blk, o in zip(stacks, sizes, blocks, offs)]
@@ -392,27 +454,18 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
         raise RuleError(path, _NO_WORLD)
     x = tree.sample(rng)
     states = scope_states(x)
-    aux = draw_aux(allowed_at([[np.zeros(s.shape, dtype=np.int64)] for s in states], states),
-                   states)
+    aux = [st.draw_private(rng, [np.zeros(s.shape, dtype=np.int64)] * len(st.masks), s, o)
+           for st, s, o in zip(stacks, states, offs)]
     marg = [np.zeros((c, B)) for c in card]
     aux_sum = [None if st.aux_on is None else np.zeros((n, B)) for st, n in zip(stacks, sizes)]
-    aux_on = [None if st.aux_on is None else np.flatnonzero(st.aux_on) for st in stacks]
     for it in range(n_iter):
         kept = [st.kept(rng, s, a, o) for st, s, a, o in zip(stacks, states, aux, offs)]
         counts = [st.counts(k, n, B, o) for st, k, n, o in zip(stacks, kept, sizes, offs)]
         tree.upward(counts)
         x = tree.sample(rng, marg if it >= burn_in else None)
         states = scope_states(x)
-        allowed = allowed_at(kept, states)
-        aux = draw_aux(allowed, states)
-        if it >= burn_in:
-            for b, (on, ok) in enumerate(zip(aux_on, allowed)):
-                if on is not None and ok is None:        # one private state: fixed
-                    aux_sum[b] += float(len(on))
-                elif on is not None:
-                    ok = ok.view(np.uint8)
-                    num = sum(ok[a] for a in on) if len(on) else np.zeros(ok.shape[1:])
-                    aux_sum[b] += num / sum(ok[a] for a in range(len(ok)))
+        aux = [st.draw_private(rng, k, s, o, est if it >= burn_in else None)
+               for st, k, s, o, est in zip(stacks, kept, states, offs, aux_sum)]
     total = (n_iter - burn_in) * B
     return ([m.sum(axis=1) / total for m in marg],
             [None if a is None else a.sum(axis=1) / total for a in aux_sum])

@@ -11,32 +11,46 @@ messages are rescaled per chain, so the counts never overflow.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 
 _LOG2_LIMIT = 60.0     # rescale messages before their entries could exceed 2^60 (float32: 2^128)
 
 
-def pick(probs, u):
-    """Inverse-CDF draw along axis 0 of ``probs`` ``(c, B)`` with uniforms ``u`` ``(B,)``.
+@numba.njit(cache=True, nogil=True)
+def _pick(probs, u, out, marg, acc):
+    c, B = probs.shape
+    for b in range(B):
+        total = 0.0
+        for j in range(c):
+            total += probs[j, b]
+        thr = u[b] * total
+        run, k = 0.0, 0
+        for j in range(c - 1):
+            run += probs[j, b]
+            if thr >= run:
+                k = j + 1
+        out[b] = k
+        if acc:
+            for j in range(c):
+                marg[j, b] += probs[j, b] / total
 
-    Returns the drawn indices and the totals ``probs.sum(axis=0)``.
 
-    Running sums are written out (``np.cumsum`` along a leading axis is slow); ``u < 1`` in
-    float64 keeps ``u * total`` below the total, so a state of zero weight (whose running sum
-    equals the previous one) is never picked.
+def pick(probs, u, marginals=None):
+    """Inverse-CDF draw along axis 0 of ``probs`` ``(c, ...)`` with uniforms ``u`` ``(...)``.
+
+    ``u < 1`` in float64 keeps ``u * total`` below the total, so a state of zero weight (whose
+    running sum equals the previous one) is never picked. With ``marginals`` (``(c, ...)``
+    float64), ``probs / total`` is added to it.
     """
     c = probs.shape[0]
-    run = [probs[0]]
-    for j in range(1, c):
-        run.append(run[-1] + probs[j])
-    if c == 1:
-        return np.zeros(probs.shape[1:], dtype=np.int64), run[-1]
-    thr = u * run[-1]
-    out = (thr >= run[0]).view(np.uint8)
-    for j in range(1, c - 1):
-        out = out + (thr >= run[j]).view(np.uint8)
-    return out, run[-1]
+    flat = np.ascontiguousarray(probs).reshape(c, -1)
+    out = np.empty(flat.shape[1], dtype=np.int64)
+    acc = marginals is not None
+    marg = marginals.reshape(c, -1) if acc else np.zeros((1, 1))
+    _pick(flat, np.ascontiguousarray(u, dtype=np.float64).reshape(-1), out, marg, acc)
+    return out.reshape(probs.shape[1:])
 
 
 def _view(perm, present):
@@ -216,7 +230,5 @@ class BatchTree:
                 if marginals is not None:
                     marginals[v] += 1.0 / c
                 continue
-            x[v], total = pick(probs, u[i])
-            if marginals is not None:
-                marginals[v] += probs / total
+            x[v] = pick(probs, u[i], None if marginals is None else marginals[v])
         return x
