@@ -4,16 +4,16 @@ The slice of an MC-SAT iteration is a network of 0/1 tables (counts, when a bloc
 private atoms); its uniform solution is drawn by forward filtering, backward sampling on the
 junction tree of :mod:`~semmap_pp.knowledge.exact`: the upward pass multiplies each clique's
 tables and its children's messages and sums out the clique's own variable, the downward pass
-draws that variable given its already drawn separator. Arrays are ``(*clique_shape, chains)``
-float32 (the chain axis last and contiguous, so every operation is one long vectorised loop);
-messages are rescaled per chain, so the counts never overflow.
+draws that variable given its already drawn separator. Arrays are ``(states, chains)`` float32
+with the chain axis last; a table whose variables lie within a larger one's is multiplied into
+it with numpy, then one compiled loop per clique counts (upward) or draws (downward) over the
+remaining few. Messages are rescaled per chain where their entries could leave float32.
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
-
 
 _LOG2_LIMIT = 60.0     # rescale messages before their entries could exceed 2^60 (float32: 2^128)
 
@@ -53,14 +53,72 @@ def pick(probs, u, marginals=None):
     return out.reshape(probs.shape[1:])
 
 
-def _view(perm, present):
-    """Transpose and ``None`` index that put a chain-last table onto chain-last clique axes."""
-    return (tuple(perm) + (len(perm),),
-            tuple(slice(None) if p else None for p in present) + (slice(None),))
+@numba.njit(cache=True, nogil=True)
+def _count(F, idx, msg, rescale):
+    """``msg[m, b] = sum_v prod_f F[idx[f, v, m], b]``, rescaled per chain if asked."""
+    n_f, c, M = idx.shape
+    B = F.shape[1]
+    tmp = np.empty(B, dtype=np.float32)
+    for m in range(M):
+        out = msg[m]
+        out[:] = 0.0
+        for v in range(c):
+            if n_f == 0:
+                out += 1.0
+                continue
+            row = F[idx[0, v, m]]
+            for b in range(B):
+                tmp[b] = row[b]
+            for f in range(1, n_f):
+                row = F[idx[f, v, m]]
+                for b in range(B):
+                    tmp[b] *= row[b]
+            for b in range(B):
+                out[b] += tmp[b]
+    if rescale:
+        for b in range(B):
+            top = np.float32(0.0)
+            for m in range(M):
+                if msg[m, b] > top:
+                    top = msg[m, b]
+            if top > 0:
+                for m in range(M):
+                    msg[m, b] /= top
+
+
+@numba.njit(cache=True, nogil=True)
+def _draw(F, idx, sep, u, out, marg, acc):
+    """Draw the clique's variable per chain given its drawn separator ``sep`` (flat)."""
+    n_f, c, M = idx.shape
+    B = u.shape[0]
+    probs = np.empty(c)
+    for b in range(B):
+        m = sep[b]
+        total = 0.0
+        for v in range(c):
+            t = 1.0
+            for f in range(n_f):
+                t *= F[idx[f, v, m], b]
+            probs[v] = t
+            total += t
+        thr = u[b] * total
+        run, k = 0.0, 0
+        for v in range(c - 1):
+            run += probs[v]
+            if thr >= run:
+                k = v + 1
+        out[b] = k
+        if acc:
+            for v in range(c):
+                marg[v, b] += probs[v] / total
 
 
 class BatchTree:
     """Upward counting and downward sampling passes over ``B`` chains.
+
+    For each clique, the tables and children's messages it holds are stacked into one
+    ``(states, B)`` array and an index map ``(factor, own state, separator state)`` into it, so
+    counting and drawing are one compiled loop per clique.
 
     Parameters
     ----------
@@ -73,6 +131,8 @@ class BatchTree:
         A tree over those scopes.
     B : int
         Number of chains.
+    table_max : list of float, optional
+        Largest entry of each block's tables (for the rescaling bound).
     """
 
     def __init__(self, card, scopes, jt, B, table_max=None):
@@ -84,85 +144,90 @@ class BatchTree:
         log_max = [np.log2(max(float(m), 1.0)) for m in (table_max or [1.0] * len(scopes))]
         bound = [0.0] * n
         self.rescale = [False] * n
-        for b_, sc in enumerate(scopes):
-            for c, *_rest in jt.assign([tuple(int(v) for v in s) for s in sc]):
-                bound[c] += log_max[b_]
+        factors = [[] for _ in range(n)]   # per clique: (kind, key, own variables, own shape)
+        for b, sc in enumerate(scopes):
+            tuples = [tuple(int(v) for v in s) for s in sc]
+            for j, (s, pl) in enumerate(zip(tuples, jt.assign(tuples))):
+                factors[pl[0]].append(("table", (b, j), s))
+                bound[pl[0]] += log_max[b]
         for i in range(n):
             bound[i] += np.log2(card[jt.order[i]])
             p = jt.parent[i]
             if p >= 0:
+                factors[p].append(("msg", i, tuple(jt.seps[i])))
                 if bound[i] > _LOG2_LIMIT:
                     self.rescale[i] = True
                 else:
                     bound[p] += bound[i]
-        factors = [[] for _ in range(n)]   # per clique: (kind, key, perm, index, axes)
-        for b, sc in enumerate(scopes):
-            tuples = [tuple(int(v) for v in s) for s in sc]
-            for j, (s, (c, perm, _shape)) in enumerate(zip(tuples, jt.assign(tuples))):
-                factors[c].append(("table", (b, j)) + _view(perm, [a in s for a in jt.axes[c]])
-                                  + (frozenset(s),))
-        for i in range(n):
-            p = jt.parent[i]
-            if p >= 0:
-                perm, _shape = jt.msg_place[i]
-                factors[p].append(("msg", i) + _view(perm, [a in jt.seps[i] for a in jt.axes[p]])
-                                  + (frozenset(jt.seps[i]),))
-        # multiply small tables into larger ones over a superset of their axes first; a group
-        # without the clique's own variable (axis 0) only scales the message
-        v_axis = [jt.order[i] for i in range(n)]
-        self.plan = []
+        # multiply each factor whose variables lie within a larger factor's into that one first
+        # (at the larger factor's size), so the compiled loops see few factors per clique
+        self.groups = []
         for i in range(n):
             groups = []
-            for f in sorted(factors[i], key=lambda f: -len(f[4])):
-                for axes, members in groups:
-                    if f[4] <= axes:
-                        members.append(f)
+            for f in sorted(factors[i], key=lambda f: -len(f[2])):
+                for g in groups:
+                    if set(f[2]) <= set(g[0][2]):
+                        g.append(f)
                         break
                 else:
-                    groups.append((f[4], [f]))
-            # groups with the clique's variable, ordered so that products grow slowly
-            rest = [g for g in groups if v_axis[i] in g[0]]
-            ordered = []
-            while rest:
-                span = frozenset().union(*(g[0] for g in ordered))
-                best = min(rest, key=lambda g: np.prod([card[a] for a in span | g[0]]))
-                ordered.append(best)
-                rest.remove(best)
-            with_v = [m for axes, m in ordered]
-            without = [m for axes, m in groups if v_axis[i] not in axes]
-            # for sampling: (variable, stride) of each separator axis a group spans
-            # sampling reads each group at the drawn separator: flat offsets of (state, chain)
-            # plus (variable, stride x B) of each separator axis the group spans
-            gather = []
-            for axes, m in ordered:
-                span, acc = [], 1
-                for a in reversed(jt.axes[i][1:]):
-                    if a in axes:
-                        span.append((a, acc * B))
-                        acc *= card[a]
-                c = card[v_axis[i]]
-                base = (np.arange(c) * (acc * B))[:, None] + np.arange(B)[None, :]
-                gather.append((span, base))
-            self.plan.append((with_v, without, gather))
-        self.sep_shapes = [tuple(card[a] for a in sep) for sep in jt.seps]
-        self.tables = [tuple(card[v] for v in sc[0]) if len(sc) else () for sc in scopes]
-        self.groups = [None] * n
+                    groups.append([f])
+            recipes = []
+            for g in groups:
+                lead = g[0][2]
+                shape = tuple(card[a] for a in lead)
+                views = []
+                for f in g[1:]:
+                    own = f[2]
+                    order = sorted(range(len(own)), key=lambda k: lead.index(own[k]))
+                    index = tuple(slice(None) if a in own else None for a in lead)
+                    views.append((tuple(card[a] for a in own), tuple(order) + (len(own),),
+                                  index + (slice(None),)))
+                recipes.append((g, shape, views))
+            self.groups.append(recipes)
+            factors[i] = [g[0] for g in groups]
+        self.factors = factors
+        self.index = []
+        self.sep_strides = []
+        for i in range(n):
+            axes = jt.axes[i]
+            shape = tuple(card[a] for a in axes)
+            state = np.indices(shape).reshape(len(axes), -1)          # clique states (v, sep)
+            where = {a: k for k, a in enumerate(axes)}
+            maps, offset = [], 0
+            for _kind, _key, own in factors[i]:
+                st = _strides([card[a] for a in own])
+                flat = sum(state[where[a]] * int(st[k]) for k, a in enumerate(own))
+                maps.append(np.asarray(flat).reshape(shape[0], -1) + offset)
+                offset += int(np.prod([card[a] for a in own]))
+            M = int(np.prod(shape[1:], dtype=np.int64))
+            self.index.append(np.array(maps, dtype=np.int64).reshape(len(maps), shape[0], M))
+            st = _strides([card[a] for a in jt.seps[i]])
+            self.sep_strides.append([(a, int(k)) for a, k in zip(jt.seps[i], st)])
+        self.stacked = [None] * n
         self.sent = [None] * n
 
-    def _factor(self, f, counts):
-        kind, key, perm, index, _axes = f
+    def _array(self, f, counts):
+        kind, key, _own = f
         if kind == "msg":
-            arr = self.sent[key]
-        else:
-            b, j = key
-            arr = counts[b][:, j].reshape(self.tables[b] + (self.B,))
-        return arr.transpose(perm)[index]
+            return self.sent[key]
+        b, j = key
+        return counts[b][:, j]
 
-    def _group(self, members, counts):
-        g = self._factor(members[0], counts)
-        for f in members[1:]:
-            g = g * self._factor(f, counts)
-        return g
+    def _stack(self, i, counts):
+        B = self.B
+        parts = []
+        for g, shape, views in self.groups[i]:
+            arr = self._array(g[0], counts)
+            if views:
+                arr = arr.reshape(shape + (B,))
+                for f, (own_shape, perm, index) in zip(g[1:], views):
+                    arr = arr * self._array(f, counts).reshape(own_shape + (B,)).transpose(
+                        perm)[index]
+                arr = arr.reshape(-1, B)
+            parts.append(arr)
+        if not parts:
+            return np.ones((1, B), dtype=np.float32)
+        return np.concatenate(parts, axis=0, dtype=np.float32)
 
     def upward(self, counts, check=False):
         """Count the solutions of the slice given by ``counts`` (``(S, I, B)`` per block).
@@ -172,63 +237,47 @@ class BatchTree:
         B, jt = self.B, self.jt
         ok = True
         for i in range(self.n):
-            with_v, without, _gather = self.plan[i]
-            groups = [self._group(m, counts) for m in with_v]
-            self.groups[i] = groups
-            c = self.card[jt.order[i]]
-            # message: sum over the clique's variable of the product of its groups, one
-            # state at a time (never the whole clique table)
-            if len(groups) == 1:
-                msg = groups[0].sum(axis=0)
-            elif groups:
-                msg = None
-                for v in range(c):
-                    t = groups[0][v]
-                    for g in groups[1:]:
-                        t = t * g[v]
-                    msg = t if msg is None else msg + t
-            else:
-                msg = np.full((1,) * len(self.sep_shapes[i]) + (B,), float(c), dtype=np.float32)
-            for m in without:
-                msg = msg * self._group(m, counts)[0]
-            full = self.sep_shapes[i] + (B,)
-            if msg.shape != full:
-                msg = np.broadcast_to(msg, full)
-            if check and not np.all(msg.reshape(-1, B).max(axis=0) > 0):
-                ok = False
-            elif self.rescale[i]:
-                msg = msg / msg.reshape(-1, B).max(axis=0)
+            F = self._stack(i, counts)
+            self.stacked[i] = F
+            idx = self.index[i]
+            msg = np.empty((idx.shape[2], B), dtype=np.float32)
+            _count(F, idx, msg, self.rescale[i] and not check)
+            if check:
+                top = msg.max(axis=0)
+                if not np.all(top > 0):
+                    ok = False
+                elif self.rescale[i]:
+                    msg /= top
             self.sent[i] = msg
         return ok
 
     def sample(self, rng, marginals=None):
         """Draw one solution per chain from the last :meth:`upward`: ``(n, B)`` states.
 
-        With ``marginals`` (a list of ``(card, B)`` arrays), each variable's distribution given
-        the variables drawn before it (its separator) is added to its entry: backward sampling
-        draws from exactly that distribution, so it is a Rao-Blackwellised indicator.
+        With ``marginals`` (a list of ``(card, B)`` float64 arrays), each variable's
+        distribution given the variables drawn before it (its separator) is added to its entry:
+        backward sampling draws from exactly that distribution, so it is a Rao-Blackwellised
+        indicator.
         """
         B, jt = self.B, self.jt
         x = np.zeros((self.n, B), dtype=np.int64)
         u = rng.random((self.n, B))
+        none = np.zeros((1, 1))
+        zero = np.zeros(B, dtype=np.int64)
         for i in range(self.n - 1, -1, -1):
             v = jt.order[i]
-            c = self.card[v]
-            probs = None
-            for g, (span, base) in zip(self.groups[i], self.plan[i][2]):
-                g = np.ascontiguousarray(g).reshape(-1)
-                if span:
-                    off = None
-                    for a, st in span:
-                        off = x[a] * st if off is None else off + x[a] * st
-                    t = g.take(base + off)
-                else:
-                    t = g.take(base)
-                probs = t if probs is None else probs * t
-            if probs is None:
-                x[v] = (u[i] * c).astype(np.int64)
-                if marginals is not None:
-                    marginals[v] += 1.0 / c
-                continue
-            x[v] = pick(probs, u[i], None if marginals is None else marginals[v])
+            sep = zero
+            for a, st in self.sep_strides[i]:
+                sep = sep + x[a] * st
+            acc = marginals is not None
+            _draw(self.stacked[i], self.index[i], sep, u[i], x[v],
+                  marginals[v] if acc else none, acc)
         return x
+
+
+def _strides(shape):
+    out, acc = [], 1
+    for c in reversed(list(shape)):
+        out.append(acc)
+        acc *= int(c)
+    return np.array(out[::-1], dtype=np.int64)
