@@ -148,25 +148,33 @@ class Posterior:
 
     def _result_arrays(self, provider, evidence, capacity: int):
         """Slot-indexed MAP types (K,) and P(SaLe) (K, K) of the provider's result for a
-        knowledge evidence (cached by the evidence: the provider is a function of it)."""
+        knowledge evidence (cached compactly by the evidence: the provider is a function of it)."""
         key = (id(provider), evidence.key, capacity)
         hit = self._typing_cache.get(key)
         if hit is not None and hit[0] is provider:
             self._typing_cache.move_to_end(key)
-            return hit[1], hit[2]
-        result = provider.infer(evidence)
-        types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
+            _, types, pairs, values = hit
+        else:
+            result = provider.infer(evidence)
+            types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
+            for s in evidence.units:
+                types[s] = UNIT_TYPES.index(result.map_types[int(s)])
+            types.setflags(write=False)
+            items = sorted(result.sale.items())
+            pairs = np.array([pq for pq, _ in items], dtype=np.intp).reshape(-1, 2)
+            values = np.array([v for _, v in items], dtype=np.float64)
+            self._typing_cache[key] = (provider, types, pairs, values)
+            if len(self._typing_cache) > 4096:
+                self._typing_cache.popitem(last=False)
         sale = np.zeros((capacity, capacity))
-        for s in evidence.units:
-            types[s] = UNIT_TYPES.index(result.map_types[int(s)])
-        for (p, q), v in result.sale.items():
-            sale[p, q] = sale[q, p] = v
-        types.setflags(write=False)
-        sale.setflags(write=False)
-        self._typing_cache[key] = (provider, types, sale)
-        if len(self._typing_cache) > 4096:
-            self._typing_cache.popitem(last=False)
+        sale[pairs[:, 0], pairs[:, 1]] = values
+        sale[pairs[:, 1], pairs[:, 0]] = values
         return types, sale
+
+    def __getstate__(self):
+        state = self.__dict__.copy()   # caches stay behind (per process)
+        state["_door_cache"], state["_typing_cache"] = {}, OrderedDict()
+        return state
 
     def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
         """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider.
