@@ -265,3 +265,23 @@ def test_slice_draw_is_uniform_over_the_solutions():
                                atol=0.015)
     np.testing.assert_allclose(marg[1].mean(axis=1), counts.sum(axis=0) / counts.sum(),
                                atol=0.015)
+
+
+def test_mcsat_with_more_clauses_than_one_word_matches_the_exact_distribution():
+    # one 8-state variable under 70 distinct soft clauses: two words of clause bits, no count
+    # table; P(s) is proportional to exp(-sum of the weights of the clauses s violates)
+    rng = np.random.default_rng(11)
+    sets = set()
+    while len(sets) < 70:
+        bits = tuple(bool(b) for b in rng.random(8) < 0.3)
+        if 0 < sum(bits) < 8:
+            sets.add(bits)
+    viol = np.array(sorted(sets))
+    weights = rng.integers(100, 1500, size=len(viol))
+    tpl = ClauseTemplate((8,), 1, np.ones(8, dtype=bool), viol, weights)
+    assert tpl.k == 70
+    blocks, _ = mcsat.stack_blocks([(tpl, [0])])
+    assert len(blocks[0].stack.masks) == 2 and blocks[0].stack.lut is None
+    marg, _ = mcsat.run_mcsat([8], blocks, np.random.default_rng(0), 2000, 30, 10)
+    p = np.exp(-(viol * weights[:, None]).sum(axis=0) / 1000.0)
+    np.testing.assert_allclose(marg[0], p / p.sum(), atol=0.02)
