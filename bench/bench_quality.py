@@ -58,6 +58,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="sampler seed")
     for name in ("chains", "cores", "tune", "draws", "n-inner"):
         parser.add_argument(f"--{name}", type=int, default=None, help=f"override {name}")
+    parser.add_argument("--anneal", type=float, default=None, help="override the burn-in temperature")
     parser.add_argument("--maps", default=None, help="comma-separated map names to keep (real/ipa/types)")
     parser.add_argument("--save", type=Path, default=None, help="write W* pictures/world.json here")
     parser.add_argument("--quiet", action="store_true")
@@ -68,7 +69,7 @@ def add_arguments(parser) -> None:
 def _settings(model, args):
     from semmap_pp.pipeline import RunSettings
     over = dict(BUDGETS[args.budget])
-    for key in ("chains", "cores", "tune", "draws", "n_inner"):
+    for key in ("chains", "cores", "tune", "draws", "n_inner", "anneal"):
         v = getattr(args, key)
         if v is not None:
             over[key] = v

@@ -30,7 +30,7 @@ from semmap_pp.errors import SemmapError
 from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
 from semmap_pp.frame import Frame, build_frame
 from semmap_pp.grid import OccupancyGrid, load_map
-from semmap_pp.init import dispersed_world, start_world
+from semmap_pp.init import dispersed_world, refine_world, start_world
 from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
 from semmap_pp.model import Model, load_model
 from semmap_pp.outputs import SemanticMap, semantic_map
@@ -190,6 +190,12 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[
     clean = wm.empty(base.capacity)
     for i, s in enumerate(ok):
         clean = wm.add(clean, i, base.rects[s])
+    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.kernels.data import settings_from_mapping
+    ks = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+    if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/init.py)
+        clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
+                             rounds=ks.start_rounds)
     worlds = [clean]
     for _ in range(1, chains):
         worlds.append(dispersed_world(rng, clean, frame.shape, min_side=c.min_side))

@@ -64,6 +64,9 @@ class KernelSettings(NamedTuple):
         Most birth candidates kept (largest distance-transform values first).
     weights : tuple of (kind, weight)
         Mixing weights of the five kernel pairs.
+    start_rounds : int
+        Rounds of the greedy ascent that refines the data-driven start world
+        (:func:`semmap_pp.init.refine_world`; 0 = the greedy cover as it is).
     """
 
     line_floor: float = 0.05
@@ -78,6 +81,7 @@ class KernelSettings(NamedTuple):
     max_candidates: int = 2000
     weights: tuple = (("add_remove", 1.0), ("split_merge", 1.0), ("shrink_dilate", 4.0),
                       ("allocate_delete", 1.0), ("interchange", 2.0))
+    start_rounds: int = 3
 
 
 def settings_from_mapping(table: Mapping, source="<model>") -> KernelSettings:
