@@ -81,6 +81,9 @@ class SampleResult(NamedTuple):
     stopped: str | None = None
 
 
+_OBJECT_STATS = ("best_rects", "best_active", "rng_state")
+
+
 class _Recorder:
     """``pm.sample``'s per-draw callback: keeps the real draws, reports progress, ends a stop.
 
@@ -103,6 +106,10 @@ class _Recorder:
         stats = draw.stats[0]
         c = int(stats["chain"])
         if not stats["stopped"]:
+            if self.draws[c]:   # keep the object stats (best world, random state) of the last draw only
+                prev = self.draws[c][-1][0]
+                self.draws[c][-1] = ({k: v for k, v in prev.items() if k not in _OBJECT_STATS},
+                                     *self.draws[c][-1][1:])
             self.draws[c].append((stats, np.rint(draw.point["rects"]).astype(np.int32),
                                   np.asarray(draw.point["active"]) > 0))
         if self.callback is not None:

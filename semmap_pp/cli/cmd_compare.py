@@ -52,6 +52,7 @@ def _names(paths: list[Path]) -> list[str]:
 def run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.compare import compare_dict, compare_png, compare_table, summarise, typed_sampled_worlds
+    from semmap_pp.errors import SemmapError
     from semmap_pp.knowledge import load_rules
     from semmap_pp.pipeline import RunSettings, check_out_dir, load_inputs, run_map
     from semmap_pp.step import StopFlag
@@ -86,7 +87,12 @@ def run(args) -> int:
     try:
         for name, path, rs in zip(_names(paths), paths, rule_sets):
             log(f"--- rules {path} ---")
-            r = run_map(dataclasses.replace(inputs, rules=rs), settings, log=log, stop=stop)
+            try:
+                r = run_map(dataclasses.replace(inputs, rules=rs), settings, log=log, stop=stop)
+            except SemmapError:
+                if stop():      # interrupted before any chain had 4 draws
+                    return 130
+                raise
             if stop():
                 return 130
             ws = typed_sampled_worlds(r, args.n_worlds)

@@ -129,7 +129,8 @@ def run(args) -> int:
 
     state = None
     if args.resume is not None:
-        given = [f"--{k.replace('_', '-')}" for k in FIXED_WHEN_RESUMING if getattr(args, k) is not None]
+        fixed = FIXED_WHEN_RESUMING + ("occupied_thresh", "free_thresh", "negate", "resolution", "mode")
+        given = [f"--{k.replace('_', '-')}" for k in fixed if getattr(args, k) is not None]
         if given or args.map is not None:
             what = ", ".join(given + (["MAP"] if args.map is not None else []))
             return _usage(f"{what} cannot be given with --resume (the run keeps its own; "
