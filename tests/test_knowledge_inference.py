@@ -237,13 +237,14 @@ def test_count_table_matches_the_direct_count(monkeypatch):
     words = [rng.integers(0, 1 << with_lut.k, size=(4, 7))]
     np.testing.assert_array_equal(with_lut.counts(words, 4, 7, off),
                                   direct.counts(words, 4, 7, off))
+    assert with_lut.counts(words, 4, 7, off).shape == (4, 3, 7)
     # the count by hand for instance 1 (template 1) in chain 2: bit c of the word keeps the
     # template's (merged) clause c
     w, t = int(words[0][1, 2]), tpls[1]
     hand = [sum(bool(hard.reshape(3, 2)[s, a]) and not any(
         t.viol[c, a, s] and (w >> c) & 1 for c in range(t.k)) for a in range(2))
         for s in range(3)]
-    assert direct.counts(words, 4, 7, off)[:, 1, 2].tolist() == hand
+    assert direct.counts(words, 4, 7, off)[1, :, 2].tolist() == hand
 
 
 def test_slice_draw_is_uniform_over_the_solutions():
@@ -254,7 +255,7 @@ def test_slice_draw_is_uniform_over_the_solutions():
     B = 20000
     jt = JunctionTree([3, 3], [(0, 1)])
     tree = BatchTree([3, 3], scopes, jt, B)
-    table = np.broadcast_to(counts.reshape(9, 1, 1), (9, 1, B))
+    table = np.broadcast_to(counts.reshape(1, 9, 1), (1, 9, B))
     assert tree.upward([table], check=True)
     marg = [np.zeros((3, B)), np.zeros((3, B))]
     x = tree.sample(np.random.default_rng(0), marg)

@@ -63,6 +63,19 @@ def _alias_draw(u, n, cut, alias, tid, shift, word):
 
 
 @numba.njit(cache=True, nogil=True)
+def _lut_gather(lut, word, col, out):
+    """``out[i, s, b] = lut[s, word[i, b] + col[i]]`` as float32."""
+    I, B = word.shape
+    S = lut.shape[0]
+    for i in range(I):
+        for s in range(S):
+            row = lut[s]
+            o = out[i, s]
+            for b in range(B):
+                o[b] = row[word[i, b] + col[i]]
+
+
+@numba.njit(cache=True, nogil=True)
 def _drop_violated(word, mask, aux, cell):
     """Clear the bits of clauses the current state ``(aux, cell)`` violates (never kept)."""
     I, B = word.shape
@@ -286,22 +299,22 @@ class ClauseStack:
         return pick(ok, u)
 
     def counts(self, kept, n_inst, B, off):
-        """Allowed private assignments per scope state, ``(S, I, B)`` float32."""
+        """Allowed private assignments per scope state, ``(I, S, B)`` float32."""
         S = self.n_states
+        tid = np.zeros(n_inst, dtype=np.int64) if off is None else off[1][:, 0]
         if kept is None:
             ok = ((self.masks[0] & _HARD_BIT) == 0).sum(axis=0, dtype=np.float32)  # (T*S,)
-            rows = ok.reshape(self.T, S)[np.zeros(n_inst, dtype=np.int64) if off is None
-                                         else off[1][:, 0]].T
-            return np.broadcast_to(rows[:, :, None], (S, n_inst, B))
-        if self.lut is not None:   # a uint8 gather is fast; products need float32
-            word = kept[0] if off is None else kept[0] + off[2]
-            return self.lut.take(word, axis=1).astype(np.float32)
-        tid = np.zeros(n_inst, dtype=np.int64) if off is None else off[1][:, 0]
+            rows = ok.reshape(self.T, S)[tid]
+            return np.ascontiguousarray(np.broadcast_to(rows[:, :, None], (n_inst, S, B)))
+        if self.lut is not None:
+            out = np.empty((n_inst, S, B), dtype=np.float32)
+            _lut_gather(self.lut, kept[0], tid << self.k, out)
+            return out
         ok = None
         for w, (mask, word) in enumerate(zip(self.masks, kept)):
             word = word | _HARD_BIT if w == 0 else word
             m = mask.reshape(self.n_aux, self.T, S)[:, tid]                     # (A, I, S)
-            t = (m.transpose(0, 2, 1)[:, :, :, None] & word[None, None]) == 0     # (A, S, I, B)
+            t = (m[:, :, :, None] & word[None, :, None, :]) == 0                 # (A, I, S, B)
             ok = t if ok is None else ok & t
         return ok.sum(axis=0, dtype=np.float32)
 
@@ -316,10 +329,10 @@ class ClauseStack:
         return ok
 
     def start_counts(self, n_inst, B, off):
-        """Weights of the scope states by each template's clauses alone, ``(S, I, B)``."""
+        """Weights of the scope states by each template's clauses alone, ``(I, S, B)``."""
         tid = np.zeros(n_inst, dtype=np.int64) if off is None else off[1][:, 0]
-        return np.broadcast_to(self.prior[tid].T.astype(np.float32)[:, :, None],
-                               (self.n_states, n_inst, B))
+        return np.ascontiguousarray(np.broadcast_to(
+            self.prior[tid].astype(np.float32)[:, :, None], (n_inst, self.n_states, B)))
 
 
 @dataclass(frozen=True)

@@ -211,7 +211,7 @@ class BatchTree:
         if kind == "msg":
             return self.sent[key]
         b, j = key
-        return counts[b][:, j]
+        return counts[b][j]
 
     def _stack(self, i, counts):
         B = self.B
@@ -230,7 +230,7 @@ class BatchTree:
         return np.concatenate(parts, axis=0, dtype=np.float32)
 
     def upward(self, counts, check=False):
-        """Count the solutions of the slice given by ``counts`` (``(S, I, B)`` per block).
+        """Count the solutions of the slice given by ``counts`` (``(I, S, B)`` per block).
 
         With ``check``, returns False if some chain's slice has no solution.
         """
