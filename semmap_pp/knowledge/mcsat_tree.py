@@ -187,6 +187,7 @@ class BatchTree:
             factors[i] = [g[0] for g in groups]
         self.factors = factors
         self.index = []
+        self.rows = []
         self.sep_strides = []
         for i in range(n):
             axes = jt.axes[i]
@@ -201,6 +202,7 @@ class BatchTree:
                 offset += int(np.prod([card[a] for a in own]))
             M = int(np.prod(shape[1:], dtype=np.int64))
             self.index.append(np.array(maps, dtype=np.int64).reshape(len(maps), shape[0], M))
+            self.rows.append(offset)
             st = _strides([card[a] for a in jt.seps[i]])
             self.sep_strides.append([(a, int(k)) for a, k in zip(jt.seps[i], st)])
         self.stacked = [None] * n
@@ -214,20 +216,28 @@ class BatchTree:
         return counts[b][j]
 
     def _stack(self, i, counts):
+        """The clique's grouped tables, written one after another into one array."""
         B = self.B
-        parts = []
-        for g, shape, views in self.groups[i]:
-            arr = self._array(g[0], counts)
-            if views:
-                arr = arr.reshape(shape + (B,))
-                for f, (own_shape, perm, index) in zip(g[1:], views):
-                    arr = arr * self._array(f, counts).reshape(own_shape + (B,)).transpose(
-                        perm)[index]
-                arr = arr.reshape(-1, B)
-            parts.append(arr)
-        if not parts:
+        groups = self.groups[i]
+        if not groups:
             return np.ones((1, B), dtype=np.float32)
-        return np.concatenate(parts, axis=0, dtype=np.float32)
+        out = np.empty((self.rows[i], B), dtype=np.float32)
+        row = 0
+        for g, shape, views in groups:
+            size = int(np.prod(shape, dtype=np.int64))
+            dest = out[row:row + size]
+            arr = self._array(g[0], counts)
+            if not views:
+                dest[...] = arr
+            else:
+                dest = dest.reshape(shape + (B,))
+                arr = arr.reshape(shape + (B,))
+                for k, (f, (own_shape, perm, index)) in enumerate(zip(g[1:], views)):
+                    other = self._array(f, counts).reshape(own_shape + (B,)).transpose(
+                        perm)[index]
+                    np.multiply(arr if k == 0 else dest, other, out=dest)
+            row += size
+        return out
 
     def upward(self, counts, check=False):
         """Count the solutions of the slice given by ``counts`` (``(I, S, B)`` per block).
