@@ -245,14 +245,14 @@ def test_slot_world_delta_equals_full_tallies():
                     new_corr[s] = not new_corr[s]
                 else:                                        # a new rectangle
                     new_rects[s] = random_rect(rng, shape)
-            ok = ((new_rects[:, 2] - new_rects[:, 0] >= 1) & (new_rects[:, 3] - new_rects[:, 1] >= 1))
-            if not np.all(ok | ~new_on):
+            h, w = new_rects[:, 2] - new_rects[:, 0], new_rects[:, 3] - new_rects[:, 1]
+            if not np.all((h >= 1) & (w >= 1) | ~new_on):
                 continue
-            h = hist.copy()
-            g = gamma + world_delta(d.xsum, rects, on, corr, new_rects, new_on, new_corr, d.wall, h)
+            hh = hist.copy()
+            g = gamma + world_delta(d.xsum, rects, on, corr, new_rects, new_on, new_corr, d.wall, hh)
             expected_hist, expected_gamma = full_tallies(d, new_rects[new_on], new_corr[new_on])
-            assert np.array_equal(h, expected_hist) and g == expected_gamma
+            assert np.array_equal(hh, expected_hist) and g == expected_gamma
             checked += 1
             if rng.random() < 0.6:
-                rects, on, corr, hist, gamma = new_rects, new_on, new_corr, h, g
+                rects, on, corr, hist, gamma = new_rects, new_on, new_corr, hh, g
     assert checked >= 1500
