@@ -31,7 +31,8 @@ from semmap_pp.outputs import dumps, semantic_map, world_dict
 from semmap_pp.outputs import figures
 from semmap_pp.outputs.geojson import geojson_dict, ring_area, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
-from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, unit_regions, write_regions_png
+from semmap_pp.outputs.regions import (is_passage, join_regions, opening, passage_pairs, regions_image,
+                                       unit_regions, write_regions_png)
 from semmap_pp.outputs.write import write_all
 from semmap_pp.pipeline import Inputs, MapRun, RunSettings
 from semmap_pp.posterior import Posterior
@@ -86,6 +87,22 @@ def test_join_regions_is_union_find_numbered_by_smallest_unit():
     assert join_regions([1, 2, 3], [(3, 1), (1, 3), (2, 2)]) == {1: 1, 2: 2, 3: 1}  # repeats, self
     assert join_regions([1, 2, 3, 4], [(1, 2), (3, 4), (2, 4)]) == {1: 1, 2: 1, 3: 1, 4: 1}
     assert join_regions([], []) == {}
+
+
+def test_an_opening_is_a_passage_when_wider_than_a_door_or_the_whole_wall():
+    cells = MODEL.cells(0.05)                                    # doors 12..50 cells
+    cls = np.full((40, 40), OCCUPIED, np.uint8)
+    cls[2:38, 2:18] = FREE
+    cls[2:38, 22:38] = FREE
+    left, right = (0, 0, 40, 20), (0, 18, 40, 40)                # shared wall: columns 18..19
+    assert opening(cls, left, right, wall=2) == (0, 36)          # closed
+    cls[10:30, 18:20] = FREE
+    assert opening(cls, left, right, wall=2) == (20, 36)         # a door, wall on both sides
+    assert not is_passage(20, 36, cells)
+    cls[2:38, 18:20] = FREE
+    assert opening(cls, left, right, wall=2) == (36, 36)         # no wall left: a corridor cut in two
+    assert is_passage(36, 36, cells) and is_passage(51, 80, cells) and not is_passage(50, 80, cells)
+    assert not is_passage(8, 8, cells)                           # a gap narrower than any door
 
 
 def test_regions_join_only_through_an_open_wall(floor, tmp_path):

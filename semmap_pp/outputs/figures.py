@@ -21,6 +21,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
+from scipy import ndimage  # noqa: E402
 
 from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN, W_OBJECT, W_WALL  # noqa: E402
 from semmap_pp.outputs.graphml import TYPE_LETTER  # noqa: E402
@@ -216,14 +217,19 @@ def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, 
     fig, axes = _axes(box, ncols=3, nrows=2, extra_h=0.9, long_side=1500)
     _show(axes[0], classified_rgb(sm.grid.classes), box)
     axes[0].set_title("classified map", fontsize=10)
-    panels = [("wall", p_wall_image)] + [(t, p_type_image[k]) for k, t in enumerate(UNIT_TYPES)]
+    y0, y1, x0, x1 = box
+    # a wall is 2-3 cells thick: on a panel narrower than the map, nearest-neighbour display drops it,
+    # so each screen pixel shows the largest probability of the cells it covers
+    block = int(np.ceil((x1 - x0) / (fig.get_figwidth() * DPI / 3)))
+    wall = ndimage.maximum_filter(p_wall_image[y0:y1, x0:x1], size=block) if block > 1 else \
+        p_wall_image[y0:y1, x0:x1]
+    panels = [("wall", wall)] + [(t, p_type_image[k][y0:y1, x0:x1]) for k, t in enumerate(UNIT_TYPES)]
     im = None
     for ax, (name, p) in zip(axes[1:], panels):
-        y0, y1, x0, x1 = box
-        im = ax.imshow(p[y0:y1, x0:x1], extent=(x0, x1, y1, y0), cmap="magma", vmin=0.0, vmax=1.0,
-                       interpolation="nearest")
+        im = ax.imshow(p, extent=(x0, x1, y1, y0), cmap="magma", vmin=0.0, vmax=1.0, interpolation="nearest")
         ax.set_title(f"p({name})", fontsize=10)
-    fig.subplots_adjust(0.005, 0.6 / fig.get_figheight(), 0.995, 0.97, wspace=0.02, hspace=0.12)
+    fig.subplots_adjust(0.005, 0.6 / fig.get_figheight(), 0.995, 1 - 0.3 / fig.get_figheight(), wspace=0.02,
+                        hspace=0.3 / (fig.get_figheight() / 2))
     cax = fig.add_axes((0.3, 0.2 / fig.get_figheight(), 0.4, 0.12 / fig.get_figheight()))
     fig.colorbar(im, cax=cax, orientation="horizontal").set_label(
         f"probability over {n_worlds} sampled worlds", fontsize=9)

@@ -9,7 +9,7 @@ Nodes (``kind`` says which; ``id`` is the id of world.json):
 
 Edges (``relation``): ``door`` between units connected by one or more doors (``doors``: their ids,
 comma-separated; ``n_doors``; ``width_m`` of the widest), ``adjacent`` between units adjacent
-without a door (``passage``: True when the wall between them is open, see
+without a door (on both, ``passage``: True when the wall between them is open, see
 :mod:`semmap_pp.outputs.regions`), ``contains`` from a unit to each of its objects, and ``next_to``
 from an unexplored area to every unit whose rectangle its bounding box touches (grown by the
 adjacency dilation). GraphML holds scalars only, so id lists are comma-separated strings.
@@ -107,7 +107,7 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
         ds = doors_of.get((a, b), [])
         if ds:
             g.add_edge(f"u{a}", f"u{b}", relation="door", doors=_ids(d["id"] for d in ds), n_doors=len(ds),
-                       width_m=max(float(d["width_m"]) for d in ds))
+                       width_m=max(float(d["width_m"]) for d in ds), passage=(a, b) in passages)
         else:
             g.add_edge(f"u{a}", f"u{b}", relation="adjacent", passage=(a, b) in passages)
     return g

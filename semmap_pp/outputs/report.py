@@ -11,6 +11,7 @@ import base64
 import html
 import math
 import os
+from collections import Counter
 from pathlib import Path
 
 from semmap_pp import __version__, atomic
@@ -97,7 +98,8 @@ def units_table(doc: dict, regions: dict[int, int]) -> str:
     rows = []
     for u in doc["units"]:
         m = u["type_marginals"]
-        to = [str(b if a == u["id"] else a) for d in u["doors"] for a, b in [door_units[d]]]
+        n = Counter(b if a == u["id"] else a for d in u["doors"] for a, b in [door_units[d]])
+        to = [f"{k} (×{c})" if c > 1 else str(k) for k, c in sorted(n.items())]
         rows.append([_td(u["id"], True), _td(u["type"])] + [_td(f"{m[t]:.2f}", True) for t in UNIT_TYPES] +
                     [_td(f"{u['size_m'][0]:.2f} × {u['size_m'][1]:.2f}", True),
                      _td(f"{u['size_m'][0] * u['size_m'][1]:.1f}", True), _td(regions.get(u["id"], ""), True),
