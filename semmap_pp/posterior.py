@@ -90,6 +90,10 @@ class Posterior:
         self._door_cache: dict = {}
         self._typing_cache: OrderedDict = OrderedDict()   # (provider, evidence key, K) -> arrays
         c, p, e = self.cells, model.prior, model.evidence
+        # per category, the larger gain of its corridor and non-corridor variants: with it the
+        # tallies of any typing bound the log-likelihood of every typing of the same geometry
+        g = self.data.gain.reshape(2, -1)
+        self._gain_max = np.concatenate([np.maximum(g[0], g[1])] * 2)
         self._ip = np.array([CORRIDOR, c.wall, c.adjacency_dilation, frame.shape[0], frame.shape[1],
                              c.min_side, c.max_side,
                              SIZE_MEASURES.index(e.size_measure)], np.int64)
@@ -328,14 +332,16 @@ class Proposal:
     (its :class:`_Typing`) and ``patch`` (the likelihood tallies).
     """
 
-    __slots__ = ("world", "logp", "loglik", "logprior", "typing", "patch")
+    __slots__ = ("world", "logp", "loglik", "logprior", "typing", "patch", "bounded")
 
-    def __init__(self, world, logp, loglik, logprior, typing, patch):
+    def __init__(self, world, logp, loglik, logprior, typing, patch, bounded=False):
         self.world, self.logp, self.loglik, self.logprior = world, logp, loglik, logprior
-        self.typing, self.patch = typing, patch
+        self.typing, self.patch, self.bounded = typing, patch, bounded
 
 
 _NO_TYPES = np.zeros(0, np.int8)
+_NO_SALE = np.zeros((1, 1))
+_ZERO_TABLE = np.zeros((len(UNIT_TYPES), len(UNIT_TYPES)))
 
 
 class Tracker:
@@ -415,11 +421,17 @@ class Tracker:
         types, sale = post._result_arrays(self._provider, ev, world.capacity)
         return types, sale, doors, ev
 
-    def propose(self, new_world: W.World, changed_slots) -> Proposal:
+    def propose(self, new_world: W.World, changed_slots, floor: float | None = None) -> Proposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
 
         Types of *every* unit are re-derived (evidence of a neighbour may change with the edit);
         units whose type changed are recomputed in the likelihood along with the edited ones.
+
+        ``floor`` (optional): the caller will reject the proposal unless its log posterior
+        reaches ``floor`` (MH with the uniform drawn first: ``floor = log π(W) + T (log u -
+        log_ratio)``). With knowledge on, when an upper bound of ``log π(W')`` over every
+        possible typing is already below ``floor``, the provider is not asked and the proposal
+        comes back with ``logp = -inf`` (``bounded`` set; never accept it).
         """
         post = self.post
         if post.provider is not self._provider:   # knowledge switched without a resync
@@ -442,6 +454,14 @@ class Tracker:
         else:
             _retype_changed(new_world.rects, new_world.active, changed, geometry, adj, _NO_TYPES,
                             _NO_TYPES, post._ip, post._fp)
+            if floor is not None:
+                bound = sum(_score(
+                    data.xsum, post._gain_max, ow.rects, ow.active, ow.types, new_world.rects,
+                    new_world.active, ow.types, hist.copy(), self.gamma_total, adj, _NO_SALE,
+                    _ZERO_TABLE, True, self._prior_n, post._ip, post._fp)[:2])
+                if bound + 1e-9 * abs(bound) < floor:
+                    return Proposal(new_world, -math.inf, -math.inf, -math.inf, None, None,
+                                    bounded=True)
             types, sale, doors, ev = self._knowledge_types(new_world, adj, changed)
             loglik, logprior, gamma_total = _score(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
@@ -459,6 +479,8 @@ class Tracker:
 
     def accept(self, prop: Proposal) -> None:
         """Commit a proposal (a rejected one is simply dropped)."""
+        if prop.bounded:
+            raise ValueError("a proposal bounded below its floor cannot be accepted")
         self.hist, self.gamma_total, knowledge = prop.patch
         if knowledge is not None:
             self._doors, self._evidence = knowledge

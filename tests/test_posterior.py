@@ -247,3 +247,43 @@ def test_pair_doors_equal_the_door_detector():
             assert post.pair_doors(a.astype(np.int32), b.astype(np.int32)) == expected
             seen.add(expected)
     assert {0, 1} <= seen and max(seen) >= 2
+
+
+def test_floor_skips_the_provider_only_below_the_bound():
+    """With a floor (MH with the uniform drawn first), a proposal comes back unevaluated only
+    when its true log posterior is below the floor; otherwise it is the full evaluation; and
+    both cases occur along a chain with the table3.lp engine."""
+    from pathlib import Path
+
+    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.knowledge import KnowledgeEngine
+
+    engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
+    post = Posterior(build_frame_from_classes(knowledge_floor(), 0.25, MODEL, theta=0.0), MODEL,
+                     engine)
+    post.knowledge_on = True
+    data = data_from_frame(post.frame)
+    mix = default_mix(data.settings)
+    tr = post.start(W.empty(6))
+    rng = np.random.default_rng(5)
+    n_bounded = n_full = 0
+    for _ in range(1500):
+        _, proposal = mix(rng, tr.world, data)
+        if proposal is None:
+            continue
+        floor = tr.logp + 5.0 * (math.log(rng.random()) - proposal.log_ratio)
+        prop = tr.propose(proposal.world, proposal.changed_slots, floor=floor)
+        if prop.bounded:
+            n_bounded += 1
+            if n_bounded % 10 == 0:
+                assert post.evaluate(proposal.world).total < floor
+            with pytest.raises(ValueError):
+                tr.accept(prop)
+            continue
+        n_full += 1
+        if n_full % 5 == 0:
+            assert prop.logp == pytest.approx(post.evaluate(proposal.world).total, rel=1e-9, abs=0)
+        if prop.logp >= floor:
+            tr.accept(prop)
+    assert n_bounded >= 100 and n_full >= 50
+    assert tr.logp == pytest.approx(post.evaluate(tr.world).total, rel=1e-9, abs=0)
