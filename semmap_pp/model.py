@@ -30,6 +30,11 @@ from semmap_pp.errors import ModelError
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "models" / "default.toml"
 SIZE_MEASURES = ("short_side", "long_side", "area")
 N_PRIORS = ("poisson", "geometric")
+# Sanity limits (not modelling choices): a model file is a few kilobytes; unit slots are allocated
+# up front, so k_max bounds memory; a length in cells must fit the int32 arrays of the samples.
+MAX_MODEL_BYTES = 1 << 20
+MAX_K = 100_000
+MAX_CELLS_PER_LENGTH = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -160,9 +165,15 @@ class Model:
         ``2 * wall + 1`` cells (so every unit has an interior).
         """
         w = self.world
+        resolution = float(resolution)
 
-        def n(m: float) -> int:
-            return int(round(m / resolution))
+        def n(m: float, dims: int = 1) -> int:
+            cells = m / resolution if dims == 1 else m / resolution / resolution
+            if not (math.isfinite(cells) and cells <= MAX_CELLS_PER_LENGTH):
+                raise ModelError(self.path, f"at a resolution of {resolution:g} m/cell the model's "
+                                 f"lengths do not fit in lattice cells ({m:g} m{'' if dims == 1 else '^2'} "
+                                 f"-> {cells:.3g} cells); is the map's resolution right?")
+            return int(round(cells))
 
         wall = max(1, n(w.wall_thickness_m))
         min_side = max(2 * wall + 1, n(w.min_unit_side_m))
@@ -172,7 +183,7 @@ class Model:
             door_min=max(1, n(w.door_min_m)), door_max=max(1, n(w.door_max_m)),
             min_side=min_side, max_side=max(min_side, n(w.max_unit_side_m)),
             adjacency_dilation=max(1, n(w.adjacency_dilation_m)),
-            unexplored_min_area=max(1, int(round(w.unexplored_min_area_m2 / resolution ** 2))))
+            unexplored_min_area=max(1, n(w.unexplored_min_area_m2, dims=2)))
 
 
 class _Reader:
@@ -208,12 +219,14 @@ class _Reader:
             raise self.error(key, f"must be <= {hi}, got {v}")
         return v
 
-    def integer(self, key: str, *, lo: int) -> int:
+    def integer(self, key: str, *, lo: int, hi: int | None = None) -> int:
         v = self.raw(key)
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.error(key, f"expected an integer, got {type(v).__name__}")
         if v < lo:
             raise self.error(key, f"must be >= {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise self.error(key, f"must be <= {hi}, got {v}")
         return int(v)
 
     def choice(self, key: str, options: tuple[str, ...]) -> str:
@@ -255,7 +268,11 @@ def load_model(path: str | Path | None = None) -> Model:
         The file cannot be read, is not TOML, or a key is missing or invalid.
     """
     path = DEFAULT_MODEL if path is None else Path(path)
+    if path.exists() and not path.is_file():  # a directory, FIFO or device
+        raise ModelError(path, "cannot read model file: not a regular file")
     try:
+        if path.stat().st_size > MAX_MODEL_BYTES:
+            raise ModelError(path, f"model file is larger than {MAX_MODEL_BYTES} bytes")
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ModelError(path, f"cannot read model file: {exc.strerror or exc}") from None
@@ -301,7 +318,7 @@ def load_model(path: str | Path | None = None) -> Model:
     prior = PriorParams(
         n_prior=r.choice("prior.n_prior", N_PRIORS),
         n_mean=r.number("prior.n_mean", positive=True),
-        k_max=r.integer("prior.k_max", lo=1),
+        k_max=r.integer("prior.k_max", lo=1, hi=MAX_K),
         sale_sigma_m=r.number("prior.sale_sigma_m", positive=True),
         sale_threshold=r.number("prior.sale_threshold", lo=0.0, hi=1.0))
 

@@ -26,10 +26,10 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.diagnostics import SUMMARIES, ConvergenceReport, convergence
-from semmap_pp.errors import SemmapError
+from semmap_pp.errors import MapError, ModelError, SemmapError
 from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
 from semmap_pp.frame import Frame, build_frame
-from semmap_pp.grid import OccupancyGrid, load_map
+from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.init import dispersed_world, refine_world, start_world
 from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
 from semmap_pp.model import Model, load_model
@@ -59,6 +59,7 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
     grid = load_map(map_path, **(map_options or {}))
     model = load_model(model_path)
     rules = load_rules(rules_path) if rules_path is not None else None
+    check_model_for_map(grid, model, (map_options or {}).get("max_cells") or MAX_CELLS)
     frame = build_frame(grid, model)
     if roi_path is not None:
         roi, roi_name = load_roi(roi_path, grid.shape), Path(roi_path).name
@@ -66,6 +67,34 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
         roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
         roi_name = "default"
     return Inputs(grid, model, rules, frame, roi, roi_name)
+
+
+def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> None:
+    """Refuse a model and map that cannot run together, before any work array is built.
+
+    The model's lengths at the map's resolution must fit in cells (:meth:`Model.cells`), and the
+    map padded by the longest of them (ROI closing, wall, door, object extent) must stay within
+    the cell limit: a mistaken resolution of nanometres per cell would otherwise ask for exabytes.
+    The ``[kernels]`` table is read here too, so that a bad value is reported before sampling.
+    """
+    from math import isfinite
+
+    from semmap_pp.kernels.data import settings_from_mapping
+
+    c = model.cells(grid.resolution)
+    pad = 1 + max(closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution), c.wall,
+                  c.adjacency_dilation, c.door_max, c.object_max_extent)
+    h, w = grid.shape
+    if (h + 2 * pad) * (w + 2 * pad) > max_cells:
+        raise MapError(grid.source, f"at {grid.resolution:g} m/cell the model's lengths reach {pad} "
+                                    f"cells: the {w}x{h} map padded by them exceeds the limit of "
+                                    f"{max_cells} cells (is the resolution right?)")
+    try:
+        ks = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+    except (TypeError, ValueError) as exc:
+        raise ModelError(model.path, f"[kernels]: {exc}") from None
+    if not all(isfinite(v) for _, v in ks.weights):
+        raise ModelError(model.path, "[kernels] weights must be finite numbers")
 
 
 @dataclass(frozen=True)

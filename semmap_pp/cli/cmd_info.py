@@ -40,13 +40,15 @@ def add_map_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mode", choices=MODES, help="map_server mode (default trinary)")
     group.add_argument("--max-cells", type=_positive_int, default=MAX_CELLS, metavar="N",
                        help=f"refuse larger images (default {MAX_CELLS})")
+    group.add_argument("--allow-outside", action="store_true",
+                       help="let the YAML's image: be outside the YAML's folder (absolute or ../ path)")
 
 
 def map_options(args: argparse.Namespace) -> dict:
     """:func:`load_map` keyword arguments from the options of :func:`add_map_options`."""
     return {"occupied_thresh": args.occupied_thresh, "free_thresh": args.free_thresh,
             "negate": args.negate, "resolution": args.resolution, "mode": args.mode,
-            "max_cells": args.max_cells}
+            "max_cells": args.max_cells, "allow_outside": args.allow_outside}
 
 
 def register(subparsers) -> None:

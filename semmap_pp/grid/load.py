@@ -17,7 +17,7 @@ IMAGE_SUFFIXES = (".png", ".pgm", ".npy")
 def load_map(path: str | os.PathLike, *, occupied_thresh: float | None = None,
              free_thresh: float | None = None, negate: int | bool | None = None,
              resolution: float | None = None, mode: str | None = None,
-             max_cells: int = images.MAX_CELLS) -> OccupancyGrid:
+             max_cells: int = images.MAX_CELLS, allow_outside: bool = False) -> OccupancyGrid:
     """Load and classify an occupancy grid map.
 
     Parameters
@@ -30,6 +30,10 @@ def load_map(path: str | os.PathLike, *, occupied_thresh: float | None = None,
         0.05 m/cell with a note, ``"trinary"``).
     max_cells : int
         Refuse images with more cells (checked from the header, before decoding).
+    allow_outside : bool
+        Let a YAML name an image outside its own folder (absolute path, ``~`` or ``..``); by
+        default such a YAML is refused, so that a shared map file cannot make the program read
+        arbitrary files (docs/formats.md).
 
     Returns
     -------
@@ -60,13 +64,16 @@ def load_map(path: str | os.PathLike, *, occupied_thresh: float | None = None,
                  "negate": negate, "resolution": resolution, "mode": mode}
     suffix = path.suffix.lower()
     if suffix in YAML_SUFFIXES:
-        params = meta.params_from_yaml(path, meta.read_yaml(path), overrides)
+        params = meta.params_from_yaml(path, meta.read_yaml(path), overrides,
+                                       allow_outside=allow_outside)
     elif suffix in IMAGE_SUFFIXES:
         params = meta.params_for_image(path, overrides)
     else:
         raise MapError(path, f"unsupported map file type {path.suffix or '(no suffix)'!r}; "
                              f"expected {', '.join(YAML_SUFFIXES + IMAGE_SUFFIXES)}")
     decoded = images.decode_image(params.image, max_cells=max_cells)
+    height, width = decoded.grey.shape
+    meta.check_extent(path, width, height, params.resolution, params.origin)
     classes, occupancy = classify_grey(
         decoded.grey, decoded.alpha, negate=params.negate, mode=params.mode,
         occupied_thresh=params.occupied_thresh, free_thresh=params.free_thresh)

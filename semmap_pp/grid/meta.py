@@ -7,6 +7,8 @@ for YAML syntax errors).
 from __future__ import annotations
 
 import math
+import os
+import reprlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +24,20 @@ DEFAULT_FREE_THRESH = 0.196
 DEFAULT_MODE = "trinary"
 # Used only for maps that do not state a resolution (bare images); always reported as a note.
 DEFAULT_RESOLUTION = 0.05
+# Sanity limits of the file format (not modelling choices): a map_server YAML is a few hundred
+# bytes, and map coordinates beyond a million kilometres only turn into overflows downstream.
+MAX_YAML_BYTES = 1 << 20
+MAX_EXTENT_M = 1e9
+
+# Values quoted in error messages are shortened: a hostile YAML (nested aliases) can hold a value
+# whose repr is gigabytes long.
+_SHORT = reprlib.Repr(maxlevel=2, maxlist=4, maxtuple=4, maxdict=4, maxstring=40, maxlong=40,
+                      maxother=40)
+
+
+def short(value) -> str:
+    """A bounded repr of ``value`` for error messages."""
+    return _SHORT.repr(value)
 
 
 @dataclass(frozen=True)
@@ -42,20 +58,27 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _finite(value) -> bool:
+    """A number that converts to a finite float (a huge YAML integer overflows)."""
+    try:
+        return _is_number(value) and math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def check_resolution(path: Path, value) -> float:
     """A positive finite resolution, or MapError."""
     if not _is_number(value):
-        raise MapError(path, f"resolution must be a number of metres per cell, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise MapError(path, f"resolution must be a positive finite number, got {value}")
-    return value
+        raise MapError(path, f"resolution must be a number of metres per cell, got {short(value)}")
+    if not _finite(value) or float(value) <= 0:
+        raise MapError(path, f"resolution must be a positive finite number, got {short(value)}")
+    return float(value)
 
 
 def check_threshold(path: Path, key: str, value) -> float:
     """A threshold in [0, 1], or MapError."""
-    if not _is_number(value) or not math.isfinite(float(value)):
-        raise MapError(path, f"{key} must be a number in [0, 1], got {value!r}")
+    if not _finite(value):
+        raise MapError(path, f"{key} must be a number in [0, 1], got {short(value)}")
     if not 0.0 <= float(value) <= 1.0:
         raise MapError(path, f"{key} must be in [0, 1], got {value}")
     return float(value)
@@ -65,22 +88,33 @@ def check_negate(path: Path, value) -> bool:
     """0/1/false/true, or MapError."""
     if isinstance(value, bool) or (isinstance(value, int) and value in (0, 1)):
         return bool(value)
-    raise MapError(path, f"negate must be 0 or 1, got {value!r}")
+    raise MapError(path, f"negate must be 0 or 1, got {short(value)}")
 
 
 def check_mode(path: Path, value) -> str:
     """One of trinary/scale/raw, or MapError."""
-    if value not in MODES:
-        raise MapError(path, f"mode must be one of {', '.join(MODES)}, got {value!r}")
+    if not isinstance(value, str) or value not in MODES:
+        raise MapError(path, f"mode must be one of {', '.join(MODES)}, got {short(value)}")
     return value
 
 
 def check_origin(path: Path, value) -> tuple[float, float, float]:
     """Three finite numbers (x, y, yaw), or MapError."""
     if (not isinstance(value, (list, tuple)) or len(value) != 3
-            or not all(_is_number(v) and math.isfinite(float(v)) for v in value)):
-        raise MapError(path, f"origin must be a list of 3 finite numbers [x, y, yaw], got {value!r}")
+            or not all(_finite(v) for v in value)):
+        raise MapError(path, f"origin must be a list of 3 finite numbers [x, y, yaw], "
+                             f"got {short(value)}")
     return tuple(float(v) for v in value)
+
+
+def check_extent(path: Path, width: int, height: int, resolution: float,
+                 origin: tuple[float, float, float]) -> None:
+    """The map's corners in metres lie within ``MAX_EXTENT_M`` of 0, or MapError."""
+    reach = max(abs(origin[0]), abs(origin[1])) + (width + height) * resolution
+    if not reach <= MAX_EXTENT_M:
+        raise MapError(path, f"map reaches {reach:.3g} m from the map frame's origin ({width}x{height} "
+                             f"cells of {resolution:g} m at origin [{origin[0]:g}, {origin[1]:g}]); "
+                             f"at most {MAX_EXTENT_M:g} m is accepted")
 
 
 def check_thresholds(path: Path, occupied: float, free: float) -> None:
@@ -91,8 +125,14 @@ def check_thresholds(path: Path, occupied: float, free: float) -> None:
 
 
 def read_yaml(path: Path) -> dict:
-    """The mapping in a map_server YAML file."""
+    """The mapping in a map_server YAML file (a regular file of at most ``MAX_YAML_BYTES``)."""
+    if not path.is_file():  # a FIFO or device would block or never end
+        raise MapError(path, "map file is not a regular file")
     try:
+        size = path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise MapError(path, f"YAML file of {size} bytes is too large for a map_server map "
+                                 f"(at most {MAX_YAML_BYTES})")
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise MapError(path, "not a YAML text file (not UTF-8)") from None
@@ -115,21 +155,48 @@ def read_yaml(path: Path) -> dict:
     return doc
 
 
-def params_from_yaml(path: Path, doc: dict, overrides: dict) -> MapParams:
-    """Validate a YAML mapping, with non-None ``overrides`` taking precedence."""
+def escapes_folder(image: str) -> bool:
+    """Whether the YAML's ``image`` text leaves the YAML's folder: absolute, ``~`` or ``..``.
+
+    The test is on the text (lexical), so a symlink the owner of the folder put there is followed;
+    what a shared YAML file cannot do is name an arbitrary file (docs/formats.md).
+
+    Examples
+    --------
+    >>> [escapes_folder(s) for s in ("m.pgm", "sub/m.pgm", "a/../m.pgm", "../m.pgm", "/etc/m.pgm")]
+    [False, False, False, True, True]
+    """
+    if image.startswith("~") or Path(image).is_absolute():
+        return True
+    parts = Path(os.path.normpath(image)).parts
+    return bool(parts) and parts[0] == ".."
+
+
+def params_from_yaml(path: Path, doc: dict, overrides: dict, *,
+                     allow_outside: bool = False) -> MapParams:
+    """Validate a YAML mapping, with non-None ``overrides`` taking precedence.
+
+    An ``image`` outside the YAML's folder (absolute, ``~`` or ``..``) is refused unless
+    ``allow_outside``; it must then still decode as an image.
+    """
     notes: list[str] = []
     image = doc.get("image")
     if image is None:
         raise MapError(path, "YAML has no 'image' key (the map image file)")
-    if not isinstance(image, str) or not image.strip():
-        raise MapError(path, f"'image' must be a file name, got {image!r}")
+    if not isinstance(image, str) or not image.strip() or "\0" in image:
+        raise MapError(path, f"'image' must be a file name, got {short(image)}")
+    if escapes_folder(image):
+        if not allow_outside:
+            raise MapError(path, f"image {short(image)} is outside the YAML file's folder "
+                                 "(use --allow-outside to read it)")
+        notes.append(f"image {image} is outside the YAML file's folder (allowed)")
     image_path = Path(image).expanduser()
     if not image_path.is_absolute():
         image_path = path.parent / image_path
     if not image_path.exists():
-        raise MapError(path, f"image file {image!r} does not exist (looked for {image_path})")
+        raise MapError(path, f"image file {short(image)} does not exist (looked for {image_path})")
     if image_path.is_dir():
-        raise MapError(path, f"image {image!r} is a directory, not an image file")
+        raise MapError(path, f"image {short(image)} is a directory, not an image file")
     if image_path.resolve() == path.resolve():
         raise MapError(path, "'image' names this YAML file itself, not an image")
 

@@ -40,7 +40,10 @@ DERIVABLE_EVIDENCE = {("adj", 2)}
 RESERVED_NAMES = {p for p, _ in EVIDENCE_PREDICATES | QUERY_PREDICATES} | {"soft"}
 WEIGHT_SCALE = 1000          # weak-constraint weights are written in thousandths
 MAX_WEIGHT = 50_000          # w = 50: e^-50 ~ 2e-22; anything stronger should be a hard rule
+MAX_INTEGER = 2**31 - 1      # clingo's integers are 32-bit: a longer literal wraps around silently
 
+# Comments, strings and integer literals (not digits inside a name such as w1500 or X2).
+_INTEGER_RE = re.compile(r'%\*.*?\*%|%[^\n]*|"(?:[^"\\\n]|\\.)*"|(?<![A-Za-z0-9_\'])\d+', re.S)
 _MSG_RE = re.compile(r"^(?P<file>.*?):(?P<line>\d+):(?P<col>\d+)(?:-\d+(?::\d+)?)?:\s*"
                      r"(?P<kind>error|info|warning):\s*(?P<msg>.*)$")
 
@@ -126,6 +129,25 @@ def strip_includes(text: str, path: str) -> tuple[str, list[tuple[str, int, int]
     return "".join(out), includes
 
 
+def check_integers(text: str, path: str) -> None:
+    """Refuse integer literals beyond clingo's 32-bit range (clingo would wrap them silently).
+
+    Examples
+    --------
+    >>> check_integers(':~ rolike(U). [w1@0, r, U] % 99999999999\\n', "r.lp")
+    >>> check_integers(':~ rolike(U). [4294968296@0, r, U]', "r.lp")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semmap_pp.errors.RuleError: r.lp:1:16: integer 4294968296 is too large ...
+    """
+    for m in _INTEGER_RE.finditer(text):
+        token = m.group()
+        if token[0].isdigit() and (len(token) > 10 or int(token) > MAX_INTEGER):
+            raise RuleError(path, f"integer {token[:20]}{'...' if len(token) > 20 else ''} is too "
+                            f"large (clingo integers are 32-bit: at most {MAX_INTEGER})",
+                            *_pos(text, m.start()))
+
+
 def resolve_include(target: str, including: Path, root: Path, line: int, col: int) -> Path:
     """Resolve an include target; it must stay inside ``root`` (the rules folder)."""
     if os.path.isabs(target) or target.startswith("~"):
@@ -200,6 +222,32 @@ def atom_signature(symbol_node, path) -> tuple[str, int]:
                     *_loc(symbol_node))
 
 
+def check_head_terms(symbol, body, path) -> None:
+    """A derived atom holds only values of its positive body atoms (Datalog).
+
+    Each head argument is a constant or a variable that occurs in a positive body atom, so
+    grounding can only combine the constants of the evidence and the rule files: no arithmetic,
+    function terms or aggregate results in heads, which could make grounding endless (e.g.
+    ``chain(X+1) :- chain(X).``).
+    """
+    bound = set()
+    for lit in body:
+        if (lit.ast_type == cast.ASTType.Literal and lit.sign == cast.Sign.NoSign
+                and lit.atom.ast_type == cast.ASTType.SymbolicAtom):
+            bound |= {n.name for n in walk(lit.atom) if n.ast_type == cast.ASTType.Variable}
+    args = symbol.arguments if symbol.ast_type == cast.ASTType.Function else []
+    for arg in args:
+        if arg.ast_type == cast.ASTType.SymbolicTerm:
+            continue
+        if arg.ast_type != cast.ASTType.Variable:
+            raise RuleError(path, f"head argument {arg} must be a variable or a constant: a derived "
+                            "atom cannot compute new values (they could make grounding endless)",
+                            *_loc(arg))
+        if arg.name not in bound:
+            raise RuleError(path, f"head variable {arg.name} must occur in a positive body atom "
+                            "(a derived atom holds only values of the evidence)", *_loc(arg))
+
+
 _FORBIDDEN = {
     cast.ASTType.Script: "#script is not allowed in rule files (no code)",
     cast.ASTType.External: "#external is not allowed in rule files",
@@ -262,6 +310,7 @@ def _read_files(top: Path) -> list[tuple[Path, list]]:
         except (OSError, UnicodeDecodeError) as exc:
             raise RuleError(path, f"cannot read rule file: {exc}") from None
         stripped, includes = strip_includes(text, str(path))
+        check_integers(stripped, str(path))
         statements = parse_text(stripped, str(path))
         order.append((path, statements))
         for target, line, col in reversed(includes):
@@ -285,6 +334,10 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                                     f"@{node.name}", *_loc(node))
                 if node.ast_type == cast.ASTType.TheoryAtom:
                     raise RuleError(path, "theory atoms are not allowed", *_loc(node))
+                if node.ast_type == cast.ASTType.Interval:
+                    raise RuleError(path, f"intervals ({node}) are not allowed: a rule file works "
+                                    "on the units of the evidence and makes no new values",
+                                    *_loc(node))
             if t == cast.ASTType.Program:
                 if st.name != "base" or len(st.parameters):
                     raise RuleError(path, f"#program {st.name} is not allowed: only the base "
@@ -332,6 +385,7 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                     if sig[0].startswith("_"):
                         raise RuleError(path, f"{sig[0]}/{sig[1]}: names starting with '_' are "
                                         "reserved for the engine", *_loc(head))
+                    check_head_terms(head.atom.symbol, st.body, path)
                     if sig not in DERIVABLE_EVIDENCE:
                         helpers.add(sig)
                 else:
