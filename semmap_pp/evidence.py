@@ -88,12 +88,38 @@ def geometry_class_compiled(rect, resolution, measure, hall_min_size,
     return COLIKE if long_ / max(short, 1e-12) >= corridor_min_ratio else ROLIKE
 
 
-def geometry_probabilities(rects: np.ndarray, resolution: float, params) -> np.ndarray:
-    """(n, 3) probabilities of RoLi, CoLi, HaLi (logistic in the distance to each threshold)."""
+def _quantise(p: np.ndarray, step: float) -> np.ndarray:
+    """``p`` rounded to multiples of ``step`` and kept in ``[step, 1 - step]``."""
+    return np.clip(np.round(p / step) * step, step, 1.0 - step)
+
+
+def _big_long(rects: np.ndarray, resolution: float, params) -> tuple[np.ndarray, np.ndarray]:
+    """The two logistic values: P(size is big), P(length-to-width ratio is long)."""
     size, ratio = _size_ratio(rects, resolution, params)
     big = 1.0 / (1.0 + np.exp(-(size - params.hall_min_size) / params.size_scale))
     long_ = 1.0 / (1.0 + np.exp(-(ratio - params.corridor_min_ratio) / params.ratio_scale))
+    return big, long_
+
+
+def _classes(big: np.ndarray, long_: np.ndarray) -> np.ndarray:
     return np.stack([(1 - big) * (1 - long_), (1 - big) * long_, big], axis=1)
+
+
+def geometry_probabilities(rects: np.ndarray, resolution: float, params) -> np.ndarray:
+    """(n, 3) probabilities of RoLi, CoLi, HaLi (logistic in the distance to each threshold)."""
+    return _classes(*_big_long(rects, resolution, params))
+
+
+def soft_probabilities(rects: np.ndarray, resolution: float, params) -> np.ndarray:
+    """:func:`geometry_probabilities` with the two logistic values quantised to ``params.soft_step``.
+
+    Soft evidence is a coarse statement about a geometry near a class boundary; a finite set of
+    values lets the knowledge engine reuse its work instead of meeting a new number at every
+    resize of a unit. Used only for evidence already judged soft (class probability below
+    ``hard_above``).
+    """
+    big, long_ = _big_long(rects, resolution, params)
+    return _classes(_quantise(big, params.soft_step), _quantise(long_, params.soft_step))
 
 
 @dataclass(frozen=True)
@@ -198,14 +224,17 @@ def unit_geometry(height: int, width: int, resolution: float, params) -> tuple:
     """Geometry evidence of one unit of ``height`` x ``width`` cells (cached by size).
 
     Returns ``(class index, None)`` for hard evidence, or ``(class index, (p_rolike, p_colike,
-    p_halike))`` (rounded to 6 decimals) when the class's probability is below ``hard_above``.
+    p_halike))`` (:func:`soft_probabilities`, rounded to 6 decimals) when the class's
+    probability is below ``hard_above``.
     Every evidence of the project is built from this function, so the sampler's incremental
     evidence and :func:`build_evidence` always agree.
     """
     rect = np.array([[0, 0, height, width]])
     c = int(geometry_class(rect, resolution, params)[0])
     pr = geometry_probabilities(rect, resolution, params)[0]
-    return c, (tuple(round(float(v), 6) for v in pr) if pr[c] < params.hard_above else None)
+    if pr[c] >= params.hard_above:
+        return c, None
+    return c, tuple(round(float(v), 6) for v in soft_probabilities(rect, resolution, params)[0])
 
 
 def knowledge_evidence(units, items, muldoor, adj):

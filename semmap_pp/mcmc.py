@@ -36,16 +36,22 @@ def mh_green(rng, tracker, proposal, temperature: float = 1.0) -> bool:
     """
     if proposal is None:
         return False
-    prop = tracker.propose(proposal.world, proposal.changed_slots)
+    # The uniform is drawn first, so the acceptance is "log pi(W') > floor" with
+    # floor = log pi(W) + T (log u - log_ratio). A target that can bound log pi(W') cheaply
+    # (``supports_floor``) skips the costly part (the knowledge engine) of proposals that cannot
+    # reach the floor: still exact Metropolis-Hastings-Green, only less work.
+    u = rng.random()
+    log_u = math.log(u) if u > 0.0 else -math.inf
+    old = tracker.logp
+    floor = None if old == -math.inf else old + temperature * (log_u - proposal.log_ratio)
+    if floor is not None and getattr(tracker, "supports_floor", False):
+        prop = tracker.propose(proposal.world, proposal.changed_slots, floor=floor)
+    else:
+        prop = tracker.propose(proposal.world, proposal.changed_slots)
     new = prop.logp
     if new == -math.inf or math.isnan(new):
         return False
-    old = tracker.logp
-    if old == -math.inf:  # leaving an impossible start is always accepted
-        tracker.accept(prop)
-        return True
-    log_alpha = (new - old) / temperature + proposal.log_ratio
-    if log_alpha >= 0.0 or math.log(rng.random()) < log_alpha:
+    if old == -math.inf or new > floor:  # leaving an impossible start is always accepted
         tracker.accept(prop)
         return True
     return False

@@ -82,6 +82,7 @@ class EvidenceParams:
     size_scale: float
     ratio_scale: float
     hard_above: float
+    soft_step: float
     multiple_doors: int
 
 
@@ -313,6 +314,7 @@ def load_model(path: str | Path | None = None) -> Model:
         size_scale=r.number("evidence.size_scale", positive=True),
         ratio_scale=r.number("evidence.ratio_scale", positive=True),
         hard_above=r.number("evidence.hard_above", lo=0.5, hi=1.0),
+        soft_step=r.number("evidence.soft_step", positive=True, hi=0.5),
         multiple_doors=r.integer("evidence.multiple_doors", lo=1))
 
     prior = PriorParams(

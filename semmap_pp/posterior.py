@@ -355,6 +355,9 @@ class Tracker:
     and SaLe sum over the slots (compiled).
     """
 
+    #: ``propose`` takes ``floor`` (see :func:`semmap_pp.mcmc.mh_green`).
+    supports_floor = True
+
     def __init__(self, post: Posterior, world: W.World):
         self.post = post
         self._provider = post.provider

@@ -79,3 +79,17 @@ def test_scalar_geometry_class_equals_the_vectorised_one():
         p = P.__class__(**{**P.__dict__, "size_measure": measure})
         vec = geometry_class(rects, RES, p)
         assert [geometry_class_one(r, RES, p) for r in rects] == vec.tolist()
+
+
+def test_soft_evidence_takes_few_values():
+    """Soft probabilities are quantised: many unit sizes near a boundary give few distinct values."""
+    from semmap_pp.evidence import unit_geometry
+    values = set()
+    for h in range(40, 80):
+        for w in range(120, 220):
+            _, soft = unit_geometry(h, w, RES, P)
+            if soft is not None:
+                values.add(soft)
+                assert abs(sum(soft) - 1) < 1e-5 and min(soft) > 0
+    step = P.soft_step
+    assert 1 < len(values) <= (round(1 / step) + 1) ** 2
