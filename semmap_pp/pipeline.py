@@ -81,7 +81,10 @@ def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> No
 
     from semmap_pp.kernels.data import settings_from_mapping
 
-    c = model.cells(grid.resolution)
+    try:
+        c = model.cells(grid.resolution)
+    except ModelError as exc:  # the map's resolution is the likelier culprit: name the map
+        raise MapError(grid.source, f"{exc.message} (model {model.path})") from None
     pad = 1 + max(closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution), c.wall,
                   c.adjacency_dilation, c.door_max, c.object_max_extent)
     h, w = grid.shape

@@ -186,6 +186,9 @@ def decode_pillow(path: Path, *, max_cells: int = MAX_CELLS) -> Decoded:
         raise MapError(path, f"image is larger than Pillow decodes safely "
                              f"({2 * Image.MAX_IMAGE_PIXELS} pixels)") from None
     except Image.UnidentifiedImageError:
+        size = _png_size(path)  # Pillow does not identify a PNG of 0 columns or rows
+        if size is not None:
+            _check_size(path, *size, max_cells)
         raise MapError(path, "not an image file that can be read (unknown or damaged format)") from None
     except MemoryError:
         raise MapError(path, "not enough memory to decode the image") from None
