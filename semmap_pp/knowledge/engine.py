@@ -24,16 +24,20 @@ from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import RuleError
 from semmap_pp.knowledge.dialect import RuleSet, load_rules
 from semmap_pp.knowledge.evidence import Evidence
-from semmap_pp.knowledge.exact import (JunctionTree, calibrate, decode_max, merged_potentials,
-                                       scope_marginal)
+from semmap_pp.knowledge.exact import (MAX_CLIQUE_STATES, JunctionTree, TooDense, calibrate,
+                                       decode_max, merged_potentials, scope_marginal)
 from semmap_pp.knowledge.ground import ground
+from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import LocalModel, is_pairwise
-from semmap_pp.knowledge.map import map_clingo, map_rc2
+from semmap_pp.knowledge.map import map_clingo, map_pairwise_rc2, map_rc2
 from semmap_pp.knowledge.mcsat import mcsat_marginals
 from semmap_pp.knowledge.mcsat_local import LocalClauses, mcsat_local
 
-METHODS = ("exact", "mcsat")
+METHODS = ("auto", "exact", "lbp", "mcsat")
 MAP_METHODS = ("jt", "clingo", "rc2")
+#: ``method="auto"`` runs the junction tree when its largest clique has at most this many joint
+#: states, loopy BP otherwise (docs/benchmarks.md, "Knowledge engine", for the measurement).
+AUTO_MAX_STATES = 1 << 12
 
 
 @dataclass(frozen=True)
@@ -51,8 +55,12 @@ class InferenceResult:
     map_cost : float
         Weight of the soft rules the MAP world violates (MLN units, i.e. thousandths / 1000).
     log_z : float or None
-        Log partition function over types and SaLe (exact method only).
+        Log partition function over types and SaLe (exact marginals only).
     method : str
+        How the marginals were computed: ``"exact"``, ``"lbp"`` or ``"mcsat"``.
+    map_method : str
+        How the MAP world was found: ``"jt"`` (max-product on a junction tree, or per unit when
+        no pair couples the MAP), ``"rc2"`` or ``"clingo"``; all exact.
     """
 
     types: dict
@@ -61,6 +69,7 @@ class InferenceResult:
     map_cost: float
     log_z: float | None
     method: str
+    map_method: str = "jt"
 
 
 class KnowledgeEngine:
@@ -69,8 +78,12 @@ class KnowledgeEngine:
     Parameters
     ----------
     rules : RuleSet
-    method : {"exact", "mcsat"}
-        Marginals by junction tree (exact) or by MC-SAT sampling.
+    method : {"auto", "exact", "lbp", "mcsat"}
+        Marginals by junction tree (exact), loopy belief propagation
+        (:mod:`~semmap_pp.knowledge.lbp`), MC-SAT sampling, or ``auto``: exact when the
+        junction tree's largest clique has at most ``auto_max_states`` joint states, else LBP.
+        The MAP stays exact: when its own junction tree is too large (``auto``/``lbp``: above
+        ``auto_max_states``) RC2 solves it.
     map_method : {"jt", "clingo", "rc2"}
         MAP by max-product on the junction tree, clingo optimisation, or RC2 MaxSAT.
     n_chains, n_iter, burn_in : int
@@ -80,15 +93,20 @@ class KnowledgeEngine:
     seed : int
         Mixed with a hash of the rules and the evidence: MC-SAT results are a deterministic
         function of (rules, evidence, settings).
+    auto_max_states : int
+        Largest clique ``auto`` hands to the junction tree.
+    bp : BPSettings
+        Damping, iteration cap and tolerance of loopy BP.
     fast : bool
         Use cached unit/pair templates (:mod:`~semmap_pp.knowledge.local`, and for MC-SAT
         :mod:`~semmap_pp.knowledge.mcsat_local`) when the rule set is pairwise-local and the MAP
         method is the junction tree.
     """
 
-    def __init__(self, rules: RuleSet, method: str = "exact", map_method: str = "jt",
+    def __init__(self, rules: RuleSet, method: str = "auto", map_method: str = "jt",
                  n_chains: int = 768, n_iter: int = 38, burn_in: int = 12,
-                 cache_size: int = 4096, seed: int = 0, fast: bool = True):
+                 cache_size: int = 4096, seed: int = 0, fast: bool = True,
+                 auto_max_states: int = AUTO_MAX_STATES, bp: BPSettings = BPSettings()):
         if method not in METHODS:
             raise RuleError(rules.path, f"unknown inference method {method!r}; use one of {METHODS}")
         if map_method not in MAP_METHODS:
@@ -97,6 +115,7 @@ class KnowledgeEngine:
         self.rules, self.method, self.map_method = rules, method, map_method
         self.mcsat_settings = (int(n_chains), int(n_iter), int(burn_in))
         self.cache_size, self.seed = int(cache_size), int(seed)
+        self.auto_max_states, self.bp = int(auto_max_states), bp
         self._cache: OrderedDict = OrderedDict()
         self.local = (LocalModel(rules) if fast and map_method == "jt" and is_pairwise(rules)
                       else None)
@@ -105,7 +124,7 @@ class KnowledgeEngine:
         self.hits = self.misses = 0
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike, method: str = "exact", **settings
+    def from_file(cls, path: str | os.PathLike, method: str = "auto", **settings
                   ) -> "KnowledgeEngine":
         """Load and validate ``path`` and build an engine over it."""
         return cls(load_rules(path), method=method, **settings)
@@ -130,24 +149,33 @@ class KnowledgeEngine:
         text = repr((self.rules.digest, evidence.key, self.mcsat_settings, self.seed))
         return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
 
+    def _limit(self) -> int:
+        """Largest clique the junction tree may have for the marginals and the MAP."""
+        return MAX_CLIQUE_STATES if self.method in ("exact", "mcsat") else self.auto_max_states
+
+    def _tree(self, card, scopes, path):
+        """A junction tree within :meth:`_limit`, or None when ``auto``/``lbp`` must fall back."""
+        try:
+            return JunctionTree(card, scopes, path, max_states=self._limit())
+        except TooDense:
+            if self.method in ("exact", "mcsat"):
+                raise
+            return None
+
     def _compute(self, ev: Evidence) -> InferenceResult:
         if self.local is not None:
+            if self.local_clauses is not None:
+                return self._compute_local_mcsat(ev)
             return self._compute_local(ev)
         g = ground(self.rules, ev, keep_control=self.map_method == "clingo")
         net = g.network
         pots = merged_potentials(net)
-        jt = JunctionTree(net.card, [s for s, _ in pots], net.path)
-        log_z = None
-        if self.method == "exact":
-            log_z, marg = calibrate(jt, pots)
-            if marg is None:
-                raise RuleError(net.path, "the hard rules admit no world for this evidence")
-            log_z -= net.offset / 1000.0
-        else:
-            rng = np.random.default_rng(self.signature_seed(ev))
-            n_chains, n_iter, burn_in = self.mcsat_settings
-            marg = mcsat_marginals(net, rng, n_chains, n_iter, burn_in, jt=None)
-        if self.map_method == "jt":
+        scopes = [s for s, _ in pots]
+        jt = None if self.method == "lbp" and self.map_method != "jt" else \
+            self._tree(net.card, scopes, net.path)
+        # MAP first: it is exact and raises when the hard rules admit no world
+        map_method = self.map_method
+        if self.map_method == "jt" and jt is not None:
             x, best = decode_max(jt, pots)
             if not np.isfinite(best):
                 raise RuleError(net.path, "the hard rules admit no world for this evidence")
@@ -156,6 +184,21 @@ class KnowledgeEngine:
             x, cost = map_clingo(g)
         else:
             x, cost = map_rc2(net)
+            map_method = "rc2"
+        log_z, method = None, self.method
+        if self.method == "mcsat":
+            rng = np.random.default_rng(self.signature_seed(ev))
+            n_chains, n_iter, burn_in = self.mcsat_settings
+            marg = mcsat_marginals(net, rng, n_chains, n_iter, burn_in, jt=None)
+        elif jt is not None and self.method != "lbp":
+            log_z, marg = calibrate(jt, pots)
+            if marg is None:
+                raise RuleError(net.path, "the hard rules admit no world for this evidence")
+            log_z -= net.offset / 1000.0
+            method = "exact"
+        else:
+            marg = factor_bp(net.card, pots, self.bp).marginals
+            method = "lbp"
         types, map_types = {}, {}
         for i, u in enumerate(net.units):
             p = np.asarray(marg[i], dtype=np.float64)
@@ -166,33 +209,77 @@ class KnowledgeEngine:
         for p_, q_ in ev.adj:
             v = net.sale.get((p_, q_))
             sale[(p_, q_)] = float(marg[v][1]) if v is not None else 0.0
-        return InferenceResult(types, sale, map_types, float(cost) / 1000.0, log_z, self.method)
+        return InferenceResult(types, sale, map_types, float(cost) / 1000.0, log_z, method,
+                               map_method)
 
-    def _compute_local(self, ev: Evidence) -> InferenceResult:
+    def _compute_local_mcsat(self, ev: Evidence) -> InferenceResult:
         card, sum_pots, max_pots, softs, conds = self.local.reduced(ev)
         path = self.rules.path
         jt = JunctionTree(card, [s for s, _ in sum_pots], path)
-        if self.local_clauses is not None:
-            x, best = decode_max(jt, max_pots)
-            if not np.isfinite(best):
-                raise RuleError(path, "the hard rules admit no world for this evidence")
-            rng = np.random.default_rng(self.signature_seed(ev))
-            types, sale = mcsat_local(self.local_clauses, ev, rng, *self.mcsat_settings, jt=jt)
-            map_types = {u: UNIT_TYPES[int(x[i]) >> softs[i]] for i, u in enumerate(ev.units)}
-            return InferenceResult(types, sale, map_types, -float(best) + 0.0, None, self.method)
-        log_z, marg, full = calibrate(jt, sum_pots, return_beliefs=True)
-        if marg is None:
-            raise RuleError(path, "the hard rules admit no world for this evidence")
         x, best = decode_max(jt, max_pots)
-        index = {u: i for i, u in enumerate(ev.units)}
+        if not np.isfinite(best):
+            raise RuleError(path, "the hard rules admit no world for this evidence")
+        rng = np.random.default_rng(self.signature_seed(ev))
+        types, sale = mcsat_local(self.local_clauses, ev, rng, *self.mcsat_settings, jt=jt)
+        map_types = {u: UNIT_TYPES[int(x[i]) >> softs[i]] for i, u in enumerate(ev.units)}
+        return InferenceResult(types, sale, map_types, -float(best) + 0.0, None, self.method)
+
+    def _map_local(self, tn, path):
+        """Exact MAP of a type network: per unit, junction tree, or RC2 when the tree is large."""
+        n = len(tn.units)
+        if not tn.max_pairs:
+            if any(not np.isfinite(t).any() for t in tn.unary_max):
+                raise RuleError(path, "the hard rules admit no world for this evidence")
+            x = np.array([int(np.argmax(t)) for t in tn.unary_max], dtype=np.int64)
+            return x, float(sum(t[k] for t, k in zip(tn.unary_max, x))), "jt"
+        pots = [((i,), t) for i, t in enumerate(tn.unary_max)]
+        pots += [((i, j), t) for i, j, t in tn.max_pairs]
+        jt = self._tree(tn.card, [s for s, _ in pots], path)
+        if jt is None:
+            x, best = map_pairwise_rc2(tn.unary_max, tn.max_pairs, path)
+            return x, best, "rc2"
+        x, best = decode_max(jt, pots)
+        if not np.isfinite(best) or len(x) != n:
+            raise RuleError(path, "the hard rules admit no world for this evidence")
+        return x, float(best), "jt"
+
+    def _compute_local(self, ev: Evidence) -> InferenceResult:
+        path = self.rules.path
+        tn = self.local.type_network(ev)
+        x, best, map_method = self._map_local(tn, path)
+        pots = [((i,), t) for i, t in enumerate(tn.unary_sum)]
+        pots += [((i, j), t) for i, j, t in tn.sum_pairs]
+        jt = None if self.method == "lbp" else self._tree(tn.card, [s for s, _ in pots], path)
+        sale = {}
+        if jt is not None:
+            log_z, marg, full = calibrate(jt, pots, return_beliefs=True)
+            if marg is None:
+                raise RuleError(path, "the hard rules admit no world for this evidence")
+            log_z, method = float(log_z), "exact"
+            for pq, c in tn.sale.items():
+                if isinstance(c, float):
+                    sale[pq] = c
+                else:
+                    i, j, cond = c
+                    sale[pq] = float(np.sum(scope_marginal(jt, full, (i, j)) * cond))
+        else:
+            where = {(i, j): k for k, (i, j, _t) in enumerate(tn.sum_pairs)}
+            want = [where[(c[0], c[1])] for c in tn.sale.values() if not isinstance(c, float)]
+            bp = pairwise_bp(tn.unary_sum, tn.sum_pairs, want, self.bp)
+            marg, log_z, method = bp.marginals, None, "lbp"
+            for pq, c in tn.sale.items():
+                if isinstance(c, float):
+                    sale[pq] = c
+                else:
+                    i, j, cond = c
+                    sale[pq] = float(np.sum(bp.pair_beliefs[where[(i, j)]] * cond))
         types, map_types = {}, {}
         for i, u in enumerate(ev.units):
-            p = marg[i].reshape(4, 1 << softs[i]).sum(axis=1)
+            p = np.asarray(marg[i], dtype=np.float64)
+            if tn.shift[i]:
+                p = p.reshape(4, 1 << tn.shift[i]).sum(axis=1)
             p.setflags(write=False)
             types[u] = p
-            map_types[u] = UNIT_TYPES[int(x[i]) >> softs[i]]
-        sale = {}
-        for (p_, q_), cond in conds.items():
-            pm = scope_marginal(jt, full, (index[p_], index[q_]))
-            sale[(p_, q_)] = float(np.sum(pm * cond))
-        return InferenceResult(types, sale, map_types, -float(best) + 0.0, float(log_z), self.method)
+            map_types[u] = UNIT_TYPES[int(x[i]) >> tn.shift[i]]
+        return InferenceResult(types, sale, map_types, -float(best) + 0.0, log_z, method,
+                               map_method)

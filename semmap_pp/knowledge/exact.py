@@ -19,6 +19,10 @@ from semmap_pp.errors import RuleError
 MAX_CLIQUE_STATES = 1 << 22
 
 
+class TooDense(RuleError):
+    """The junction tree would have a clique above the allowed number of joint states."""
+
+
 def merged_potentials(net) -> list[tuple[tuple[int, ...], np.ndarray]]:
     """Log potentials of ``net`` grouped by scope: ``-Σ w/1000 · viol`` and ``-inf`` for hard."""
     groups: dict = {}
@@ -55,9 +59,16 @@ class JunctionTree:
         Sorted factor scopes.
     path : str
         Named in the error when the tree would be too large.
+    max_states : int
+        Largest clique allowed (joint states); a larger one raises :class:`TooDense`.
+
+    Attributes
+    ----------
+    largest : int
+        Joint states of the largest clique.
     """
 
-    def __init__(self, card, scopes, path=None):
+    def __init__(self, card, scopes, path=None, max_states=MAX_CLIQUE_STATES):
         card = [int(c) for c in card]
         n = len(card)
         self.card = card
@@ -79,13 +90,15 @@ class JunctionTree:
         heapq.heapify(heap)
         done = [False] * n
         order, seps = [], []
+        largest = 1
         while heap:
             w, v = heapq.heappop(heap)
             if done[v] or w != current[v]:
                 continue
-            if w > MAX_CLIQUE_STATES:
-                raise RuleError(path, f"the ground network is too densely connected for exact "
-                                f"inference (a clique of {w} states); use method='mcsat'")
+            if w > max_states:
+                raise TooDense(path, f"the ground network is too densely connected for exact "
+                               f"inference (a clique of {w} states); use method='auto' or 'lbp'")
+            largest = max(largest, w)
             done[v] = True
             sep = sorted(nbrs[v])
             for a in sep:
@@ -99,7 +112,7 @@ class JunctionTree:
         pos = [0] * n
         for i, v in enumerate(order):
             pos[v] = i
-        self.order, self.seps, self.pos = order, seps, pos
+        self.order, self.seps, self.pos, self.largest = order, seps, pos, largest
         self.axes = [(v,) + s for v, s in zip(order, seps)]
         self.shapes = [tuple(card[a] for a in ax) for ax in self.axes]
         self.parent = [min((pos[a] for a in s), default=-1) for s in seps]

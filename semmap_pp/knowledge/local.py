@@ -19,6 +19,8 @@ file) followed by exactly its unit variables. Anything else uses the general pat
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import clingo
 import clingo.ast as cast
 import numpy as np
@@ -153,6 +155,8 @@ class LocalModel:
         self.rules = rules
         self._units: dict = {}
         self._pairs: dict = {}
+        self._flags: dict = {}
+        self._reduced: dict = {}
 
     def unit(self, key):
         """``(log potential over super-states, n_soft_atoms)`` of a unit with pattern ``key``."""
@@ -197,6 +201,54 @@ class LocalModel:
             hit = self._pairs[(kp, kq)] = (lse, mx, cond)
         return hit
 
+    def pair_flags(self, kp, kq):
+        """Whether the pair tables of ``(kp, kq)`` ignore p's / q's soft atoms (cached)."""
+        hit = self._flags.get((kp, kq))
+        if hit is None:
+            tables = self.pair(kp, kq)
+            k1, k2 = self.unit(kp)[1], self.unit(kq)[1]
+            hit = self._flags[(kp, kq)] = (all(_invariant(t, 0, k1) for t in tables),
+                                           all(_invariant(t, 1, k2) for t in tables))
+        return hit
+
+    def reduced_pair(self, kp, kq, cut_p, cut_q):
+        """Pair tables of ``(kp, kq)`` with the low ``cut_p`` / ``cut_q`` soft bits dropped
+        (units whose soft atoms no pair reads), split into what joins the network and what
+        folds into the units (cached).
+
+        Returns
+        -------
+        tuple
+            ``(sum_table or None, (a, b) or None, sale, max_table or None, (a, b) or None)``:
+            the sum-out table when it couples the pair (a zero table when only the SaLe
+            marginal needs the pair's joint), its unit terms when separable, the SaLe marginal
+            (a float when constant, else the conditional table), likewise for the max-out.
+        """
+        key = (kp, kq, cut_p, cut_q)
+        hit = self._reduced.get(key)
+        if hit is None:
+            lse, mx, cond = self.pair(kp, kq)
+            lse, mx, cond = (_types_only(_types_only(t, 0, cut_p), 1, cut_q)
+                             for t in (lse, mx, cond))
+            c = _constant_on(cond, lse)
+            s_sep = separate(lse)
+            s_tab = lse if s_sep is None else (np.zeros(lse.shape) if c is None else None)
+            m_sep = separate(mx)
+            hit = self._reduced[key] = (s_tab, s_sep, cond if c is None else c,
+                                        mx if m_sep is None else None, m_sep)
+        return hit
+
+    def type_network(self, ev: Evidence) -> "TypeNetwork":
+        """The network of ``ev`` over one variable per unit, ready for inference.
+
+        A unit's soft evidence atoms are summed (maximised) out into its unit table unless a
+        pair table reads them; a pair whose table is a sum of unit terms (e.g. every pair under
+        ``rules/none.lp``) is folded into its units and joins no clique, separately for the
+        sum-out (marginals) and the max-out (MAP) of SaLe. Exact: the joint distribution of the
+        types is unchanged.
+        """
+        return _type_network(self, ev)
+
     def reduced(self, ev: Evidence):
         """Cardinalities, sum potentials, max potentials and pair info for ``ev``."""
         maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
@@ -217,3 +269,140 @@ class LocalModel:
             max_pots.append(((i, j), mx))
             conds[(p, q)] = cond
         return card, sum_pots, max_pots, softs, conds
+
+
+# ---- the type network: private atoms summed out, uninformative pairs factored out ------------
+
+_TOL = 1e-9   # template tables are sums of thousandths: equal within float rounding
+
+
+def _invariant(table, axis, k):
+    """Whether ``table`` (super-states along ``axis``) ignores the low ``k`` soft bits there."""
+    if k == 0:
+        return True
+    shape = table.shape[:axis] + (table.shape[axis] >> k, 1 << k) + table.shape[axis + 1:]
+    t = table.reshape(shape)
+    first = np.take(t, [0], axis=axis + 1)
+    fin = np.isfinite(t)
+    if not np.array_equal(fin, np.broadcast_to(np.isfinite(first), t.shape)):
+        return False
+    with np.errstate(invalid="ignore"):
+        diff = np.where(fin, t - first, 0.0)
+    return bool(np.abs(diff).max() <= _TOL)
+
+
+def _types_only(table, axis, k):
+    """``table`` restricted to soft state 0 of its super-states along ``axis``."""
+    if k == 0:
+        return table
+    idx = np.arange(0, table.shape[axis], 1 << k)
+    return np.take(table, idx, axis=axis)
+
+
+def separate(table):
+    """Split a log pair table into unit terms when it is a sum of them.
+
+    Returns
+    -------
+    (ndarray, ndarray) or None
+        ``(a, b)`` with ``table[x, y] == a[x] + b[y]`` (within rounding), or None when the table
+        couples its two variables (or forbids some of their joint states).
+    """
+    if not np.isfinite(table).all():
+        return None
+    a, b = table[:, 0], table[0, :] - table[0, 0]
+    if np.abs(table - a[:, None] - b[None, :]).max() > _TOL:
+        return None
+    return a.copy(), b.copy()
+
+
+@dataclass
+class TypeNetwork:
+    """A pairwise network with one variable per unit, for one evidence (see :meth:`LocalModel.
+    type_network`).
+
+    Attributes
+    ----------
+    units : tuple of int
+    shift : list of int
+        Soft atoms kept in a unit's variable: its type is ``state >> shift`` (0 when no pair
+        reads the unit's soft atoms, so the variable is the type itself).
+    unary_sum, unary_max : list of ndarray
+        Log unit tables (soft atoms not kept summed / maximised out; uninformative pair terms
+        folded in).
+    sum_pairs, max_pairs : list of (i, j, ndarray)
+        Pair tables over ``(state_i, state_j)``, ``i < j`` unit indices, that couple their units
+        (sum-out / max-out of SaLe).
+    sale : dict (p, q) -> float or (i, j, ndarray)
+        ``P(sale(p,q))``: a constant, or the table of ``P(sale | state_i, state_j)``; a pair with
+        such a table is also in ``sum_pairs`` (with a zero table if it carries no factor).
+    """
+
+    units: tuple
+    shift: list
+    unary_sum: list
+    unary_max: list
+    sum_pairs: list
+    max_pairs: list
+    sale: dict
+
+    @property
+    def card(self) -> list[int]:
+        return [len(t) for t in self.unary_sum]
+
+
+def _constant_on(cond, table):
+    """The value of ``cond`` if it is one constant over the finite entries of ``table``."""
+    vals = cond[np.isfinite(table)]
+    if vals.size == 0:
+        return 0.0
+    return float(vals[0]) if np.abs(vals - vals[0]).max() <= _TOL else None
+
+
+def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
+    maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
+    keys = [_unit_key(maps, u) for u in ev.units]
+    index = {u: i for i, u in enumerate(ev.units)}
+    softs = [model.unit(key)[1] for key in keys]
+    collapse = [True] * len(keys)
+    pairs = []
+    for p, q in ev.adj:
+        i, j = index[p], index[q]
+        fl = model.pair_flags(keys[i], keys[j])
+        collapse[i] &= fl[0]
+        collapse[j] &= fl[1]
+        pairs.append((p, q, i, j))
+    shift, usum, umax = [], [], []
+    for i, key in enumerate(keys):
+        table, k = model.unit(key)
+        if collapse[i] and k:
+            t = table.reshape(4, 1 << k)
+            usum.append(_lse(t, 1))
+            umax.append(t.max(axis=1))
+            shift.append(0)
+        else:
+            usum.append(table.copy())
+            umax.append(table.copy())
+            shift.append(k)
+    sum_pairs, max_pairs, sale = [], [], {}
+    add_sum, add_max = [[] for _ in keys], [[] for _ in keys]
+    for p, q, i, j in pairs:
+        s_tab, s_sep, c, m_tab, m_sep = model.reduced_pair(
+            keys[i], keys[j], softs[i] if collapse[i] else 0, softs[j] if collapse[j] else 0)
+        if s_sep is not None:
+            add_sum[i].append(s_sep[0])
+            add_sum[j].append(s_sep[1])
+        if s_tab is not None:
+            sum_pairs.append((i, j, s_tab))
+        sale[(p, q)] = c if isinstance(c, float) else (i, j, c)
+        if m_sep is not None:
+            add_max[i].append(m_sep[0])
+            add_max[j].append(m_sep[1])
+        else:
+            max_pairs.append((i, j, m_tab))
+    for i in range(len(keys)):
+        if add_sum[i]:
+            usum[i] = usum[i] + np.sum(add_sum[i], axis=0)
+        if add_max[i]:
+            umax[i] = umax[i] + np.sum(add_max[i], axis=0)
+    return TypeNetwork(tuple(ev.units), shift, usum, umax, sum_pairs, max_pairs, sale)

@@ -91,3 +91,62 @@ def map_rc2(net: Network) -> tuple[np.ndarray, int]:
         else:
             x[v] = next(k for k, i in enumerate(ids[v]) if i in true)
     return x, cost + int(net.offset)
+
+
+def map_pairwise_rc2(unary, pairs, path) -> tuple[np.ndarray, float]:
+    """Exact MAP of a pairwise log-potential network by RC2 (one Boolean per variable state).
+
+    Parameters
+    ----------
+    unary : list of ndarray
+        Log tables whose finite entries are multiples of 1/1000 (negated costs of soft rules),
+        ``-inf`` for forbidden states.
+    pairs : list of (i, j, ndarray)
+        Log pair tables of the same kind.
+    path : str
+        Named in the error when no assignment is allowed.
+
+    Returns
+    -------
+    (ndarray of int, float)
+        An optimal assignment and its log potential (``-cost``, MLN units).
+    """
+    if any(not np.isfinite(t).any() for t in list(unary) + [p[2] for p in pairs]):
+        raise RuleError(path, _NO_WORLD)
+    wcnf = WCNF()
+    ids, top = [], 0
+    for u in unary:
+        ids.append(list(range(top + 1, top + 1 + len(u))))
+        top += len(u)
+    base = 0
+    for v, u in enumerate(unary):
+        wcnf.append(list(ids[v]))
+        for a in range(len(u)):
+            for b in range(a + 1, len(u)):
+                wcnf.append([-ids[v][a], -ids[v][b]])
+        base += _add_costs(wcnf, u.reshape(-1), [[ids[v][a]] for a in range(len(u))])
+    for i, j, t in pairs:
+        lits = [[ids[i][a], ids[j][b]] for a in range(t.shape[0]) for b in range(t.shape[1])]
+        base += _add_costs(wcnf, t.reshape(-1), lits)
+    with RC2(wcnf) as rc2:
+        model = rc2.compute()
+        if model is None:
+            raise RuleError(path, _NO_WORLD)
+        cost = int(rc2.cost)
+    true = {m for m in model if m > 0}
+    x = np.array([next(k for k, i in enumerate(row) if i in true) for row in ids], dtype=np.int64)
+    return x, -(cost + base) / 1000.0
+
+
+def _add_costs(wcnf, table, lits) -> int:
+    """Soft clauses ``¬(conjunction)`` weighted by each entry's cost above the table's minimum;
+    hard clauses for ``-inf``. Returns the minimum cost (thousandths)."""
+    fin = np.isfinite(table)
+    cost = np.where(fin, np.rint(-1000.0 * np.where(fin, table, 0.0)), 0).astype(np.int64)
+    low = int(cost[fin].min())
+    for k, conj in enumerate(lits):
+        if not fin[k]:
+            wcnf.append([-lit for lit in conj])
+        elif cost[k] > low:
+            wcnf.append([-lit for lit in conj], weight=int(cost[k] - low))
+    return low
