@@ -114,7 +114,9 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
             ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
     reasons = []
-    if not math.isfinite(rhat):
+    if math.isinf(rhat):
+        reasons.append("R-hat is infinite (each chain stuck at its own value)")
+    elif not math.isfinite(rhat):
         same = np.all(a == a.flat[0]) if np.all(np.isfinite(a)) else False
         reasons.append("R-hat is NaN (" + ("summary never moved in any chain" if same else "NaN values") + ")")
     elif rhat > rhat_max:

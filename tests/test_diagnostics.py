@@ -45,6 +45,12 @@ def test_nan_counts_as_failure():
     assert rep.to_dict()["quantities"]["cpr"]["rhat"] is None  # JSON-safe
 
 
+def test_chains_stuck_at_different_values_fail_as_infinite():
+    stuck = np.repeat(np.array([[1.0], [2.0]]), 25, axis=1)   # as n_hall on cartesium, 2 chains
+    rep = dg.convergence({"n_hall": stuck}, rhat_max=1.01, ess_min=10)
+    assert not rep.ok and "infinite" in rep.quantities[0].reason
+
+
 def test_shape_mismatch_is_refused():
     with pytest.raises(ValueError):
         dg.convergence({"a": np.zeros((4, 10)), "b": np.zeros((3, 10))}, rhat_max=1.01, ess_min=1)
