@@ -27,6 +27,8 @@ test: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/semmap info $(DEMO_MAP)
+	$(BIN)/semmap map $(DEMO_MAP) --out $(DEMO_OUT) --force
+	@echo "semantic map written to $(DEMO_OUT)/ (open $(DEMO_OUT)/report.html)"
 
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do n=$$(basename $$b .py); n=$${n#bench_}; \
