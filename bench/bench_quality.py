@@ -19,13 +19,16 @@ model``) or a shorter run (``--budget quick``); per-map rows, the means and the 
 * **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
   corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
 
-Missing data directories are skipped with a note. **Time to W\\*** is the wall time from the start of
+Missing data directories are skipped with a note. A map on which the pipeline fails with the
+knowledge engine is run again without it (``knowledge`` in its row says so); a map that fails both
+ways gets a row with its error message and is left out of the means. **Time to W\\*** is the wall time from the start of
 sampling until the best chain's ``best_logp`` first reached its final value, clocked per draw through
 ``run_map``'s ``callback`` (start worlds and the final semantic map are not included).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import time
@@ -103,7 +106,11 @@ def time_to_best(run, clock) -> dict:
 
 
 def _run(inputs, settings, quiet):
-    """``run_map`` and the per-draw clock ``[(seconds since start, chain, best_logp)]``."""
+    """``run_map`` and the per-draw clock ``[(seconds since the call, chain, best_logp)]``.
+
+    The clock starts before ``run_map`` (start worlds included). A sampling failure is re-raised as
+    :class:`MapFailed` so one map does not end the benchmark.
+    """
     from semmap_pp import pipeline
     clock = []
     t0 = time.perf_counter()
@@ -111,9 +118,28 @@ def _run(inputs, settings, quiet):
     def tick(info):
         clock.append((time.perf_counter() - t0, info["chain"], info["best_logp"]))
 
-    run = pipeline.run_map(inputs, settings, callback=tick, log=(lambda m: None) if quiet else
-                           (lambda m: print("   ", m, file=sys.stderr, flush=True)))
+    log = (lambda m: None) if quiet else (lambda m: print("   ", m, file=sys.stderr, flush=True))
+    try:
+        run = pipeline.run_map(inputs, settings, callback=tick, log=log)
+        run.notes.insert(0, "knowledge: on")
+    except Exception as exc:  # noqa: BLE001 - a benchmark row, not a crash
+        if inputs.rules is None:
+            raise MapFailed(f"{type(exc).__name__}: {exc}") from exc
+        # The knowledge engine failed on some world (see docs/quality.md): the map is run again
+        # without knowledge (types from the geometry class), and the row says so.
+        log(f"pipeline failed with knowledge ({type(exc).__name__}: {exc}); again without knowledge")
+        clock.clear()
+        t0 = time.perf_counter()
+        try:
+            run = pipeline.run_map(dataclasses.replace(inputs, rules=None), settings, callback=tick, log=log)
+        except Exception as exc2:  # noqa: BLE001
+            raise MapFailed(f"{type(exc2).__name__}: {exc2}") from exc2
+        run.notes.insert(0, f"knowledge: off (engine failed: {type(exc).__name__}: {str(exc)[:120]})")
     return run, clock
+
+
+class MapFailed(RuntimeError):
+    """The pipeline failed on one map (the row records the message)."""
 
 
 def regions_of(sm) -> tuple[np.ndarray, dict]:
@@ -199,7 +225,12 @@ def bench_synthetic(args, model, rules) -> dict:
                              source=Path(f"synth-{seed}"))
         inputs = _inputs_from_grid(grid, model, rules)
         settings = _settings(model, args)
-        run, clock = _run(inputs, settings, args.quiet)
+        try:
+            run, clock = _run(inputs, settings, args.quiet)
+        except MapFailed as exc:
+            rows.append({"seed": seed, "error": str(exc)})
+            _log(args, f"synth {seed:3d}: FAILED {exc}")
+            continue
         sm = run.semantic
         sc = score_world(world_dict(sm), floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
         dp, dr = sc.door_precision, sc.door_recall
@@ -212,7 +243,7 @@ def bench_synthetic(args, model, rules) -> dict:
                "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
-               "seconds": round(time.perf_counter() - t0, 1)}
+               "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, f"synth-{seed}", sm)
         _log(args, f"synth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f}  "
@@ -232,14 +263,19 @@ def bench_real(args, model, rules) -> dict:
             continue
         inputs = load_inputs(path)
         settings = _settings(model, args)
-        run, clock = _run(inputs, settings, args.quiet)
+        try:
+            run, clock = _run(inputs, settings, args.quiet)
+        except MapFailed as exc:
+            rows.append({"map": path.stem, "error": str(exc)})
+            _log(args, f"real {path.stem}: FAILED {exc}")
+            continue
         sm = run.semantic
         ttb = time_to_best(run, clock)
         row = {"map": path.stem, "units": len(sm.unit_ids), "cpr": round(sm.cpr, 4),
                "paper_cpr": PUBLISHED["cpr"].get(path.stem), "log_posterior": round(sm.log_posterior, 1),
                "run_s": round(run.seconds, 1), "time_to_wstar_s": ttb.get("seconds"),
                "wstar_draw": ttb.get("draw"), "draws_per_chain": ttb.get("of"),
-               "types": {t: sum(1 for u in sm.unit_ids if sm.type_of(u) == t)
+               "knowledge": run.notes[0], "types": {t: sum(1 for u in sm.unit_ids if sm.type_of(u) == t)
                          for t in ("room", "corridor", "hall", "other")}}
         rows.append(row)
         _save(args, path.stem, sm)
@@ -263,7 +299,12 @@ def bench_ipa(args, model, rules) -> dict:
             continue
         grid = load_map(base / f"{name}.yaml", **IPA_FREE)
         inputs = _inputs_from_grid(grid, model, rules)
-        run, clock = _run(inputs, _settings(model, args), args.quiet)
+        try:
+            run, clock = _run(inputs, _settings(model, args), args.quiet)
+        except MapFailed as exc:
+            rows.append({"map": name, "error": str(exc)})
+            _log(args, f"ipa {name}: FAILED {exc}")
+            continue
         sm = run.semantic
         gt = read_ipa_gt(gt_path)
         seg, _ = regions_of(sm)
@@ -274,7 +315,7 @@ def bench_ipa(args, model, rules) -> dict:
                "precision": round(pub.precision, 4), "recall": round(pub.recall, 4),
                "precision_restricted": round(res.precision, 4), "recall_restricted": round(res.recall, 4),
                "precision_units": round(units.precision, 4), "recall_units": round(units.recall, 4),
-               "run_s": round(run.seconds, 1)}
+               "run_s": round(run.seconds, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, name, sm)
         _log(args, f"ipa {name}: P {row['precision']:.3f} R {row['recall']:.3f} (restricted "
@@ -305,7 +346,12 @@ def bench_types(args, model, rules) -> dict:
             continue
         grid = load_map(base / map_name, resolution=0.05, **IPA_FREE)
         inputs = _inputs_from_grid(grid, model, rules)
-        run, clock = _run(inputs, _settings(model, args), args.quiet)
+        try:
+            run, clock = _run(inputs, _settings(model, args), args.quiet)
+        except MapFailed as exc:
+            rows.append({"map": map_name, "error": str(exc)})
+            _log(args, f"types {map_name}: FAILED {exc}")
+            continue
         sm = run.semantic
         types = {uid: UNIT_TYPES.index(sm.type_of(uid)) for uid in sm.unit_ids}
         pred = type_map_from_labels(sm.labels_image, types)
@@ -314,7 +360,7 @@ def bench_types(args, model, rules) -> dict:
                "balanced_accuracy": round(sc.balanced_accuracy, 4), "recall_room": round(sc.recall_room, 4),
                "recall_corridor": round(sc.recall_corridor, 4), "coverage": round(sc.coverage, 4),
                "accuracy_covered": round(sc.accuracy_covered, 4), "units": len(sm.unit_ids),
-               "run_s": round(run.seconds, 1)}
+               "run_s": round(run.seconds, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, row["map"], sm)
         _log(args, f"types {row['map']}: acc {row['accuracy']:.3f} balanced {row['balanced_accuracy']:.3f} "

@@ -210,10 +210,10 @@ class _Ascent:
     """Greedy ascent state: a tracker of the knowledge-free target and the kernels' data."""
 
     def __init__(self, posterior, world: wm.World, data, *, peaks: int = 8, local: int = 3,
-                 absorb_share: float = 0.8, merge_slack: float = 0.15):
+                 absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5):
         self.tr = posterior.start(world)
         self.data, self.peaks, self.local = data, peaks, local
-        self.absorb_share, self.merge_slack = absorb_share, merge_slack
+        self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
 
     @property
     def world(self) -> wm.World:
@@ -306,11 +306,37 @@ class _Ascent:
             changed |= self.try_world(wm.remove(self.world, s), (s,))
         return changed
 
+    def boundary_lines(self, ra, rb) -> float:
+        """Strongest wall-line fraction on the boundary between two side-by-side units (0..1).
+
+        The lines (lattice rows or columns, with door candidates) within a wall band of the two
+        facing edges, each as the share of its cells over the shared span that are wall or door.
+        """
+        d, t = self.data, self.data.wall_cells
+        gap_r = max(ra[0], rb[0]) - min(ra[2], rb[2])
+        gap_c = max(ra[1], rb[1]) - min(ra[3], rb[3])
+        axis = 0 if gap_r >= gap_c else 1            # stacked along rows: the boundary is a row band
+        cum = d.hcum if axis == 0 else d.vcum
+        s0, s1 = max(ra[1 - axis], rb[1 - axis]), min(ra[3 - axis], rb[3 - axis])
+        if s1 <= s0:
+            return 1.0
+        lo_r, hi_r = (ra, rb) if ra[axis] <= rb[axis] else (rb, ra)
+        i0 = max(min(lo_r[axis + 2], hi_r[axis]) - t, 0)
+        i1 = min(max(lo_r[axis + 2], hi_r[axis]) + t, cum.shape[0])
+        if i1 <= i0:
+            return 1.0
+        frac = (cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)
+        return float(frac.max())
+
     def merges(self) -> bool:
         """Replace two nearby units by their bounding box when it adds little area and raises log p.
 
-        Pairs whose boxes are at most a wall band apart and whose bounding box exceeds their union
-        by at most ``merge_slack`` (one space cut into two rectangles, e.g. a corridor in pieces).
+        Pairs whose boxes are at most a wall band apart, whose bounding box exceeds their union by at
+        most ``merge_slack`` and whose boundary shows no wall line (:meth:`boundary_lines` below
+        ``merge_line_max``): one space cut into two rectangles, e.g. a room cut at a row of furniture
+        or a corridor in pieces. A wall between two rooms is a line along most of its length (door
+        gaps included as door candidates), so rooms are not merged here even where the
+        knowledge-free target would take it.
         """
         t = self.data.wall_cells
         changed = False
@@ -329,6 +355,8 @@ class _Ascent:
                 area = lambda r: (r[2] - r[0]) * (r[3] - r[1])  # noqa: E731
                 union = area(ra) + area(rb) - max(0, -gap_r) * max(0, -gap_c)
                 if area(box) > (1 + self.merge_slack) * union:
+                    continue
+                if self.boundary_lines(ra, rb) >= self.merge_line_max:
                     continue
                 if self.try_world(wm.replace(wm.remove(self.world, b), a, box), (a, b)):
                     changed = True
@@ -394,7 +422,7 @@ class _Ascent:
 
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
-                 merges: bool = False) -> wm.World:
+                 merges: bool = True) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (see the note above).
 
     Parameters

@@ -176,7 +176,14 @@ def free_runs(free: np.ndarray):
 
 
 def _lines_and_doors(occ: np.ndarray, free: np.ndarray, line_min: int, door_min: int, door_max: int):
-    """Wall lines and door gaps along rows of ``occ``; returns (lines, doors, door_mask)."""
+    """Wall lines and door gaps along rows of ``occ``; returns (lines, doors, door_mask).
+
+    A door gap is a run of free cells of door width *in a wall line*: the occupied runs that end
+    just before it and start just after it along the same row are each at least ``line_min`` cells
+    long. Without that condition every row across a corridor narrower than ``door_max`` (a free run
+    between its two walls) counted as a door, which put line evidence across every corridor and
+    made SPLIT cut corridors into pieces at random rows.
+    """
     r, s, e = runs(occ)
     keep = (e - s) >= line_min
     lines = np.stack([r[keep], s[keep], e[keep]], axis=1)
@@ -185,7 +192,10 @@ def _lines_and_doors(occ: np.ndarray, free: np.ndarray, line_min: int, door_min:
     width = fe - fs
     inner = (fs > 0) & (fe < w)
     ok = inner & (width >= door_min) & (width <= door_max)
-    ok[ok] = occ[fr[ok], fs[ok] - 1] & occ[fr[ok], np.minimum(fe[ok], w - 1)]
+    back = _run_back(occ)                              # occupied run ending at each cell
+    ahead = _run_back(occ[:, ::-1])[:, ::-1]           # occupied run starting at each cell
+    ok[ok] = ((back[fr[ok], fs[ok] - 1] >= line_min)
+              & (ahead[fr[ok], np.minimum(fe[ok], w - 1)] >= line_min))
     doors = np.stack([fr[ok], fs[ok], fe[ok]], axis=1)
     mask = np.zeros_like(occ)
     for row, a, b in doors:
