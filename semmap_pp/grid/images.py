@@ -10,6 +10,7 @@ from the header alone, before any pixel is decoded.
 from __future__ import annotations
 
 import struct
+import tokenize
 import warnings
 import zlib
 from dataclasses import dataclass
@@ -240,6 +241,9 @@ def _from_pillow(im: Image.Image, path: Path) -> Decoded:
 
 # --- .npy --------------------------------------------------------------------------------------
 
+_NPY_HEADER_ERRORS = (ValueError, OSError, EOFError, SyntaxError, TypeError, RecursionError,
+                      tokenize.TokenError)
+
 def decode_npy(path: Path, *, max_cells: int = MAX_CELLS) -> Decoded:
     """Decode a 2-D ``.npy`` array.
 
@@ -250,8 +254,8 @@ def decode_npy(path: Path, *, max_cells: int = MAX_CELLS) -> Decoded:
     check_file(path)
     try:
         header = np.load(path, mmap_mode="r", allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise MapError(path, f"not a readable .npy array: {exc}") from None
+    except _NPY_HEADER_ERRORS as exc:  # numpy parses the header with tokenize and literal_eval
+        raise MapError(path, f"not a readable .npy array: {str(exc)[:200]}") from None
     shape, dtype = header.shape, header.dtype
     if len(shape) != 2:
         raise MapError(path, f".npy array must be 2-D (rows, cols), got shape {shape}")

@@ -1,0 +1,230 @@
+"""Fuzzing the map, rule and model loaders with hypothesis (CI-sized; bench/fuzz.py runs longer).
+
+Inputs are random bytes and mutations of valid files: a PNG (grey, RGBA, 16-bit), a PGM (P5 and
+P2), a ``.npy`` array, a map_server YAML, every rule file in rules/ and models/default.toml. The only
+exception a loader may raise is the project's own :class:`~semmap_pp.errors.SemmapError`
+(MapError, RuleError, ModelError); a rule file that loads must also ground against a small evidence
+set (a RuleError for hard rules that admit no world is fine). Anything else -- a traceback, an
+OverflowError, a hang past the deadline -- fails the test.
+
+The ``check_*`` functions are the fuzz targets; bench/fuzz.py drives the same targets for a fixed
+time (``python bench/fuzz.py --seconds 600``) and reports how many cases ran.
+"""
+
+from __future__ import annotations
+
+import io
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from PIL import Image
+
+from semmap_pp.errors import SemmapError
+from semmap_pp.grid import load_map
+from semmap_pp.knowledge import Evidence, load_rules
+from semmap_pp.knowledge.ground import ground
+from semmap_pp.model import DEFAULT_MODEL, load_model
+
+ROOT = Path(__file__).resolve().parents[1]
+MAX_CELLS = 1_000_000     # bounds the work of one case; the limit itself is tested elsewhere
+CI = settings(max_examples=200, deadline=3000, database=None, derandomize=True,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+COUNT = {"cases": 0}      # bench/fuzz.py reads this
+
+
+# --- valid seed files --------------------------------------------------------------------------
+
+def _pattern(dtype=np.uint8, top=255) -> np.ndarray:
+    a = np.full((12, 10), int(top * 254 / 255), dtype)
+    a[0, :] = a[-1, :] = a[:, 0] = a[:, -1] = 0
+    a[5:7, 3:6] = int(top * 205 / 255)
+    return a
+
+
+def _png(mode: str) -> bytes:
+    buf = io.BytesIO()
+    if mode == "RGBA":
+        a = np.dstack([_pattern()] * 3 + [np.full((12, 10), 255, np.uint8)])
+        a[2, 2, 3] = 0
+        Image.fromarray(a, "RGBA").save(buf, "PNG")
+    elif mode == "I;16":
+        Image.fromarray(_pattern(np.uint16, 65535)).save(buf, "PNG")
+    else:
+        Image.fromarray(_pattern(), "L").save(buf, "PNG")
+    return buf.getvalue()
+
+
+def _npy() -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, _pattern(), allow_pickle=False)
+    return buf.getvalue()
+
+
+SEED_IMAGES = {
+    "grey.png": _png("L"), "rgba.png": _png("RGBA"), "deep.png": _png("I;16"),
+    "p5.pgm": b"P5\n10 12\n255\n" + _pattern().tobytes(),
+    "p2.pgm": ("P2\n# plain\n10 12\n255\n" + " ".join(map(str, _pattern().ravel())) + "\n").encode(),
+    "a.npy": _npy(),
+}
+SEED_YAML = ("image: m.pgm\nresolution: 0.05\norigin: [-1.0, 2.0, 0.0]\nnegate: 0\n"
+             "occupied_thresh: 0.65\nfree_thresh: 0.196\nmode: trinary\n")
+SEED_RULES = {p.name: p.read_text() for p in sorted((ROOT / "rules").glob("*.lp"))}
+SEED_MODEL = DEFAULT_MODEL.read_text()
+EVIDENCE = Evidence.build([1, 2, 3], rolike={1}, colike={2: 0.7}, halike={3}, muldoor={2},
+                          adj=[(1, 2), (2, 3)])
+
+
+# --- mutations -----------------------------------------------------------------------------------
+
+@st.composite
+def mutated(draw, seed: bytes, tokens: tuple[bytes, ...] = ()) -> bytes:
+    """``seed`` with a few random edits: flip, delete, insert, duplicate, truncate, splice a token."""
+    data = bytearray(seed)
+    for _ in range(draw(st.integers(1, 4))):
+        kind = draw(st.sampled_from(["flip", "delete", "insert", "duplicate", "truncate", "token"]
+                                    if tokens else ["flip", "delete", "insert", "duplicate", "truncate"]))
+        i = draw(st.integers(0, max(len(data) - 1, 0)))
+        if kind == "flip" and data:
+            data[i] ^= 1 << draw(st.integers(0, 7))
+        elif kind == "delete":
+            del data[i:i + draw(st.integers(1, 16))]
+        elif kind == "insert":
+            data[i:i] = draw(st.binary(min_size=1, max_size=8))
+        elif kind == "duplicate":
+            data[i:i] = data[i:i + draw(st.integers(1, 64))]
+        elif kind == "truncate":
+            del data[i:]
+        elif kind == "token":
+            data[i:i] = draw(st.sampled_from(tokens))
+    return bytes(data)
+
+
+RULE_TOKENS = tuple(t.encode() for t in (
+    ":-", ":~", "not ", ".", ",", "(", ")", "[", "]", "@0", "@1", "U", "V", "_", "1..3", "X+1",
+    "2147483648", "4294968296", "-5", "#const w = 7.", "w", "#script (python) #end.", "@f(U)",
+    '#include "table3.lp".', '#include "/etc/passwd".', "#show room/1.", "#minimize { 1,U : room(U) }.",
+    "room(U)", "corr(U)", "hall(U)", "other(U)", "sale(P,Q)", "adj(P,Q)", "unit(U)", "rolike(U)",
+    "muldoor(U)", "helper(U) :- unit(U).", "#count { V : adj(U,V) } >= 3", "%", "%*", "*%", '"',
+    "\\", "\n", "p(f(X)) :- p(X).", "{ room(U) } :- unit(U).", "a;b", "|", "#true", "#false"))
+YAML_TOKENS = tuple(t.encode() for t in (
+    "image: ", "resolution: ", "origin: ", "negate: ", "mode: raw\n", "mode: scale\n", "~", "null",
+    ".nan", ".inf", "-.inf", "1e400", "1.0e+308", "9" * 40, "[", "]", "{", "}", "&a ", "*a", "!!binary ",
+    "!!python/object:os.system ", "../", "/etc/passwd", "m.yaml", "m.pgm", "'", '"', "\n", "- ", ": ",
+    "true", "0x1F", "0o17", "1_000"))
+MODEL_TOKENS = tuple(t.encode() for t in (
+    "nan", "inf", "-inf", "1e308", "-1", "0", "99999999999999999999", "true", '"x"', "[", "]", "{",
+    "}", "=", "\n", "[sensor]", "[prior]", "k_max = ", "psi = ", "weights = { add_remove = -1 }"))
+
+
+# --- fuzz targets ----------------------------------------------------------------------------------
+
+def check_map_bytes(data: bytes, name: str) -> None:
+    """Load ``data`` saved as ``name`` (a bare image or array)."""
+    COUNT["cases"] += 1
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / name
+        path.write_bytes(data)
+        try:
+            grid = load_map(path, max_cells=MAX_CELLS)
+        except SemmapError as exc:
+            assert "\n" not in str(exc)
+            return
+        assert grid.classes.ndim == 2 and grid.classes.size > 0
+
+
+def check_yaml_bytes(data: bytes) -> None:
+    """Load ``data`` as ``m.yaml`` next to a valid ``m.pgm``."""
+    COUNT["cases"] += 1
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "m.pgm").write_bytes(SEED_IMAGES["p5.pgm"])
+        (Path(d) / "m.yaml").write_bytes(data)
+        try:
+            grid = load_map(Path(d) / "m.yaml", max_cells=MAX_CELLS)
+        except SemmapError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 2000
+            return
+        assert np.isfinite(grid.resolution) and grid.resolution > 0
+
+
+def check_rules_bytes(data: bytes) -> None:
+    """Load ``data`` as a rule file beside the shipped ones; ground it if it loads."""
+    COUNT["cases"] += 1
+    with tempfile.TemporaryDirectory() as d:
+        for name, text in SEED_RULES.items():
+            (Path(d) / name).write_text(text)
+        (Path(d) / "fuzz.lp").write_bytes(data)
+        try:
+            rules = load_rules(Path(d) / "fuzz.lp")
+            ground(rules, EVIDENCE)
+        except SemmapError as exc:
+            assert "\n" not in str(exc)
+
+
+def check_model_bytes(data: bytes) -> None:
+    """Load ``data`` as a model file."""
+    COUNT["cases"] += 1
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "m.toml").write_bytes(data)
+        try:
+            model = load_model(Path(d) / "m.toml")
+            model.cells(0.05)
+        except SemmapError as exc:
+            assert "\n" not in str(exc)
+
+
+# --- CI-sized runs ---------------------------------------------------------------------------------
+
+IMAGE_NAMES = st.sampled_from(sorted(SEED_IMAGES))
+
+
+@CI
+@given(st.binary(max_size=512), st.sampled_from(["x.png", "x.pgm", "x.npy"]))
+def test_random_bytes_as_an_image(data, name):
+    check_map_bytes(data, name)
+
+
+@CI
+@given(st.data())
+def test_mutated_images(data):
+    name = data.draw(IMAGE_NAMES)
+    check_map_bytes(data.draw(mutated(SEED_IMAGES[name])), name)
+
+
+@CI
+@given(st.data())
+def test_mutated_yaml(data):
+    check_yaml_bytes(data.draw(mutated(SEED_YAML.encode(), YAML_TOKENS)))
+
+
+HOSTILE_VALUES = [10**400, -10**400, 2**63, 1e-320, 1e308, [1e308, 1e308, 0], [10**400, 0, 0],
+                  "../m.pgm", "/dev/zero", "m.yaml", ""]
+YAML_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=12),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=3),
+    max_leaves=8)
+
+
+@CI
+@given(st.dictionaries(st.sampled_from(["image", "resolution", "origin", "negate", "occupied_thresh",
+                                        "free_thresh", "mode"]),
+                       st.sampled_from(HOSTILE_VALUES) | YAML_VALUES))
+def test_yaml_of_random_values(doc):
+    import yaml
+    doc = {"image": "m.pgm", "resolution": 0.05} | doc
+    check_yaml_bytes(yaml.safe_dump(doc).encode())
+
+
+@CI
+@given(st.data())
+def test_mutated_rule_files(data):
+    seed = data.draw(st.sampled_from(sorted(SEED_RULES)))
+    check_rules_bytes(data.draw(mutated(SEED_RULES[seed].encode(), RULE_TOKENS)))
+
+
+@CI
+@given(st.data())
+def test_mutated_model_file(data):
+    check_model_bytes(data.draw(mutated(SEED_MODEL.encode(), MODEL_TOKENS)))
