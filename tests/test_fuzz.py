@@ -175,29 +175,7 @@ def check_model_bytes(data: bytes) -> None:
             assert "\n" not in str(exc)
 
 
-# --- CI-sized runs ---------------------------------------------------------------------------------
-
-IMAGE_NAMES = st.sampled_from(sorted(SEED_IMAGES))
-
-
-@CI
-@given(st.binary(max_size=512), st.sampled_from(["x.png", "x.pgm", "x.npy"]))
-def test_random_bytes_as_an_image(data, name):
-    check_map_bytes(data, name)
-
-
-@CI
-@given(st.data())
-def test_mutated_images(data):
-    name = data.draw(IMAGE_NAMES)
-    check_map_bytes(data.draw(mutated(SEED_IMAGES[name])), name)
-
-
-@CI
-@given(st.data())
-def test_mutated_yaml(data):
-    check_yaml_bytes(data.draw(mutated(SEED_YAML.encode(), YAML_TOKENS)))
-
+# --- the targets with their inputs (bench/fuzz.py runs the same for longer) ----------------------
 
 HOSTILE_VALUES = [10**400, -10**400, 2**63, 1e-320, 1e308, [1e308, 1e308, 0], [10**400, 0, 0],
                   "../m.pgm", "/dev/zero", "m.yaml", ""]
@@ -205,26 +183,67 @@ YAML_VALUES = st.recursive(
     st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=12),
     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=3),
     max_leaves=8)
+YAML_KEYS = st.sampled_from(["image", "resolution", "origin", "negate", "occupied_thresh",
+                             "free_thresh", "mode"])
 
 
-@CI
-@given(st.dictionaries(st.sampled_from(["image", "resolution", "origin", "negate", "occupied_thresh",
-                                        "free_thresh", "mode"]),
-                       st.sampled_from(HOSTILE_VALUES) | YAML_VALUES))
-def test_yaml_of_random_values(doc):
+def _yaml_doc(doc: dict) -> tuple[bytes]:
     import yaml
-    doc = {"image": "m.pgm", "resolution": 0.05} | doc
-    check_yaml_bytes(yaml.safe_dump(doc).encode())
+    return (yaml.safe_dump({"image": "m.pgm", "resolution": 0.05} | doc).encode(),)
+
+
+def _one(strategy):
+    return strategy.map(lambda b: (b,))
+
+
+#: name -> (strategy of argument tuples, target)
+TARGETS = {
+    "random-bytes-image": (st.tuples(st.binary(max_size=512), st.sampled_from(["x.png", "x.pgm", "x.npy"])),
+                           check_map_bytes),
+    "mutated-image": (st.sampled_from(sorted(SEED_IMAGES)).flatmap(
+        lambda n: st.tuples(mutated(SEED_IMAGES[n]), st.just(n))), check_map_bytes),
+    "mutated-yaml": (_one(mutated(SEED_YAML.encode(), YAML_TOKENS)), check_yaml_bytes),
+    "random-values-yaml": (st.dictionaries(YAML_KEYS, st.sampled_from(HOSTILE_VALUES) | YAML_VALUES)
+                           .map(_yaml_doc), check_yaml_bytes),
+    "mutated-rules": (_one(st.sampled_from(sorted(SEED_RULES)).flatmap(
+        lambda n: mutated(SEED_RULES[n].encode(), RULE_TOKENS))), check_rules_bytes),
+    "mutated-model": (_one(mutated(SEED_MODEL.encode(), MODEL_TOKENS)), check_model_bytes),
+}
+
+
+# --- CI-sized runs ---------------------------------------------------------------------------------
+
+@CI
+@given(TARGETS["random-bytes-image"][0])
+def test_random_bytes_as_an_image(args):
+    check_map_bytes(*args)
 
 
 @CI
-@given(st.data())
-def test_mutated_rule_files(data):
-    seed = data.draw(st.sampled_from(sorted(SEED_RULES)))
-    check_rules_bytes(data.draw(mutated(SEED_RULES[seed].encode(), RULE_TOKENS)))
+@given(TARGETS["mutated-image"][0])
+def test_mutated_images(args):
+    check_map_bytes(*args)
 
 
 @CI
-@given(st.data())
-def test_mutated_model_file(data):
-    check_model_bytes(data.draw(mutated(SEED_MODEL.encode(), MODEL_TOKENS)))
+@given(TARGETS["mutated-yaml"][0])
+def test_mutated_yaml(args):
+    check_yaml_bytes(*args)
+
+
+@CI
+@given(TARGETS["random-values-yaml"][0])
+def test_yaml_of_random_values(args):
+    check_yaml_bytes(*args)
+
+
+@CI
+@given(TARGETS["mutated-rules"][0])
+def test_mutated_rule_files(args):
+    check_rules_bytes(*args)
+
+
+@CI
+@given(TARGETS["mutated-model"][0])
+def test_mutated_model_file(args):
+    check_model_bytes(*args)
