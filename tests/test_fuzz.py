@@ -108,7 +108,8 @@ RULE_TOKENS = tuple(t.encode() for t in (
     '#include "table3.lp".', '#include "/etc/passwd".', "#show room/1.", "#minimize { 1,U : room(U) }.",
     "room(U)", "corr(U)", "hall(U)", "other(U)", "sale(P,Q)", "adj(P,Q)", "unit(U)", "rolike(U)",
     "muldoor(U)", "helper(U) :- unit(U).", "#count { V : adj(U,V) } >= 3", "%", "%*", "*%", '"',
-    "\\", "\n", "p(f(X)) :- p(X).", "{ room(U) } :- unit(U).", "a;b", "|", "#true", "#false"))
+    "\\", "\n", "p(f(X)) :- p(X).", "{ room(U) } :- unit(U).", "a;b", "|", "#true", "#false",
+    "\u00e9", "\u03d5", '"\u00e9', "\x00", "\x7f"))
 YAML_TOKENS = tuple(t.encode() for t in (
     "image: ", "resolution: ", "origin: ", "negate: ", "mode: raw\n", "mode: scale\n", "~", "null",
     ".nan", ".inf", "-.inf", "1e400", "1.0e+308", "9" * 40, "[", "]", "{", "}", "&a ", "*a", "!!binary ",

@@ -216,6 +216,8 @@ CASES = [
     ("rules-recursion-without-end", lambda d: rules(d, "c(X) :- unit(X).\nc(X+1) :- c(X).\n"),
      "must be a variable or a constant"),
     ("rules-binary-file", lambda d: rules_bytes(d, bytes(range(256))), "cannot read rule file"),
+    ("rules-non-ascii-character", lambda d: rules(d, ":- room(U) \u00e9.\n"),
+     "not allowed outside comments and strings"),
     ("rules-dev-zero", rules_device, "no such rule file"),
 ]
 
@@ -390,9 +392,20 @@ def test_subprocess_info(tmp_path, case):
     assert_one_line(semmap("info", *argv), 2, named, phrase)
 
 
-@pytest.mark.parametrize("case", ["rules-script", "rules-weight-wraps-32-bit"])
+@pytest.mark.parametrize("case", ["rules-script", "rules-weight-wraps-32-bit", "rules-non-ascii-character"])
 def test_subprocess_rules_check(tmp_path, case):
     build = dict((c[0], c[1]) for c in CASES)[case]
     phrase = dict((c[0], c[2]) for c in CASES)[case]
     argv, named = build(tmp_path)
     assert_one_line(semmap("rules", "check", named), 1, named, phrase, prefix="")
+
+
+# knowledge/evidence.py parses evidence facts with clingo, whose lexer error on a non-ASCII character
+# quotes one byte of it; clingo's Python logger cannot decode that message and clingo aborts the
+# process ("PANIC: exception in nothrow scope", SIGABRT). Rule files are guarded by
+# dialect.check_lexemes; the evidence parser needs the same guard (not ours to edit).
+@pytest.mark.xfail(strict=True, reason="evidence_from_facts: clingo aborts on a non-ASCII character")
+def test_subprocess_rules_query_with_non_ascii_evidence(tmp_path):
+    (tmp_path / "ev.lp").write_text("unit(1). \u00e9\n")
+    result = semmap("rules", "query", ROOT / "rules" / "table3.lp", "--evidence", tmp_path / "ev.lp")
+    assert_one_line(result, 2, tmp_path / "ev.lp", "")

@@ -42,8 +42,10 @@ WEIGHT_SCALE = 1000          # weak-constraint weights are written in thousandth
 MAX_WEIGHT = 50_000          # w = 50: e^-50 ~ 2e-22; anything stronger should be a hard rule
 MAX_INTEGER = 2**31 - 1      # clingo's integers are 32-bit: a longer literal wraps around silently
 
-# Comments, strings and integer literals (not digits inside a name such as w1500 or X2).
-_INTEGER_RE = re.compile(r'%\*.*?\*%|%[^\n]*|"(?:[^"\\\n]|\\.)*"|(?<![A-Za-z0-9_\'])\d+', re.S)
+# Comments, strings, integer literals (not digits inside a name such as w1500 or X2) and
+# non-ASCII characters.
+_LEXEME_RE = re.compile(r'%\*.*?\*%|%[^\n]*|"(?:[^"\\\n]|\\.)*"|(?<![A-Za-z0-9_\'])\d+|[^\x00-\x7f]',
+                        re.S)
 _MSG_RE = re.compile(r"^(?P<file>.*?):(?P<line>\d+):(?P<col>\d+)(?:-\d+(?::\d+)?)?:\s*"
                      r"(?P<kind>error|info|warning):\s*(?P<msg>.*)$")
 
@@ -129,19 +131,27 @@ def strip_includes(text: str, path: str) -> tuple[str, list[tuple[str, int, int]
     return "".join(out), includes
 
 
-def check_integers(text: str, path: str) -> None:
-    """Refuse integer literals beyond clingo's 32-bit range (clingo would wrap them silently).
+def check_lexemes(text: str, path: str) -> None:
+    """Refuse what clingo's lexer mishandles, outside comments and strings.
+
+    * integer literals beyond clingo's 32-bit range: clingo wraps them around silently;
+    * non-ASCII characters: clingo's lexer reports one byte of the character, its Python logger
+      fails to decode that message, and clingo aborts the whole process ("PANIC: exception in
+      nothrow scope").
 
     Examples
     --------
-    >>> check_integers(':~ rolike(U). [w1@0, r, U] % 99999999999\\n', "r.lp")
-    >>> check_integers(':~ rolike(U). [4294968296@0, r, U]', "r.lp")  # doctest: +ELLIPSIS
+    >>> check_lexemes(':~ rolike(U). [w1@0, r, U] % 99999999999 \u00e9\\n', "r.lp")
+    >>> check_lexemes(':~ rolike(U). [4294968296@0, r, U]', "r.lp")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
     semmap_pp.errors.RuleError: r.lp:1:16: integer 4294968296 is too large ...
     """
-    for m in _INTEGER_RE.finditer(text):
+    for m in _LEXEME_RE.finditer(text):
         token = m.group()
+        if len(token) == 1 and ord(token) > 0x7f:
+            raise RuleError(path, f"character {token!r} (U+{ord(token):04X}) is not allowed outside "
+                            "comments and strings (rule files are ASCII)", *_pos(text, m.start()))
         if token[0].isdigit() and (len(token) > 10 or int(token) > MAX_INTEGER):
             raise RuleError(path, f"integer {token[:20]}{'...' if len(token) > 20 else ''} is too "
                             f"large (clingo integers are 32-bit: at most {MAX_INTEGER})",
@@ -310,7 +320,7 @@ def _read_files(top: Path) -> list[tuple[Path, list]]:
         except (OSError, UnicodeDecodeError) as exc:
             raise RuleError(path, f"cannot read rule file: {exc}") from None
         stripped, includes = strip_includes(text, str(path))
-        check_integers(stripped, str(path))
+        check_lexemes(stripped, str(path))
         statements = parse_text(stripped, str(path))
         order.append((path, statements))
         for target, line, col in reversed(includes):
