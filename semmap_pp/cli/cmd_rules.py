@@ -21,7 +21,9 @@ def register(subparsers) -> None:
     query.add_argument("file", metavar="FILE", help="rule file (.lp)")
     query.add_argument("--evidence", required=True, metavar="FACTS.lp",
                        help='evidence facts: unit(1). rolike(1). adj(1,2). soft(muldoor(1), "0.7").')
-    query.add_argument("--method", choices=("exact", "mcsat"), default="exact")
+    query.add_argument("--method", choices=("auto", "exact", "lbp", "mcsat"), default="auto",
+                       help="marginals: auto (exact junction tree when small, else loopy BP), "
+                            "exact, lbp (loopy belief propagation) or mcsat (default: auto)")
     query.add_argument("--map", dest="map_method", choices=("jt", "clingo", "rc2"), default="jt",
                        help="MAP by junction-tree max-product, clingo optimisation or RC2")
     query.add_argument("--json", action="store_true", help="print one JSON object")
@@ -56,13 +58,15 @@ def _query(args) -> int:
     r = engine.infer(ev)
     if args.json:
         out = {"rules": args.file, "evidence": args.evidence, "method": r.method,
+               "map_method": r.map_method,
                "types": {str(u): dict(zip(UNIT_TYPES, map(float, p))) for u, p in r.types.items()},
                "sale": {f"{p},{q}": v for (p, q), v in r.sale.items()},
                "map_types": {str(u): t for u, t in r.map_types.items()},
                "map_cost": r.map_cost, "log_z": r.log_z}
         print(json.dumps(out))
         return 0
-    print(f"rules {args.file}, evidence {args.evidence}, method {r.method}")
+    print(f"rules {args.file}, evidence {args.evidence}, method {r.method} (MAP by "
+          f"{r.map_method})")
     print("unit  " + "  ".join(f"{t:>8}" for t in UNIT_TYPES) + "  MAP")
     for u, p in r.types.items():
         print(f"{u:<4}  " + "  ".join(f"{v:8.4f}" for v in p) + f"  {r.map_types[u]}")

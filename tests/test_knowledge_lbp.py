@@ -1,0 +1,332 @@
+"""method="auto": exact when the junction tree is small, loopy BP otherwise; MAP stays exact.
+
+Oracles: enumeration of every joint state of a small pairwise network (for the BP code itself),
+clingo's enumeration of every world (``test_knowledge_inference.oracle``) for the engine on
+small loopy floors, and the exact engine (itself checked against that enumeration to 1e-9) on
+many random floors of up to 6 units.
+"""
+
+import itertools
+import time
+
+import numpy as np
+import pytest
+from test_knowledge_inference import oracle
+
+from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
+from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
+from semmap_pp.knowledge.ground import ground
+from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
+from semmap_pp.knowledge.local import separate
+from semmap_pp.knowledge.map import map_pairwise_rc2, map_rc2
+
+# Largest LBP error against exact marginals on random floors of 3..6 units with 70 % of the
+# pairs adjacent (types and SaLe, rules/table3.lp): measured 0.0072 over 300 floors.
+TABLE3_TOL = 0.02
+
+
+def brute_force(unary, pairs):
+    """Marginals and pair joints of a pairwise log-potential network, by enumeration."""
+    cards = [len(u) for u in unary]
+    states = np.array(list(itertools.product(*[range(c) for c in cards])))
+    logp = sum(u[states[:, i]] for i, u in enumerate(unary))
+    logp = logp + sum(t[states[:, i], states[:, j]] for i, j, t in pairs)
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    marg = [np.bincount(states[:, i], weights=w, minlength=c) for i, c in enumerate(cards)]
+    joint = []
+    for i, j, t in pairs:
+        jt = np.zeros(t.shape)
+        np.add.at(jt, (states[:, i], states[:, j]), w)
+        joint.append(jt)
+    return marg, joint
+
+
+def random_network(rng, n, edges, strength):
+    unary = [rng.normal(0, 1, 4) for _ in range(n)]
+    pairs = [(i, j, rng.normal(0, strength, (4, 4))) for i, j in edges]
+    return unary, pairs
+
+
+def test_bp_is_exact_on_a_tree():
+    # a star plus a path (no loop): the BP fixed point is the exact marginal
+    rng = np.random.default_rng(0)
+    unary, pairs = random_network(rng, 6, [(0, 1), (0, 2), (0, 3), (3, 4), (4, 5)], 1.0)
+    res = pairwise_bp(unary, pairs, range(len(pairs)), BPSettings(tol=1e-13, max_iter=500))
+    marg, joint = brute_force(unary, pairs)
+    assert res.converged
+    for a, b in zip(res.marginals, marg):
+        np.testing.assert_allclose(a, b, atol=1e-9)
+    for k, jt in enumerate(joint):
+        np.testing.assert_allclose(res.pair_beliefs[k], jt, atol=1e-9)
+
+
+def test_bp_on_loops_is_close_for_weak_couplings_and_not_exact():
+    # K5 and a 2x3 grid with couplings of table3's size (|log ratio| <= ~0.6)
+    rng = np.random.default_rng(1)
+    k5 = [(i, j) for i in range(5) for j in range(i + 1, 5)]
+    grid = [(0, 1), (1, 2), (3, 4), (4, 5), (0, 3), (1, 4), (2, 5)]
+    worst = 0.0
+    for edges, n in ((k5, 5), (grid, 6)):
+        for _ in range(5):
+            unary, pairs = random_network(rng, n, edges, 0.3)
+            res = pairwise_bp(unary, pairs)
+            marg, _ = brute_force(unary, pairs)
+            worst = max(worst, max(np.abs(a - b).max() for a, b in zip(res.marginals, marg)))
+    assert 1e-6 < worst < TABLE3_TOL   # an approximation, but a close one
+
+
+def test_bp_never_gives_mass_to_a_forbidden_state():
+    unary = [np.array([0.0, -np.inf, 0.0, 0.0]), np.zeros(4), np.zeros(4)]
+    forbid = np.zeros((4, 4))
+    forbid[2, 3] = -np.inf   # x0 = 2 and x1 = 3 never together
+    pairs = [(0, 1, forbid), (1, 2, np.eye(4)), (0, 2, -np.eye(4))]
+    res = pairwise_bp(unary, pairs, [0])
+    assert res.marginals[0][1] == 0.0 and res.pair_beliefs[0][2, 3] == 0.0
+    for m in res.marginals:
+        assert abs(m.sum() - 1) < 1e-12
+
+
+def test_bp_is_a_deterministic_function_of_the_network():
+    rng = np.random.default_rng(2)
+    unary, pairs = random_network(rng, 6, [(i, j) for i in range(6) for j in range(i + 1, 6)], 1)
+    a = pairwise_bp(unary, pairs, range(15))
+    b = pairwise_bp([u.copy() for u in unary], [(i, j, t.copy()) for i, j, t in pairs],
+                    range(15))
+    assert all(np.array_equal(x, y) for x, y in zip(a.marginals, b.marginals))
+    assert all(np.array_equal(a.pair_beliefs[k], b.pair_beliefs[k]) for k in range(15))
+
+
+def test_factor_bp_is_exact_on_a_tree_of_factors():
+    # a ternary factor and a pair hanging off it: a tree of factors
+    rng = np.random.default_rng(3)
+    card = [2, 3, 4, 2]
+    pots = [((0, 1, 2), rng.normal(0, 1, (2, 3, 4))), ((2, 3), rng.normal(0, 1, (4, 2))),
+            ((1,), rng.normal(0, 1, 3))]
+    res = factor_bp(card, pots, BPSettings(tol=1e-13, max_iter=500))
+    states = np.array(list(itertools.product(*[range(c) for c in card])))
+    logp = sum(t[tuple(states[:, v] for v in s)] for s, t in pots)
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    for v, c in enumerate(card):
+        np.testing.assert_allclose(res.marginals[v], np.bincount(states[:, v], w, c), atol=1e-9)
+
+
+def test_separate_splits_only_sums_of_unit_terms():
+    a, b = np.array([0.0, -1.0]), np.array([0.5, 0.0, -2.0])
+    split = separate(a[:, None] + b[None, :])
+    assert split is not None
+    np.testing.assert_allclose(split[0][:, None] + split[1][None, :], a[:, None] + b[None, :])
+    assert separate(np.array([[0.0, 0.0], [0.0, -1.0]])) is None      # a coupling
+    assert separate(np.array([[0.0, -np.inf], [0.0, 0.0]])) is None   # a hard pair rule
+
+
+def test_none_folds_every_pair_and_table3_folds_every_map_pair():
+    ev = Evidence.build([1, 2, 3], rolike={1: 0.7}, adj=[(1, 2), (2, 3), (1, 3)])
+    none = KnowledgeEngine.from_file("rules/none.lp").local.type_network(ev)
+    assert none.sum_pairs == [] and none.max_pairs == [] and none.card == [4, 4, 4]
+    assert none.sale == {(1, 2): 0.5, (1, 3): 0.5, (2, 3): 0.5}
+    t3 = KnowledgeEngine.from_file("rules/table3.lp").local.type_network(ev)
+    # SaLe can always be chosen to satisfy the pair rules: the MAP never couples units, but
+    # the sum over SaLe does (two rooms: 1 + e^-2.2, a room and a hall: 1 + e^-1, ...)
+    assert len(t3.sum_pairs) == 3 and t3.max_pairs == []
+    assert t3.card == [4, 4, 4]   # unit 1's soft RoLi summed out: no pair reads it
+
+
+def loopy_floors():
+    """Small floors whose adjacency has cycles (a triangle, a 4-cycle with a chord)."""
+    yield Evidence.build([1, 2, 3], rolike={1, 2}, colike={3}, muldoor={3},
+                         adj=[(1, 2), (2, 3), (1, 3)])
+    yield Evidence.build([1, 2, 3, 4], rolike={1, 3}, halike={2}, colike={4: 0.7},
+                         adj=[(1, 2), (2, 3), (3, 4), (1, 4)])
+
+
+def test_lbp_close_to_enumeration_on_loopy_floors():
+    rules = load_rules("rules/table3.lp")
+    engine = KnowledgeEngine(rules, method="lbp")
+    for ev in loopy_floors():
+        types, sale, best, _, _ = oracle(rules, ev)
+        r = engine.infer(ev)
+        assert r.method == "lbp" and r.log_z is None
+        err = max([np.abs(r.types[u] - types[u]).max() for u in ev.units]
+                  + [abs(r.sale[pq] - sale[pq]) for pq in ev.adj])
+        assert 0 < err < TABLE3_TOL
+        assert abs(r.map_cost * 1000 - best) < 1e-6     # the MAP stays exact
+
+
+def random_dense_floor(rng):
+    n = int(rng.integers(3, 7))
+    units = list(range(1, n + 1))
+    pairs = [(p, q) for p in units for q in units if p < q and rng.random() < 0.7]
+    kw = {}
+    for name in ("rolike", "colike", "halike", "muldoor"):
+        d = {}
+        for u in units:
+            r = rng.random()
+            if r < 0.3:
+                d[u] = 1.0
+            elif r < 0.4:
+                d[u] = round(float(rng.uniform(0.05, 0.95)), 2)
+        kw[name] = d
+    return Evidence.build(units, adj=pairs, **kw)
+
+
+def test_lbp_within_tolerance_of_exact_on_random_floors():
+    rules = load_rules("rules/table3.lp")
+    exact = KnowledgeEngine(rules, method="exact")
+    lbp = KnowledgeEngine(rules, method="lbp")
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for _ in range(60):
+        ev = random_dense_floor(rng)
+        a, b = exact.infer(ev), lbp.infer(ev)
+        worst = max([worst] + [np.abs(a.types[u] - b.types[u]).max() for u in ev.units]
+                    + [abs(a.sale[pq] - b.sale[pq]) for pq in ev.adj])
+        assert a.map_types == b.map_types and abs(a.map_cost - b.map_cost) < 1e-9
+    assert worst < TABLE3_TOL
+
+
+@pytest.mark.parametrize("rule_file", ["rules/table3.lp", "rules/halls_to_corridors.lp"])
+def test_auto_picks_exact_on_small_floors_and_agrees_with_enumeration(rule_file):
+    rules = load_rules(rule_file)
+    engine = KnowledgeEngine(rules)   # the default is auto
+    assert engine.method == "auto"
+    for ev in loopy_floors():
+        types, sale, best, log_z, _ = oracle(rules, ev)
+        r = engine.infer(ev)
+        assert r.method == "exact"
+        for u in ev.units:
+            np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
+        for pq in ev.adj:
+            assert abs(r.sale[pq] - sale[pq]) < 1e-9
+        assert abs(r.log_z - log_z) < 1e-9 and abs(r.map_cost * 1000 - best) < 1e-6
+
+
+def test_general_path_falls_back_to_factor_bp():
+    # halls_to_corridors.lp is not pairwise-local: BP runs on the ground network (SaLe atoms
+    # and soft atoms as variables); a clique bound of 1 forces the fallback on a small floor
+    rules = load_rules("rules/halls_to_corridors.lp")
+    ev = next(loopy_floors())
+    types, sale, best, _, _ = oracle(rules, ev)
+    r = KnowledgeEngine(rules, auto_max_states=1).infer(ev)
+    assert r.method == "lbp" and r.map_method == "rc2"
+    assert abs(r.map_cost * 1000 - best) < 1e-6
+    err = max([np.abs(r.types[u] - types[u]).max() for u in ev.units]
+              + [abs(r.sale[pq] - sale[pq]) for pq in ev.adj])
+    assert err < 0.1   # the ground network's loops are tight (see docs/rules.md)
+
+
+def test_map_by_rc2_when_the_map_tree_is_too_large(tmp_path):
+    # a pair rule that no SaLe choice satisfies couples the MAP: two adjacent rooms cost 1.5
+    f = tmp_path / "rr.lp"
+    f.write_text(":~ rolike(U), not room(U). [1000@0, r, U]\n"
+                 ":~ room(P), room(Q), adj(P,Q). [1500@0, rr, P, Q]\n")
+    rules = load_rules(f)
+    ev = Evidence.build([1, 2, 3, 4], rolike={1, 2, 3, 4},
+                        adj=[(1, 2), (2, 3), (3, 4), (1, 4), (1, 3)])
+    _, _, best, _, _ = oracle(rules, ev)
+    r = KnowledgeEngine(rules, auto_max_states=4).infer(ev)
+    assert r.method == "lbp" and r.map_method == "rc2"
+    assert abs(r.map_cost * 1000 - best) < 1e-6
+    assert sum(t == "room" for t in r.map_types.values()) == 2   # 1 and 3 adjacent: 2, 4 rooms
+
+
+def test_pairwise_rc2_reaches_the_brute_force_optimum():
+    rng = np.random.default_rng(6)
+    for _ in range(5):
+        unary = [-rng.integers(0, 3000, 4) / 1000.0 for _ in range(4)]
+        pairs = [(i, j, -rng.integers(0, 3000, (4, 4)) / 1000.0)
+                 for i, j in [(0, 1), (1, 2), (2, 3), (0, 3), (0, 2)]]
+        pairs[0][2][0, :] = -np.inf
+        x, best = map_pairwise_rc2(unary, pairs, "test")
+        states = np.array(list(itertools.product(range(4), repeat=4)))
+        logp = sum(u[states[:, i]] for i, u in enumerate(unary))
+        logp = logp + sum(t[states[:, i], states[:, j]] for i, j, t in pairs)
+        assert abs(best - logp.max()) < 1e-9
+        assert abs(sum(u[x[i]] for i, u in enumerate(unary))
+                   + sum(t[x[i], x[j]] for i, j, t in pairs) - best) < 1e-9
+
+
+def corridor_rows_floor(n):
+    """A realistic dense floor: rows of 6 rooms between corridor rows, every unit adjacent to
+    its grid neighbours and, on alternate cells, its diagonal ones; most geometry is soft (as
+    the sampler's evidence of ambiguous units). Before the type network, inference refused
+    both 40 and 80 units (a clique of 2^24 / 2^27 states)."""
+    cols = 6
+    units = list(range(1, n + 1))
+    pos = {u: divmod(u - 1, cols) for u in units}
+    adj = []
+    for p in units:
+        for q in units:
+            (r1, c1), (r2, c2) = pos[p], pos[q]
+            if p < q and max(abs(r1 - r2), abs(c1 - c2)) == 1 and (
+                    r1 == r2 or c1 == c2 or (r1 + c1) % 2 == 0):
+                adj.append((p, q))
+    corr = [u for u in units if pos[u][0] % 3 == 1]
+    rooms = [u for u in units if u not in corr]
+    return Evidence.build(units, colike={c: (0.9 if c % 2 else 1.0) for c in corr},
+                          muldoor=corr + rooms[::5],
+                          rolike={r: (0.8 if r % 3 else 1.0) for r in rooms},
+                          halike={r: 0.15 for r in rooms if r % 3}, adj=adj)
+
+
+def check_valid(r, ev):
+    for u in ev.units:
+        p = r.types[u]
+        assert p.shape == (4,) and np.all(p >= 0) and np.all(p <= 1) and abs(p.sum() - 1) < 1e-9
+    assert set(r.sale) == set(ev.adj) and all(0 <= v <= 1 for v in r.sale.values())
+    assert set(r.map_types) == set(ev.units)
+
+
+@pytest.mark.parametrize("n", [40, 80])
+def test_dense_floors_that_used_to_raise_get_marginals_in_time(n):
+    rules = load_rules("rules/table3.lp")
+    ev = corridor_rows_floor(n)
+    engine = KnowledgeEngine(rules)
+    card, sum_pots, _, _, _ = engine.local.reduced(ev)     # the network inference used to run on
+    with pytest.raises(TooDense, match="too densely connected"):
+        JunctionTree(card, [s for s, _ in sum_pots], rules.path, max_states=MAX_CLIQUE_STATES)
+    r = engine.infer(ev)            # templates built here
+    assert r.method == "lbp"
+    check_valid(r, ev)
+    # the MAP is exact: the ground network's RC2 optimum
+    assert abs(r.map_cost * 1000 - map_rc2(ground(rules, ev).network)[1]) < 1e-6
+    best = np.inf
+    for _ in range(3):
+        engine._cache.clear()
+        t = time.perf_counter()
+        again = engine.infer(ev)
+        best = min(best, time.perf_counter() - t)
+    assert all(np.array_equal(again.types[u], r.types[u]) for u in ev.units)
+    assert again.sale == r.sale and again.map_types == r.map_types
+    assert best < 0.1   # measured 2-7 ms on a loaded 2-core machine (docs/benchmarks.md)
+
+
+def alone(ev, u):
+    """The evidence of unit ``u`` without its neighbours."""
+    kw = {name: {v: p for v, p in ev.unary(name) if v == u}
+          for name in ("rolike", "colike", "halike", "muldoor")}
+    return Evidence.build([u], **kw)
+
+
+@pytest.mark.parametrize("rule_file", ["rules/none.lp", "unit_rules"])
+def test_rules_without_pair_terms_give_independent_units_on_80_units(rule_file, tmp_path):
+    # no pair rule: every unit's marginal is what its own evidence gives it alone, exactly;
+    # "unit_rules" is table3's reasoning on type (unit rules only), so the marginals differ
+    # from unit to unit
+    if rule_file == "unit_rules":
+        text = open("rules/table3.lp").read()
+        rule_file = tmp_path / "unit_rules.lp"
+        rule_file.write_text(text[:text.index("% ---- reasoning on SaLe")])
+    ev = corridor_rows_floor(80)
+    engine = KnowledgeEngine.from_file(rule_file)
+    r = engine.infer(ev)
+    check_valid(r, ev)
+    assert r.method == "exact" and r.map_method == "jt"
+    tn = engine.local.type_network(ev)
+    assert tn.sum_pairs == [] and tn.max_pairs == []
+    for u in ev.units:
+        one = engine.infer(alone(ev, u))
+        np.testing.assert_allclose(r.types[u], one.types[u], atol=1e-12)
+        assert r.map_types[u] == one.map_types[u]
+    assert all(abs(v - 0.5) < 1e-12 for v in r.sale.values())
