@@ -334,7 +334,6 @@ TYPE_MAPS = [("Fr52_original.png", "training_Fr52.png"), ("NLB_original.png", "t
 
 
 def bench_types(args, model, rules) -> dict:
-    from semmap_pp.cells import UNIT_TYPES
     from semmap_pp.evaluate import read_ipa_types, type_accuracy, type_map_from_labels
     from semmap_pp.grid import load_map
     base = SHARED / "ipa-types"
@@ -353,7 +352,7 @@ def bench_types(args, model, rules) -> dict:
             _log(args, f"types {map_name}: FAILED {exc}")
             continue
         sm = run.semantic
-        types = {uid: UNIT_TYPES.index(sm.type_of(uid)) for uid in sm.unit_ids}
+        types = {uid: sm.type_of(uid) for uid in sm.unit_ids}
         pred = type_map_from_labels(sm.labels_image, types)
         sc = type_accuracy(pred, read_ipa_types(base / truth_name))
         row = {"map": map_name[:-len("_original.png")], "accuracy": round(sc.accuracy, 4),

@@ -358,10 +358,23 @@ class _Ascent:
                     continue
                 if self.boundary_lines(ra, rb) >= self.merge_line_max:
                     continue
-                if self.try_world(wm.replace(wm.remove(self.world, b), a, box), (a, b)):
-                    changed = True
-                    self.wall_moves(a)
+                changed |= self.tentative(wm.replace(wm.remove(self.world, b), a, box), (a, b), [a])
         return changed
+
+    def tentative(self, new: wm.World, changed, polish) -> bool:
+        """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo)."""
+        if not self.valid(new):
+            return False
+        old, before = self.world, self.tr.logp
+        self.tr.accept(self.tr.propose(new, tuple(int(s) for s in changed)))
+        for s in polish:
+            self.wall_moves(int(s))
+        if self.tr.logp > before + 1e-9:
+            return True
+        diff = np.flatnonzero((old.active != self.world.active)
+                              | np.any(old.rects != self.world.rects, axis=1))
+        self.tr.accept(self.tr.propose(old, tuple(int(s) for s in diff)))
+        return False
 
     def splits(self) -> bool:
         """Split a unit at its strongest interior wall line when that helps (pieces share the wall)."""
