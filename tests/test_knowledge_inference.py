@@ -286,3 +286,38 @@ def test_mcsat_with_more_clauses_than_one_word_matches_the_exact_distribution():
     marg, _ = mcsat.run_mcsat([8], blocks, np.random.default_rng(0), 2000, 30, 10)
     p = np.exp(-(viol * weights[:, None]).sum(axis=0) / 1000.0)
     np.testing.assert_allclose(marg[0], p / p.sum(), atol=0.02)
+
+
+def test_pairs_reading_soft_atoms_keep_them_in_the_unit_variable(tmp_path):
+    # a pair rule on a soft evidence atom: that unit's variable keeps the atom (type x MulDoor),
+    # units whose soft atoms no pair reads are collapsed to their type; both exact vs enumeration
+    f = tmp_path / "soft_pair.lp"
+    f.write_text(":~ muldoor(P), room(Q), adj(P,Q). [800@0, md_room, P, Q]\n"
+                 ":~ room(P), room(Q), adj(P,Q), not sale(P,Q). [1100@0, rr, P, Q]\n"
+                 ":~ rolike(U), not room(U). [1500@0, r, U]\n")
+    rules = load_rules(f)
+    ev = Evidence.build([1, 2, 3], rolike={2: 0.6, 3: 1.0}, muldoor={1: 0.7},
+                        adj=[(1, 2), (2, 3), (1, 3)])
+    engine = KnowledgeEngine(rules, method="exact")
+    tn = engine.local.type_network(ev)
+    assert tn.shift == [1, 0, 0] and tn.card == [8, 4, 4]
+    types, sale, best, log_z, _ = oracle(rules, ev)
+    r = engine.infer(ev)
+    for u in ev.units:
+        np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
+    for pq in ev.adj:
+        assert abs(r.sale[pq] - sale[pq]) < 1e-9
+    assert abs(r.log_z - log_z) < 1e-9 and abs(r.map_cost * 1000 - best) < 1e-6
+    lbp = KnowledgeEngine(rules, method="lbp").infer(ev)
+    assert max(np.abs(lbp.types[u] - types[u]).max() for u in ev.units) < 0.02
+    assert lbp.map_types == r.map_types
+
+
+def test_auto_is_exact_below_its_clique_bound_and_bitwise_equal_to_exact():
+    rules = load_rules("rules/table3.lp")
+    auto, exact = KnowledgeEngine(rules), KnowledgeEngine(rules, method="exact")
+    for ev in cases(7, 6):
+        a, e = auto.infer(ev), exact.infer(ev)
+        assert a.method == "exact"
+        assert all(np.array_equal(a.types[u], e.types[u]) for u in ev.units)
+        assert a.sale == e.sale and a.map_types == e.map_types and a.log_z == e.log_z
