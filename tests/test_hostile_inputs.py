@@ -355,6 +355,19 @@ def test_contradictory_hard_rules_stop_the_run_with_one_line_and_no_output(tmp_p
     assert "Traceback" not in stderr and not (tmp_path / "out").exists()
 
 
+def test_out_of_memory_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
+    import semmap_pp.pipeline
+
+    def no_memory(*args, **kwargs):
+        raise MemoryError()
+
+    monkeypatch.setattr(semmap_pp.pipeline, "build_frame", no_memory)
+    code, stdout, stderr = run_map([good_map(tmp_path)], tmp_path / "out", capsys)
+    assert code == 2 and stdout == ""
+    assert stderr.splitlines() == [stderr.strip()] and stderr.startswith("semmap: error: out of memory")
+    assert not (tmp_path / "out").exists()
+
+
 def test_rule_file_that_includes_itself_is_read_once(tmp_path, capsys):
     (tmp_path / "r.lp").write_text('#include "r.lp".\n:- unit(U), room(U), hall(U).\n')
     assert main(["rules", "check", str(tmp_path / "r.lp")]) == 0

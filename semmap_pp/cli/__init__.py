@@ -4,8 +4,9 @@ Each subcommand lives in its own module ``semmap_pp/cli/cmd_<name>.py`` exposing
 ``register(subparsers)``; the module registers its parser and sets ``func(args) -> int``.
 Modules are discovered, so adding a subcommand never touches this file.
 
-Every :class:`~semmap_pp.errors.SemmapError` becomes one line on stderr and exit status 2;
-Ctrl-C becomes exit status 130. No traceback reaches the user for an input error.
+Every :class:`~semmap_pp.errors.SemmapError` becomes one line on stderr and exit status 2; so does
+running out of memory (a map too large for the machine: docs/robustness.md gives the memory per
+cell). Ctrl-C becomes exit status 130. No traceback reaches the user for an input error.
 """
 
 from __future__ import annotations
@@ -45,6 +46,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("semmap: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("semmap: error: out of memory: the input is too large for this machine "
+              "(docs/robustness.md: memory per map cell); --max-cells refuses such maps early",
+              file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover
