@@ -1,9 +1,11 @@
-"""Knowledge engine speed: exact marginals (grounding included), MC-SAT, cache hits.
+"""Knowledge engine speed: exact marginals (grounding included), MC-SAT, cache hits, auto/LBP.
 
 Floors are hand-built evidence of real layouts: a corridor with rooms on both sides, a grid of
 corridors with rooms, a hall with rooms around it, at 20 and 40 units. "exact" times a cold
 engine's first inference (templates warmed on a different floor of the same patterns, as in a
-long MCMC run); "exact_cold" includes building the templates.
+long MCMC run); "exact_cold" includes building the templates. "dense" floors (rows of rooms
+between corridor rows, king-move adjacency on alternate cells, soft geometry) at 40 and 80 units
+time ``method="auto"`` (which picks loopy BP there) and its error against exact marginals.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import time
 import numpy as np
 
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
+from semmap_pp.knowledge.lbp import pairwise_bp
 
 
 def corridor_floor(n):
@@ -53,6 +56,26 @@ def hall_floor(n):
                           rolike={r: (1.0 if r % 4 else 0.7) for r in rooms}, adj=adj)
 
 
+def dense_floor(n, cols=6):
+    """Rows of ``cols`` rooms between corridor rows; grid neighbours adjacent, diagonal ones on
+    alternate cells; most geometry soft (the sampler's evidence of ambiguous units)."""
+    units = list(range(1, n + 1))
+    pos = {u: divmod(u - 1, cols) for u in units}
+    adj = []
+    for p in units:
+        for q in units:
+            (r1, c1), (r2, c2) = pos[p], pos[q]
+            if p < q and max(abs(r1 - r2), abs(c1 - c2)) == 1 and (
+                    r1 == r2 or c1 == c2 or (r1 + c1) % 2 == 0):
+                adj.append((p, q))
+    corr = [u for u in units if pos[u][0] % 3 == 1]
+    rooms = [u for u in units if u not in corr]
+    return Evidence.build(units, colike={c: (0.9 if c % 2 else 1.0) for c in corr},
+                          muldoor=corr + rooms[::5],
+                          rolike={r: (0.8 if r % 3 else 1.0) for r in rooms},
+                          halike={r: 0.15 for r in rooms if r % 3}, adj=adj)
+
+
 FLOORS = {"corridor": corridor_floor, "grid": grid_floor, "hall": hall_floor}
 
 
@@ -73,12 +96,12 @@ def _time(fn, repeat):
 def run(args):
     rules = load_rules(args.rules)
     out = {"rules": args.rules}
-    warm = KnowledgeEngine(rules)
+    warm = KnowledgeEngine(rules, method="exact")
     for name, make in FLOORS.items():
         for n in (20, 40):
             ev = make(n)
             t = time.perf_counter()
-            KnowledgeEngine(rules).infer(ev)
+            KnowledgeEngine(rules, method="exact").infer(ev)
             cold = time.perf_counter() - t
             warm.infer(ev)   # builds the templates of these patterns
 
@@ -87,7 +110,7 @@ def run(args):
                 warm.infer(ev)
             out[f"exact_ms_{name}_{n}"] = round(1000 * _time(fresh, args.repeat), 3)
             out[f"exact_cold_ms_{name}_{n}"] = round(1000 * cold, 2)
-            generic = KnowledgeEngine(rules, fast=False)
+            generic = KnowledgeEngine(rules, method="exact", fast=False)
             out[f"exact_generic_ms_{name}_{n}"] = round(
                 1000 * _time(lambda: (generic._cache.clear(), generic.infer(ev)), 3), 2)
     # cache hits
@@ -106,7 +129,7 @@ def run(args):
     # warm (as "exact"), "mcsat_cold" is the first call of a fresh engine
     for name in FLOORS:
         ev = FLOORS[name](20)
-        exact = KnowledgeEngine(rules).infer(ev)
+        exact = KnowledgeEngine(rules, method="exact").infer(ev)
         mc = KnowledgeEngine(rules, method="mcsat")
         t = time.perf_counter()
         mc.infer(ev)
@@ -123,4 +146,38 @@ def run(args):
         err = max(max(np.abs(r.types[u] - exact.types[u]).max() for u in ev.units),
                   max(abs(r.sale[pq] - exact.sale[pq]) for pq in ev.adj))
         out[f"mcsat_max_abs_err_{name}_20"] = round(float(err), 4)
+    out.update(auto_rows(rules, args.repeat))
+    return out
+
+
+def auto_rows(rules, repeat):
+    """``method="auto"`` on the dense floors: method picked, warm and cold time, error vs exact."""
+    out = {}
+    for n in (40, 80):
+        ev = dense_floor(n)
+        t = time.perf_counter()
+        auto = KnowledgeEngine(rules)
+        r = auto.infer(ev)
+        out[f"auto_cold_ms_dense_{n}"] = round(1000 * (time.perf_counter() - t), 2)
+        out[f"auto_method_dense_{n}"] = f"{r.method}/{r.map_method}"
+
+        def fresh():
+            auto._cache.clear()
+            auto.infer(ev)
+        out[f"auto_ms_dense_{n}"] = round(1000 * _time(fresh, repeat), 3)
+        c = time.process_time()
+        for _ in range(repeat):
+            fresh()
+        out[f"auto_cpu_ms_dense_{n}"] = round(1000 * (time.process_time() - c) / repeat, 3)
+        tn = auto.local.type_network(ev)
+        bp = pairwise_bp(tn.unary_sum, tn.sum_pairs, settings=auto.bp)
+        out[f"lbp_iterations_dense_{n}"] = bp.iterations
+        ex = KnowledgeEngine(rules, method="exact")
+        t = time.perf_counter()
+        e = ex.infer(ev)
+        out[f"exact_ms_dense_{n}"] = round(1000 * (time.perf_counter() - t), 1)
+        err = max(max(np.abs(r.types[u] - e.types[u]).max() for u in ev.units),
+                  max(abs(r.sale[pq] - e.sale[pq]) for pq in ev.adj))
+        out[f"auto_max_abs_err_dense_{n}"] = round(float(err), 4)
+        out[f"auto_map_equals_exact_dense_{n}"] = r.map_types == e.map_types
     return out

@@ -157,6 +157,7 @@ class LocalModel:
         self._pairs: dict = {}
         self._flags: dict = {}
         self._reduced: dict = {}
+        self._unit_types: dict = {}
 
     def unit(self, key):
         """``(log potential over super-states, n_soft_atoms)`` of a unit with pattern ``key``."""
@@ -209,6 +210,22 @@ class LocalModel:
             k1, k2 = self.unit(kp)[1], self.unit(kq)[1]
             hit = self._flags[(kp, kq)] = (all(_invariant(t, 0, k1) for t in tables),
                                            all(_invariant(t, 1, k2) for t in tables))
+        return hit
+
+    def unit_types(self, key, cut):
+        """Sum-out and max-out unit tables of pattern ``key`` with its low ``cut`` soft bits
+        (all or none of them) summed / maximised out (cached; do not modify)."""
+        hit = self._unit_types.get((key, cut))
+        if hit is None:
+            table = self.unit(key)[0]
+            if cut:
+                t = table.reshape(-1, 1 << cut)
+                hit = (_lse(t, 1), t.max(axis=1))
+            else:
+                hit = (table, table)
+            for t in hit:
+                t.setflags(write=False)
+            self._unit_types[(key, cut)] = hit
         return hit
 
     def reduced_pair(self, kp, kq, cut_p, cut_q):
@@ -359,6 +376,21 @@ def _constant_on(cond, table):
     return float(vals[0]) if np.abs(vals - vals[0]).max() <= _TOL else None
 
 
+def _fold(tables, terms):
+    """``tables[i] + Σ`` of the ``(i, vector)`` terms (new arrays; the inputs are cached)."""
+    if not terms:
+        return list(tables)
+    k = len(tables[0])
+    if all(len(t) == k for t in tables):
+        out = np.stack(tables)
+        np.add.at(out, np.array([i for i, _ in terms]), np.stack([v for _, v in terms]))
+        return list(out)
+    out = [t.copy() for t in tables]
+    for i, v in terms:
+        out[i] += v
+    return out
+
+
 def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
     maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
     keys = [_unit_key(maps, u) for u in ev.units]
@@ -374,35 +406,26 @@ def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
         pairs.append((p, q, i, j))
     shift, usum, umax = [], [], []
     for i, key in enumerate(keys):
-        table, k = model.unit(key)
-        if collapse[i] and k:
-            t = table.reshape(4, 1 << k)
-            usum.append(_lse(t, 1))
-            umax.append(t.max(axis=1))
-            shift.append(0)
-        else:
-            usum.append(table.copy())
-            umax.append(table.copy())
-            shift.append(k)
+        k = softs[i] if collapse[i] else 0
+        s_tab, m_tab = model.unit_types(key, k)
+        usum.append(s_tab)
+        umax.append(m_tab)
+        shift.append(softs[i] - k)
     sum_pairs, max_pairs, sale = [], [], {}
-    add_sum, add_max = [[] for _ in keys], [[] for _ in keys]
+    add_sum, add_max = [], []
     for p, q, i, j in pairs:
         s_tab, s_sep, c, m_tab, m_sep = model.reduced_pair(
             keys[i], keys[j], softs[i] if collapse[i] else 0, softs[j] if collapse[j] else 0)
         if s_sep is not None:
-            add_sum[i].append(s_sep[0])
-            add_sum[j].append(s_sep[1])
+            add_sum.append((i, s_sep[0]))
+            add_sum.append((j, s_sep[1]))
         if s_tab is not None:
             sum_pairs.append((i, j, s_tab))
         sale[(p, q)] = c if isinstance(c, float) else (i, j, c)
         if m_sep is not None:
-            add_max[i].append(m_sep[0])
-            add_max[j].append(m_sep[1])
+            add_max.append((i, m_sep[0]))
+            add_max.append((j, m_sep[1]))
         else:
             max_pairs.append((i, j, m_tab))
-    for i in range(len(keys)):
-        if add_sum[i]:
-            usum[i] = usum[i] + np.sum(add_sum[i], axis=0)
-        if add_max[i]:
-            umax[i] = umax[i] + np.sum(add_max[i], axis=0)
+    usum, umax = _fold(usum, add_sum), _fold(umax, add_max)
     return TypeNetwork(tuple(ev.units), shift, usum, umax, sum_pairs, max_pairs, sale)
