@@ -153,10 +153,20 @@ class JunctionTree:
 
 
 def _lse(x, axis):
-    m = np.max(x, axis=axis, keepdims=True)
-    m = np.where(np.isfinite(m), m, 0.0)
-    with np.errstate(divide="ignore"):
-        return np.log(np.sum(np.exp(x - m), axis=axis)) + np.squeeze(m, axis=axis)
+    """``log Σ exp`` along ``axis`` (``-inf`` where every entry is ``-inf``)."""
+    m = x.max(axis=axis, keepdims=True)
+    fin = np.isfinite(m)
+    if not fin.all():
+        m = np.where(fin, m, 0.0)
+    s = np.exp(x - m).sum(axis=axis)
+    pos = s > 0
+    if pos.all():
+        out = np.log(s)
+    else:
+        out = np.full(s.shape, -np.inf)
+        np.log(s, out=out, where=pos)
+    out += m.reshape(out.shape)
+    return out
 
 
 def _put(table, placement):
