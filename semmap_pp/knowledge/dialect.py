@@ -14,8 +14,12 @@ A rule file is a plain clingo program restricted to what an MLN-style knowledge 
 Everything else that could run code or reach outside the rules folder is rejected: ``#script``,
 ``@``-terms, ``#external``, ``#program`` other than ``base``, ``#include`` of absolute paths or of
 files outside the folder of the top-level file, choice rules, disjunctions, ``#minimize``,
-``#heuristic``, ``#project``, ``#edge``, theory atoms, classical negation. Every problem is a
-:class:`~semmap_pp.errors.RuleError` ``file:line:col: message``.
+``#heuristic``, ``#project``, ``#edge``, theory atoms, classical negation. So is what could make
+grounding endless or clingo misbehave: intervals ``a..b``, derived atoms whose arguments are not
+constants or variables of positive body atoms (``c(X+1) :- c(X).``), integer literals beyond 32 bits
+(clingo wraps them silently) and non-ASCII characters outside comments and strings (clingo aborts
+the process on them). Every problem is a :class:`~semmap_pp.errors.RuleError`
+``file:line:col: message`` (docs/robustness.md lists the cases).
 """
 
 from __future__ import annotations
