@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
+from semmap_pp.knowledge.exact import JunctionTree
 from semmap_pp.knowledge.lbp import pairwise_bp
 
 
@@ -147,6 +148,31 @@ def run(args):
                   max(abs(r.sale[pq] - exact.sale[pq]) for pq in ev.adj))
         out[f"mcsat_max_abs_err_{name}_20"] = round(float(err), 4)
     out.update(auto_rows(rules, args.repeat))
+    out.update(clique_rows(rules))
+    return out
+
+
+def clique_rows(rules):
+    """Exact vs LBP time by the largest junction-tree clique, on dense floors of 12..42 units
+    (the measurement behind ``engine.AUTO_MAX_STATES``)."""
+    out = {}
+    exact = KnowledgeEngine(rules, method="exact")
+    lbp = KnowledgeEngine(rules, method="lbp")
+    for n in (12, 20, 25, 30, 42):
+        ev = dense_floor(n)
+        tn = exact.local.type_network(ev)
+        scopes = [(i,) for i in range(n)] + [(i, j) for i, j, _ in tn.sum_pairs]
+        largest = JunctionTree(tn.card, scopes, max_states=1 << 40).largest
+        times = []
+        for eng in (exact, lbp):
+            eng.infer(ev)
+
+            def fresh(eng=eng):
+                eng._cache.clear()
+                eng.infer(ev)
+            times.append(round(1000 * _time(fresh, 5), 2))
+        out[f"clique_log2_dense_{n}"] = int(np.log2(largest))
+        out[f"exact_vs_lbp_ms_dense_{n}"] = times
     return out
 
 

@@ -37,7 +37,7 @@ METHODS = ("auto", "exact", "lbp", "mcsat")
 MAP_METHODS = ("jt", "clingo", "rc2")
 #: ``method="auto"`` runs the junction tree when its largest clique has at most this many joint
 #: states, loopy BP otherwise (docs/benchmarks.md, "Knowledge engine", for the measurement).
-AUTO_MAX_STATES = 1 << 12
+AUTO_MAX_STATES = 1 << 10
 
 
 @dataclass(frozen=True)
