@@ -114,7 +114,7 @@ class Posterior:
         table = self._prior_n.get(capacity)
         if table is None:
             log_pn = log_p_n_table(capacity, self.model.prior)
-            table = np.array([float(log_pn[n] - log_slots(n, capacity) + n * self.log_rect)
+            table = np.array([float(log_pn[n] - log_slots(n, capacity) + (n * self.log_rect if n else 0.0))
                               for n in range(capacity + 1)])
             table.setflags(write=False)
             self._prior_n[capacity] = table

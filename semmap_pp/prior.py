@@ -131,7 +131,7 @@ def log_prior(rects: np.ndarray, capacity: int, shape, min_side: int, max_side: 
     if n > capacity or not np.all(rects_valid(rects, shape, min_side, max_side)):
         return -math.inf
     return (log_p_n(n, capacity, params) - log_slots(n, capacity)
-            + n * log_p_rect_const(shape, min_side, max_side)
+            + (n * log_p_rect_const(shape, min_side, max_side) if n else 0.0)  # 0 units: no -inf * 0
             + sale_log_factor(rects, adj, sale_prob, resolution, params))
 
 

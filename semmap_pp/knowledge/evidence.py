@@ -18,8 +18,8 @@ from typing import Iterable, Mapping
 import clingo
 import clingo.ast as cast
 
-from semmap_pp.errors import EvidenceError
-from semmap_pp.knowledge.dialect import SOFT_PREDICATES, WEIGHT_SCALE, strip_includes
+from semmap_pp.errors import EvidenceError, RuleError
+from semmap_pp.knowledge.dialect import SOFT_PREDICATES, WEIGHT_SCALE, check_lexemes, strip_includes
 
 _PROB_RE = re.compile(r"^\d*\.?\d+(?:[eE][-+]?\d+)?$")
 _WHERE = "<evidence>"
@@ -182,6 +182,10 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
         raise EvidenceError(path, getattr(exc, "message", str(exc))) from None
     if includes:
         raise EvidenceError(path, "#include is not allowed in evidence", *includes[0][1:])
+    try:  # what clingo's lexer mishandles (non-ASCII aborts the process) is refused first
+        check_lexemes(stripped, path)
+    except RuleError as exc:
+        raise EvidenceError(path, exc.message, exc.line, exc.col) from None
     statements, messages = [], []
     try:
         cast.parse_string(stripped, statements.append,
