@@ -16,7 +16,7 @@ from test_knowledge_inference import oracle
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.ground import ground
-from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
+from semmap_pp.knowledge.lbp import BPSettings, cluster, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2, map_rc2
 
@@ -110,6 +110,41 @@ def test_factor_bp_is_exact_on_a_tree_of_factors():
     w /= w.sum()
     for v, c in enumerate(card):
         np.testing.assert_allclose(res.marginals[v], np.bincount(states[:, v], w, c), atol=1e-9)
+
+
+def test_cluster_keeps_the_joint_and_merges_tight_overlaps():
+    # two factors on (0, 1, 2) and (1, 2, 3) share two variables: merged; (3, 4) shares one
+    rng = np.random.default_rng(4)
+    card = [2, 2, 2, 2, 3]
+    pots = [((0, 1, 2), rng.normal(0, 1, (2, 2, 2))), ((1, 2, 3), rng.normal(0, 1, (2, 2, 2))),
+            ((3, 4), rng.normal(0, 1, (2, 3))), ((1, 2), rng.normal(0, 1, (2, 2))),
+            ((4,), rng.normal(0, 1, 3))]
+    merged = cluster(card, pots, 1 << 8)
+    assert sorted(s for s, _ in merged) == [(0, 1, 2, 3), (3, 4), (4,)]
+    states = np.array(list(itertools.product(*[range(c) for c in card])))
+
+    def joint(ps):
+        return sum(np.broadcast_to(t, t.shape)[tuple(states[:, v] for v in s)] for s, t in ps)
+    np.testing.assert_allclose(joint(merged), joint(pots), atol=1e-12)
+    # within 8 states only the subset (1, 2) is absorbed
+    assert sorted(s for s, _ in cluster(card, pots, 8)) == [(0, 1, 2), (1, 2, 3), (3, 4), (4,)]
+
+
+def test_general_path_lbp_on_table3_is_as_close_as_the_type_network():
+    # the same rules through the ground network: a SaLe atom, its mirror and the symmetry rule
+    # are merged into one factor per pair, so BP sees the same loops as on the type network
+    rules = load_rules("rules/table3.lp")
+    exact = KnowledgeEngine(rules, method="exact")
+    lbp = KnowledgeEngine(rules, method="lbp", fast=False)
+    rng = np.random.default_rng(8)
+    worst = 0.0
+    for _ in range(15):
+        ev = random_dense_floor(rng)
+        a, b = exact.infer(ev), lbp.infer(ev)
+        assert b.method == "lbp"
+        worst = max([worst] + [np.abs(a.types[u] - b.types[u]).max() for u in ev.units]
+                    + [abs(a.sale[pq] - b.sale[pq]) for pq in ev.adj])
+    assert worst < TABLE3_TOL
 
 
 def test_separate_splits_only_sums_of_unit_terms():

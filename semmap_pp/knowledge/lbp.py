@@ -32,6 +32,7 @@ class BPSettings:
     damping: float = 0.5
     max_iter: int = 200
     tol: float = 1e-7
+    cluster_states: int = 1 << 8   # factor_bp: merge factors sharing two variables up to this
 
 
 @dataclass
@@ -191,8 +192,57 @@ def _flood(U, src, rev, expT, indptr, inedges, damping, max_iter, tol, m, logm, 
     return it, converged
 
 
+def _expand(scope, table, union, card):
+    """``table`` over sorted ``scope`` broadcast to the full sorted ``union``."""
+    shape = [card[v] if v in scope else 1 for v in union]
+    return np.broadcast_to(np.asarray(table).reshape(shape), [card[v] for v in union])
+
+
+def cluster(card, potentials, max_states):
+    """Merge factors that share two or more variables (or whose scope another contains) while
+    the merged scope has at most ``max_states`` joint states. Exact (the product of the factors
+    is unchanged); BP on the merged network no longer runs around the short, tight loops that
+    e.g. a SaLe atom, its mirror and their hard symmetry rule make between two types.
+    Deterministic: factors are visited in a fixed order."""
+    facs = {k: (tuple(s), np.asarray(t, dtype=np.float64)) for k, (s, t) in
+            enumerate(potentials) if len(s) >= 2}
+    rest = [(tuple(s), t) for s, t in potentials if len(s) < 2]
+    by_var: dict = {}
+    for k, (s, _t) in facs.items():
+        for v in s:
+            by_var.setdefault(v, set()).add(k)
+    changed = True
+    while changed:
+        changed = False
+        for f in sorted(facs):
+            if f not in facs:
+                continue
+            sf, tf = facs[f]
+            partners = sorted(set().union(*(by_var[v] for v in sf)) - {f})
+            for g in partners:
+                sg, tg = facs[g]
+                union = tuple(sorted(set(sf) | set(sg)))
+                shared = len(sf) + len(sg) - len(union)
+                if shared < min(2, len(sf), len(sg)):
+                    continue
+                if int(np.prod([card[v] for v in union])) > max_states:
+                    continue
+                table = _expand(sf, tf, union, card) + _expand(sg, tg, union, card)
+                del facs[g]
+                for v in sg:
+                    by_var[v].discard(g)
+                for v in union:
+                    by_var.setdefault(v, set()).add(f)
+                facs[f] = sf, tf = union, table
+                changed = True
+    return rest + [facs[k] for k in sorted(facs)]
+
+
 def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult:
     """Sum-product on a factor network ``P(x) ∝ exp(Σ_f table_f(x_scope_f))``.
+
+    Factors are first merged by :func:`cluster`; factors of one shape then move together as
+    arrays (one numpy operation per shape and scope position per iteration).
 
     Parameters
     ----------
@@ -209,62 +259,76 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
         Variable marginals (no pair beliefs).
     """
     card = [int(c) for c in card]
-    n = len(card)
     unary = [np.zeros(c) for c in card]
-    factors = []
-    for scope, table in potentials:
+    groups: dict = {}
+    for scope, table in cluster(card, potentials, settings.cluster_states):
         if len(scope) == 0:
             continue
         if len(scope) == 1:
             unary[scope[0]] = unary[scope[0]] + table
         else:
-            factors.append((scope, np.asarray(table, dtype=np.float64)))
-    # messages factor -> variable (probability, normalised), one per (factor, position)
-    f2v = [[np.ones(card[v]) / card[v] for v in scope] for scope, _ in factors]
+            groups.setdefault(table.shape, []).append((scope, table))
+    # variables of one cardinality share a belief array
+    local, by_card = [0] * len(card), {}
+    for v, c in enumerate(card):
+        local[v] = len(by_card.setdefault(c, []))
+        by_card[c].append(v)
+    U = {c: np.array([unary[v] for v in vs]) for c, vs in by_card.items()}
+    local = np.array(local, dtype=np.int64)
+    blocks = []
+    for shape, items in sorted(groups.items()):
+        scopes = np.array([s for s, _ in items], dtype=np.int64)
+        T = np.stack([t for _, t in items])
+        msgs = [np.full((len(items), c), 1.0 / c) for c in shape]
+        blocks.append((shape, scopes, T, msgs))
     a, b = 1.0 - settings.damping, settings.damping
 
+    def log_of(m):
+        return np.maximum(np.log(np.maximum(m, 1e-300)), _LOG_FLOOR)
+
     def beliefs():
-        logb = [u.copy() for u in unary]
-        for (scope, _), msgs in zip(factors, f2v):
-            for v, msg in zip(scope, msgs):
-                logb[v] += np.maximum(np.log(np.maximum(msg, 1e-300)), _LOG_FLOOR)
+        logb = {c: u.copy() for c, u in U.items()}
+        for shape, scopes, _T, msgs in blocks:
+            for pos, c in enumerate(shape):
+                np.add.at(logb[c], local[scopes[:, pos]], log_of(msgs[pos]))
         return logb
 
     it, converged = 0, False
-    while factors and it < settings.max_iter:
+    while blocks and it < settings.max_iter:
         it += 1
         logb = beliefs()
         delta = 0.0
         new_all = []
-        for (scope, table), msgs in zip(factors, f2v):
-            r = len(scope)
+        for shape, scopes, T, msgs in blocks:
+            r = len(shape)
             ins = []
-            for pos, (v, msg) in enumerate(zip(scope, msgs)):
-                lm = np.maximum(np.log(np.maximum(msg, 1e-300)), _LOG_FLOOR)
-                vin = logb[v] - lm           # variable -> factor
-                top = np.max(vin)
-                vin = vin - (top if np.isfinite(top) else 0.0)
-                shape = [1] * r
-                shape[pos] = card[v]
-                vin = vin.reshape(shape)
-                ins.append(vin)
-            out = []
-            for pos in range(r):
-                t = table
+            for pos, c in enumerate(shape):
+                vin = logb[c][local[scopes[:, pos]]] - log_of(msgs[pos])
+                top = vin.max(axis=1, keepdims=True)
+                vin = vin - np.where(np.isfinite(top), top, 0.0)
+                sh = [len(scopes)] + [1] * r
+                sh[pos + 1] = c
+                ins.append(vin.reshape(sh))
+            news = []
+            for pos, c in enumerate(shape):
+                t = T
                 for q, vin in enumerate(ins):
                     if q != pos:
                         t = t + vin
-                flat = np.moveaxis(t, pos, 0).reshape(card[scope[pos]], -1)
-                new = _norm_exp(_lse(flat, 1))
-                if not new.any():
-                    new = np.ones(len(new)) / len(new)
+                flat = np.moveaxis(t, pos + 1, 1).reshape(len(scopes), c, -1)
+                new = _norm_exp(_lse(flat, 2), axis=1)
+                empty = ~new.any(axis=1)
+                if empty.any():
+                    new[empty] = 1.0 / c
                 delta = max(delta, float(np.abs(new - msgs[pos]).max()))
-                out.append(new)
-            new_all.append(out)
-        f2v = [[a * nw + b * old for nw, old in zip(news, olds)]
-               for news, olds in zip(new_all, f2v)]
+                news.append(new)
+            new_all.append(news)
+        for (_s, _sc, _T, msgs), news in zip(blocks, new_all):
+            for pos, new in enumerate(news):
+                msgs[pos] = a * new + b * msgs[pos]
         if delta < settings.tol:
             converged = True
             break
     logb = beliefs()
-    return BPResult([_norm_exp(lb) for lb in logb], {}, it, converged or not factors)
+    marg = [_norm_exp(logb[c][local[v]]) for v, c in enumerate(card)]
+    return BPResult(marg, {}, it, converged or not blocks)
