@@ -1,0 +1,52 @@
+"""The start world's greedy ascent (init.refine_world) and the door candidates it relies on."""
+
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.init import refine_world
+from semmap_pp.kernels import build_data, data_from_frame
+from semmap_pp.model import load_model
+from semmap_pp.posterior import Posterior
+
+
+def two_rooms() -> np.ndarray:
+    """Two 3 m x 3 m rooms (0.05 m cells) side by side, 2-cell walls, a 0.8 m door between them."""
+    m = np.full((84, 144), UNKNOWN, np.uint8)
+    m[2:82, 2:142] = OCCUPIED
+    m[4:80, 4:70] = FREE
+    m[4:80, 72:140] = FREE
+    m[34:50, 70:72] = FREE          # the door in the shared wall
+    return m
+
+
+def test_refine_reaches_the_walls_and_swallows_the_fragment():
+    model = load_model()
+    grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    assert frame.theta == 0.0                                # the lattice is the image
+    post = Posterior(frame, model, None)
+    start = wm.empty(8)
+    start = wm.add(start, 0, (2, 2, 82, 50))                # left room stops 20 cells short of its wall
+    start = wm.add(start, 1, (4, 50, 80, 70))               # a strip between it and the wall
+    start = wm.add(start, 2, (2, 70, 82, 142))              # the right room, right as it is
+    out = refine_world(post, start, data_from_frame(frame))
+    assert post.evaluate(out).total > post.evaluate(start).total
+    rects = sorted(tuple(int(v) for v in out.rects[s]) for s in wm.active_slots(out))
+    assert len(rects) == 2                                  # the strip was absorbed, nothing born
+    left, right = rects
+    assert abs(left[3] - 72) <= 2 and left[:3] == (2, 2, 82)  # its wall band now sits on the shared wall
+    assert right == (2, 70, 82, 142)
+
+
+def test_door_candidates_are_gaps_in_wall_lines_not_corridor_rows():
+    m = np.full((30, 40), FREE, np.uint8)
+    m[:, 5] = m[:, 16] = OCCUPIED     # a corridor 10 cells wide between two walls (columns 6..15)
+    m[20, 16:] = OCCUPIED             # a wall along row 20 right of the corridor ...
+    m[20, 26:31] = FREE               # ... with a 5-cell gap in it
+    data = build_data(m, min_side=4, wall_cells=1, door_min=3, door_max=12)
+    doors = {tuple(int(v) for v in d) for d in data.door_candidates}
+    assert (0, 20, 26, 31) in doors                         # axis 0 = along a row: row 20, cols 26..30
+    assert not any(d[0] == 0 and d[2] == 6 and d[3] == 16 for d in doors)  # no corridor row is a door
