@@ -3,7 +3,8 @@
 ``python bench/run.py quality --json [--subset synthetic|real|ipa|types|all] [--floors N] [--budget B]``
 
 Every map goes through :func:`semmap_pp.pipeline.run_map` with the model file's defaults (``--budget
-model``) or a shorter run (``--budget quick``); per-map rows, the means and the published figures
+model``), a shorter run (``--budget quick``) or the model's run capped at a number of seconds of
+sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the means and the published figures
 (/work/shared/data/README.md) are printed, the JSON summary on the last line.
 
 * **synthetic**: floors ``semmap_pp.synth.generate_floor(seed)`` for seeds ``0..N-1`` (rotations
@@ -28,6 +29,7 @@ sampling until the best chain's ``best_logp`` first reached its final value, clo
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 import sys
@@ -49,15 +51,28 @@ PUBLISHED = {
 }
 TARGETS = {"synthetic_cpr": 0.95, "unit_f1": 0.9, "type_accuracy": 0.9, "door_f1": 0.85,
            "cartesium_cpr": 0.90, "intel_cpr": 0.93, "time_to_wstar_s": 60.0}
-BUDGETS = {"model": {}, "quick": dict(chains=2, tune=100, draws=50, n_inner=100)}
+BUDGETS = {"model": {}, "quick": dict(chains=2, tune=10, draws=10, n_inner=50)}
+
+
+def _budget(text: str) -> str | float:
+    """A preset name of :data:`BUDGETS` or seconds of sampling per map."""
+    if text in BUDGETS:
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a preset {sorted(BUDGETS)} nor seconds: {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"seconds must be > 0, got {text!r}")
+    return value
 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all", choices=["synthetic", "real", "ipa", "types", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
-    parser.add_argument("--budget", default="model", choices=sorted(BUDGETS),
-                        help="run lengths: the model file's [sampler] or a quick run")
+    parser.add_argument("--budget", default="model", type=_budget,
+                        help="run lengths: 'model' ([sampler]), 'quick', or seconds of sampling per map")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed")
     for name in ("chains", "cores", "tune", "draws", "n-inner"):
         parser.add_argument(f"--{name}", type=int, default=None, help=f"override {name}")
@@ -71,7 +86,7 @@ def add_arguments(parser) -> None:
 
 def _settings(model, args):
     from semmap_pp.pipeline import RunSettings
-    over = dict(BUDGETS[args.budget])
+    over = dict(BUDGETS[args.budget]) if isinstance(args.budget, str) else {}
     for key in ("chains", "cores", "tune", "draws", "n_inner", "anneal"):
         v = getattr(args, key)
         if v is not None:
@@ -105,6 +120,9 @@ def time_to_best(run, clock) -> dict:
     return {"seconds": None, "draw": None}
 
 
+SECONDS: list = [None]   # sampling budget in seconds per map (``--budget N``), set by :func:`run`
+
+
 def _run(inputs, settings, quiet):
     """``run_map`` and the per-draw clock ``[(seconds since the call, chain, best_logp)]``.
 
@@ -120,7 +138,7 @@ def _run(inputs, settings, quiet):
 
     log = (lambda m: None) if quiet else (lambda m: print("   ", m, file=sys.stderr, flush=True))
     try:
-        run = pipeline.run_map(inputs, settings, callback=tick, log=log)
+        run = pipeline.run_map(inputs, settings, callback=tick, log=log, budget=SECONDS[0])
         run.notes.insert(0, "knowledge: on")
     except Exception as exc:  # noqa: BLE001 - a benchmark row, not a crash
         if inputs.rules is None:
@@ -131,7 +149,8 @@ def _run(inputs, settings, quiet):
         clock.clear()
         t0 = time.perf_counter()
         try:
-            run = pipeline.run_map(dataclasses.replace(inputs, rules=None), settings, callback=tick, log=log)
+            run = pipeline.run_map(dataclasses.replace(inputs, rules=None), settings, callback=tick, log=log,
+                                   budget=SECONDS[0])
         except Exception as exc2:  # noqa: BLE001
             raise MapFailed(f"{type(exc2).__name__}: {exc2}") from exc2
         run.notes.insert(0, f"knowledge: off (engine failed: {type(exc).__name__}: {str(exc)[:120]})")
@@ -375,8 +394,10 @@ def run(args) -> dict:
     from semmap_pp.pipeline import DEFAULT_RULES
     model = load_model()
     rules = load_rules(DEFAULT_RULES)
+    SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
     s = _settings(model, args)
-    out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal")},
+    out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal")}
+           | {"budget": args.budget},
            "published": PUBLISHED, "targets": TARGETS}
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
     fns = {"synthetic": bench_synthetic, "real": bench_real, "ipa": bench_ipa, "types": bench_types}
