@@ -22,6 +22,11 @@ class SemmapError(Exception):
         self.col = col
         super().__init__(str(self))
 
+    def __reduce__(self):
+        # rebuilt from its fields, so an error raised in a sampling worker reaches the main
+        # process as itself (the default pickling calls __init__ with the formatted string only)
+        return (type(self), (self.path, self.message, self.line, self.col))
+
     def __str__(self) -> str:
         where = self.path if self.path is not None else "<input>"
         if self.line is not None:
