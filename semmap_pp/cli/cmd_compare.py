@@ -16,7 +16,8 @@ import sys
 from pathlib import Path
 
 from semmap_pp.cli.cmd_info import add_map_options, map_options
-from semmap_pp.cli.cmd_map import _non_negative_int, _positive_int
+from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
+from semmap_pp.cli.argtypes import positive_int as _positive_int
 
 
 def register(subparsers) -> None:

@@ -12,18 +12,9 @@ import argparse
 import json
 
 from semmap_pp.cells import INPUT_CLASSES
+from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.grid.pixels import MODES
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {value}")
-    return value
 
 
 def add_map_options(parser: argparse.ArgumentParser) -> None:

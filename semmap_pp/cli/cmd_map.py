@@ -18,22 +18,9 @@ import signal
 import sys
 from pathlib import Path
 
+from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
+from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.cmd_info import add_map_options, map_options
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
-def _non_negative_int(text: str) -> int:
-    value = _positive_int(text) if text.strip() != "0" else 0
-    return value
 
 
 def _seconds(text: str) -> float:

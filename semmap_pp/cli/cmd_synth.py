@@ -17,25 +17,13 @@ from collections import Counter
 from pathlib import Path
 
 from semmap_pp.errors import OutputError
+from semmap_pp.cli.argtypes import integer, non_negative_int
 from semmap_pp.synth import generate_floor, write_floor
 from semmap_pp.synth.floor import MAX_UNITS
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
 def _units(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    value = integer(text)
     if not 2 <= value <= MAX_UNITS:
         raise argparse.ArgumentTypeError(f"must be between 2 and {MAX_UNITS}, got {value}")
     return value
@@ -63,7 +51,7 @@ def register(subparsers) -> None:
         "synth", help="generate a synthetic floor (occupancy grid + ground truth)",
         description="Generate a realistic synthetic floor from a seed: map.yaml + map.pgm, "
                     "truth.json and truth_labels.png (see docs/synthetic.md).")
-    parser.add_argument("--seed", type=_seed, required=True, metavar="N",
+    parser.add_argument("--seed", type=non_negative_int, required=True, metavar="N",
                         help="seed; the same arguments always give the same bytes")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--units", type=_units, metavar="K",
