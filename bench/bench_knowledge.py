@@ -16,6 +16,7 @@ import numpy as np
 
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import JunctionTree
+from semmap_pp.knowledge.layouts import dense_floor
 from semmap_pp.knowledge.lbp import pairwise_bp
 
 
@@ -55,26 +56,6 @@ def hall_floor(n):
     adj = [(1, 2), (1, 3)] + [(1, r) for r in rooms] + list(zip(rooms, rooms[1:]))
     return Evidence.build(range(1, n + 1), halike={1}, colike=[2, 3], muldoor=[1, 2, 3],
                           rolike={r: (1.0 if r % 4 else 0.7) for r in rooms}, adj=adj)
-
-
-def dense_floor(n, cols=6):
-    """Rows of ``cols`` rooms between corridor rows; grid neighbours adjacent, diagonal ones on
-    alternate cells; most geometry soft (the sampler's evidence of ambiguous units)."""
-    units = list(range(1, n + 1))
-    pos = {u: divmod(u - 1, cols) for u in units}
-    adj = []
-    for p in units:
-        for q in units:
-            (r1, c1), (r2, c2) = pos[p], pos[q]
-            if p < q and max(abs(r1 - r2), abs(c1 - c2)) == 1 and (
-                    r1 == r2 or c1 == c2 or (r1 + c1) % 2 == 0):
-                adj.append((p, q))
-    corr = [u for u in units if pos[u][0] % 3 == 1]
-    rooms = [u for u in units if u not in corr]
-    return Evidence.build(units, colike={c: (0.9 if c % 2 else 1.0) for c in corr},
-                          muldoor=corr + rooms[::5],
-                          rolike={r: (0.8 if r % 3 else 1.0) for r in rooms},
-                          halike={r: 0.15 for r in rooms if r % 3}, adj=adj)
 
 
 FLOORS = {"corridor": corridor_floor, "grid": grid_floor, "hall": hall_floor}

@@ -16,6 +16,7 @@ from test_knowledge_inference import oracle
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.ground import ground
+from semmap_pp.knowledge.layouts import dense_floor
 from semmap_pp.knowledge.lbp import BPSettings, cluster, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2, map_rc2
@@ -282,27 +283,7 @@ def test_pairwise_rc2_reaches_the_brute_force_optimum():
                    + sum(t[x[i], x[j]] for i, j, t in pairs) - best) < 1e-9
 
 
-def corridor_rows_floor(n):
-    """A realistic dense floor: rows of 6 rooms between corridor rows, every unit adjacent to
-    its grid neighbours and, on alternate cells, its diagonal ones; most geometry is soft (as
-    the sampler's evidence of ambiguous units). Before the type network, inference refused
-    both 40 and 80 units (a clique of 2^24 / 2^27 states)."""
-    cols = 6
-    units = list(range(1, n + 1))
-    pos = {u: divmod(u - 1, cols) for u in units}
-    adj = []
-    for p in units:
-        for q in units:
-            (r1, c1), (r2, c2) = pos[p], pos[q]
-            if p < q and max(abs(r1 - r2), abs(c1 - c2)) == 1 and (
-                    r1 == r2 or c1 == c2 or (r1 + c1) % 2 == 0):
-                adj.append((p, q))
-    corr = [u for u in units if pos[u][0] % 3 == 1]
-    rooms = [u for u in units if u not in corr]
-    return Evidence.build(units, colike={c: (0.9 if c % 2 else 1.0) for c in corr},
-                          muldoor=corr + rooms[::5],
-                          rolike={r: (0.8 if r % 3 else 1.0) for r in rooms},
-                          halike={r: 0.15 for r in rooms if r % 3}, adj=adj)
+corridor_rows_floor = dense_floor  # the benchmark's dense layout (semmap_pp/knowledge/layouts.py)
 
 
 def check_valid(r, ev):
