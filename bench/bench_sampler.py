@@ -8,7 +8,16 @@ empty world with the plain loop (``--burn`` kernels) so that it holds units; the
 * ``pymc_kernels_per_s``: one chain through ``pm.sample`` with :class:`semmap_pp.step.WorldStep`
   (``--draws`` draws of ``--n-inner`` kernels, timed around ``pm.sample``, set-up included);
 * ``pymc_overhead_us_per_draw``: ``pm.sample`` with a constant target and one kernel per draw, minus
-  the same kernels in the plain loop: what PyMC adds per draw.
+  the same kernels in the plain loop: what PyMC adds per draw;
+* ``knowledge_kernels_per_cpu_s``: the burnt-in chain with the knowledge engine on
+  (``--rules``, a fresh engine), ``--knowledge-warm`` kernels after the switch, then
+  ``--knowledge-kernels`` kernels timed (CPU time) in the plain loop;
+  ``knowledge_first_kernels_per_cpu_s`` is the rate of the warm-up kernels (the fresh engine's
+  templates are built there, as in every ``semmap map`` process), and ``knowledge_counts`` what
+  the target did in the timed kernels (proposals evaluated, skipped by the floor bound, evidence
+  unchanged, engine cache hits and misses).
+
+``--only knowledge`` runs the burn-in and the knowledge measurement alone.
 """
 
 from __future__ import annotations
@@ -37,11 +46,60 @@ def add_arguments(parser) -> None:
     parser.add_argument("--draws", type=int, default=200)
     parser.add_argument("--n-inner", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rules", default=str(ROOT / "rules/table3.lp"))
+    parser.add_argument("--knowledge-start", choices=("refined", "burnt"), default="refined",
+                        help="knowledge chain starts from semmap map's start world (refined) or "
+                        "from the burnt-in chain")
+    parser.add_argument("--knowledge-warm", type=int, default=300)
+    parser.add_argument("--knowledge-kernels", type=int, default=1500)
+    parser.add_argument("--only", choices=("all", "knowledge"), default="all")
 
 
 class _Flat:
     def start(self, world):
         return _FlatTracker(world)
+
+
+def knowledge_rate(args, frame, model, data, start) -> dict:
+    """Kernels per CPU-s of the chain at ``start`` with the knowledge engine on (plain loop)."""
+    from semmap_pp.knowledge import KnowledgeEngine
+
+    engine = KnowledgeEngine.from_file(args.rules)
+    post = Posterior(frame, model, engine)
+    mix = default_mix(data.settings)
+    rng = np.random.default_rng(args.seed + 1)
+    tracker = post.start(start)
+    post.knowledge_on = True
+    tracker.resync()
+    counts = {"proposals": 0, "bounded": 0}
+    propose = tracker.propose
+
+    def counted(world, changed, floor=None):
+        prop = propose(world, changed, floor=floor)
+        counts["proposals"] += 1
+        counts["bounded"] += bool(prop.bounded)
+        return prop
+
+    tracker.propose = counted
+    c0 = time.process_time()
+    run_chain(rng, tracker, mix, args.knowledge_warm, data)
+    c_warm = time.process_time() - c0
+    counts.update(proposals=0, bounded=0)
+    hits0, misses0 = engine.hits, engine.misses
+    c0 = time.process_time()
+    stats = run_chain(rng, tracker, mix, args.knowledge_kernels, data)
+    c_timed = time.process_time() - c0
+    counts.update(engine_hits=engine.hits - hits0, engine_misses=engine.misses - misses0,
+                  accepted=int(stats.accepted.sum()))
+    full = post.evaluate(tracker.world).total
+    return {
+        "knowledge_rules": Path(args.rules).name, "knowledge_start": args.knowledge_start,
+        "knowledge_units": wm.n_units(tracker.world),
+        "knowledge_first_kernels_per_cpu_s": round(args.knowledge_warm / max(c_warm, 1e-9), 1),
+        "knowledge_kernels_per_cpu_s": round(args.knowledge_kernels / max(c_timed, 1e-9), 1),
+        "knowledge_counts": counts,
+        "knowledge_tracker_error": abs(tracker.logp - full) / max(abs(full), 1.0),
+    }
 
 
 def run(args) -> dict:
@@ -58,6 +116,14 @@ def run(args) -> dict:
     tracker = post.start(wm.empty(capacity))
     run_chain(rng, tracker, mix, args.burn, data)
     start = tracker.world
+    kstart = start
+    if args.knowledge_start == "refined":   # the start world of semmap map's first chain
+        from semmap_pp.pipeline import load_inputs, start_worlds
+        kstart = start_worlds(load_inputs(args.map, rules_path=args.rules), 1,
+                              np.random.default_rng(args.seed))[0]
+    knowledge = knowledge_rate(args, frame, model, data, kstart)
+    if args.only == "knowledge":
+        return {"map": args.map, "units_at_start": wm.n_units(start), **knowledge}
 
     alone = {}   # CPU time: robust when other processes share the cores
     for kernel in mix.kernels:
@@ -97,4 +163,5 @@ def run(args) -> dict:
         "pymc_draws": args.draws, "pymc_n_inner": args.n_inner,
         "pymc_overhead_us_per_draw": round((flat.seconds - t_flat_loop) / n_flat * 1e6, 1),
         "units_at_end": wm.n_units(tracker.world),
+        **knowledge,
     }
