@@ -10,6 +10,14 @@ runs on one variable per unit (its type times its soft evidence atoms). The resu
 network as :func:`~semmap_pp.knowledge.ground.ground` builds (tests check both against
 enumeration).
 
+Soft evidence never needs a grounding of its own: ``soft(rolike(u), p)`` only opens the atom
+and puts the unit weight ``w = round(1000 log(p / (1 - p)))`` / 1000 on it (the engine's
+``FRAME``), so a unit template is the template of its *structure* (each evidence atom absent,
+hard or soft) grounded once with weight 0 (``p = 0.5``), plus that weight on the atom's bit; a
+pair template (full pair network minus its unit templates) does not depend on the soft weights
+at all. clingo therefore grounds one template per structure and structure pair, a handful per
+rule set, instead of one per soft value.
+
 A rule file is pairwise-local when: its only normal rule is ``adj(Q,P) :- adj(P,Q).``; every
 constraint body is plain literals of evidence and query atoms whose arguments are variables, plus
 comparisons between those variables; a body has one unit variable, or two linked by a positive
@@ -26,7 +34,7 @@ import clingo.ast as cast
 import numpy as np
 
 from semmap_pp.knowledge.dialect import SOFT_PREDICATES, RuleSet, parse_text
-from semmap_pp.knowledge.evidence import Evidence
+from semmap_pp.knowledge.evidence import Evidence, soft_weight
 from semmap_pp.knowledge.exact import _lse, merged_potentials
 from semmap_pp.knowledge.ground import ground
 
@@ -139,6 +147,26 @@ def _unit_key(ev_maps, u):
     return tuple(ev_maps[name].get(u, 0.0) for name in SOFT_PREDICATES)
 
 
+def _structure(key):
+    """The structure of a unit pattern: each evidence atom absent (0), hard (1) or soft (0.5,
+    i.e. open with weight 0)."""
+    return tuple(0.0 if p <= 0.0 else (1.0 if p >= 1.0 else 0.5) for p in key)
+
+
+def _soft_terms(key):
+    """``(bit, w)`` of the soft atoms of ``key`` whose weight ``w`` (thousandths) is not 0:
+    ``bit`` is the atom's place in the unit's super-state (the atoms are ordered by name, the
+    last one lowest, as :meth:`LocalModel._unit_order` lays them out)."""
+    soft = sorted(name for name, p in zip(SOFT_PREDICATES, key) if 0.0 < p < 1.0)
+    prob = dict(zip(SOFT_PREDICATES, key))
+    out = []
+    for j, name in enumerate(soft):
+        w = soft_weight(prob[name])
+        if w:
+            out.append((len(soft) - 1 - j, w))
+    return out
+
+
 def _pattern_evidence(units_keys, adj):
     kw = {name: {} for name in SOFT_PREDICATES}
     for u, key in units_keys:
@@ -158,16 +186,41 @@ class LocalModel:
         self._flags: dict = {}
         self._reduced: dict = {}
         self._unit_types: dict = {}
+        self._structures: dict = {}
+        self.groundings = 0
+
+    def structure(self, key):
+        """:func:`_structure` of ``key`` (cached)."""
+        hit = self._structures.get(key)
+        if hit is None:
+            hit = self._structures[key] = _structure(key)
+        return hit
 
     def unit(self, key):
-        """``(log potential over super-states, n_soft_atoms)`` of a unit with pattern ``key``."""
+        """``(log potential over super-states, n_soft_atoms)`` of a unit with pattern ``key``:
+        the grounded template of its structure plus the soft atoms' unit weights."""
         hit = self._units.get(key)
         if hit is None:
-            net = ground(self.rules, _pattern_evidence([(1, key)], [])).network
-            order = self._unit_order(net, 1)
-            table = _dense(net, order).reshape(-1)
-            hit = self._units[key] = (table, len(order) - 1)
+            struct = self.structure(key)
+            if struct == key:
+                hit = self._units[key] = self.ground_unit(key)
+            else:
+                base, k = self.unit(struct)
+                table = base.reshape((-1,) + (2,) * k).copy()
+                for bit, w in _soft_terms(key):
+                    at = [slice(None)] * (k + 1)
+                    at[k - bit] = 0 if w > 0 else 1   # the state the weak constraint charges
+                    table[tuple(at)] -= abs(w) / 1000.0
+                hit = self._units[key] = (table.reshape(-1), k)
         return hit
+
+    def ground_unit(self, key):
+        """The unit template of ``key`` grounded by clingo (no cache; :meth:`unit` uses it for
+        structures, the tests for every pattern)."""
+        self.groundings += 1
+        net = ground(self.rules, _pattern_evidence([(1, key)], [])).network
+        order = self._unit_order(net, 1)
+        return _dense(net, order).reshape(-1), len(order) - 1
 
     @staticmethod
     def _unit_order(net, u):
@@ -176,9 +229,12 @@ class LocalModel:
         return [net.units.index(u)] + [v for _, v in soft]
 
     def pair(self, kp, kq):
-        """Pair tables over (super p, super q): sum-out and max-out of SaLe, and P(sale(p,q))."""
+        """Pair tables over (super p, super q): sum-out and max-out of SaLe, and P(sale(p,q))
+        (a function of the two structures only, see the module docstring)."""
+        kp, kq = self.structure(kp), self.structure(kq)
         hit = self._pairs.get((kp, kq))
         if hit is None:
+            self.groundings += 1
             net = ground(self.rules, _pattern_evidence([(1, kp), (2, kq)], [(1, 2)])).network
             o1, o2 = self._unit_order(net, 1), self._unit_order(net, 2)
             sale_vars = sorted(net.sale.values())
@@ -204,6 +260,7 @@ class LocalModel:
 
     def pair_flags(self, kp, kq):
         """Whether the pair tables of ``(kp, kq)`` ignore p's / q's soft atoms (cached)."""
+        kp, kq = self.structure(kp), self.structure(kq)
         hit = self._flags.get((kp, kq))
         if hit is None:
             tables = self.pair(kp, kq)
@@ -241,7 +298,7 @@ class LocalModel:
             marginal needs the pair's joint), its unit terms when separable, the SaLe marginal
             (a float when constant, else the conditional table), likewise for the max-out.
         """
-        key = (kp, kq, cut_p, cut_q)
+        key = (self.structure(kp), self.structure(kq), cut_p, cut_q)
         hit = self._reduced.get(key)
         if hit is None:
             lse, mx, cond = self.pair(kp, kq)
