@@ -76,6 +76,19 @@ def _lut_gather(lut, word, col, out):
 
 
 @numba.njit(cache=True, nogil=True)
+def _lut_rows(lut, word, col, rows, G):
+    """``G[rows[i] + s, b] = lut[s, word[i, b] + col[i]]``: count tables into their rows."""
+    I, B = word.shape
+    S = lut.shape[0]
+    for i in range(I):
+        for s in range(S):
+            row = lut[s]
+            o = G[rows[i] + s]
+            for b in range(B):
+                o[b] = row[word[i, b] + col[i]]
+
+
+@numba.njit(cache=True, nogil=True)
 def _drop_violated(word, mask, aux, cell):
     """Clear the bits of clauses the current state ``(aux, cell)`` violates (never kept)."""
     I, B = word.shape
@@ -318,6 +331,14 @@ class ClauseStack:
             ok = t if ok is None else ok & t
         return ok.sum(axis=0, dtype=np.float32)
 
+    def counts_into(self, kept, n_inst, B, off, tree, b):
+        """:meth:`counts` written into the rows of block ``b`` of ``tree`` (a BatchTree)."""
+        if self.lut is not None:
+            tid = np.zeros(n_inst, dtype=np.int64) if off is None else off[1][:, 0]
+            _lut_rows(self.lut, kept[0], tid << self.k, tree.table_rows[b], tree.G)
+        else:
+            tree.load(b, self.counts(kept, n_inst, B, off))
+
     def allowed_at(self, kept, s, off):
         """Allowed private states ``(A, I, B)`` at the drawn scope states ``s`` ``(I, B)``."""
         cell = s if off is None else s + off[0]
@@ -469,18 +490,22 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
     states = scope_states(x)
     aux = [st.draw_private(rng, [np.zeros(s.shape, dtype=np.int64)] * len(st.masks), s, o)
            for st, s, o in zip(stacks, states, offs)]
-    marg = [np.zeros((c, B)) for c in card]
+    marg = np.zeros((int(tree.marg_offsets[-1]), B))
     aux_sum = [None if st.aux_on is None else np.zeros((n, B)) for st, n in zip(stacks, sizes)]
+    items = list(zip(range(len(stacks)), stacks, sizes, offs, aux_sum))
     for it in range(n_iter):
+        keep = it >= burn_in
         kept = [st.kept(rng, s, a, o) for st, s, a, o in zip(stacks, states, aux, offs)]
-        counts = [st.counts(k, n, B, o) for st, k, n, o in zip(stacks, kept, sizes, offs)]
-        tree.upward(counts)
-        x = tree.sample(rng, marg if it >= burn_in else None)
+        for b, st, n, o, _ in items:
+            st.counts_into(kept[b], n, B, o, tree, b)
+        tree.upward()
+        x = tree.sample(rng, marg if keep else None)
         states = scope_states(x)
-        aux = [st.draw_private(rng, k, s, o, est if it >= burn_in else None)
-               for st, k, s, o, est in zip(stacks, kept, states, offs, aux_sum)]
+        aux = [st.draw_private(rng, kept[b], states[b], o, est if keep else None)
+               for b, st, n, o, est in items]
     total = (n_iter - burn_in) * B
-    return ([m.sum(axis=1) / total for m in marg],
+    est = marg.sum(axis=1) / total
+    return ([est[tree.marg_offsets[v]:tree.marg_offsets[v + 1]] for v in range(len(card))],
             [None if a is None else a.sum(axis=1) / total for a in aux_sum])
 
 

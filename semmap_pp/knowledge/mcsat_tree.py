@@ -4,10 +4,12 @@ The slice of an MC-SAT iteration is a network of 0/1 tables (counts, when a bloc
 private atoms); its uniform solution is drawn by forward filtering, backward sampling on the
 junction tree of :mod:`~semmap_pp.knowledge.exact`: the upward pass multiplies each clique's
 tables and its children's messages and sums out the clique's own variable, the downward pass
-draws that variable given its already drawn separator. Arrays are ``(states, chains)`` float32
-with the chain axis last; a table whose variables lie within a larger one's is multiplied into
-it with numpy, then one compiled loop per clique counts (upward) or draws (downward) over the
-remaining few. Messages are rescaled per chain where their entries could leave float32.
+draws that variable given its already drawn separator. Every table, message and product of
+tables has fixed rows of one ``(rows, chains)`` float32 array (the chain axis last), so the
+count tables are written into it in place and each pass is one compiled loop over the cliques.
+A table whose variables lie within a larger one's is multiplied into it first (at the larger
+one's size, into rows of its own), so the count and draw loops see few factors per clique.
+Messages are rescaled per chain where their entries could leave float32.
 """
 
 from __future__ import annotations
@@ -54,71 +56,101 @@ def pick(probs, u, marginals=None):
 
 
 @numba.njit(cache=True, nogil=True)
-def _count(F, idx, msg, rescale):
-    """``msg[m, b] = sum_v prod_f F[idx[f, v, m], b]``, rescaled per chain if asked."""
-    n_f, c, M = idx.shape
-    B = F.shape[1]
+def _upward(G, pp, prod_base, sp, src, idx, ip, nf, cc, MM, msg_row, rescale, check):
+    """The upward pass, cliques in elimination order (children first). Per clique: multiply
+    its grouped tables into their product rows, then count ``msg[m, b] = sum_v prod_f
+    G[idx[f, v, m], b]`` into its message rows, rescaled per chain where flagged. Returns
+    False if ``check`` and some chain's message is all zero (its slice has no solution)."""
+    B = G.shape[1]
     tmp = np.empty(B, dtype=np.float32)
-    for m in range(M):
-        out = msg[m]
-        out[:] = 0.0
-        for v in range(c):
-            if n_f == 0:
-                out += 1.0
-                continue
-            row = F[idx[0, v, m]]
+    ok = True
+    for i in range(len(nf)):
+        for p in range(pp[i], pp[i + 1]):
+            dest = G[prod_base + p]
+            first = G[src[sp[p]]]
             for b in range(B):
-                tmp[b] = row[b]
-            for f in range(1, n_f):
-                row = F[idx[f, v, m]]
+                dest[b] = first[b]
+            for t in range(sp[p] + 1, sp[p + 1]):
+                row = G[src[t]]
                 for b in range(B):
-                    tmp[b] *= row[b]
+                    dest[b] *= row[b]
+        n_f, c, M, base, m0 = nf[i], cc[i], MM[i], ip[i], msg_row[i]
+        for m in range(M):
+            out = G[m0 + m]
             for b in range(B):
-                out[b] += tmp[b]
-    if rescale:
-        for b in range(B):
-            top = np.float32(0.0)
-            for m in range(M):
-                if msg[m, b] > top:
-                    top = msg[m, b]
-            if top > 0:
+                out[b] = 0.0
+            for v in range(c):
+                if n_f == 0:
+                    for b in range(B):
+                        out[b] += 1.0
+                    continue
+                row = G[idx[base + v * M + m]]
+                for b in range(B):
+                    tmp[b] = row[b]
+                for f in range(1, n_f):
+                    row = G[idx[base + (f * c + v) * M + m]]
+                    for b in range(B):
+                        tmp[b] *= row[b]
+                for b in range(B):
+                    out[b] += tmp[b]
+        if rescale[i] or check:
+            for b in range(B):
+                top = np.float32(0.0)
                 for m in range(M):
-                    msg[m, b] /= top
+                    if G[m0 + m, b] > top:
+                        top = G[m0 + m, b]
+                if top > 0:
+                    if rescale[i]:
+                        for m in range(M):
+                            G[m0 + m, b] /= top
+                else:
+                    ok = False
+    return ok
 
 
 @numba.njit(cache=True, nogil=True)
-def _draw(F, idx, sep, u, out, marg, acc):
-    """Draw the clique's variable per chain given its drawn separator ``sep`` (flat)."""
-    n_f, c, M = idx.shape
-    B = u.shape[0]
-    probs = np.empty(c)
-    for b in range(B):
-        m = sep[b]
-        total = 0.0
-        for v in range(c):
-            t = 1.0
-            for f in range(n_f):
-                t *= F[idx[f, v, m], b]
-            probs[v] = t
-            total += t
-        thr = u[b] * total
-        run, k = 0.0, 0
-        for v in range(c - 1):
-            run += probs[v]
-            if thr >= run:
-                k = v + 1
-        out[b] = k
-        if acc:
+def _sample(G, idx, ip, nf, cc, MM, order, sep_ptr, sep_var, sep_stride, u, x, marg, moff,
+            acc):
+    """The downward pass: per clique (root first) draw its variable per chain given the drawn
+    separator, and with ``acc`` add that conditional distribution to ``marg``."""
+    B = G.shape[1]
+    probs = np.empty(int(cc.max()) if len(cc) else 1)
+    for i in range(len(nf) - 1, -1, -1):
+        v_out = order[i]
+        n_f, c, M, base = nf[i], cc[i], MM[i], ip[i]
+        xo = x[v_out]
+        ui = u[i]
+        for b in range(B):
+            m = 0
+            for k in range(sep_ptr[i], sep_ptr[i + 1]):
+                m += x[sep_var[k], b] * sep_stride[k]
+            total = 0.0
             for v in range(c):
-                marg[v, b] += probs[v] / total
+                t = 1.0
+                for f in range(n_f):
+                    t *= G[idx[base + (f * c + v) * M + m], b]
+                probs[v] = t
+                total += t
+            thr = ui[b] * total
+            run, k = 0.0, 0
+            for v in range(c - 1):
+                run += probs[v]
+                if thr >= run:
+                    k = v + 1
+            xo[b] = k
+            if acc:
+                r0 = moff[v_out]
+                for v in range(c):
+                    marg[r0 + v, b] += probs[v] / total
 
 
 class BatchTree:
     """Upward counting and downward sampling passes over ``B`` chains.
 
-    For each clique, the tables and children's messages it holds are stacked into one
-    ``(states, B)`` array and an index map ``(factor, own state, separator state)`` into it, so
-    counting and drawing are one compiled loop per clique.
+    ``G`` (``(rows, B)`` float32) holds every table instance (rows ``table_rows[b][j]`` ...
+    ``+ S``, row-major over its scope), every message and every product of a group of tables;
+    row 0 is all ones. Each clique has an index map ``(factor, own state, separator state)``
+    into ``G``, so counting and drawing are one compiled loop over all cliques.
 
     Parameters
     ----------
@@ -139,149 +171,143 @@ class BatchTree:
         self.card, self.jt, self.B = card, jt, B
         n = len(card)
         self.n = n
+        size = lambda vs: int(np.prod([card[a] for a in vs], dtype=np.int64))   # noqa: E731
         # a message is rescaled per chain only where a bound on its entries could leave the
         # float32 range: log2 of (own states x largest table entries x children's bounds)
         log_max = [np.log2(max(float(m), 1.0)) for m in (table_max or [1.0] * len(scopes))]
         bound = [0.0] * n
-        self.rescale = [False] * n
-        factors = [[] for _ in range(n)]   # per clique: (kind, key, own variables, own shape)
+        rescale = [False] * n
+        factors = [[] for _ in range(n)]   # per clique: (row of G, own variables)
+        rows = 1                           # row 0: ones
+        self.table_rows = []
+        self.sizes = []
         for b, sc in enumerate(scopes):
             tuples = [tuple(int(v) for v in s) for s in sc]
+            S = size(tuples[0]) if tuples else 1
+            start = rows + S * np.arange(len(tuples), dtype=np.int64)
+            rows += S * len(tuples)
+            self.table_rows.append(start)
+            self.sizes.append(S)
             for j, (s, pl) in enumerate(zip(tuples, jt.assign(tuples))):
-                factors[pl[0]].append(("table", (b, j), s))
+                factors[pl[0]].append((int(start[j]), s))
                 bound[pl[0]] += log_max[b]
+        msg_row = []
+        for i in range(n):
+            msg_row.append(rows)
+            rows += size(jt.seps[i])
         for i in range(n):
             bound[i] += np.log2(card[jt.order[i]])
             p = jt.parent[i]
             if p >= 0:
-                factors[p].append(("msg", i, tuple(jt.seps[i])))
+                factors[p].append((msg_row[i], tuple(jt.seps[i])))
                 if bound[i] > _LOG2_LIMIT:
-                    self.rescale[i] = True
+                    rescale[i] = True
                 else:
                     bound[p] += bound[i]
         # multiply each factor whose variables lie within a larger factor's into that one first
-        # (at the larger factor's size), so the compiled loops see few factors per clique
-        self.groups = []
+        # (at the larger factor's size, into rows of its own)
+        prod_rows = []        # per product row: rows of G to multiply
+        pp = [0]
+        grouped = []
         for i in range(n):
             groups = []
-            for f in sorted(factors[i], key=lambda f: -len(f[2])):
+            for f in sorted(factors[i], key=lambda f: -len(f[1])):
                 for g in groups:
-                    if set(f[2]) <= set(g[0][2]):
+                    if set(f[1]) <= set(g[0][1]):
                         g.append(f)
                         break
                 else:
                     groups.append([f])
-            recipes = []
+            heads = []
             for g in groups:
-                lead = g[0][2]
-                shape = tuple(card[a] for a in lead)
-                views = []
-                for f in g[1:]:
-                    own = f[2]
-                    order = sorted(range(len(own)), key=lambda k: lead.index(own[k]))
-                    index = tuple(slice(None) if a in own else None for a in lead)
-                    views.append((tuple(card[a] for a in own), tuple(order) + (len(own),),
-                                  index + (slice(None),)))
-                recipes.append((g, shape, views))
-            self.groups.append(recipes)
-            factors[i] = [g[0] for g in groups]
-        self.factors = factors
-        self.index = []
-        self.rows = []
-        self.sep_strides = []
+                lead = g[0][1]
+                if len(g) == 1:
+                    heads.append(g[0])
+                    continue
+                state = np.indices([card[a] for a in lead]).reshape(len(lead), -1)
+                terms = [g[0][0] + np.arange(state.shape[1])]
+                for row0, own in g[1:]:
+                    st = _strides([card[a] for a in own])
+                    terms.append(row0 + sum(state[lead.index(a)] * int(st[k])
+                                            for k, a in enumerate(own)))
+                heads.append((len(prod_rows), lead, True))
+                prod_rows.extend(np.array(terms).T.tolist())
+            grouped.append(heads)
+            pp.append(len(prod_rows))
+        prod_base = rows
+        rows += len(prod_rows)
+        self.G = np.ones((rows, B), dtype=np.float32)
+        idx, ip, nf, cc, MM = [], [0], [], [], []
+        sep_ptr, sep_var, sep_stride = [0], [], []
         for i in range(n):
             axes = jt.axes[i]
             shape = tuple(card[a] for a in axes)
             state = np.indices(shape).reshape(len(axes), -1)          # clique states (v, sep)
             where = {a: k for k, a in enumerate(axes)}
-            maps, offset = [], 0
-            for _kind, _key, own in factors[i]:
+            M = int(np.prod(shape[1:], dtype=np.int64))
+            maps = []
+            for head in grouped[i]:
+                row0, own = (prod_base + head[0], head[1]) if len(head) == 3 else head
                 st = _strides([card[a] for a in own])
                 flat = sum(state[where[a]] * int(st[k]) for k, a in enumerate(own))
-                maps.append(np.asarray(flat).reshape(shape[0], -1) + offset)
-                offset += int(np.prod([card[a] for a in own]))
-            M = int(np.prod(shape[1:], dtype=np.int64))
-            self.index.append(np.array(maps, dtype=np.int64).reshape(len(maps), shape[0], M))
-            self.rows.append(offset)
+                maps.append(np.asarray(flat).reshape(shape[0], M) + row0)
+            idx.extend(np.array(maps, dtype=np.int64).reshape(-1).tolist())
+            ip.append(len(idx))
+            nf.append(len(maps))
+            cc.append(shape[0])
+            MM.append(M)
             st = _strides([card[a] for a in jt.seps[i]])
-            self.sep_strides.append([(a, int(k)) for a, k in zip(jt.seps[i], st)])
-        self.stacked = [None] * n
-        self.sent = [None] * n
+            sep_var.extend(int(a) for a in jt.seps[i])
+            sep_stride.extend(int(k) for k in st)
+            sep_ptr.append(len(sep_var))
+        i64 = lambda a: np.array(a, dtype=np.int64)   # noqa: E731
+        lens = [len(r) for r in prod_rows]
+        self._up = (self.G, i64(pp), int(prod_base), i64(np.concatenate([[0], np.cumsum(lens)])
+                                                             if lens else [0]),
+                    i64([t for r in prod_rows for t in r]), i64(idx), i64(ip[:-1]), i64(nf),
+                    i64(cc), i64(MM), i64(msg_row), np.array(rescale, dtype=np.bool_))
+        self._down = (self.G, i64(idx), i64(ip[:-1]), i64(nf), i64(cc), i64(MM),
+                      i64(jt.order), i64(sep_ptr), i64(sep_var), i64(sep_stride))
+        self.rescale = rescale
+        self.marg_offsets = i64(np.concatenate([[0], np.cumsum(card)]))
 
-    def _array(self, f, counts):
-        kind, key, _own = f
-        if kind == "msg":
-            return self.sent[key]
-        b, j = key
-        return counts[b][j]
+    def load(self, b, table):
+        """Write the tables ``(I, S, B)`` of block ``b`` into their rows."""
+        rows = self.table_rows[b][:, None] + np.arange(self.sizes[b])
+        self.G[rows.reshape(-1)] = np.asarray(table, dtype=np.float32).reshape(-1, self.B)
 
-    def _stack(self, i, counts):
-        """The clique's grouped tables, written one after another into one array."""
-        B = self.B
-        groups = self.groups[i]
-        if not groups:
-            return np.ones((1, B), dtype=np.float32)
-        out = np.empty((self.rows[i], B), dtype=np.float32)
-        row = 0
-        for g, shape, views in groups:
-            size = int(np.prod(shape, dtype=np.int64))
-            dest = out[row:row + size]
-            arr = self._array(g[0], counts)
-            if not views:
-                dest[...] = arr
-            else:
-                dest = dest.reshape(shape + (B,))
-                arr = arr.reshape(shape + (B,))
-                for k, (f, (own_shape, perm, index)) in enumerate(zip(g[1:], views)):
-                    other = self._array(f, counts).reshape(own_shape + (B,)).transpose(
-                        perm)[index]
-                    np.multiply(arr if k == 0 else dest, other, out=dest)
-            row += size
-        return out
-
-    def upward(self, counts, check=False):
-        """Count the solutions of the slice given by ``counts`` (``(I, S, B)`` per block).
+    def upward(self, counts=None, check=False):
+        """Count the solutions of the slice given by ``counts`` (``(I, S, B)`` per block, or
+        None when the tables are already in their rows of ``G``).
 
         With ``check``, returns False if some chain's slice has no solution.
         """
-        B, jt = self.B, self.jt
-        ok = True
-        for i in range(self.n):
-            F = self._stack(i, counts)
-            self.stacked[i] = F
-            idx = self.index[i]
-            msg = np.empty((idx.shape[2], B), dtype=np.float32)
-            _count(F, idx, msg, self.rescale[i] and not check)
-            if check:
-                top = msg.max(axis=0)
-                if not np.all(top > 0):
-                    ok = False
-                elif self.rescale[i]:
-                    msg /= top
-            self.sent[i] = msg
-        return ok
+        if counts is not None:
+            for b, t in enumerate(counts):
+                self.load(b, t)
+        return bool(_upward(*self._up, bool(check)))
 
     def sample(self, rng, marginals=None):
         """Draw one solution per chain from the last :meth:`upward`: ``(n, B)`` states.
 
-        With ``marginals`` (a list of ``(card, B)`` float64 arrays), each variable's
-        distribution given the variables drawn before it (its separator) is added to its entry:
-        backward sampling draws from exactly that distribution, so it is a Rao-Blackwellised
-        indicator.
+        With ``marginals`` (a list of ``(card, B)`` float64 arrays, or one ``(sum card, B)``
+        array with the variables' rows at ``marg_offsets``), each variable's distribution given
+        the variables drawn before it (its separator) is added to its entry: backward sampling
+        draws from exactly that distribution, so it is a Rao-Blackwellised indicator.
         """
-        B, jt = self.B, self.jt
+        B = self.B
         x = np.zeros((self.n, B), dtype=np.int64)
         u = rng.random((self.n, B))
-        none = np.zeros((1, 1))
-        zero = np.zeros(B, dtype=np.int64)
-        for i in range(self.n - 1, -1, -1):
-            v = jt.order[i]
-            sep = zero
-            for a, st in self.sep_strides[i]:
-                sep = sep + x[a] * st
-            acc = marginals is not None
-            _draw(self.stacked[i], self.index[i], sep, u[i], x[v],
-                  marginals[v] if acc else none, acc)
+        acc = marginals is not None
+        flat = marginals
+        if isinstance(marginals, list):
+            flat = np.zeros((int(self.marg_offsets[-1]), B))
+        elif not acc:
+            flat = np.zeros((1, 1))
+        _sample(*self._down, u, x, flat, self.marg_offsets, acc)
+        if isinstance(marginals, list):
+            for v, m in enumerate(marginals):
+                m += flat[self.marg_offsets[v]:self.marg_offsets[v + 1]]
         return x
 
 
