@@ -89,6 +89,7 @@ class Posterior:
         self._prior_n: dict[int, np.ndarray] = {}
         self._door_cache: dict = {}
         self._typing_cache: OrderedDict = OrderedDict()   # (provider, evidence key, K) -> arrays
+        self._map_cache: OrderedDict = OrderedDict()      # same key -> MAP types alone
         c, p, e = self.cells, model.prior, model.evidence
         # per category, the larger gain of its corridor and non-corridor variants: with it the
         # tallies of any typing bound the log-likelihood of every typing of the same geometry
@@ -150,6 +151,31 @@ class Posterior:
         ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
         return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
 
+    def _cached_arrays(self, provider, evidence, capacity: int):
+        """:meth:`_result_arrays` when the result is cached, else None."""
+        hit = self._typing_cache.get((id(provider), evidence.key, capacity))
+        if hit is None or hit[0] is not provider:
+            return None
+        return self._result_arrays(provider, evidence, capacity)
+
+    def _map_arrays(self, provider, evidence, capacity: int) -> np.ndarray:
+        """Slot-indexed MAP types (K,) alone (``provider.map_types``: no marginals computed),
+        equal to the types of :meth:`_result_arrays` (cached by the evidence)."""
+        key = (id(provider), evidence.key, capacity)
+        hit = self._map_cache.get(key)
+        if hit is not None and hit[0] is provider:
+            self._map_cache.move_to_end(key)
+            return hit[1]
+        map_types = provider.map_types(evidence)
+        types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
+        for s in evidence.units:
+            types[s] = UNIT_TYPES.index(map_types[int(s)])
+        types.setflags(write=False)
+        self._map_cache[key] = (provider, types)
+        if len(self._map_cache) > 4096:
+            self._map_cache.popitem(last=False)
+        return types
+
     def _result_arrays(self, provider, evidence, capacity: int):
         """Slot-indexed MAP types (K,) and P(SaLe) (K, K) of the provider's result for a
         knowledge evidence (cached compactly by the evidence: the provider is a function of it)."""
@@ -178,6 +204,7 @@ class Posterior:
     def __getstate__(self):
         state = self.__dict__.copy()   # caches stay behind (per process)
         state["_door_cache"], state["_typing_cache"] = {}, OrderedDict()
+        state["_map_cache"] = OrderedDict()
         return state
 
     def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
@@ -341,7 +368,8 @@ class Proposal:
 
 _NO_TYPES = np.zeros(0, np.int8)
 _NO_SALE = np.zeros((1, 1))
-_ZERO_TABLE = np.zeros((len(UNIT_TYPES), len(UNIT_TYPES)))
+# P(SaLe) of every pair below any threshold: the SaLe factor's upper bound 1 (log 0)
+_NEVER_SALE = np.full((len(UNIT_TYPES), len(UNIT_TYPES)), -np.inf)
 
 
 class Tracker:
@@ -372,8 +400,11 @@ class Tracker:
         self._prior_n = post.prior_n(w.capacity)
         self._fixed = isinstance(self._provider, FixedProvider)
         self._doors = self._evidence = None
+        #: proposals skipped below their floor: by the type-free bound, by the MAP-types bound
+        self.skipped = [0, 0]
         if not self._fixed:
             self._with_doors = getattr(self._provider, "needs_doors", True)
+            self._map_only = bool(getattr(self._provider, "has_map_only", False))
             self._doors = np.zeros((w.capacity, w.capacity), np.int32)
             if self._with_doors:
                 for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
@@ -403,8 +434,11 @@ class Tracker:
         iu, ju = np.nonzero(np.triu(adj, 1))
         return knowledge_evidence(units, items, muldoor, list(zip(iu.tolist(), ju.tolist())))
 
-    def _knowledge_types(self, world, adj, changed):
-        """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on)."""
+    def _knowledge_types(self, world, adj, changed, map_only=False):
+        """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on).
+
+        With ``map_only`` (and a provider that :attr:`has_map_only`) an uncached result comes
+        back with P(SaLe) ``None``: the MAP types alone, without the marginals."""
         post = self.post
         doors = self._doors
         if self._with_doors:
@@ -421,6 +455,11 @@ class Tracker:
         if ev.key == self._evidence.key:
             cur = self._typ
             return cur.world.types, cur.sale, doors, self._evidence
+        if map_only and self._map_only:
+            hit = post._cached_arrays(self._provider, ev, world.capacity)
+            if hit is None:
+                return post._map_arrays(self._provider, ev, world.capacity), None, doors, ev
+            return hit[0], hit[1], doors, ev
         types, sale = post._result_arrays(self._provider, ev, world.capacity)
         return types, sale, doors, ev
 
@@ -458,14 +497,28 @@ class Tracker:
             _retype_changed(new_world.rects, new_world.active, changed, geometry, adj, _NO_TYPES,
                             _NO_TYPES, post._ip, post._fp)
             if floor is not None:
+                # bound 1, no types: per category the better of the corridor / non-corridor
+                # gains, SaLe factor at most 1
                 bound = sum(_score(
                     data.xsum, post._gain_max, ow.rects, ow.active, ow.types, new_world.rects,
                     new_world.active, ow.types, hist.copy(), self.gamma_total, adj, _NO_SALE,
-                    _ZERO_TABLE, True, self._prior_n, post._ip, post._fp)[:2])
+                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp)[:2])
                 if bound + 1e-9 * abs(bound) < floor:
-                    return Proposal(new_world, -math.inf, -math.inf, -math.inf, None, None,
-                                    bounded=True)
-            types, sale, doors, ev = self._knowledge_types(new_world, adj, changed)
+                    self.skipped[0] += 1
+                    return self._bounded(new_world)
+            types, sale, doors, ev = self._knowledge_types(new_world, adj, changed,
+                                                           map_only=floor is not None)
+            if sale is None:
+                # bound 2, the MAP types alone (no marginals yet): the exact log-likelihood and
+                # the prior with the SaLe factor at most 1
+                bound = sum(_score(
+                    data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
+                    new_world.active, types, hist.copy(), self.gamma_total, adj, _NO_SALE,
+                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp)[:2])
+                if bound + 1e-9 * abs(bound) < floor:
+                    self.skipped[1] += 1
+                    return self._bounded(new_world)
+                types, sale = post._result_arrays(self._provider, ev, new_world.capacity)
             loglik, logprior, gamma_total = _score(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
@@ -474,6 +527,10 @@ class Tracker:
         new = W.World(new_world.rects, new_world.active, types)
         return Proposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale), (hist, gamma_total, knowledge))
+
+    @staticmethod
+    def _bounded(world) -> Proposal:
+        return Proposal(world, -math.inf, -math.inf, -math.inf, None, None, bounded=True)
 
     def resync(self) -> None:
         """Rebuild every cache from the current geometry (call after switching

@@ -287,3 +287,59 @@ def test_floor_skips_the_provider_only_below_the_bound():
             tr.accept(prop)
     assert n_bounded >= 100 and n_full >= 50
     assert tr.logp == pytest.approx(post.evaluate(tr.world).total, rel=1e-9, abs=0)
+
+
+
+class MapNeighbourProvider(NeighbourProvider):
+    """:class:`NeighbourProvider` that can also give its MAP types alone (as the engine's fast
+    path does), counting both kinds of call."""
+
+    has_map_only = True
+
+    def __init__(self):
+        super().__init__()
+        self.map_calls = 0
+
+    def map_types(self, ev):
+        self.map_calls += 1
+        return NeighbourProvider.infer(self, ev).map_types
+
+
+def test_map_types_bound_skips_only_proposals_below_the_floor():
+    """The second bound (MAP types from the provider without its marginals: exact likelihood,
+    SaLe factor at most 1) skips a proposal only when its full evaluation is below the floor,
+    and skips proposals the type-free bound let through; a chain with floors makes the same
+    moves as one without, and asks the provider for marginals less often."""
+    runs = []
+    for use_floor in (True, False):
+        rng = np.random.default_rng(21)
+        provider = MapNeighbourProvider()
+        post = posterior(rng, provider)
+        world = W.empty(6)
+        for s in range(4):
+            world = W.add(world, s, random_rect(rng, post.frame.shape))
+        tr = post.start(world)
+        moves, checked, evaluated = [], 0, 0
+        for _ in range(600):
+            new, changed = random_proposal(rng, tr.world, post.frame.shape)
+            floor = tr.logp + math.log(rng.random())
+            before = tr.skipped[1]
+            prop = tr.propose(new, changed, floor=floor if use_floor else None)
+            if prop.bounded:
+                if tr.skipped[1] > before and checked < 40:   # skipped by the MAP-types bound
+                    checked += 1
+                    assert post.evaluate(new).total < floor
+                continue
+            evaluated += 1
+            if evaluated % 10 == 0:
+                assert prop.logp == pytest.approx(post.evaluate(new).total, rel=1e-9, abs=0)
+            if prop.logp > floor:
+                tr.accept(prop)
+                moves.append(tr.world.rects.copy())
+        if use_floor:
+            assert tr.skipped[0] >= 20 and tr.skipped[1] >= 10 and checked >= 10
+        assert tr.logp == pytest.approx(post.evaluate(tr.world).total, rel=1e-9, abs=0)
+        runs.append((moves, provider.calls))
+    (a, calls_floor), (b, calls_full) = runs
+    assert len(a) == len(b) >= 20 and all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert calls_floor < calls_full

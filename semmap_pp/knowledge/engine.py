@@ -122,6 +122,7 @@ class KnowledgeEngine:
         self.local_clauses = (LocalClauses(rules) if self.local is not None and method == "mcsat"
                               else None)
         self.hits = self.misses = 0
+        self._map_cache: OrderedDict = OrderedDict()   # evidence key -> (type network, MAP)
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, method: str = "auto", **settings
@@ -143,6 +144,35 @@ class KnowledgeEngine:
         if len(self._cache) > self.cache_size:
             self._cache.popitem(last=False)
         return result
+
+    @property
+    def has_map_only(self) -> bool:
+        """Whether :meth:`map_types` can find the MAP types without the marginals (the fast
+        path with exact or ``auto`` marginals: the MAP is decoded before them anyway)."""
+        return self.local is not None and self.local_clauses is None
+
+    def map_types(self, evidence: Evidence) -> dict:
+        """``infer(evidence).map_types`` without computing the marginals when they are not
+        cached: the same type network and the same MAP decoding as :meth:`infer` (which then
+        reuses them), so the types are identical. Needs :attr:`has_map_only`."""
+        hit = self._cache.get(evidence.key)
+        if hit is not None:
+            return hit.map_types
+        tn, x, _best, _method = self._local_map(evidence)
+        return {u: UNIT_TYPES[int(x[i]) >> tn.shift[i]] for i, u in enumerate(evidence.units)}
+
+    def _local_map(self, ev: Evidence):
+        """Type network and exact MAP of ``ev`` (cached by evidence, small LRU)."""
+        hit = self._map_cache.get(ev.key)
+        if hit is not None:
+            self._map_cache.move_to_end(ev.key)
+            return hit
+        tn = self.local.type_network(ev)
+        x, best, map_method = self._map_local(tn, self.rules.path)
+        hit = self._map_cache[ev.key] = (tn, x, best, map_method)
+        if len(self._map_cache) > 256:
+            self._map_cache.popitem(last=False)
+        return hit
 
     def signature_seed(self, evidence: Evidence) -> int:
         """The MC-SAT seed: a hash of (rules, evidence, settings, seed)."""
@@ -245,8 +275,8 @@ class KnowledgeEngine:
 
     def _compute_local(self, ev: Evidence) -> InferenceResult:
         path = self.rules.path
-        tn = self.local.type_network(ev)
-        x, best, map_method = self._map_local(tn, path)
+        tn, x, best, map_method = self._local_map(ev)
+        self._map_cache.pop(ev.key, None)   # the full result is cached from now on
         pots = [((i,), t) for i, t in enumerate(tn.unary_sum)]
         pots += [((i, j), t) for i, j, t in tn.sum_pairs]
         jt = None if self.method == "lbp" else self._tree(tn.card, [s for s, _ in pots], path)

@@ -1,0 +1,77 @@
+"""The engine's shortcuts against the full computation: unit templates from the grounded
+template of their structure plus the soft weights, pair templates shared by every soft value of
+the same structure, and the MAP types without the marginals (``KnowledgeEngine.map_types``)."""
+
+import itertools
+
+import numpy as np
+
+from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
+from semmap_pp.knowledge.local import LocalModel
+
+RULES = "rules/table3.lp"
+PROBS = (0.0, 1.0, 0.05, 0.35, 0.5, 0.7, 0.95)
+
+
+def test_unit_template_equals_its_own_grounding():
+    """For soft, hard and absent evidence atoms in every combination, the unit table built
+    from the structure's template equals a clingo grounding of that very pattern."""
+    model = LocalModel(load_rules(RULES))
+    worst = 0.0
+    for key in itertools.product((0.0, 1.0, 0.05, 0.62), (0.0, 0.35, 0.95), (0.0, 1.0, 0.2),
+                                 (0.0, 1.0, 0.8)):
+        table, k = model.unit(key)
+        direct, k_direct = model.ground_unit(key)
+        assert k == k_direct
+        fin = np.isfinite(direct)
+        assert np.array_equal(np.isfinite(table), fin)
+        worst = max(worst, float(np.abs(table[fin] - direct[fin]).max()))
+    assert worst < 1e-12
+
+
+def test_soft_values_share_one_grounding_per_structure():
+    """Many soft values of one structure: clingo grounds the structure's unit and pair
+    templates once, and every result equals the general path (full grounding per evidence)."""
+    rules = load_rules(RULES)
+    fast, general = KnowledgeEngine(rules, method="exact"), KnowledgeEngine(rules, method="exact",
+                                                                            fast=False)
+    rng = np.random.default_rng(3)
+    for _ in range(25):
+        ro = {u: float(rng.choice(PROBS[2:])) for u in (1, 2, 3)}
+        co = {u: float(rng.choice(PROBS[2:])) for u in (1, 2, 3)}
+        ev = Evidence.build([1, 2, 3, 4], rolike=ro, colike=co, halike={4: 1.0},
+                            muldoor={2: 1.0}, adj=[(1, 2), (2, 3), (3, 4), (1, 4)])
+        a, b = fast.infer(ev), general.infer(ev)
+        for u in ev.units:
+            np.testing.assert_allclose(a.types[u], b.types[u], atol=1e-9)
+        for pq in ev.adj:
+            assert abs(a.sale[pq] - b.sale[pq]) < 1e-9
+        assert a.map_types == b.map_types and abs(a.log_z - b.log_z) < 1e-9
+    # structures: soft ro+co (with and without a hard muldoor) and the hard-halike unit
+    assert fast.local.groundings <= 3 + 6
+
+
+def test_map_types_equal_the_full_inference():
+    """``map_types`` on a fresh engine (no marginals computed) equals ``infer().map_types``
+    of another fresh engine, and ``infer`` after ``map_types`` gives the same result as
+    without it (the MAP decoding is reused, not changed)."""
+    rules = load_rules(RULES)
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        n = int(rng.integers(1, 8))
+        units = list(range(n))
+        pairs = [(p, q) for p in units for q in units if p < q and rng.random() < 0.4]
+        kw = {name: {u: float(rng.choice(PROBS)) for u in units}
+              for name in ("rolike", "colike", "halike", "muldoor")}
+        ev = Evidence.build(units, adj=pairs, **kw)
+        first, second, third = (KnowledgeEngine(rules) for _ in range(3))
+        assert first.has_map_only
+        m = first.map_types(ev)
+        r = second.infer(ev)
+        assert m == r.map_types
+        r1 = first.infer(ev)
+        assert r1.map_types == r.map_types and r1.map_cost == r.map_cost
+        assert r1.sale == r.sale and all(np.array_equal(r1.types[u], r.types[u]) for u in units)
+        assert third.infer(ev).map_types == third.map_types(ev)   # from the result cache
+    mcsat = KnowledgeEngine(rules, method="mcsat")
+    assert not mcsat.has_map_only
