@@ -435,7 +435,31 @@ def _strides(shape):
     return np.array(out[::-1], dtype=np.int64)
 
 
-def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
+_TREE_CACHE_SIZE = 64   # compiled trees kept per cache (one per floor structure and chain count)
+
+
+def _batch_tree(card, blocks, jt, B, cache):
+    """The :class:`BatchTree` of these blocks on ``jt``, from ``cache`` when its structure was
+    built before (its index arrays reused, its rows fresh)."""
+    stacks = [blk.stack for blk in blocks]
+    key = None
+    if cache is not None:
+        key = (B, tuple(card), tuple(jt.axes), tuple(jt.parent),
+               tuple((id(blk.stack), blk.scopes.shape, blk.scopes.tobytes()) for blk in blocks))
+        hit = cache.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], stacks)):
+            return hit[1].fresh()
+    tree = BatchTree(card, [blk.scopes for blk in blocks], jt, B, [st.n_aux for st in stacks])
+    if cache is not None:
+        if len(cache) >= _TREE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = (stacks, tree)
+        tree = tree.fresh()
+    return tree
+
+
+def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
+              tree_cache=None):
     """MC-SAT over junction-tree variables of cardinalities ``card`` and clause ``blocks``.
 
     Parameters
@@ -449,6 +473,10 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
         Named in the error when the hard clauses admit no world.
     jt : JunctionTree, optional
         A tree over the block scopes (built if absent).
+    tree_cache : dict, optional
+        Keeps the compiled sampling tree of each structure for later runs (the stacks of the
+        blocks must outlive it, as :class:`~semmap_pp.knowledge.mcsat_local.LocalClauses`'
+        cached stacks do).
 
     Returns
     -------
@@ -470,7 +498,7 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None):
     offs = [st.offsets(blk.tids) for st, blk in zip(stacks, blocks)]
     sizes = [len(blk.scopes) for blk in blocks]
     strides = [_strides(st.shape) for st in stacks]
-    tree = BatchTree(card, [blk.scopes for blk in blocks], jt, B, [st.n_aux for st in stacks])
+    tree = _batch_tree(card, blocks, jt, B, tree_cache)
 
     def scope_states(x):
         out = []

@@ -58,6 +58,7 @@ class LocalClauses:
         self._unit_raw: dict = {}
         self._pairs: dict = {}
         self._stacks: dict = {}
+        self.trees: dict = {}       # compiled sampling trees by floor structure (run_mcsat)
 
     def _unit_clauses(self, key):
         hit = self._unit_raw.get(key)
@@ -152,7 +153,8 @@ def mcsat_local(clauses: LocalClauses, ev: Evidence, rng, n_chains, n_iter, burn
     sale : dict (p, q) -> float
     """
     card, blocks, labels = clauses.blocks(ev)
-    marg, aux = run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, clauses.rules.path, jt)
+    marg, aux = run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, clauses.rules.path, jt,
+                          clauses.trees)
     types = {}
     for i, u in enumerate(ev.units):
         p = marg[i].reshape(4, -1).sum(axis=1)

@@ -14,6 +14,8 @@ Messages are rescaled per chain where their entries could leave float32.
 
 from __future__ import annotations
 
+import copy
+
 import numba
 import numpy as np
 
@@ -237,6 +239,7 @@ class BatchTree:
         prod_base = rows
         rows += len(prod_rows)
         self.G = np.ones((rows, B), dtype=np.float32)
+        self.prod_base = int(prod_base)
         idx, ip, nf, cc, MM = [], [0], [], [], []
         sep_ptr, sep_var, sep_stride = [0], [], []
         for i in range(n):
@@ -270,6 +273,14 @@ class BatchTree:
                       i64(jt.order), i64(sep_ptr), i64(sep_var), i64(sep_stride))
         self.rescale = rescale
         self.marg_offsets = i64(np.concatenate([[0], np.cumsum(card)]))
+
+    def fresh(self):
+        """A tree of the same structure with rows of its own (for reuse across runs)."""
+        out = copy.copy(self)
+        out.G = np.ones(self.G.shape, dtype=np.float32)
+        out._up = (out.G,) + self._up[1:]
+        out._down = (out.G,) + self._down[1:]
+        return out
 
     def load(self, b, table):
         """Write the tables ``(I, S, B)`` of block ``b`` into their rows."""
