@@ -8,7 +8,11 @@ Pure functions over :class:`~semmap_pp.pipeline.MapRun` objects. Per rule set:
 * convergence: R-hat and bulk / tail ESS of every label-invariant summary, and the verdict.
 * posterior spread: ``n`` sampled worlds (evenly thinned over chains and draws), rasterised on the
   building lattice and accumulated in :class:`~semmap_pp.diagnostics.SpreadAccumulator`;
-  ``wall_spread`` is its mean Bernoulli variance of the wall indicator (0 = every world agrees).
+  ``wall_spread`` is its mean Bernoulli variance of the wall indicator over the cells ever wall
+  (0 = every world agrees), ``wall_disagreement_m2`` the expected area on which two sampled worlds
+  disagree about wall (:func:`semmap_pp.outputs.spread.wall_disagreement_m2`). The mean divides by a
+  number of cells that differs from run to run (and grows with every rare excursion), so only the
+  area compares two rule sets on the same cells (docs/knowledge_comparison.md).
 * topological defects (:mod:`semmap_pp.derive.defects`): adjacent rooms whose connecting walls
   differ by more than ``[diagnostics] defect_tolerance_m``, in W* and averaged over the sampled
   worlds (typed as the sampler typed them).
@@ -52,6 +56,7 @@ class RuleSetSummary:
     defects_best: int     # in W*
     defects_mean: float   # mean over the sampled worlds
     seconds: float
+    wall_disagreement_m2: float = math.nan
 
 
 def typed_sampled_worlds(run, n: int) -> list:
@@ -65,15 +70,26 @@ def typed_sampled_worlds(run, n: int) -> list:
     return typed_worlds(post, sampled_worlds(run, n))
 
 
-def wall_spread(worlds, shape, wall: int) -> float:
-    """Mean Bernoulli variance of the wall indicator of ``worlds`` on a lattice of ``shape``."""
+def _accumulate(worlds, shape, wall: int) -> SpreadAccumulator:
     from semmap_pp.outputs.spread import rasterise, sampled_box
 
     box = sampled_box(worlds, shape)
     acc = SpreadAccumulator((box[2] - box[0], box[3] - box[1]))
     for w in worlds:
         acc.add(*rasterise(w, box, wall))
-    return acc.wall_spread()
+    return acc
+
+
+def wall_spread(worlds, shape, wall: int) -> float:
+    """Mean Bernoulli variance of the wall indicator of ``worlds`` on a lattice of ``shape``."""
+    return _accumulate(worlds, shape, wall).wall_spread()
+
+
+def wall_disagreement(worlds, shape, wall: int, resolution: float) -> float:
+    """Expected area (m²) where two of ``worlds`` disagree about wall (``Σ 2p(1-p)`` · cell area)."""
+    from semmap_pp.outputs.spread import wall_disagreement_m2
+
+    return wall_disagreement_m2(_accumulate(worlds, shape, wall).p_wall(), resolution)
 
 
 def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
@@ -84,14 +100,17 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
     defects = count_defects(worlds, c.resolution, c.wall, c.adjacency_dilation, tol)
     best = count_defects([run.world], c.resolution, c.wall, c.adjacency_dilation, tol)
     q = run.report.quantities
+    from semmap_pp.outputs.spread import wall_disagreement_m2
+
+    acc = _accumulate(worlds, frame.shape, c.wall)
     return RuleSetSummary(
         name=name, rules=rules, n_units=len(run.semantic.unit_ids), cpr=float(run.semantic.cpr),
         log_posterior=float(run.semantic.log_posterior), converged=bool(run.report.ok),
         rhat={x.name: x.rhat for x in q}, ess_bulk={x.name: x.ess_bulk for x in q},
         ess_tail={x.name: x.ess_tail for x in q},
-        wall_spread=wall_spread(worlds, frame.shape, c.wall), n_worlds=len(worlds),
+        wall_spread=acc.wall_spread(), n_worlds=len(worlds),
         defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
-        seconds=float(run.seconds))
+        seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution))
 
 
 def _fmt(v, spec: str) -> str:
@@ -115,7 +134,8 @@ def compare_table(rows: list[RuleSetSummary]) -> str:
     add("converged", ["yes" if r.converged else "no" for r in rows])
     add("topological defects in W*", [str(r.defects_best) for r in rows])
     add("defects, mean over sampled worlds", [_fmt(r.defects_mean, ".2f") for r in rows])
-    add("wall spread (mean p(1-p))", [_fmt(r.wall_spread, ".4f") for r in rows])
+    add("wall spread (mean p(1-p) over cells ever wall)", [_fmt(r.wall_spread, ".4f") for r in rows])
+    add("wall disagreement, m² (Σ 2p(1-p) · cell area)", [_fmt(r.wall_disagreement_m2, ".2f") for r in rows])
     add("sampled worlds", [str(r.n_worlds) for r in rows])
     names = list(rows[0].rhat)
     for n in names:
@@ -164,11 +184,12 @@ def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-        ax.set_title(f"{row.name}: {row.n_worlds} worlds, wall spread {_fmt(row.wall_spread, '.3f')}, "
-                     f"defects {_fmt(row.defects_mean, '.2f')}", fontsize=9)
+        ax.set_title(f"{row.name}: {row.n_worlds} worlds, walls disagree on "
+                     f"{_fmt(row.wall_disagreement_m2, '.2f')} m², defects {_fmt(row.defects_mean, '.2f')}",
+                     fontsize=9)
     fig.subplots_adjust(0.01, 0.01, 0.99, 1 - 0.5 / fig.get_figheight(), wspace=0.03)
     return png(fig)
 
 
-__all__ = ["RuleSetSummary", "typed_sampled_worlds", "wall_spread", "summarise", "compare_table",
+__all__ = ["RuleSetSummary", "typed_sampled_worlds", "wall_spread", "wall_disagreement", "summarise", "compare_table",
            "compare_dict", "compare_png"]

@@ -235,7 +235,7 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[
 
 
 def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,
-            budget: float | None = None, resume=None) -> MapRun:
+            budget: float | None = None, resume=None, starts: list | None = None) -> MapRun:
     """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report.
 
     Parameters
@@ -249,6 +249,9 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     resume : semmap_pp.resume.ResumeState, optional
         Continue an earlier run: its chains go on from their last worlds and random states, and
         the new draws are appended to the old ones (``settings`` must be the stored ones).
+    starts : list of World, optional
+        Start worlds of the chains (repeated cyclically) instead of the data-driven ones, e.g. the
+        W* of an earlier run, as the paper's Fig. 7 does; not with ``resume``.
     """
     from semmap_pp.kernels import data_from_frame, default_mix
     from semmap_pp.kernels.data import settings_from_mapping
@@ -261,7 +264,10 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     factory = TargetFactory(frame, model, inputs.rules)
     if resume is None:
         rng = np.random.default_rng(settings.seed)
-        starts = start_worlds(inputs, settings.chains, rng)
+        if starts is None:
+            starts = start_worlds(inputs, settings.chains, rng)
+        else:
+            starts = [starts[i % len(starts)] for i in range(settings.chains)]
         first = starts
         pm_tune, pm_draws, schedule, chain_starts = settings.tune, settings.draws, None, None
         history = [None] * settings.chains

@@ -23,7 +23,8 @@ def test_compare_writes_table_json_and_figure(tmp_path, capsys):
     assert printed.splitlines()[0] == "| quantity | table3 | none |"
     assert "| topological defects in W* |" in printed and "| R-hat log_posterior |" in printed
     md = (out / "compare.md").read_text()
-    assert md.startswith("# Knowledge sets compared") and "| wall spread (mean p(1-p)) |" in md
+    assert md.startswith("# Knowledge sets compared") and "| wall spread (mean p(1-p) over cells ever wall) |" in md \
+        and "| wall disagreement, m² (Σ 2p(1-p) · cell area) |" in md
     doc = json.loads((out / "compare.json").read_text())
     assert [r["name"] for r in doc["rule_sets"]] == ["table3", "none"]
     assert doc["settings"]["seed"] == 4 and doc["settings"]["draws"] == 4

@@ -8,7 +8,8 @@ import pytest
 
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN
-from semmap_pp.compare import RuleSetSummary, compare_dict, compare_table, summarise, wall_spread
+from semmap_pp.compare import (RuleSetSummary, compare_dict, compare_table, summarise, wall_disagreement,
+                               wall_spread)
 from semmap_pp.evaluate import closing_radius_cells, default_roi
 from semmap_pp.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
@@ -30,6 +31,31 @@ def test_spread_of_two_worlds_differing_in_one_wall():
     # 3 of columns 0..3 and column 0 (10 cells); wall in one only (p=1/2): column 3 rows 1-2 (a), columns
     # 4, 5 of rows 0 and 3 and column 5 rows 1-2 (b) -> 8 cells. Mean p(1-p) = 8 * 0.25 / 18.
     assert wall_spread([a, b], (10, 10), wall=1) == pytest.approx(8 * 0.25 / 18)
+
+
+def test_wall_disagreement_is_the_area_two_worlds_disagree_on():
+    a = W.add(W.empty(2), 0, (0, 0, 4, 4), ROOM)
+    b = W.add(W.empty(2), 0, (0, 0, 4, 6), ROOM)
+    assert wall_disagreement([a, a], (10, 10), wall=1, resolution=0.1) == 0.0
+    # the 8 cells walled in one world of two (see above): p = 1/2, 2p(1-p) = 1/2, 0.01 m² each
+    assert wall_disagreement([a, b], (10, 10), wall=1, resolution=0.1) == pytest.approx(8 * 0.5 * 0.01)
+
+
+def test_a_rare_excursion_lowers_the_mean_spread_but_raises_the_disagreement():
+    # 19 identical worlds and one with a far-away extra room: the excursion adds 12 cells at
+    # p = 1/20 to the "ever wall" cells, so the mean over them falls although the worlds agree less.
+    a = W.add(W.empty(2), 0, (0, 0, 4, 4), ROOM)
+    b = W.add(W.empty(2), 0, (0, 0, 4, 6), ROOM)
+    far = W.add(a, 1, (20, 20, 24, 24), ROOM)
+    base = [a, b] * 10
+    shape = (30, 30)
+    excursion = base[:-1] + [far]
+    assert wall_spread(excursion, shape, 1) < wall_spread(base, shape, 1)
+    assert wall_disagreement(excursion, shape, 1, 0.1) > wall_disagreement(base, shape, 1, 0.1)
+    # the area counts the new cells: 12 cells at p = 1/20 add 12 * 2 * (1/20) * (19/20) * 0.01 m²
+    # (replacing one b by far also moves b's 8 cells from p = 1/2 to 9/20: 8 * 2 * (9/20) * (11/20) * 0.01)
+    expected = (12 * 2 * (1 / 20) * (19 / 20) + 8 * 2 * (9 / 20) * (11 / 20)) * 0.01
+    assert wall_disagreement(excursion, shape, 1, 0.1) == pytest.approx(expected)
 
 
 def row(name, defects_best, cpr=0.9, rhat=1.01):

@@ -81,3 +81,21 @@ def test_run_map_keeps_recorded_worlds():
     assert (run.samples["active"].sum(axis=2) == run.summaries["n_units"]).all()
     worlds = sampled_worlds(run, 4)
     assert len(worlds) == 4 and all(W.is_valid(w, f.shape, f.cells.min_side) for w in worlds)
+
+
+def test_run_map_starts_every_chain_from_the_given_world():
+    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+
+    g = rooms_grid(door=True)
+    f = build_frame(g, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    inputs = Inputs(g, MODEL, None, f, roi, "default")
+    start = W.add(W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=0, draws=4,
+                                                 n_inner=1), log=lambda m: None, starts=[start])
+    assert len(run.starts) == 2
+    for s in run.starts:
+        assert np.array_equal(s.active, start.active) and np.array_equal(s.rects, start.rects)
+    # one kernel per draw: the first recorded world is the start or one edit away from it
+    first = run.samples["active"][:, 0].sum(axis=1)
+    assert np.all(np.abs(first - 2) <= 1)

@@ -15,6 +15,21 @@ Examples
 [1.0, 1.0, 1.0, 1.0, 0.5, 0.5, 0.0, 0.0]
 >>> p_type[0][2].tolist(), p_type[1][2].tolist()
 ([0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0], [0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.0, 0.0])
+
+Two numbers summarise the spread of the wall indicator over the sampled worlds:
+
+* :meth:`~semmap_pp.diagnostics.SpreadAccumulator.wall_spread`: the *mean* of ``p (1 - p)`` over the
+  cells that are ever wall. Its denominator is a property of the run (how many cells some world
+  ever put a wall on), so two runs are not measured on the same cells, and a rare excursion (a
+  cell walled in 1 world of 1000, ``p (1 - p)`` near 0) *lowers* it: more exploration can read as
+  less spread;
+* :func:`wall_disagreement_m2`: the *sum* of ``2 p (1 - p)`` times the cell area, the expected area
+  on which two independently drawn worlds disagree about wall or not. Cells that are never or
+  always wall add nothing, so no denominator is needed and runs on one map compare directly
+  (the per-cell picture of the paper's Fig. 7: thin lines of many samples).
+
+>>> round(wall_disagreement_m2(p_wall, resolution=0.5), 3)   # 8 cells at p = 0.5: 8 * 0.5 * 0.25 m²
+1.0
 """
 
 from __future__ import annotations
@@ -78,6 +93,16 @@ def cell_probabilities(shape, worlds, wall: int) -> tuple[np.ndarray, np.ndarray
     return p_wall, p_type
 
 
+def wall_disagreement_m2(p_wall: np.ndarray, resolution: float) -> float:
+    """Expected area (m²) where two independent sampled worlds disagree on wall: ``Σ 2p(1-p) · res²``.
+
+    ``p_wall`` is the per-cell wall probability on the lattice (:func:`cell_probabilities`),
+    ``resolution`` metres per lattice cell. 0 when every world has the same walls.
+    """
+    p = np.asarray(p_wall, dtype=float)
+    return float(np.sum(2.0 * p * (1.0 - p)) * resolution * resolution)
+
+
 def typed_worlds(posterior, worlds) -> list[W.World]:
     """``worlds`` with types from ``posterior`` (the MAP types the sampler used); repeats typed once."""
     cache: dict[bytes, np.ndarray] = {}
@@ -90,4 +115,4 @@ def typed_worlds(posterior, worlds) -> list[W.World]:
     return out
 
 
-__all__ = ["rasterise", "sampled_box", "cell_probabilities", "typed_worlds"]
+__all__ = ["rasterise", "sampled_box", "cell_probabilities", "wall_disagreement_m2", "typed_worlds"]
