@@ -89,6 +89,43 @@ def _lut_rows(lut, word, col, rows, G):
 
 
 @numba.njit(cache=True, nogil=True)
+def _kept_word(u, base, n, c0, cut, alias, tid, mask, aux, cell, word):
+    """One word of keep coins per instance and chain, all chunks at once (alias method per
+    chunk ``j``: table ``base[j] + tid * n[j]``), minus the clauses the current state
+    ``(aux, cell)`` violates."""
+    J, I, B = u.shape
+    for r in range(I):
+        t = tid[r]
+        for b in range(B):
+            w = np.int64(0)
+            for j in range(J):
+                v = u[j, r, b] * n[j]
+                i = int(v)
+                k = base[j] + t * n[j] + i
+                a = alias[k]
+                w |= (i if v < cut[k] else a) << c0[j]
+            word[r, b] = w & ~mask[aux[r, b], cell[r, b]]
+
+
+@numba.njit(cache=True, nogil=True)
+def _cells(x, scopes, strides, tid, S, out):
+    """``out[i, b] = tid[i] * S + sum_r x[scopes[i, r], b] * strides[r]``: each instance's
+    drawn scope state, as a column of its stack's tables."""
+    I, R = scopes.shape
+    B = x.shape[1]
+    for i in range(I):
+        o = out[i]
+        t = tid[i] * S
+        for b in range(B):
+            o[b] = t
+        for r in range(R):
+            xr = x[scopes[i, r]]
+            st = strides[r]
+            for b in range(B):
+                o[b] += xr[b] * st
+
+
+@numba.njit(cache=True, nogil=True)
 def _drop_violated(word, mask, aux, cell):
     """Clear the bits of clauses the current state ``(aux, cell)`` violates (never kept)."""
     I, B = word.shape
@@ -254,6 +291,15 @@ class ClauseStack:
                                np.concatenate([a for _, a in tables])))
             self.chunks.append(chunks)
         self.masks[0] = np.where(hard, self.masks[0], self.masks[0] | _HARD_BIT)
+        if len(self.chunks) == 1:      # one word: all chunks' tables end to end (_kept_word)
+            ch = self.chunks[0]
+            sizes = [len(c[2]) for c in ch]
+            self.flat_chunks = (np.cumsum([0] + sizes[:-1]).astype(np.int64),
+                                np.array([c[1] for c in ch], dtype=np.int64),
+                                np.array([c[0] for c in ch], dtype=np.int64),
+                                np.concatenate([c[2] for c in ch]) if ch else np.zeros(0),
+                                np.concatenate([c[3] for c in ch]).astype(np.int64)
+                                if ch else np.zeros(0, dtype=np.int64))
         self.hard = hard
         self.lut = None
         if len(self.masks) == 1 and k <= LUT_BITS and (T * S) << k <= LUT_ENTRIES:
@@ -283,30 +329,37 @@ class ClauseStack:
             out.append(word)
         return out
 
-    def kept(self, rng, s, aux, off):
-        """Kept-clause words ``(I, B)``: the coin came up and the clause holds at ``(aux, s)``."""
-        cell = s if off is None else s + off[0]
-        words = self.draw_words(rng, s.shape, off)
+    def kept(self, rng, cell, aux, off):
+        """Kept-clause words ``(I, B)``: the coin came up and the clause holds at ``(aux,
+        cell)`` (``cell``: scope state plus the template's offset ``off[0]``)."""
+        if len(self.masks) == 1:
+            base, n, c0, cut, alias = self.flat_chunks
+            tid = np.zeros(cell.shape[0], dtype=np.int64) if off is None else off[1][:, 0]
+            word = np.empty(cell.shape, dtype=np.int64)
+            _kept_word(rng.random((len(n),) + cell.shape), base, n, c0, cut, alias, tid,
+                       self.masks[0], aux, cell, word)
+            return [word]
+        words = self.draw_words(rng, cell.shape, off)
         for w, m in zip(words, self.masks):
             _drop_violated(w, m, aux, cell)
         return words
 
-    def draw_private(self, rng, kept, s, off, est=None):
+    def draw_private(self, rng, kept, cell, off, est=None):
         """Private states ``(I, B)`` drawn uniformly among those the kept clauses allow at the
-        drawn scope states; with ``est``, add the probability of the reported atom to it."""
+        drawn scope states (``cell`` as in :meth:`kept`); with ``est``, add the probability of
+        the reported atom to it."""
         if self.n_aux == 1:
             if est is not None:
                 est += float(self.aux_on[0])
-            return np.zeros(s.shape, dtype=np.int64)
-        u = rng.random(s.shape)
+            return np.zeros(cell.shape, dtype=np.int64)
+        u = rng.random(cell.shape)
         on = np.zeros(self.n_aux, dtype=bool) if self.aux_on is None else self.aux_on
-        cell = s if off is None else s + off[0]
         if len(self.masks) == 1:
-            aux = np.zeros(s.shape, dtype=np.int64)
+            aux = np.zeros(cell.shape, dtype=np.int64)
             _draw_private(self.masks[0], _HARD_BIT, cell, kept[0], u, on, aux,
                           np.zeros((1, 1)) if est is None else est, est is not None)
             return aux
-        ok = self.allowed_at(kept, s, off).view(np.uint8)
+        ok = self.allowed_at(kept, cell, None).view(np.uint8)
         if est is not None:
             est += ok[on].sum(axis=0) / ok.sum(axis=0)
         return pick(ok, u)
@@ -500,13 +553,15 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
     strides = [_strides(st.shape) for st in stacks]
     tree = _batch_tree(card, blocks, jt, B, tree_cache)
 
-    def scope_states(x):
+    tids = [np.zeros(n, dtype=np.int64) if o is None else np.ascontiguousarray(o[1][:, 0])
+            for n, o in zip(sizes, offs)]
+
+    def scope_cells(x):
         out = []
-        for blk, st in zip(blocks, strides):
-            s = x[blk.scopes[:, 0]] * st[0]
-            for r in range(1, len(st)):
-                s = s + x[blk.scopes[:, r]] * st[r]
-            out.append(s)
+        for blk, st, t, stack in zip(blocks, strides, tids, stacks):
+            c = np.empty((len(t), B), dtype=np.int64)
+            _cells(x, blk.scopes, st, t, stack.n_states, c)
+            out.append(c)
         return out
 
     # start: a world of the hard clauses weighted by the single-variable clauses alone
@@ -515,7 +570,7 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
     if not tree.upward(start, check=True):
         raise RuleError(path, _NO_WORLD)
     x = tree.sample(rng)
-    states = scope_states(x)
+    states = scope_cells(x)
     aux = [st.draw_private(rng, [np.zeros(s.shape, dtype=np.int64)] * len(st.masks), s, o)
            for st, s, o in zip(stacks, states, offs)]
     marg = np.zeros((int(tree.marg_offsets[-1]), B))
@@ -528,7 +583,7 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
             st.counts_into(kept[b], n, B, o, tree, b)
         tree.upward()
         x = tree.sample(rng, marg if keep else None)
-        states = scope_states(x)
+        states = scope_cells(x)
         aux = [st.draw_private(rng, kept[b], states[b], o, est if keep else None)
                for b, st, n, o, est in items]
     total = (n_iter - burn_in) * B
