@@ -163,6 +163,16 @@ def _draw_private(mask, hard_bit, cell, word, u, on, aux, est, acc):
                 est[r, b] += n_on / n
 
 
+def _buffer(buf, name, shape, dtype, zero=False):
+    """A reusable array of ``buf`` (a fresh one without ``buf``): no page faults per call."""
+    arr = None if buf is None else buf.get(name)
+    if arr is None or arr.shape != tuple(shape) or arr.dtype != dtype:
+        arr = np.zeros(shape, dtype=dtype) if zero else np.empty(shape, dtype=dtype)
+        if buf is not None:
+            buf[name] = arr
+    return arr
+
+
 def _alias(prob):
     """Walker/Vose alias table ``(q, alias)`` of a discrete distribution."""
     n = len(prob)
@@ -329,33 +339,34 @@ class ClauseStack:
             out.append(word)
         return out
 
-    def kept(self, rng, cell, aux, off):
+    def kept(self, rng, cell, aux, off, buf=None):
         """Kept-clause words ``(I, B)``: the coin came up and the clause holds at ``(aux,
-        cell)`` (``cell``: scope state plus the template's offset ``off[0]``)."""
+        cell)`` (``cell``: scope state plus the template's offset ``off[0]``). ``buf`` (a dict)
+        keeps the arrays for the next call (the returned words are overwritten then)."""
         if len(self.masks) == 1:
             base, n, c0, cut, alias = self.flat_chunks
             tid = np.zeros(cell.shape[0], dtype=np.int64) if off is None else off[1][:, 0]
-            word = np.empty(cell.shape, dtype=np.int64)
-            _kept_word(rng.random((len(n),) + cell.shape), base, n, c0, cut, alias, tid,
-                       self.masks[0], aux, cell, word)
+            word = _buffer(buf, "word", cell.shape, np.int64)
+            u = rng.random(out=_buffer(buf, "u_keep", (len(n),) + cell.shape, np.float64))
+            _kept_word(u, base, n, c0, cut, alias, tid, self.masks[0], aux, cell, word)
             return [word]
         words = self.draw_words(rng, cell.shape, off)
         for w, m in zip(words, self.masks):
             _drop_violated(w, m, aux, cell)
         return words
 
-    def draw_private(self, rng, kept, cell, off, est=None):
+    def draw_private(self, rng, kept, cell, off, est=None, buf=None):
         """Private states ``(I, B)`` drawn uniformly among those the kept clauses allow at the
         drawn scope states (``cell`` as in :meth:`kept`); with ``est``, add the probability of
-        the reported atom to it."""
+        the reported atom to it. ``buf`` as in :meth:`kept`."""
         if self.n_aux == 1:
             if est is not None:
                 est += float(self.aux_on[0])
-            return np.zeros(cell.shape, dtype=np.int64)
-        u = rng.random(cell.shape)
+            return _buffer(buf, "aux0", cell.shape, np.int64, zero=True)
+        u = rng.random(out=_buffer(buf, "u_aux", cell.shape, np.float64))
         on = np.zeros(self.n_aux, dtype=bool) if self.aux_on is None else self.aux_on
         if len(self.masks) == 1:
-            aux = np.zeros(cell.shape, dtype=np.int64)
+            aux = _buffer(buf, "aux", cell.shape, np.int64)
             _draw_private(self.masks[0], _HARD_BIT, cell, kept[0], u, on, aux,
                           np.zeros((1, 1)) if est is None else est, est is not None)
             return aux
@@ -556,13 +567,13 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
     tids = [np.zeros(n, dtype=np.int64) if o is None else np.ascontiguousarray(o[1][:, 0])
             for n, o in zip(sizes, offs)]
 
+    bufs = [{} for _ in stacks]     # per block: arrays reused by every iteration
+    cells = [np.empty((n, B), dtype=np.int64) for n in sizes]
+
     def scope_cells(x):
-        out = []
-        for blk, st, t, stack in zip(blocks, strides, tids, stacks):
-            c = np.empty((len(t), B), dtype=np.int64)
+        for blk, st, t, stack, c in zip(blocks, strides, tids, stacks, cells):
             _cells(x, blk.scopes, st, t, stack.n_states, c)
-            out.append(c)
-        return out
+        return cells
 
     # start: a world of the hard clauses weighted by the single-variable clauses alone
     start = [st.start_counts(n, B, o) if blk.scopes.shape[1] == 1 else st.counts(None, n, B, o)
@@ -578,13 +589,14 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
     items = list(zip(range(len(stacks)), stacks, sizes, offs, aux_sum))
     for it in range(n_iter):
         keep = it >= burn_in
-        kept = [st.kept(rng, s, a, o) for st, s, a, o in zip(stacks, states, aux, offs)]
+        kept = [st.kept(rng, s, a, o, bf)
+                for st, s, a, o, bf in zip(stacks, states, aux, offs, bufs)]
         for b, st, n, o, _ in items:
             st.counts_into(kept[b], n, B, o, tree, b)
         tree.upward()
         x = tree.sample(rng, marg if keep else None)
         states = scope_cells(x)
-        aux = [st.draw_private(rng, kept[b], states[b], o, est if keep else None)
+        aux = [st.draw_private(rng, kept[b], states[b], o, est if keep else None, bufs[b])
                for b, st, n, o, est in items]
     total = (n_iter - burn_in) * B
     est = marg.sum(axis=1) / total

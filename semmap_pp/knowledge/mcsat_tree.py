@@ -272,12 +272,14 @@ class BatchTree:
         self._down = (self.G, i64(idx), i64(ip[:-1]), i64(nf), i64(cc), i64(MM),
                       i64(jt.order), i64(sep_ptr), i64(sep_var), i64(sep_stride))
         self.rescale = rescale
+        self._x = self._u = None
         self.marg_offsets = i64(np.concatenate([[0], np.cumsum(card)]))
 
     def fresh(self):
         """A tree of the same structure with rows of its own (for reuse across runs)."""
         out = copy.copy(self)
         out.G = np.ones(self.G.shape, dtype=np.float32)
+        out._x = out._u = None
         out._up = (out.G,) + self._up[1:]
         out._down = (out.G,) + self._down[1:]
         return out
@@ -299,7 +301,8 @@ class BatchTree:
         return bool(_upward(*self._up, bool(check)))
 
     def sample(self, rng, marginals=None):
-        """Draw one solution per chain from the last :meth:`upward`: ``(n, B)`` states.
+        """Draw one solution per chain from the last :meth:`upward`: ``(n, B)`` states (one
+        array, overwritten by the next call).
 
         With ``marginals`` (a list of ``(card, B)`` float64 arrays, or one ``(sum card, B)``
         array with the variables' rows at ``marg_offsets``), each variable's distribution given
@@ -307,8 +310,11 @@ class BatchTree:
         draws from exactly that distribution, so it is a Rao-Blackwellised indicator.
         """
         B = self.B
-        x = np.zeros((self.n, B), dtype=np.int64)
-        u = rng.random((self.n, B))
+        if self._x is None:
+            self._x = np.zeros((self.n, B), dtype=np.int64)
+            self._u = np.empty((self.n, B))
+        x = self._x                                   # reused: valid until the next call
+        u = rng.random(out=self._u)
         acc = marginals is not None
         flat = marginals
         if isinstance(marginals, list):
