@@ -116,7 +116,7 @@ def _sample(G, idx, ip, nf, cc, MM, order, sep_ptr, sep_var, sep_stride, u, x, m
     """The downward pass: per clique (root first) draw its variable per chain given the drawn
     separator, and with ``acc`` add that conditional distribution to ``marg``."""
     B = G.shape[1]
-    probs = np.empty(int(cc.max()) if len(cc) else 1)
+    probs = np.empty(int(cc.max()) if len(cc) else 1, dtype=np.float32)
     for i in range(len(nf) - 1, -1, -1):
         v_out = order[i]
         n_f, c, M, base = nf[i], cc[i], MM[i], ip[i]
@@ -126,15 +126,15 @@ def _sample(G, idx, ip, nf, cc, MM, order, sep_ptr, sep_var, sep_stride, u, x, m
             m = 0
             for k in range(sep_ptr[i], sep_ptr[i + 1]):
                 m += x[sep_var[k], b] * sep_stride[k]
-            total = 0.0
+            total = np.float32(0.0)
             for v in range(c):
-                t = 1.0
+                t = np.float32(1.0)
                 for f in range(n_f):
                     t *= G[idx[base + (f * c + v) * M + m], b]
                 probs[v] = t
                 total += t
             thr = ui[b] * total
-            run, k = 0.0, 0
+            run, k = np.float32(0.0), 0
             for v in range(c - 1):
                 run += probs[v]
                 if thr >= run:
@@ -142,8 +142,9 @@ def _sample(G, idx, ip, nf, cc, MM, order, sep_ptr, sep_var, sep_stride, u, x, m
             xo[b] = k
             if acc:
                 r0 = moff[v_out]
+                inv = 1.0 / np.float64(total)
                 for v in range(c):
-                    marg[r0 + v, b] += probs[v] / total
+                    marg[r0 + v, b] += probs[v] * inv
 
 
 class BatchTree:
