@@ -352,6 +352,24 @@ def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_
                   hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp)
 
 
+def _ro(a):
+    """``a`` as a read-only array (a view when it is writable). The compiled calls get every
+    input read-only, whatever made it: one signature each, not one per mix of writable and
+    read-only arguments (each of which a new process loads or compiles, ~0.1 s each)."""
+    if a.flags.writeable:
+        a = a.view()
+        a.setflags(write=False)
+    return a
+
+
+def _score_ro(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, new_types,
+              hist, gamma_total, adj, sale, table, use_table, prior_n, ip, fp):
+    """:func:`_score` with read-only inputs (see :func:`_ro`); ``hist`` is written."""
+    return _score(xsum, _ro(gain), _ro(old_rects), _ro(old_active), _ro(old_types),
+                  _ro(new_rects), _ro(new_active), _ro(new_types), hist, gamma_total, _ro(adj),
+                  _ro(sale), _ro(table), use_table, _ro(prior_n), ip, fp)
+
+
 class Proposal:
     """A proposed world with its log posterior; pass it to :meth:`Tracker.accept` to commit.
 
@@ -488,18 +506,19 @@ class Tracker:
         if self._fixed:
             types = ow.types.copy()
             loglik, logprior, gamma_total = _propose_fixed(
-                data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
-                new_world.active, changed, geometry, adj, types, GEOMETRY_TYPE, hist,
-                self.gamma_total, post.fixed.fixed_sale, self._prior_n, post._ip, post._fp)
+                data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, types,
+                GEOMETRY_TYPE, hist, self.gamma_total, _ro(post.fixed.fixed_sale),
+                _ro(self._prior_n), post._ip, post._fp)
             types.setflags(write=False)
             knowledge = sale = None
         else:
-            _retype_changed(new_world.rects, new_world.active, changed, geometry, adj, _NO_TYPES,
-                            _NO_TYPES, post._ip, post._fp)
+            _retype_changed(_ro(new_world.rects), _ro(new_world.active), changed, geometry, adj,
+                            _NO_TYPES, _NO_TYPES, post._ip, post._fp)
             if floor is not None:
                 # bound 1, no types: per category the better of the corridor / non-corridor
                 # gains, SaLe factor at most 1
-                bound = sum(_score(
+                bound = sum(_score_ro(
                     data.xsum, post._gain_max, ow.rects, ow.active, ow.types, new_world.rects,
                     new_world.active, ow.types, hist.copy(), self.gamma_total, adj, _NO_SALE,
                     _NEVER_SALE, True, self._prior_n, post._ip, post._fp)[:2])
@@ -511,7 +530,7 @@ class Tracker:
             if sale is None:
                 # bound 2, the MAP types alone (no marginals yet): the exact log-likelihood and
                 # the prior with the SaLe factor at most 1
-                bound = sum(_score(
+                bound = sum(_score_ro(
                     data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                     new_world.active, types, hist.copy(), self.gamma_total, adj, _NO_SALE,
                     _NEVER_SALE, True, self._prior_n, post._ip, post._fp)[:2])
@@ -519,7 +538,7 @@ class Tracker:
                     self.skipped[1] += 1
                     return self._bounded(new_world)
                 types, sale = post._result_arrays(self._provider, ev, new_world.capacity)
-            loglik, logprior, gamma_total = _score(
+            loglik, logprior, gamma_total = _score_ro(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
                 post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp)

@@ -123,6 +123,7 @@ class KnowledgeEngine:
                               else None)
         self.hits = self.misses = 0
         self._map_cache: OrderedDict = OrderedDict()   # evidence key -> (type network, MAP)
+        self._trees: OrderedDict = OrderedDict()       # (card, scopes) -> JunctionTree or None
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, method: str = "auto", **settings
@@ -184,13 +185,24 @@ class KnowledgeEngine:
         return MAX_CLIQUE_STATES if self.method in ("exact", "mcsat") else self.auto_max_states
 
     def _tree(self, card, scopes, path):
-        """A junction tree within :meth:`_limit`, or None when ``auto``/``lbp`` must fall back."""
+        """A junction tree within :meth:`_limit`, or None when ``auto``/``lbp`` must fall back
+        (cached by cardinalities and scopes: a tree is a pure function of them, and the
+        sampler's networks keep their structure across most evidence changes)."""
+        key = (tuple(int(c) for c in card), tuple(scopes))
+        hit = self._trees.get(key, False)
+        if hit is not False:
+            self._trees.move_to_end(key)
+            return hit
         try:
-            return JunctionTree(card, scopes, path, max_states=self._limit())
+            jt = JunctionTree(card, scopes, path, max_states=self._limit())
         except TooDense:
             if self.method in ("exact", "mcsat"):
                 raise
-            return None
+            jt = None
+        self._trees[key] = jt
+        if len(self._trees) > 256:
+            self._trees.popitem(last=False)
+        return jt
 
     def _compute(self, ev: Evidence) -> InferenceResult:
         if self.local is not None:
