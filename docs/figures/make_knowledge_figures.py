@@ -268,8 +268,7 @@ def main(argv=None) -> int:
                 f"({model.sampler.chains} chains x ({model.sampler.tune} + {model.sampler.draws}) x "
                 f"{model.sampler.n_inner})", "from_wstar": f"{args.chains} chains x (0 + {args.draws}) x "
                 f"{args.n_inner} kernels", "start": args.start, "worlds": args.worlds,
-                "machine": f"{platform.machine()} {platform.processor() or ''} {platform.system()}, "
-                f"python {platform.python_version()}".replace("  ", " "),
+                "machine": _machine(),
                 "wall_seconds": round(time.time() - t_start, 1)}
     doc = compare_dict(rows, map_path=settings["map"], settings=settings)
     doc["wstar"] = wstar
@@ -279,6 +278,21 @@ def main(argv=None) -> int:
     for f in ("knowledge_fig6.png", "knowledge_fig7.png", "knowledge_table.md", "knowledge_table.json"):
         print(args.out / f)
     return 0
+
+
+def _machine() -> str:
+    """CPU model and count, OS and Python, for the table."""
+    import os
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{os.cpu_count()} x {cpu}, {platform.system()}, Python {platform.python_version()}"
 
 
 def _defect_args(run):
