@@ -121,13 +121,20 @@ def run(args):
             mc._cache.clear()
             mc.infer(ev)
         out[f"mcsat_ms_{name}_20"] = round(1000 * _time(fresh_mc, 3), 1)
-        c = time.process_time()     # CPU time of one call: less sensitive to a shared machine
-        fresh_mc()
-        out[f"mcsat_cpu_ms_{name}_20"] = round(1000 * (time.process_time() - c), 1)
-        r = mc.infer(ev)
-        err = max(max(np.abs(r.types[u] - exact.types[u]).max() for u in ev.units),
-                  max(abs(r.sale[pq] - exact.sale[pq]) for pq in ev.adj))
-        out[f"mcsat_max_abs_err_{name}_20"] = round(float(err), 4)
+        cpu = []                    # CPU time per call: less sensitive to a shared machine
+        for _ in range(3):
+            c = time.process_time()
+            fresh_mc()
+            cpu.append(time.process_time() - c)
+        out[f"mcsat_cpu_ms_{name}_20"] = round(1000 * min(cpu), 1)
+
+        def error(r):
+            return float(max(max(np.abs(r.types[u] - exact.types[u]).max() for u in ev.units),
+                             max(abs(r.sale[pq] - exact.sale[pq]) for pq in ev.adj)))
+        out[f"mcsat_max_abs_err_{name}_20"] = round(error(mc.infer(ev)), 4)
+        # the worst over seeds 0..3 (the estimate's spread, not one draw of it)
+        out[f"mcsat_worst_err_4seeds_{name}_20"] = round(max(
+            error(KnowledgeEngine(rules, method="mcsat", seed=s).infer(ev)) for s in range(4)), 4)
     out.update(auto_rows(rules, args.repeat))
     out.update(clique_rows(rules))
     return out
