@@ -39,7 +39,8 @@ def test_probabilities_are_soft_near_a_threshold_and_hard_far_from_it():
 def test_build_evidence_and_facts():
     rects = np.vstack([cells(4, 5), cells(2, 20), cells(3, 9.05)])
     adj = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool)
-    ev = build_evidence([7, 3, 5], rects, adj, RES, P, door_counts=np.array([1, 2, 0]))
+    md = P.multiple_doors            # MulDoor from this many doors on (one fewer: not)
+    ev = build_evidence([7, 3, 5], rects, adj, RES, P, door_counts=np.array([md - 1, md, 0]))
     assert ev.units == (3, 5, 7)
     assert ev.adj == frozenset({(3, 7), (3, 5)})
     assert ev.muldoor == frozenset({3})
@@ -48,12 +49,13 @@ def test_build_evidence_and_facts():
     assert "rolike(7)." in facts and "colike(3)." in facts and "muldoor(3)." in facts
     assert not any(f.endswith("(5).") and not f.startswith("unit") for f in facts)
     assert "adj(3,7)." in facts and "adj(7,3)." in facts
-    assert hash(ev) == hash(build_evidence([7, 3, 5], rects, adj, RES, P, np.array([1, 2, 0])))
+    assert hash(ev) == hash(build_evidence([7, 3, 5], rects, adj, RES, P, np.array([md - 1, md, 0])))
 
 
 def test_to_knowledge_carries_hard_and_soft_evidence():
     rects = np.vstack([cells(4, 5), cells(3, 9.05)])
-    ev = build_evidence([0, 1], rects, np.array([[0, 1], [1, 0]], bool), RES, P, np.array([2, 0]))
+    ev = build_evidence([0, 1], rects, np.array([[0, 1], [1, 0]], bool), RES, P,
+                        np.array([P.multiple_doors, 0]))
     k = ev.to_knowledge()
     assert k.rolike[0] == (0, 1.0) and k.muldoor == ((0, 1.0),) and k.adj == ((0, 1),)
     assert dict(k.colike)[1] == pytest.approx(dict(ev.soft)[1][COLIKE], abs=1e-6)
