@@ -216,8 +216,8 @@ def main(argv=None) -> int:
     ap.add_argument("--model", default=None, help="model file (default models/default.toml), read at run time")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--chains", type=int, default=2)
-    ap.add_argument("--draws", type=int, default=500, help="recorded draws per chain from W* (default 500)")
-    ap.add_argument("--n-inner", type=int, default=20, help="kernels per draw from W* (default 20)")
+    ap.add_argument("--draws", type=int, default=1000, help="recorded draws per chain from W* (default 1000)")
+    ap.add_argument("--n-inner", type=int, default=40, help="kernels per draw from W* (default 40)")
     ap.add_argument("--worlds", type=int, default=1000, help="sampled worlds drawn and measured (default 1000)")
     ap.add_argument("--start", choices=("own", "table3"), default="own",
                     help="start each rule set from its own W* (default) or both from table3's W*")
