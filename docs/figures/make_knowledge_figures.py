@@ -1,6 +1,7 @@
 """Knowledge against no knowledge on one map: the paper's Fig. 6 (defects) and Fig. 7 (spread).
 
-Run (from the repository root; about 3-4 minutes of CPU on cartesium with the defaults)::
+Run (from the repository root; on cartesium with the defaults about 1.5 min of CPU, 2-3 min wall on
+the shared 2-core machine)::
 
     .venv/bin/python docs/figures/make_knowledge_figures.py
 
