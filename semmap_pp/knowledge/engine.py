@@ -25,7 +25,7 @@ from semmap_pp.errors import RuleError
 from semmap_pp.knowledge.dialect import RuleSet, load_rules
 from semmap_pp.knowledge.evidence import Evidence
 from semmap_pp.knowledge.exact import (MAX_CLIQUE_STATES, JunctionTree, TooDense, calibrate,
-                                       decode_max, merged_potentials, scope_marginal)
+                                       calibrate_flat, decode_max, merged_potentials)
 from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import LocalModel, is_pairwise
@@ -294,16 +294,21 @@ class KnowledgeEngine:
         jt = None if self.method == "lbp" else self._tree(tn.card, [s for s, _ in pots], path)
         sale = {}
         if jt is not None:
-            log_z, marg, full = calibrate(jt, pots, return_beliefs=True)
+            # compiled calibration and pair marginals (exact.calibrate_flat; equal to
+            # exact.calibrate + scope_marginal within rounding, tests/test_knowledge_exact.py)
+            scopes = [s for s, _ in pots]
+            n1 = len(tn.unary_sum)
+            where = {(i, j): n1 + k for k, (i, j, _t) in enumerate(tn.sum_pairs)}
+            conds = [(pq, c) for pq, c in tn.sale.items() if not isinstance(c, float)]
+            log_z, marg, joint = calibrate_flat(jt.plan(scopes), [t for _, t in pots],
+                                                [where[(c[0], c[1])] for _, c in conds])
             if marg is None:
                 raise RuleError(path, "the hard rules admit no world for this evidence")
-            log_z, method = float(log_z), "exact"
+            method = "exact"
+            given = {pq: float(np.dot(pm.reshape(-1), c[2].reshape(-1)))
+                     for (pq, c), pm in zip(conds, joint)}
             for pq, c in tn.sale.items():
-                if isinstance(c, float):
-                    sale[pq] = c
-                else:
-                    i, j, cond = c
-                    sale[pq] = float(np.sum(scope_marginal(jt, full, (i, j)) * cond))
+                sale[pq] = c if isinstance(c, float) else given[pq]
         else:
             where = {(i, j): k for k, (i, j, _t) in enumerate(tn.sum_pairs)}
             want = [where[(c[0], c[1])] for c in tn.sale.values() if not isinstance(c, float)]

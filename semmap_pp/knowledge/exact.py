@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import heapq
 
+import numba
+
 import numpy as np
 
 from semmap_pp.errors import RuleError
@@ -140,6 +142,17 @@ class JunctionTree:
             shape[t] = self.card[scope[j]]
         return perm, tuple(shape)
 
+    def plan(self, scopes) -> "Plan":
+        """The flat layout of this tree for factors over ``scopes`` (cached per scope list)."""
+        key = tuple(scopes)
+        plans = self.__dict__.setdefault("_plans", {})
+        hit = plans.get(key)
+        if hit is None:
+            if len(plans) > 16:
+                plans.clear()
+            hit = plans[key] = Plan(self, key)
+        return hit
+
     def assign(self, scopes):
         """Clique index and placement for each factor scope."""
         out = []
@@ -255,3 +268,302 @@ def decode_max(jt: JunctionTree, potentials):
         idx = (slice(None),) + tuple(int(x[a]) for a in jt.seps[i])
         x[jt.order[i]] = int(np.argmax(beliefs[i][idx]))
     return x, best
+
+
+# ---- compiled calibration over flat clique tables (the engine's fast path) -------------------
+#
+# Clique i is stored flat in C order over its axes (eliminated variable first, then its
+# separator), so its message to the parent is a log-sum over the leading axis and the downward
+# separator term is broadcast along it. Index maps (parent state -> separator state, clique state
+# -> factor state) are built once per tree and factor scopes (:meth:`JunctionTree.plan`).
+
+
+class Plan:
+    """Flat layout of a :class:`JunctionTree` and of one list of factor scopes, for
+    :func:`calibrate_flat`.
+
+    Attributes
+    ----------
+    ints : tuple of ndarray
+        The integer arrays :func:`_calibrate_flat` reads (clique sizes and offsets, parents,
+        separator maps, factor cliques and maps).
+    factor_offsets : ndarray
+        Where each factor's table starts in the packed potential values.
+    n_values : int
+        Length of the packed potential values.
+    """
+
+    def __init__(self, jt: JunctionTree, scopes):
+        card = np.array(jt.card, dtype=np.int64)
+        n = len(jt.order)
+        cax = np.array([a for ax in jt.axes for a in ax], dtype=np.int64)
+        caxoff = np.zeros(n + 1, dtype=np.int64)
+        caxoff[1:] = np.cumsum([len(ax) for ax in jt.axes])
+        pos = jt.pos
+        fcl, fsc = [], []
+        for s in scopes:
+            if not s:
+                raise ValueError("a factor without variables has no clique")
+            fcl.append(min(pos[v] for v in s))
+            fsc.append(len(s))
+        fscoff = np.zeros(len(scopes) + 1, dtype=np.int64)
+        fscoff[1:] = np.cumsum(fsc)
+        fsv = np.array([v for s in scopes for v in s], dtype=np.int64)
+        fcl = np.array(fcl, dtype=np.int64)
+        parent = np.array(jt.parent, dtype=np.int64)
+        ccard, coff, ssize, soff, emap, eoff, fmap, fmoff, foff = _plan_maps(
+            card, cax, caxoff, parent, fsv, fscoff, fcl)
+        self.ints = (ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmoff, foff)
+        for a in self.ints:
+            a.setflags(write=False)
+        self.factor_offsets = foff
+        self.n_values = int(foff[-1])
+        self.order = np.array(jt.order, dtype=np.int64)
+        self.card = list(jt.card)
+        self.scopes = list(scopes)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sub_index(card, ax, sub, out):  # pragma: no cover - compiled
+    """``out[t]``: flat index over the variables ``sub`` (C order) of each flat state ``t`` of a
+    table over the variables ``ax`` (C order)."""
+    a = ax.shape[0]
+    stride = np.zeros(a, np.int64)
+    st = 1
+    for j in range(sub.shape[0] - 1, -1, -1):
+        for k in range(a):
+            if ax[k] == sub[j]:
+                stride[k] = st
+        st *= card[sub[j]]
+    digit = np.zeros(a, np.int64)
+    idx = 0
+    for t in range(out.shape[0]):
+        out[t] = idx
+        k = a - 1   # mixed-radix increment, last axis fastest
+        while k >= 0:
+            digit[k] += 1
+            idx += stride[k]
+            if digit[k] < card[ax[k]]:
+                break
+            idx -= stride[k] * digit[k]
+            digit[k] = 0
+            k -= 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _plan_maps(card, cax, caxoff, parent, fsv, fscoff, fcl):  # pragma: no cover - compiled
+    n = parent.shape[0]
+    ccard = np.empty(n, np.int64)
+    coff = np.zeros(n + 1, np.int64)
+    ssize = np.empty(n, np.int64)
+    soff = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        ax = cax[caxoff[i]:caxoff[i + 1]]
+        size = 1
+        for k in range(ax.shape[0]):
+            size *= card[ax[k]]
+        ccard[i] = card[ax[0]]
+        coff[i + 1] = coff[i] + size
+        ssize[i] = size // ccard[i]
+        soff[i + 1] = soff[i] + ssize[i]
+    eoff = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        p = parent[i]
+        eoff[i + 1] = eoff[i] + (coff[p + 1] - coff[p] if p >= 0 else 0)
+    emap = np.empty(eoff[n], np.int64)
+    for i in range(n):
+        p = parent[i]
+        if p >= 0:   # the child's separator is its axes after the first
+            _sub_index(card, cax[caxoff[p]:caxoff[p + 1]], cax[caxoff[i] + 1:caxoff[i + 1]],
+                       emap[eoff[i]:eoff[i + 1]])
+    nf = fcl.shape[0]
+    fmoff = np.zeros(nf + 1, np.int64)
+    foff = np.zeros(nf + 1, np.int64)
+    for f in range(nf):
+        i = fcl[f]
+        fmoff[f + 1] = fmoff[f] + coff[i + 1] - coff[i]
+        size = 1
+        for k in range(fscoff[f], fscoff[f + 1]):
+            size *= card[fsv[k]]
+        foff[f + 1] = foff[f] + size
+    fmap = np.empty(fmoff[nf], np.int64)
+    for f in range(nf):
+        i = fcl[f]
+        _sub_index(card, cax[caxoff[i]:caxoff[i + 1]], fsv[fscoff[f]:fscoff[f + 1]],
+                   fmap[fmoff[f]:fmoff[f + 1]])
+    return ccard, coff, ssize, soff, emap, eoff, fmap, fmoff, foff
+
+
+@numba.njit(cache=True, nogil=True)
+def _calibrate_flat(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmoff, foff, values,
+                    want):  # pragma: no cover - compiled
+    """Sum-product on flat cliques: ``(log_z, marginals by elimination step, pair marginals of the
+    factors in want)``; the marginals are empty when log_z is not finite."""
+    n = ccard.shape[0]
+    belief = np.zeros(coff[n])
+    for f in range(fcl.shape[0]):
+        i = fcl[f]
+        b0, m0, v0 = coff[i], fmoff[f], foff[f]
+        for t in range(coff[i + 1] - b0):
+            belief[b0 + t] += values[v0 + fmap[m0 + t]]
+    msg = np.empty(soff[n])
+    log_z = 0.0
+    for i in range(n):   # children come before their parents in elimination order
+        S, K, b0, s0 = ssize[i], ccard[i], coff[i], soff[i]
+        for s in range(S):
+            m = -np.inf
+            for k in range(K):
+                x = belief[b0 + k * S + s]
+                if x > m:
+                    m = x
+            if m == -np.inf:
+                msg[s0 + s] = -np.inf
+                continue
+            acc = 0.0
+            for k in range(K):
+                acc += np.exp(belief[b0 + k * S + s] - m)
+            msg[s0 + s] = np.log(acc) + m
+        p = parent[i]
+        if p >= 0:
+            e0, pb = eoff[i], coff[p]
+            for t in range(coff[p + 1] - pb):
+                belief[pb + t] += msg[s0 + emap[e0 + t]]
+        else:
+            log_z += msg[s0]
+    marg = np.zeros(0)
+    pairs = np.zeros(0)
+    if not np.isfinite(log_z):
+        return log_z, marg, pairs
+    moff = np.zeros(n + 1, np.int64)
+    for i in range(n):
+        moff[i + 1] = moff[i] + ccard[i]
+    marg = np.empty(moff[n])
+    smax = 1
+    for i in range(n):
+        if ssize[i] > smax:
+            smax = ssize[i]
+    mx = np.empty(smax)
+    acc = np.empty(smax)
+    for i in range(n - 1, -1, -1):   # downward: full[i] = belief[i] + (parent's sep term - msg)
+        S, K, b0, s0 = ssize[i], ccard[i], coff[i], soff[i]
+        p = parent[i]
+        if p >= 0:
+            e0, pb = eoff[i], coff[p]
+            for s in range(S):
+                mx[s] = -np.inf
+                acc[s] = 0.0
+            for t in range(coff[p + 1] - pb):
+                x = belief[pb + t]
+                s = emap[e0 + t]
+                if x > mx[s]:
+                    mx[s] = x
+            for t in range(coff[p + 1] - pb):
+                s = emap[e0 + t]
+                if mx[s] > -np.inf:
+                    acc[s] += np.exp(belief[pb + t] - mx[s])
+            for s in range(S):
+                ms = msg[s0 + s]
+                if mx[s] == -np.inf or ms == -np.inf:
+                    d = -np.inf
+                else:
+                    d = np.log(acc[s]) + mx[s] - ms
+                for k in range(K):
+                    belief[b0 + k * S + s] += d
+        top = -np.inf
+        for k in range(K):
+            m = -np.inf
+            for s in range(S):
+                x = belief[b0 + k * S + s]
+                if x > m:
+                    m = x
+            if m > -np.inf:
+                a = 0.0
+                for s in range(S):
+                    a += np.exp(belief[b0 + k * S + s] - m)
+                m = np.log(a) + m
+            marg[moff[i] + k] = m
+            if m > top:
+                top = m
+        tot = 0.0
+        for k in range(K):
+            e = np.exp(marg[moff[i] + k] - top)
+            marg[moff[i] + k] = e
+            tot += e
+        for k in range(K):
+            marg[moff[i] + k] /= tot
+    # joint marginals of the wanted factors' scopes (grouped log-sums of their clique)
+    poff = np.zeros(want.shape[0] + 1, np.int64)
+    for w in range(want.shape[0]):
+        f = want[w]
+        poff[w + 1] = poff[w] + foff[f + 1] - foff[f]
+    pairs = np.empty(poff[want.shape[0]])
+    for w in range(want.shape[0]):
+        f = want[w]
+        i = fcl[f]
+        b0, m0, q0, Q = coff[i], fmoff[f], poff[w], poff[w + 1] - poff[w]
+        for q in range(Q):
+            pairs[q0 + q] = -np.inf
+        for t in range(coff[i + 1] - b0):
+            x = belief[b0 + t]
+            q = fmap[m0 + t]
+            if x > pairs[q0 + q]:
+                pairs[q0 + q] = x
+        mq = pairs[q0:q0 + Q].copy()
+        for q in range(Q):
+            pairs[q0 + q] = 0.0
+        for t in range(coff[i + 1] - b0):
+            q = fmap[m0 + t]
+            if mq[q] > -np.inf:
+                pairs[q0 + q] += np.exp(belief[b0 + t] - mq[q])
+        top = -np.inf
+        for q in range(Q):
+            lm = np.log(pairs[q0 + q]) + mq[q] if mq[q] > -np.inf else -np.inf
+            pairs[q0 + q] = lm
+            if lm > top:
+                top = lm
+        tot = 0.0
+        for q in range(Q):
+            e = np.exp(pairs[q0 + q] - top)
+            pairs[q0 + q] = e
+            tot += e
+        for q in range(Q):
+            pairs[q0 + q] /= tot
+    return log_z, marg, pairs
+
+
+def calibrate_flat(plan: Plan, tables, want=()):
+    """:func:`calibrate` and :func:`scope_marginal` in one compiled pass.
+
+    Parameters
+    ----------
+    plan : Plan
+        Of the tree and the factor scopes of ``tables``.
+    tables : list of ndarray
+        Log potential of each factor (over its sorted scope), in the plan's scope order.
+    want : sequence of int
+        Factors whose joint scope marginal is wanted.
+
+    Returns
+    -------
+    (float, list of ndarray or None, list of ndarray)
+        ``log Z``, the marginal of each variable (None when no world is possible) and the joint
+        distribution of each wanted factor's scope (shaped as its table).
+    """
+    values = np.concatenate([np.asarray(t, dtype=np.float64).reshape(-1) for t in tables])
+    w = np.asarray(want, dtype=np.int64)
+    log_z, flat, pairs = _calibrate_flat(*plan.ints, values, w)
+    if not np.isfinite(log_z):
+        return float(log_z), None, []
+    marg = [None] * len(plan.order)
+    at = 0
+    for i, v in enumerate(plan.order.tolist()):
+        k = plan.card[v]
+        marg[v] = flat[at:at + k]
+        at += k
+    out, at = [], 0
+    for f in w.tolist():
+        shape = tuple(plan.card[v] for v in plan.scopes[f])
+        size = int(np.prod(shape))
+        out.append(pairs[at:at + size].reshape(shape))
+        at += size
+    return float(log_z), marg, out
