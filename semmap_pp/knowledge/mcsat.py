@@ -7,8 +7,9 @@ near-uniform one: the slice is a 0/1 factor network on a junction tree, so a cou
 pass and a sampling (downward) pass draw a uniform solution (forward filtering, backward
 sampling). MC-SAT is then a slice sampler whose only error is Monte Carlo error.
 
-All chains move together: every array has the chain axis last, so one iteration is a few numpy
-operations per clause block and per clique. Clauses come in :class:`ClauseBlock` s, instances of
+All chains move together: every array has the chain axis last, so one iteration is a few
+compiled loops per clause block (keep coins, count tables, private atoms) and one per tree pass
+(:mod:`~semmap_pp.knowledge.mcsat_tree`), over arrays reused by every iteration. Clauses come in :class:`ClauseBlock` s, instances of
 one :class:`ClauseTemplate`: the clauses on a scope of junction-tree variables plus *private*
 atoms that occur in no other block (e.g. the SaLe atoms of an adjacent pair on the pairwise fast
 path), which are counted inside the block and drawn uniformly among the allowed ones once the
