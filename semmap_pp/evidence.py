@@ -237,6 +237,54 @@ def unit_geometry(height: int, width: int, resolution: float, params) -> tuple:
     return c, tuple(round(float(v), 6) for v in soft_probabilities(rect, resolution, params)[0])
 
 
+#: side of the square blocks of sizes :class:`GeometryTable` evaluates at once
+GEOMETRY_BLOCK = 16
+
+
+def unit_geometry_block(heights, widths, resolution: float, params) -> list:
+    """``[unit_geometry(h, w, resolution, params) for h, w in zip(heights, widths)]`` in one
+    vectorised evaluation (the same elementwise floating-point operations, so equal item by
+    item; tests/test_evidence.py checks it). Sizes are positive."""
+    n = len(heights)
+    rects = np.zeros((n, 4), dtype=np.int64)
+    rects[:, 2] = heights
+    rects[:, 3] = widths
+    classes = geometry_class(rects, resolution, params).tolist()
+    pr = geometry_probabilities(rects, resolution, params)
+    hard = (pr[np.arange(n), classes] >= params.hard_above).tolist()
+    soft = None if all(hard) else soft_probabilities(rects, resolution, params).tolist()
+    return [(c, None) if h else (c, tuple(round(float(v), 6) for v in soft[k]))
+            for k, (c, h) in enumerate(zip(classes, hard))]
+
+
+class GeometryTable:
+    """:func:`unit_geometry` by size for one resolution and evidence model, filled a block of
+    :data:`GEOMETRY_BLOCK` x :data:`GEOMETRY_BLOCK` sizes at a time (the sampler's resizes meet
+    a new size at almost every step, mostly near the sizes already seen; one vectorised block
+    costs a few times one size)."""
+
+    def __init__(self, resolution: float, params):
+        self.resolution, self.params = resolution, params
+        self._items: dict = {}
+        self.blocks = 0
+
+    def get(self, height: int, width: int) -> tuple:
+        """``unit_geometry(height, width, resolution, params)``."""
+        item = self._items.get((height, width))
+        if item is None:
+            b = GEOMETRY_BLOCK
+            h0, w0 = max(1, height - height % b), max(1, width - width % b)
+            hs, ws = np.meshgrid(np.arange(h0, h0 + b), np.arange(w0, w0 + b), indexing="ij")
+            hs, ws = hs.reshape(-1).tolist(), ws.reshape(-1).tolist()
+            if len(self._items) > 1 << 20:
+                self._items.clear()
+            self.blocks += 1
+            block = unit_geometry_block(hs, ws, self.resolution, self.params)
+            self._items.update(zip(zip(hs, ws), block))
+            item = self._items[(height, width)]
+        return item
+
+
 def knowledge_evidence(units, items, muldoor, adj):
     """The knowledge engine's evidence straight from canonical parts (the sampler's fast path).
 

@@ -35,8 +35,8 @@ from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.derive.doors import door_count
-from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, build_evidence, geometry_class,
-                                geometry_class_compiled, knowledge_evidence, unit_geometry)
+from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, GeometryTable, build_evidence,
+                                geometry_class, geometry_class_compiled, knowledge_evidence)
 from semmap_pp.likelihood import (covered_free, full_tallies, loglik_from_tallies, prepare,
                                   tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
@@ -90,6 +90,7 @@ class Posterior:
         self._door_cache: dict = {}
         self._typing_cache: OrderedDict = OrderedDict()   # (provider, evidence key, K) -> arrays
         self._map_cache: OrderedDict = OrderedDict()      # same key -> MAP types alone
+        self._geometry = GeometryTable(frame.cells.resolution, model.evidence)
         c, p, e = self.cells, model.prior, model.evidence
         # per category, the larger gain of its corridor and non-corridor variants: with it the
         # tallies of any typing bound the log-likelihood of every typing of the same geometry
@@ -205,6 +206,7 @@ class Posterior:
         state = self.__dict__.copy()   # caches stay behind (per process)
         state["_door_cache"], state["_typing_cache"] = {}, OrderedDict()
         state["_map_cache"] = OrderedDict()
+        state["_geometry"] = GeometryTable(self.cells.resolution, self.model.evidence)
         return state
 
     def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
@@ -440,17 +442,20 @@ class Tracker:
 
     def _knowledge_evidence(self, world, adj, doors):
         post = self.post
-        c, p = post.cells, post.model.evidence
-        units = np.flatnonzero(world.active).tolist()
-        rects = world.rects.tolist()
-        items = [unit_geometry(rects[u][2] - rects[u][0], rects[u][3] - rects[u][1],
-                               c.resolution, p) for u in units]
+        active = world.active
+        units = np.flatnonzero(active).tolist()
+        r = world.rects[units]
+        get = post._geometry.get   # = unit_geometry by size
+        items = [get(h, w) for h, w in zip((r[:, 2] - r[:, 0]).tolist(),
+                                             (r[:, 3] - r[:, 1]).tolist())]
         muldoor = []
         if self._with_doors:
-            counts = doors.sum(axis=1).tolist()
-            muldoor = [u for u in units if counts[u] >= p.multiple_doors]
-        iu, ju = np.nonzero(np.triu(adj, 1))
-        return knowledge_evidence(units, items, muldoor, list(zip(iu.tolist(), ju.tolist())))
+            many = doors.sum(axis=1) >= post.model.evidence.multiple_doors
+            muldoor = np.flatnonzero(many & active).tolist()
+        iu, ju = np.nonzero(adj)   # row-major: the pairs p < q come out sorted
+        up = iu < ju
+        return knowledge_evidence(units, items, muldoor,
+                                  list(zip(iu[up].tolist(), ju[up].tolist())))
 
     def _knowledge_types(self, world, adj, changed, map_only=False):
         """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on).

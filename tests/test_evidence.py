@@ -95,3 +95,22 @@ def test_soft_evidence_takes_few_values():
                 assert abs(sum(soft) - 1) < 1e-5 and min(soft) > 0
     step = P.soft_step
     assert 1 < len(values) <= (round(1 / step) + 1) ** 2
+
+
+def test_geometry_table_equals_unit_geometry_size_by_size():
+    """The sampler's block-vectorised size table gives exactly unit_geometry's items (hard and
+    soft, every size measure), including block edges and sizes below the first block."""
+    from semmap_pp.evidence import GEOMETRY_BLOCK, GeometryTable, unit_geometry
+    rng = np.random.default_rng(3)
+    b = GEOMETRY_BLOCK
+    for measure in ("short_side", "long_side", "area"):
+        p = P.__class__(**{**P.__dict__, "size_measure": measure})
+        table = GeometryTable(RES, p)
+        sizes = [(int(h), int(w)) for h, w in rng.integers(1, 500, (400, 2))]
+        sizes += [(1, 1), (b - 1, b), (b, b - 1), (2 * b, 3 * b - 1), (140, 60), (60, 140)]
+        n_soft = 0
+        for h, w in sizes:
+            item = table.get(h, w)
+            assert item == unit_geometry(h, w, RES, p), (measure, h, w)
+            n_soft += item[1] is not None
+        assert n_soft > 0 and table.blocks < len(sizes)

@@ -76,3 +76,9 @@ def test_plan_is_cached_per_scope_list():
     jt = JunctionTree([3, 2], scopes)
     assert jt.plan(scopes) is jt.plan(list(scopes))
     assert jt.plan(scopes[:2] + [(0, 1), (0,)]) is not jt.plan(scopes)
+
+
+def test_flat_calibration_of_an_empty_network():
+    jt = JunctionTree([], [])
+    log_z, marg, joint = calibrate_flat(jt.plan([]), [], [])
+    assert log_z == 0.0 and marg == [] and joint == []

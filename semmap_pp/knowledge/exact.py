@@ -549,7 +549,8 @@ def calibrate_flat(plan: Plan, tables, want=()):
         ``log Z``, the marginal of each variable (None when no world is possible) and the joint
         distribution of each wanted factor's scope (shaped as its table).
     """
-    values = np.concatenate([np.asarray(t, dtype=np.float64).reshape(-1) for t in tables])
+    values = (np.concatenate([np.asarray(t, dtype=np.float64).reshape(-1) for t in tables])
+              if len(tables) else np.zeros(0))
     w = np.asarray(want, dtype=np.int64)
     log_z, flat, pairs = _calibrate_flat(*plan.ints, values, w)
     if not np.isfinite(log_z):
