@@ -430,6 +430,7 @@ class Tracker:
                 for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
                     self._doors[p, q] = self._doors[q, p] = post.pair_doors(w.rects[p], w.rects[q])
             self._evidence = self._knowledge_evidence(w, self._typ.adj, self._doors)
+            self._many = self._muldoor(w, self._doors)
 
     @property
     def world(self) -> W.World:
@@ -457,6 +458,35 @@ class Tracker:
         return knowledge_evidence(units, items, muldoor,
                                   list(zip(iu[up].tolist(), ju[up].tolist())))
 
+    def _muldoor(self, world, doors):
+        """Slots with multiple doors (bool (K,), the MulDoor evidence; all False without doors)."""
+        if not self._with_doors:
+            return np.zeros(world.capacity, dtype=bool)
+        return (doors.sum(axis=1) >= self.post.model.evidence.multiple_doors) & world.active
+
+    def _same_evidence(self, world, adj, doors, changed) -> bool:
+        """Whether the evidence of the proposed world equals the current world's, checked on
+        the changed slots alone (without building it): every part of the evidence is the same
+        when each changed slot keeps its presence, its geometry item and its adjacency row (the
+        edit touches no other row) and no unit's MulDoor flag changes."""
+        cur = self._typ
+        ow, oadj = cur.world, cur.adj
+        get = self.post._geometry.get
+        active, oactive = world.active, ow.active
+        for s in changed.tolist():
+            a = active[s]
+            if a != oactive[s]:
+                return False
+            if not a:
+                continue
+            r, o = world.rects[s].tolist(), ow.rects[s].tolist()
+            if (r[2] - r[0], r[3] - r[1]) != (o[2] - o[0], o[3] - o[1]) and \
+                    get(r[2] - r[0], r[3] - r[1]) != get(o[2] - o[0], o[3] - o[1]):
+                return False
+            if not np.array_equal(adj[s], oadj[s]):
+                return False
+        return not self._with_doors or np.array_equal(self._muldoor(world, doors), self._many)
+
     def _knowledge_types(self, world, adj, changed, map_only=False):
         """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on).
 
@@ -474,6 +504,9 @@ class Tracker:
                     for t in np.flatnonzero(adj[s]).tolist():
                         p, q = (s, t) if s < t else (t, s)
                         doors[p, q] = doors[q, p] = post.pair_doors(rects[p], rects[q])
+        if self._same_evidence(world, adj, doors, changed):
+            cur = self._typ
+            return cur.world.types, cur.sale, doors, self._evidence
         ev = self._knowledge_evidence(world, adj, doors)
         if ev.key == self._evidence.key:
             cur = self._typ
@@ -566,7 +599,8 @@ class Tracker:
         if prop.bounded:
             raise ValueError("a proposal bounded below its floor cannot be accepted")
         self.hist, self.gamma_total, knowledge = prop.patch
+        self._typ = prop.typing
         if knowledge is not None:
             self._doors, self._evidence = knowledge
-        self._typ = prop.typing
+            self._many = self._muldoor(prop.world, self._doors)
         self.loglik, self.logprior, self.logp = prop.loglik, prop.logprior, prop.logp

@@ -343,3 +343,45 @@ def test_map_types_bound_skips_only_proposals_below_the_floor():
     (a, calls_floor), (b, calls_full) = runs
     assert len(a) == len(b) >= 20 and all(np.array_equal(x, y) for x, y in zip(a, b))
     assert calls_floor < calls_full
+
+
+def test_same_evidence_shortcut_is_exact_and_makes_the_same_moves(monkeypatch):
+    """Tracker._same_evidence (evidence unchanged, judged on the changed slots alone) says True
+    only when the evidence built in full equals the current one, and a chain with the shortcut
+    makes exactly the moves of one without it (table3.lp engine, floors passed)."""
+    from pathlib import Path
+
+    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.knowledge import KnowledgeEngine
+    from semmap_pp.mcmc import run_chain
+    from semmap_pp.posterior import Tracker
+
+    rules = Path(__file__).resolve().parents[1] / "rules/table3.lp"
+    frame = build_frame_from_classes(knowledge_floor(), 0.25, MODEL, theta=0.0)
+    same = Tracker._same_evidence
+    seen = {True: 0, False: 0}
+
+    def checked(self, world, adj, doors, changed):
+        out = same(self, world, adj, doors, changed)
+        seen[out] += 1
+        if out:
+            assert self._knowledge_evidence(world, adj, doors) == self._evidence
+        return out
+
+    def chain(check):
+        post = Posterior(frame, MODEL, KnowledgeEngine.from_file(rules))
+        post.knowledge_on = True
+        data = data_from_frame(post.frame)
+        tr = post.start(W.empty(6))
+        trace = []
+        run_chain(np.random.default_rng(11), tr, default_mix(data.settings), 1500, data, 20.0,
+                  callback=lambda i, t, ok: trace.append((ok, t.logp)))
+        return trace, tr
+
+    monkeypatch.setattr(Tracker, "_same_evidence", checked)
+    with_shortcut, tr = chain(True)
+    assert seen[True] >= 50 and seen[False] >= 50
+    monkeypatch.setattr(Tracker, "_same_evidence", lambda *a: False)
+    without, _ = chain(False)
+    assert with_shortcut == without and sum(ok for ok, _ in without) >= 10
+    assert tr.logp == pytest.approx(tr.post.evaluate(tr.world).total, rel=1e-9, abs=0)
