@@ -28,8 +28,8 @@ def edited(tmp_path, old, new):
 @pytest.mark.parametrize("old,new,key", [
     ("psi = 0.5", "psi = 1.5", "sensor.psi"),
     ("psi = 0.5", "", "sensor.psi: missing"),
-    ("wall = [0.25, 0.25, 0.50]", "wall = [0.25, 0.25, 0.60]", "sensor.corridor.wall: row must sum to 1"),
-    ("wall = [0.25, 0.25, 0.50]", "wall = [1.25, -0.75, 0.50]", "probabilities must lie in [0, 1]"),
+    ("wall = [0.10, 0.25, 0.65]", "wall = [0.10, 0.25, 0.75]", "sensor.corridor.wall: row must sum to 1"),
+    ("wall = [0.10, 0.25, 0.65]", "wall = [1.10, -0.75, 0.65]", "probabilities must lie in [0, 1]"),
     ("k_max = 64", "k_max = 6.5", "prior.k_max: expected an integer"),
     ('size_measure = "short_side"', 'size_measure = "volume"', "evidence.size_measure"),
     ("door_max_m = 2.5", "door_max_m = 0.1", "world.door_max_m"),

@@ -218,7 +218,7 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels():
         checked["soft"] += len(ev.soft)
 
     rng = np.random.default_rng(7)
-    stats = run_chain(rng, Checked(tr), default_mix(data.settings), 20_000, data, temperature=5.0,
+    stats = run_chain(rng, Checked(tr), default_mix(data.settings), 20_000, data, temperature=10.0,
                       callback=check)
     assert stats.attempted.sum() == 20_000 and stats.accepted.sum() > 100
     assert checked["proposals"] >= 300 and checked["soft"] > 0
