@@ -75,3 +75,50 @@ def test_map_types_equal_the_full_inference():
         assert third.infer(ev).map_types == third.map_types(ev)   # from the result cache
     mcsat = KnowledgeEngine(rules, method="mcsat")
     assert not mcsat.has_map_only
+
+
+def _evidences(n, seed):
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        ro = {u: float(rng.choice(PROBS)) for u in (1, 2, 3)}
+        ha = {u: float(rng.choice(PROBS)) for u in (2, 3, 4)}
+        md = {u: 1.0 for u in (1, 2, 3, 4) if rng.random() < 0.4}
+        out.append(Evidence.build([1, 2, 3, 4], rolike=ro, halike=ha, muldoor=md,
+                                  adj=[(1, 2), (2, 3), (3, 4), (1, 3)]))
+    return out
+
+
+def test_template_store_gives_bitwise_the_grounded_templates(tmp_path):
+    """A second engine on the same store grounds nothing and gives bitwise the results of an
+    engine without a store; a damaged store file is ignored; another program has its own key."""
+    rules = load_rules(RULES)
+    evs = _evidences(20, 7)
+    plain = KnowledgeEngine(rules, method="exact", template_store=False)
+    first = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
+    ref = [plain.infer(ev) for ev in evs]
+    for ev in evs:
+        first.infer(ev)
+    assert first.local.groundings > 0 and plain.local.store is None
+    (store,) = tmp_path.glob("templates-*.pkl")
+    second = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
+    for ev, r in zip(evs, ref):
+        got = second.infer(ev)
+        assert got.map_types == r.map_types and got.log_z == r.log_z and got.sale == r.sale
+        assert all(np.array_equal(got.types[u], r.types[u]) for u in ev.units)
+    assert second.local.groundings == 0
+    store.write_bytes(b"not a pickle")
+    third = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
+    assert third.infer(evs[0]).map_types == ref[0].map_types and third.local.groundings > 0
+    other = KnowledgeEngine(load_rules("rules/none.lp"), method="exact", template_store=tmp_path)
+    assert other.local is None or other.local.store != third.local.store
+
+
+def test_template_store_directory_from_the_environment(monkeypatch, tmp_path):
+    from semmap_pp.knowledge.local import STORE_ENV, default_store
+
+    monkeypatch.setenv(STORE_ENV, str(tmp_path))
+    assert default_store() == tmp_path
+    monkeypatch.setenv(STORE_ENV, "off")
+    assert default_store() is None
+    assert KnowledgeEngine(load_rules(RULES)).local.store is None

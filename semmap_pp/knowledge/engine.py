@@ -28,7 +28,7 @@ from semmap_pp.knowledge.exact import (MAX_CLIQUE_STATES, JunctionTree, TooDense
                                        calibrate_flat, decode_max, merged_potentials)
 from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
-from semmap_pp.knowledge.local import LocalModel, is_pairwise
+from semmap_pp.knowledge.local import LocalModel, default_store, is_pairwise
 from semmap_pp.knowledge.map import map_clingo, map_pairwise_rc2, map_rc2
 from semmap_pp.knowledge.mcsat import mcsat_marginals
 from semmap_pp.knowledge.mcsat_local import LocalClauses, mcsat_local
@@ -101,12 +101,18 @@ class KnowledgeEngine:
         Use cached unit/pair templates (:mod:`~semmap_pp.knowledge.local`, and for MC-SAT
         :mod:`~semmap_pp.knowledge.mcsat_local`) when the rule set is pairwise-local and the MAP
         method is the junction tree.
+    template_store : bool or path
+        Where the fast path keeps its grounded templates between processes: ``True`` the
+        default directory (:func:`~semmap_pp.knowledge.local.default_store`, which the
+        ``SEMMAP_TEMPLATE_CACHE`` variable sets or turns off), a directory, or ``False`` for
+        none (every process grounds its own).
     """
 
     def __init__(self, rules: RuleSet, method: str = "auto", map_method: str = "jt",
                  n_chains: int = 768, n_iter: int = 38, burn_in: int = 12,
                  cache_size: int = 4096, seed: int = 0, fast: bool = True,
-                 auto_max_states: int = AUTO_MAX_STATES, bp: BPSettings = BPSettings()):
+                 auto_max_states: int = AUTO_MAX_STATES, bp: BPSettings = BPSettings(),
+                 template_store=True):
         if method not in METHODS:
             raise RuleError(rules.path, f"unknown inference method {method!r}; use one of {METHODS}")
         if map_method not in MAP_METHODS:
@@ -117,8 +123,10 @@ class KnowledgeEngine:
         self.cache_size, self.seed = int(cache_size), int(seed)
         self.auto_max_states, self.bp = int(auto_max_states), bp
         self._cache: OrderedDict = OrderedDict()
-        self.local = (LocalModel(rules) if fast and map_method == "jt" and is_pairwise(rules)
-                      else None)
+        store = (default_store() if template_store is True
+                 else (template_store or None))
+        self.local = (LocalModel(rules, store=store)
+                      if fast and map_method == "jt" and is_pairwise(rules) else None)
         self.local_clauses = (LocalClauses(rules) if self.local is not None and method == "mcsat"
                               else None)
         self.hits = self.misses = 0
