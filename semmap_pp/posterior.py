@@ -95,7 +95,7 @@ class Posterior:
         # per category, the larger gain of its corridor and non-corridor variants: with it the
         # tallies of any typing bound the log-likelihood of every typing of the same geometry
         g = self.data.gain.reshape(2, -1)
-        self._gain_max = np.concatenate([np.maximum(g[0], g[1])] * 2)
+        self._gain_max = _ro(np.concatenate([np.maximum(g[0], g[1])] * 2))
         self._ip = np.array([CORRIDOR, c.wall, c.adjacency_dilation, frame.shape[0], frame.shape[1],
                              c.min_side, c.max_side,
                              SIZE_MEASURES.index(e.size_measure)], np.int64)
@@ -354,6 +354,21 @@ def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_
                   hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp)
 
 
+@numba.njit(cache=True, nogil=True)
+def _retype_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects, new_active,
+                  changed, geometry, adj, hist, gamma_total, no_sale, never_sale, prior_n, ip,
+                  fp):  # pragma: no cover - compiled
+    """:func:`_retype_changed` (knowledge on: no types) then the type-free upper bound of the
+    proposal's log posterior (:func:`_score` with the better gain per category and the SaLe
+    factor at most 1), in one call; ``hist`` is not written."""
+    no_types = np.zeros(0, np.int8)
+    _retype_changed(new_rects, new_active, changed, geometry, adj, no_types, no_types, ip, fp)
+    loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
+                                  new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
+                                  never_sale, True, prior_n, ip, fp)
+    return 0 + loglik + logprior
+
+
 def _ro(a):
     """``a`` as a read-only array (a view when it is writable). The compiled calls get every
     input read-only, whatever made it: one signature each, not one per mix of writable and
@@ -386,10 +401,10 @@ class Proposal:
         self.typing, self.patch, self.bounded = typing, patch, bounded
 
 
-_NO_TYPES = np.zeros(0, np.int8)
-_NO_SALE = np.zeros((1, 1))
+_NO_TYPES = np.zeros(0, np.int8)   # written by _retype_changed only with fixed types
+_NO_SALE = _ro(np.zeros((1, 1)))
 # P(SaLe) of every pair below any threshold: the SaLe factor's upper bound 1 (log 0)
-_NEVER_SALE = np.full((len(UNIT_TYPES), len(UNIT_TYPES)), -np.inf)
+_NEVER_SALE = _ro(np.full((len(UNIT_TYPES), len(UNIT_TYPES)), -np.inf))
 
 
 class Tracker:
@@ -551,18 +566,19 @@ class Tracker:
             types.setflags(write=False)
             knowledge = sale = None
         else:
-            _retype_changed(_ro(new_world.rects), _ro(new_world.active), changed, geometry, adj,
-                            _NO_TYPES, _NO_TYPES, post._ip, post._fp)
             if floor is not None:
                 # bound 1, no types: per category the better of the corridor / non-corridor
-                # gains, SaLe factor at most 1
-                bound = sum(_score_ro(
-                    data.xsum, post._gain_max, ow.rects, ow.active, ow.types, new_world.rects,
-                    new_world.active, ow.types, hist.copy(), self.gamma_total, adj, _NO_SALE,
-                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp)[:2])
+                # gains, SaLe factor at most 1 (with the retyping of the changed slots)
+                bound = _retype_bound(
+                    data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                    _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, hist,
+                    self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp)
                 if bound + 1e-9 * abs(bound) < floor:
                     self.skipped[0] += 1
                     return self._bounded(new_world)
+            else:
+                _retype_changed(_ro(new_world.rects), _ro(new_world.active), changed, geometry,
+                                adj, _NO_TYPES, _NO_TYPES, post._ip, post._fp)
             types, sale, doors, ev = self._knowledge_types(new_world, adj, changed,
                                                            map_only=floor is not None)
             if sale is None:
