@@ -232,6 +232,8 @@ class LocalModel:
         self._reduced: dict = {}
         self._unit_types: dict = {}
         self._structures: dict = {}
+        self._raw_flags: dict = {}     # pair_flags / reduced_pair by the units' own keys
+        self._raw_reduced: dict = {}
         self.groundings = 0
         self.store = None
         if store is not None:
@@ -518,13 +520,13 @@ def _constant_on(cond, table):
 
 
 def _fold(tables, terms):
-    """``tables[i] + Σ`` of the ``(i, vector)`` terms (new arrays; the inputs are cached)."""
-    if not terms:
-        return list(tables)
-    k = len(tables[0])
+    """``tables[i] + Σ`` of the ``(i, vector)`` terms, added in order (new arrays; the inputs
+    are cached). Rows of one 2-D array when the tables have one length."""
+    k = len(tables[0]) if tables else 0
     if all(len(t) == k for t in tables):
-        out = np.stack(tables)
-        np.add.at(out, np.array([i for i, _ in terms]), np.stack([v for _, v in terms]))
+        out = np.array(tables, dtype=np.float64).reshape(len(tables), k)
+        for i, v in terms:
+            out[i] += v
         return list(out)
     out = [t.copy() for t in tables]
     for i, v in terms:
@@ -533,30 +535,43 @@ def _fold(tables, terms):
 
 
 def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
-    maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
-    keys = [_unit_key(maps, u) for u in ev.units]
-    index = {u: i for i, u in enumerate(ev.units)}
-    softs = [model.unit(key)[1] for key in keys]
+    dicts = [dict(ev.unary(name)) for name in SOFT_PREDICATES]
+    units = ev.units
+    keys = [tuple([d.get(u, 0.0) for d in dicts]) for u in units]
+    index = {u: i for i, u in enumerate(units)}
+    unit = model.unit
+    softs = [unit(key)[1] for key in keys]
     collapse = [True] * len(keys)
     pairs = []
+    flags_of = model._raw_flags
     for p, q in ev.adj:
         i, j = index[p], index[q]
-        fl = model.pair_flags(keys[i], keys[j])
-        collapse[i] &= fl[0]
-        collapse[j] &= fl[1]
+        kk = (keys[i], keys[j])
+        fl = flags_of.get(kk)
+        if fl is None:
+            fl = flags_of[kk] = model.pair_flags(*kk)
+        if not fl[0]:
+            collapse[i] = False
+        if not fl[1]:
+            collapse[j] = False
         pairs.append((p, q, i, j))
+    cuts = [softs[i] if collapse[i] else 0 for i in range(len(keys))]
     shift, usum, umax = [], [], []
+    unit_types = model.unit_types
     for i, key in enumerate(keys):
-        k = softs[i] if collapse[i] else 0
-        s_tab, m_tab = model.unit_types(key, k)
+        s_tab, m_tab = unit_types(key, cuts[i])
         usum.append(s_tab)
         umax.append(m_tab)
-        shift.append(softs[i] - k)
+        shift.append(softs[i] - cuts[i])
     sum_pairs, max_pairs, sale = [], [], {}
     add_sum, add_max = [], []
+    reduced_of = model._raw_reduced
     for p, q, i, j in pairs:
-        s_tab, s_sep, c, m_tab, m_sep = model.reduced_pair(
-            keys[i], keys[j], softs[i] if collapse[i] else 0, softs[j] if collapse[j] else 0)
+        rk = (keys[i], keys[j], cuts[i], cuts[j])
+        red = reduced_of.get(rk)
+        if red is None:
+            red = reduced_of[rk] = model.reduced_pair(*rk)
+        s_tab, s_sep, c, m_tab, m_sep = red
         if s_sep is not None:
             add_sum.append((i, s_sep[0]))
             add_sum.append((j, s_sep[1]))
@@ -569,4 +584,4 @@ def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
         else:
             max_pairs.append((i, j, m_tab))
     usum, umax = _fold(usum, add_sum), _fold(umax, add_max)
-    return TypeNetwork(tuple(ev.units), shift, usum, umax, sum_pairs, max_pairs, sale)
+    return TypeNetwork(tuple(units), shift, usum, umax, sum_pairs, max_pairs, sale)
