@@ -254,6 +254,33 @@ def observed_truth(truth: dict) -> dict:
     return out
 
 
+def error_breakdown(pred: dict, truth: dict, shape, iou_min: float = 0.5) -> dict:
+    """Where unit F1 is lost: predicted units matching no true unit (IoU < ``iou_min`` with every
+    one), and of those the ones lying mostly (> half their cells) outside the building (ray fans seen
+    through windows and exits); true units matched by none, and of those the ones never seen
+    (``explored`` false) and the ones cut into pieces (>= 2 predicted units each holding > 20 % of
+    their own cells and > 10 % of the true unit's)."""
+    from semmap_pp.evaluate.truth import polygon_mask
+    T = [polygon_mask(u["corners_px"], shape) for u in truth["units"]]
+    P = [polygon_mask(u["vertices_px"], shape) for u in pred["units"]]
+    union = np.any(T, axis=0) if T else np.zeros(shape, bool)
+    iou = np.array([[(p & t).sum() / max(1, (p | t).sum()) for t in T] for p in P]).reshape(len(P), len(T))
+    out = dict(pred_unmatched=0, pred_outside_building=0, true_missed=0, true_missed_unseen=0,
+               true_missed_cut=0)
+    for i, p in enumerate(P):
+        if not len(T) or iou[i].max() < iou_min:
+            out["pred_unmatched"] += 1
+            out["pred_outside_building"] += int((p & ~union).sum() > 0.5 * p.sum())
+    for j, t in enumerate(T):
+        if not len(P) or iou[:, j].max() < iou_min:
+            out["true_missed"] += 1
+            if not truth["units"][j].get("explored", True):
+                out["true_missed_unseen"] += 1
+            elif sum((p & t).sum() > 0.2 * p.sum() and (p & t).sum() > 0.1 * t.sum() for p in P) >= 2:
+                out["true_missed_cut"] += 1
+    return out
+
+
 def building_roi(truth: dict, shape, default: np.ndarray, resolution: float, margin_m: float = 0.25):
     """The building as region of interest: the union of the true units (every one, seen or not),
     grown by ``margin_m`` to hold their walls, within the default ROI. The analogue of the paper's
@@ -307,6 +334,7 @@ def bench_synthetic(args, model, rules) -> dict:
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "observed_units": len(seen["units"]), "unit_f1_observed": round(so.unit_f1, 4),
                "type_accuracy_observed": _r4(so.type_accuracy), "door_f1_observed": _r4(_door_f1(so)),
+               "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, f"synth-{seed}", sm)
@@ -316,7 +344,12 @@ def bench_synthetic(args, model, rules) -> dict:
                    f"{row['seconds']} s")
     means = {k: _mean(rows, k) for k in ("cpr", "cpr_building", "unit_f1", "type_accuracy", "door_f1", "unit_f1_observed",
                                          "type_accuracy_observed", "door_f1_observed", "seconds")}
-    return {"rows": rows, "means": means,
+    errors = {k: sum(r["errors"][k] for r in rows if "errors" in r)
+              for k in ("pred_unmatched", "pred_outside_building", "true_missed", "true_missed_unseen",
+                        "true_missed_cut")}
+    errors |= {"pred_units": sum(r["units"] for r in rows if "units" in r),
+               "true_units": sum(r["true_units"] for r in rows if "true_units" in r)}
+    return {"rows": rows, "means": means, "errors": errors,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}
 
