@@ -15,7 +15,13 @@ empty world with the plain loop (``--burn`` kernels) so that it holds units; the
   ``knowledge_first_kernels_per_cpu_s`` is the rate of the warm-up kernels (the fresh engine's
   templates are built there, as in every ``semmap map`` process), and ``knowledge_counts`` what
   the target did in the timed kernels (proposals evaluated, skipped by the floor bound, evidence
-  unchanged, engine cache hits and misses).
+  unchanged, engine cache hits and misses); ``knowledge_template_groundings`` counts the clingo
+  groundings of the fresh engine (0 once the template store holds them, as in every later
+  ``semmap map`` process; ``SEMMAP_TEMPLATE_CACHE=off`` measures a process without the store);
+* ``knowledge_pymc_kernels_per_s``: the same start world with knowledge on through ``pm.sample``,
+  one chain (``--knowledge-pymc-draws`` draws of ``--n-inner`` kernels, a fresh engine and
+  posterior, ``SampleResult.seconds``: wall time around ``pm.sample``, PyMC's set-up included;
+  ``..._per_cpu_s`` the process CPU time around ``sample_worlds``).
 
 ``--only knowledge`` runs the burn-in and the knowledge measurement alone.
 """
@@ -52,6 +58,9 @@ def add_arguments(parser) -> None:
                         "from the burnt-in chain")
     parser.add_argument("--knowledge-warm", type=int, default=300)
     parser.add_argument("--knowledge-kernels", type=int, default=1500)
+    parser.add_argument("--knowledge-pymc-draws", type=int, default=60,
+                        help="draws of --n-inner kernels through pm.sample with knowledge on "
+                        "(0: skip)")
     parser.add_argument("--only", choices=("all", "knowledge"), default="all")
 
 
@@ -92,14 +101,27 @@ def knowledge_rate(args, frame, model, data, start) -> dict:
     counts.update(engine_hits=engine.hits - hits0, engine_misses=engine.misses - misses0,
                   accepted=int(stats.accepted.sum()))
     full = post.evaluate(tracker.world).total
-    return {
+    out = {
         "knowledge_rules": Path(args.rules).name, "knowledge_start": args.knowledge_start,
         "knowledge_units": wm.n_units(tracker.world),
         "knowledge_first_kernels_per_cpu_s": round(args.knowledge_warm / max(c_warm, 1e-9), 1),
         "knowledge_kernels_per_cpu_s": round(args.knowledge_kernels / max(c_timed, 1e-9), 1),
         "knowledge_counts": counts,
+        "knowledge_template_groundings": engine.local.groundings if engine.local else None,
         "knowledge_tracker_error": abs(tracker.logp - full) / max(abs(full), 1.0),
     }
+    if args.knowledge_pymc_draws > 0:
+        post = Posterior(frame, model, KnowledgeEngine.from_file(args.rules))
+        post.knowledge_on = True
+        c0 = time.process_time()
+        res = sample_worlds(post, data, [start], draws=args.knowledge_pymc_draws, tune=0,
+                            chains=1, cores=1, n_inner=args.n_inner, seed=args.seed + 2)
+        c_pymc = time.process_time() - c0
+        n = args.knowledge_pymc_draws * args.n_inner
+        out.update(knowledge_pymc_kernels=n,
+                   knowledge_pymc_kernels_per_s=round(n / res.seconds, 1),
+                   knowledge_pymc_kernels_per_cpu_s=round(n / c_pymc, 1))
+    return out
 
 
 def run(args) -> dict:
