@@ -498,9 +498,10 @@ class Tracker:
             if (r[2] - r[0], r[3] - r[1]) != (o[2] - o[0], o[3] - o[1]) and \
                     get(r[2] - r[0], r[3] - r[1]) != get(o[2] - o[0], o[3] - o[1]):
                 return False
-            if not np.array_equal(adj[s], oadj[s]):
+            if adj[s].tobytes() != oadj[s].tobytes():
                 return False
-        return not self._with_doors or np.array_equal(self._muldoor(world, doors), self._many)
+        return (not self._with_doors
+                or self._muldoor(world, doors).tobytes() == self._many.tobytes())
 
     def _knowledge_types(self, world, adj, changed, map_only=False):
         """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on).
