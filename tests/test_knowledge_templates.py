@@ -110,6 +110,12 @@ def test_template_store_gives_bitwise_the_grounded_templates(tmp_path):
     store.write_bytes(b"not a pickle")
     third = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
     assert third.infer(evs[0]).map_types == ref[0].map_types and third.local.groundings > 0
+    import pickle
+    for foreign in (pickle.dumps(["a", "list"]), pickle.dumps(({1: 2}, "not a dict")),
+                    pickle.dumps((1, 2, 3))):   # readable pickles of the wrong shape: ignored too
+        store.write_bytes(foreign)
+        fourth = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
+        assert fourth.infer(evs[0]).map_types == ref[0].map_types
     other = KnowledgeEngine(load_rules("rules/none.lp"), method="exact", template_store=tmp_path)
     assert other.local is None or other.local.store != third.local.store
 

@@ -250,7 +250,9 @@ class LocalModel:
         try:
             with open(self.store, "rb") as fh:
                 units, pairs = pickle.load(fh)
-        except (OSError, EOFError, pickle.UnpicklingError, ValueError, TypeError):
+            if not (isinstance(units, dict) and isinstance(pairs, dict)):
+                return
+        except Exception:   # noqa: BLE001 - any unreadable or foreign file: the store is only a cache
             return
         for key, val in units.items():
             self._units.setdefault(key, val)
@@ -264,6 +266,7 @@ class LocalModel:
             return
         self._load()
         units = {k: v for k, v in self._units.items() if self.structure(k) == k}
+        tmp = None
         try:
             self.store.parent.mkdir(parents=True, exist_ok=True)
             fd, tmp = tempfile.mkstemp(dir=self.store.parent, prefix=".templates-")
@@ -271,7 +274,11 @@ class LocalModel:
                 pickle.dump((units, dict(self._pairs)), fh, protocol=pickle.HIGHEST_PROTOCOL)
             os.replace(tmp, self.store)
         except OSError:
-            pass
+            if tmp is not None:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
 
     def structure(self, key):
         """:func:`_structure` of ``key`` (cached)."""
