@@ -1,0 +1,124 @@
+"""The kernels propose exactly what they proposed before their speed-ups.
+
+``tests/data/kernels_frozen.npz`` holds, for the cartesium lattice (its class map stored in the file)
+and worlds reached by a random walk of the kernels on it, the outcome of a few thousand seeded
+proposals per kernel made by the code of commit 6e5ed88: a hash of the proposed world, the log
+proposal ratio, the changed slots and the next number of the generator (so the kernel consumed the
+random stream the same way). Any change to what a kernel proposes, its log ratio, or how many
+random numbers it draws fails here. ``python tests/test_kernels_frozen.py`` rewrites the fixture
+(only when a change of the proposal distribution is intended).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from semmap_pp import world as wm
+from semmap_pp.kernels import KERNELS, Mix, build_data
+
+FIXTURE = Path(__file__).parent / "data" / "kernels_frozen.npz"
+N_PER_KERNEL = 2000
+NO_PROPOSAL = -1.0e300          # log ratio stored for a ``None`` proposal
+
+
+def _data(classes, params):
+    min_side, max_side, wall, share, door_min, door_max = (int(v) for v in params)
+    return build_data(classes, min_side=min_side, max_side=max_side, wall_cells=wall, wall_share=share,
+                      door_min=door_min, door_max=door_max)
+
+
+def _world_hash(world) -> int:
+    h = hashlib.blake2b(digest_size=8)
+    for a in (world.rects, world.active, world.types):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return int.from_bytes(h.digest(), "little", signed=True)
+
+
+def _record(kernel, worlds, data):
+    """(hash, log ratio, changed slots (padded -1), next random) of seeded proposals of ``kernel``."""
+    n = N_PER_KERNEL
+    hashes, ratios = np.zeros(n, np.int64), np.zeros(n)
+    changed, nxt = np.full((n, 2), -1, np.int64), np.zeros(n)
+    for i in range(n):
+        rng = np.random.default_rng([7, i])
+        world = worlds[i % len(worlds)]
+        p = kernel(rng, world, data)
+        if p is None:
+            ratios[i] = NO_PROPOSAL
+        else:
+            hashes[i], ratios[i] = _world_hash(p.world), p.log_ratio
+            changed[i, :len(p.changed_slots)] = p.changed_slots
+            assert p.world.rects.dtype == np.int32 and p.world.active.dtype == bool
+        nxt[i] = rng.random()
+    return hashes, ratios, changed, nxt
+
+
+def _walk_worlds(data, capacity, steps=3000, every=60):
+    """Worlds visited by a walk of all kernels, every proposal accepted (deterministic, seeded)."""
+    rng = np.random.default_rng(2026)
+    mix = Mix([(KERNELS[k], w) for k, w in [("add_remove", 1), ("split_merge", 2), ("allocate_delete", 3),
+                                            ("shrink_dilate", 2), ("interchange", 2)]])
+    w, out = wm.empty(capacity), []
+    for step in range(1, steps + 1):
+        _, p = mix(rng, w, data)
+        if p is not None:
+            w = p.world
+        if step % every == 0:
+            out.append(w)
+    return out
+
+
+def write_fixture() -> None:
+    from semmap_pp.frame import build_frame
+    from semmap_pp.grid import load_map
+    from semmap_pp.model import load_model
+
+    model = load_model()
+    root = Path(__file__).resolve().parents[1]
+    frame = build_frame(load_map(root / "data/maps/ubremen-cartesium.yaml"), model)
+    c = frame.cells
+    params = np.array([c.min_side, c.max_side, c.wall, c.wall, c.door_min, c.door_max], np.int64)
+    classes = np.ascontiguousarray(frame.classes, np.uint8)
+    data = _data(classes, params)
+    worlds = _walk_worlds(data, model.prior.k_max)
+    out = {"classes": classes, "params": params,
+           "rects": np.stack([w.rects for w in worlds]), "active": np.stack([w.active for w in worlds]), "types": np.stack([w.types for w in worlds])}
+    for kind, kernel in KERNELS.items():
+        for name, a in zip(("hash", "ratio", "changed", "next"), _record(kernel, worlds, data)):
+            out[f"{kind}_{name}"] = a
+    np.savez_compressed(FIXTURE, **out)
+
+
+@pytest.fixture(scope="module")
+def frozen():
+    f = np.load(FIXTURE)
+    data = _data(f["classes"], f["params"])
+    worlds = [wm.make(r, a, t) for r, a, t in zip(f["rects"], f["active"], f["types"])]
+    return f, data, worlds
+
+
+def test_fixture_worlds_hold_units(frozen):
+    f, _, worlds = frozen
+    sizes = [wm.n_units(w) for w in worlds]
+    assert max(sizes) >= 20 and np.mean(sizes) >= 10 and min(sizes) == 0   # the empty world too
+
+
+@pytest.mark.parametrize("kind", list(KERNELS))
+def test_kernel_proposes_as_frozen(frozen, kind):
+    f, data, worlds = frozen
+    hashes, ratios, changed, nxt = _record(KERNELS[kind], worlds, data)
+    none = f[f"{kind}_ratio"] == NO_PROPOSAL
+    assert 0.05 < np.mean(~none)             # the fixture exercises real proposals
+    np.testing.assert_array_equal(ratios == NO_PROPOSAL, none)
+    np.testing.assert_array_equal(nxt, f[f"{kind}_next"])
+    np.testing.assert_array_equal(changed, f[f"{kind}_changed"])
+    np.testing.assert_array_equal(hashes, f[f"{kind}_hash"])
+    np.testing.assert_array_equal(ratios, f[f"{kind}_ratio"])   # bit for bit, infinities included
+
+
+if __name__ == "__main__":
+    write_fixture()
