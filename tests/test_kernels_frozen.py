@@ -122,3 +122,18 @@ def test_kernel_proposes_as_frozen(frozen, kind):
 
 if __name__ == "__main__":
     write_fixture()
+
+
+def test_compiled_pairs_match_the_python_reference(frozen):
+    from semmap_pp.kernels.common import attach_pairs, attach_pairs_py
+
+    _, data, worlds = frozen
+    rng = np.random.default_rng(3)
+    small = []
+    for _ in range(200):     # dense random worlds on a small lattice: many shared walls, g in 0..2
+        r0, c0 = rng.integers(0, 6, (2, 12))
+        rects = np.stack([r0, c0, r0 + rng.integers(2, 5, 12), c0 + rng.integers(2, 5, 12)], 1)
+        small.append((wm.make(rects, rng.random(12) < 0.8, np.zeros(12)), int(rng.integers(0, 3))))
+    for w, g in [(w, data.wall_share) for w in worlds] + small:
+        m = data.min_side if g == data.wall_share else 2
+        assert attach_pairs(w.rects, w.active, m, g) == attach_pairs_py(w.rects, w.active, m, g)

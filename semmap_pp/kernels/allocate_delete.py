@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import attach_pairs, attached_to
+from semmap_pp.kernels.common import attached_to, pair_array
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -113,8 +113,11 @@ def _sources_q(b_rect, world, data: KernelData) -> float:
 
 def deletable(world, data: KernelData) -> np.ndarray:
     """Slots of the units that share a wall with at least one other unit."""
-    pairs = attach_pairs(world.rects, world.active, data.min_side, data.wall_share)
-    return np.array(sorted({s for _, a, b in pairs for s in (a, b)}), dtype=np.int64)
+    pairs = pair_array(world.rects, world.active, data.min_side, data.wall_share)
+    mark = np.zeros(world.capacity, bool)
+    mark[pairs[:, 1]] = True
+    mark[pairs[:, 2]] = True
+    return np.flatnonzero(mark).astype(np.int64, copy=False)
 
 
 def _log(x: float) -> float:

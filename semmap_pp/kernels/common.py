@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from semmap_pp.kernels.data import KernelData
@@ -39,13 +40,54 @@ def band_weights(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1:
     return floor + (cs[width:width + n] - cs[:n]) / (width * float(s1 - s0))
 
 
+@numba.njit(cache=True, nogil=True)
+def _pairs(rects, active, m, g, merge_big):  # pragma: no cover - compiled
+    """``(n, 3)`` rows ``(axis, a, b)`` of :func:`attach_pairs`, in its order (axis, then ``a``, then
+    ``b``); with ``merge_big >= 0`` only the pairs of equal span whose union is at most that long."""
+    k = rects.shape[0]
+    out = np.empty((16, 3), np.int64)
+    n = 0
+    for axis in range(2):
+        for i in range(k):
+            if not active[i]:
+                continue
+            edge = rects[i, axis + 2] - g
+            for j in range(k):
+                if not active[j] or rects[j, axis] != edge:
+                    continue
+                if min(rects[i, 3 - axis], rects[j, 3 - axis]) - max(rects[i, 1 - axis],
+                                                                     rects[j, 1 - axis]) < m:
+                    continue
+                if merge_big >= 0 and not (rects[i, 1 - axis] == rects[j, 1 - axis]
+                                           and rects[i, 3 - axis] == rects[j, 3 - axis]
+                                           and rects[j, axis + 2] - rects[i, axis] <= merge_big):
+                    continue
+                if n == out.shape[0]:
+                    grown = np.empty((2 * n, 3), np.int64)
+                    grown[:n] = out
+                    out = grown
+                out[n, 0], out[n, 1], out[n, 2] = axis, i, j
+                n += 1
+    return out[:n]
+
+
+def pair_array(rects: np.ndarray, active: np.ndarray, m: int, g: int, merge_big: int = -1) -> np.ndarray:
+    """:func:`attach_pairs` as an ``(n, 3)`` int64 array (compiled; see ``_pairs`` for ``merge_big``)."""
+    return _pairs(rects, active, int(m), int(g), int(merge_big))
+
+
 def attach_pairs(rects: np.ndarray, active: np.ndarray, m: int, g: int) -> list:
     """Slot pairs of units that share a wall: a list of ``(axis, a, b)``, ``a`` upper (0) or left (1).
 
     ``b`` lies below ``a`` (axis 0) when ``b.r0 == a.r1 - g`` and their column spans overlap by at
-    least ``m`` cells; right of ``a`` (axis 1) in the same sense. Units are matched through a table
-    of their edges (a world holds tens of units: plain Python beats many small array operations).
+    least ``m`` cells; right of ``a`` (axis 1) in the same sense. Sorted by axis, then ``a``, then
+    ``b`` (the order the kernels draw from).
     """
+    return [tuple(p) for p in _pairs(rects, active, int(m), int(g), -1).tolist()]
+
+
+def attach_pairs_py(rects: np.ndarray, active: np.ndarray, m: int, g: int) -> list:
+    """Plain-Python reference of :func:`attach_pairs` (for the tests)."""
     rl = rects.tolist()
     slots = [i for i, a in enumerate(active.tolist()) if a]
     out = []

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import (attach_pairs, band_weights, line_cum, position_draw,
+from semmap_pp.kernels.common import (attach_pairs, band_weights, pair_array, line_cum, position_draw,
                                       position_enumerate, position_q)
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
@@ -29,7 +29,7 @@ def adjacent_pairs(world, data: KernelData) -> list:
 
 
 def n_adjacent(world, data: KernelData) -> int:
-    return len(attach_pairs(world.rects, world.active, data.min_side, data.wall_share))
+    return pair_array(world.rects, world.active, data.min_side, data.wall_share).shape[0]
 
 
 def shared_wall_range(ra, rb, axis: int, data: KernelData):

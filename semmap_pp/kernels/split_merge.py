@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import LOG_HALF, attach_pairs, band_weights, line_cum
+from semmap_pp.kernels.common import LOG_HALF, band_weights, line_cum, pair_array
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -52,14 +52,8 @@ def split_log_q(rect, axis: int, s: int, n: int, capacity: int, data: KernelData
 
 def mergeable(world, data: KernelData) -> list:
     """``(axis, a, b)`` of every pair MERGE may join, ``a`` the first (upper or left) unit."""
-    rl = world.rects.tolist()
-    out = []
-    for axis, a, b in attach_pairs(world.rects, world.active, data.min_side, data.wall_share):
-        ra, rb = rl[a], rl[b]
-        if ra[1 - axis] == rb[1 - axis] and ra[3 - axis] == rb[3 - axis] \
-                and rb[axis + 2] - ra[axis] <= data.max_side:
-            out.append((axis, a, b))
-    return out
+    arr = pair_array(world.rects, world.active, data.min_side, data.wall_share, data.max_side)
+    return [tuple(p) for p in arr.tolist()]
 
 
 def _split_world(world, slot, new_slot, axis, s, data):
