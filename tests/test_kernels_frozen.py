@@ -137,3 +137,33 @@ def test_compiled_pairs_match_the_python_reference(frozen):
     for w, g in [(w, data.wall_share) for w in worlds] + small:
         m = data.min_side if g == data.wall_share else 2
         assert attach_pairs(w.rects, w.active, m, g) == attach_pairs_py(w.rects, w.active, m, g)
+
+
+def test_compiled_allocate_q_matches_the_numpy_reference(frozen):
+    import importlib
+
+    ad = importlib.import_module("semmap_pp.kernels.allocate_delete")
+
+    _, data, worlds = frozen
+    rng = np.random.default_rng(4)
+    checked = nonzero = 0
+    for w in worlds[::5]:
+        for a in np.flatnonzero(w.active).tolist():
+            a_rect = w.rects[a]
+            for side in range(4):
+                rg = ad.ranges(a_rect, side, data)
+                if rg is None:
+                    continue
+                axis, near, far, s0, s1 = rg
+                span0, span1 = int(a_rect[1 - axis]), int(a_rect[3 - axis])
+                for _ in range(3):
+                    seed = np.array([int(rng.integers(span0, span1))])
+                    b0, b1, bf = (int(v[0]) + int(rng.integers(-2, 3)) for v in ad.boxes(a_rect, side, near, data, seed))
+                    b = [0, 0, 0, 0]
+                    b[1 - axis], b[3 - axis] = b0, b1
+                    b[axis], b[axis + 2] = (near, bf) if side % 2 == 0 else (bf, near)
+                    q = ad.allocate_q(b, a_rect, side, data)
+                    assert q == ad.allocate_q_py(b, a_rect, side, data)
+                    checked += 1
+                    nonzero += q > 0
+    assert checked > 500 and nonzero > 100

@@ -27,6 +27,7 @@ from __future__ import annotations
 import itertools
 import math
 
+import numba
 import numpy as np
 
 from semmap_pp import world as wm
@@ -88,8 +89,8 @@ def _coord_q(x: int, b: np.ndarray, lo: int, hi: int, data: KernelData) -> np.nd
             + rho_uni / (hi - lo + 1))
 
 
-def allocate_q(b_rect, a_rect, side: int, data: KernelData) -> float:
-    """Probability that ALLOCATE from unit ``a_rect`` and ``side`` draws ``b_rect`` (seed averaged)."""
+def allocate_q_py(b_rect, a_rect, side: int, data: KernelData) -> float:
+    """Plain-numpy reference of :func:`allocate_q` (for the tests)."""
     rg = ranges(a_rect, side, data)
     if rg is None:
         return 0.0
@@ -99,6 +100,66 @@ def allocate_q(b_rect, a_rect, side: int, data: KernelData) -> float:
     bs0, bs1, bfar = boxes(a_rect, side, near, data)
     q = (_coord_q(int(b_rect[1 - axis]), bs0, *s0, data) * _coord_q(int(b_rect[3 - axis]), bs1, *s1, data)
          * _coord_q(int(b_rect[fidx]), bfar, *far, data))
+    return float(q.mean())
+
+
+@numba.njit(cache=True, nogil=True)
+def _coord_q1(x, b, lo, hi, box_prob, jit_prob, j, uni):  # pragma: no cover - compiled
+    """One element of :func:`_coord_q`, the same floating-point operations in the same order."""
+    if not lo <= x <= hi:
+        return 0.0
+    return (box_prob * (1.0 if b == x else 0.0) + jit_prob * (1.0 if abs(b - x) <= j else 0.0) / (2 * j + 1)
+            + uni / (hi - lo + 1))
+
+
+@numba.njit(cache=True, nogil=True)
+def _seed_q(back, fwd, run, e, sign, span0, span1, t, length, other, x0, lo0, hi0, x1, lo1, hi1, xf, lof,
+            hif, box_prob, jit_prob, j, uni):  # pragma: no cover - compiled
+    """Per-seed probabilities ``q0 * q1 * qf`` of :func:`allocate_q_py` (boxes and coordinates fused).
+
+    ``back, fwd, run`` are the free-run arrays indexed ``[e, p]`` (transposed views for axis 1)."""
+    n = span1 - span0
+    out = np.empty(n)
+    inside = 0 <= e < length
+    for i in range(n):
+        p = span0 + i
+        if inside:
+            b0 = max(p - back[e, p] + 1 - t, 0)
+            b1 = min(p + fwd[e, p] + t, other)
+            if sign > 0:
+                bf = min(e + run[e, p] + t, length)
+            else:
+                bf = max(e - run[e, p] + 1 - t, 0)
+        else:
+            b0 = b1 = bf = _NONE
+        out[i] = (_coord_q1(x0, b0, lo0, hi0, box_prob, jit_prob, j, uni)
+                  * _coord_q1(x1, b1, lo1, hi1, box_prob, jit_prob, j, uni)
+                  * _coord_q1(xf, bf, lof, hif, box_prob, jit_prob, j, uni))
+    return out
+
+
+def allocate_q(b_rect, a_rect, side: int, data: KernelData) -> float:
+    """Probability that ALLOCATE from unit ``a_rect`` and ``side`` draws ``b_rect`` (seed averaged)."""
+    rg = ranges(a_rect, side, data)
+    if rg is None:
+        return 0.0
+    axis, near, far, s0, s1 = rg
+    sign = 1 if side % 2 == 0 else -1
+    fidx = axis + 2 if sign > 0 else axis
+    t = data.wall_cells
+    e = near + t if sign > 0 else near - t - 1
+    if axis == 0:
+        back, fwd = data.free_left, data.free_right
+        run = data.free_down if sign > 0 else data.free_up
+    else:
+        back, fwd = data.free_up.T, data.free_down.T
+        run = (data.free_right if sign > 0 else data.free_left).T
+    s = data.settings
+    q = _seed_q(back, fwd, run, e, sign, int(a_rect[1 - axis]), int(a_rect[3 - axis]), t,
+                data.shape[axis], data.shape[1 - axis], int(b_rect[1 - axis]), s0[0], s0[1],
+                int(b_rect[3 - axis]), s1[0], s1[1], int(b_rect[fidx]), far[0], far[1],
+                float(s.box_prob), float(s.box_jitter_prob), int(s.box_jitter),
+                1.0 - s.box_prob - s.box_jitter_prob)
     return float(q.mean())
 
 
