@@ -167,3 +167,35 @@ def test_compiled_allocate_q_matches_the_numpy_reference(frozen):
                     checked += 1
                     nonzero += q > 0
     assert checked > 500 and nonzero > 100
+
+
+def test_compiled_helpers_match_their_references(frozen):
+    from semmap_pp.kernels import common
+
+    _, data, worlds = frozen
+    rng = np.random.default_rng(5)
+    h, w = data.shape
+    for _ in range(300):     # band weights: ranges that run off the lattice at either end
+        axis = int(rng.integers(0, 2))
+        cum = common.line_cum(data, axis)
+        lo = int(rng.integers(-5, cum.shape[0] + 5))
+        hi = lo + int(rng.integers(0, 40))
+        a = -int(rng.integers(0, 4))
+        b = a + int(rng.integers(1, 5))
+        s0 = int(rng.integers(0, cum.shape[1] - 2))
+        s1 = int(rng.integers(s0 + 1, cum.shape[1]))
+        got = common.band_weights(cum, lo, hi, a, b, s0, s1, 0.05)
+        np.testing.assert_array_equal(got, common.band_weights_py(cum, lo, hi, a, b, s0, s1, 0.05))
+    for _ in range(2000):    # jumps: numpy's cumsum and right-sided search, dips at k included
+        n = int(rng.integers(2, 30))
+        wts = rng.choice([0.05, 0.1, 1 / 3, 0.7, 1e-17, 1e17], n) * rng.random(n)
+        k, r = int(rng.integers(0, n)), float(rng.random())
+        cdf = np.cumsum(wts)
+        cdf[k:] -= wts[k]
+        assert common._jump(wts, k, r) == np.searchsorted(cdf, r * cdf[-1], side="right")
+    for wd in worlds[::3]:
+        for s in np.flatnonzero(wd.active).tolist():
+            r = wd.rects[s].copy()
+            for rect in (r, r + np.array([0, 0, 2, 0]), r - np.array([2, 2, 0, 0])):
+                assert (common.attached_to(rect, wd.rects, wd.active, data.min_side, data.wall_share)
+                        == common.attached_to_py(rect, wd.rects, wd.active, data.min_side, data.wall_share))

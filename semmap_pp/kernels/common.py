@@ -22,6 +22,28 @@ def line_cum(data: KernelData, axis: int) -> np.ndarray:
     return data.hcum if axis == 0 else data.vcum
 
 
+@numba.njit(cache=True, nogil=True)
+def _band(cum, lo, hi, a, b, s0, s1, floor):  # pragma: no cover - compiled
+    """:func:`band_weights_py` in one loop (integer prefix sums, the same final float operations)."""
+    first, last = lo + a, hi + b
+    i0, i1 = max(first, 0), min(last, cum.shape[0])
+    cs = np.zeros(last - first + 1)
+    if i1 > i0:
+        acc = 0
+        for i in range(i0, i1):
+            acc += cum[i, s1] - cum[i, s0]
+            cs[i - first + 1] = acc
+        for k in range(i1 - first + 1, cs.shape[0]):
+            cs[k] = cs[i1 - first]
+    width = b - a
+    n = hi - lo + 1
+    out = np.empty(n)
+    den = width * float(s1 - s0)
+    for i in range(n):
+        out[i] = floor + (cs[width + i] - cs[i]) / den
+    return out
+
+
 def band_weights(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1: int,
                  floor: float) -> np.ndarray:
     """Weight of each position ``x = lo..hi``: ``floor`` + mean line fraction over lines ``x+a..x+b-1``.
@@ -29,6 +51,14 @@ def band_weights(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1:
     The line fraction of line ``i`` is the share of its cells in ``[s0, s1)`` that are wall (occupied)
     or door-candidate cells; lines outside the lattice count 0.
     """
+    if hi >= lo and b > a and s1 > s0:
+        return _band(cum, int(lo), int(hi), int(a), int(b), int(s0), int(s1), float(floor))
+    return band_weights_py(cum, lo, hi, a, b, s0, s1, floor)
+
+
+def band_weights_py(cum: np.ndarray, lo: int, hi: int, a: int, b: int, s0: int, s1: int,
+                    floor: float) -> np.ndarray:
+    """Plain-numpy reference of :func:`band_weights` (for the tests and degenerate ranges)."""
     first, last = lo + a, hi + b
     i0, i1 = max(first, 0), min(last, cum.shape[0])
     cs = np.zeros(last - first + 1)
@@ -113,12 +143,45 @@ def attach_matrices(rects: np.ndarray, active: np.ndarray, m: int, g: int):
     return mats[0], mats[1]
 
 
+@numba.njit(cache=True, nogil=True)
+def _attached(r0, c0, r1, c1, rects, active, m, g):  # pragma: no cover - compiled
+    """Rows ``(k, side)`` of :func:`attached_to`, in its order."""
+    k_max = rects.shape[0]
+    out = np.empty((4 * k_max, 2), np.int64)
+    n = 0
+    for k in range(k_max):
+        if not active[k]:
+            continue
+        a0, b0, a1, b1 = rects[k, 0], rects[k, 1], rects[k, 2], rects[k, 3]
+        if min(b1, c1) - max(b0, c0) >= m:
+            if r0 == a1 - g:
+                out[n, 0], out[n, 1] = k, 0
+                n += 1
+            if r1 == a0 + g:
+                out[n, 0], out[n, 1] = k, 1
+                n += 1
+        if min(a1, r1) - max(a0, r0) >= m:
+            if c0 == b1 - g:
+                out[n, 0], out[n, 1] = k, 2
+                n += 1
+            if c1 == b0 + g:
+                out[n, 0], out[n, 1] = k, 3
+                n += 1
+    return out[:n]
+
+
 def attached_to(rect, rects: np.ndarray, active: np.ndarray, m: int, g: int) -> list:
     """``(k, side)`` for every unit ``k`` that ``rect`` touches on ``k``'s side ``side``.
 
     Sides are indexed ``(axis, direction)`` as ``0: (0, +1)`` below, ``1: (0, -1)`` above,
     ``2: (1, +1)`` right, ``3: (1, -1)`` left of unit ``k``.
     """
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    return [tuple(p) for p in _attached(r0, c0, r1, c1, rects, active, int(m), int(g)).tolist()]
+
+
+def attached_to_py(rect, rects: np.ndarray, active: np.ndarray, m: int, g: int) -> list:
+    """Plain-Python reference of :func:`attached_to` (for the tests)."""
     r0, c0, r1, c1 = (int(v) for v in rect)
     out = []
     rl = rects.tolist()
@@ -161,10 +224,31 @@ def position_draw(rng, x: int, lo: int, hi: int, w: np.ndarray, rho: float, d: i
         return x2 if lo <= x2 <= hi else None
     if hi <= lo:
         return None
-    cdf = np.cumsum(w)
-    cdf[x - lo:] -= w[x - lo]
-    u = rng.random() * cdf[-1]
-    return lo + int(np.searchsorted(cdf, u, side="right"))
+    return lo + int(_jump(w, x - lo, rng.random()))
+
+
+@numba.njit(cache=True, nogil=True)
+def _jump(w, k, r):  # pragma: no cover - compiled
+    """Index drawn by a jump: ``searchsorted(cdf, r * cdf[-1], "right")``, ``cdf`` the running sum
+    of ``w`` with ``w[k]`` taken out (the same sums as ``np.cumsum``, and numpy's binary search step
+    for step, so a rounding dip of ``cdf`` at ``k`` gives numpy's answer too)."""
+    n = w.shape[0]
+    cdf = np.empty(n)
+    acc = 0.0
+    for i in range(n):
+        acc += w[i]
+        cdf[i] = acc
+    for i in range(k, n):
+        cdf[i] -= w[k]
+    u = r * cdf[n - 1]
+    lo_i, hi_i = 0, n
+    while lo_i < hi_i:
+        mid = lo_i + ((hi_i - lo_i) >> 1)
+        if not u < cdf[mid]:
+            lo_i = mid + 1
+        else:
+            hi_i = mid
+    return lo_i
 
 
 def position_enumerate(x: int, lo: int, hi: int, w: np.ndarray, rho: float, d: int) -> dict:
