@@ -18,6 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 
+import numba
 import numpy as np
 
 from semmap_pp import world as wm
@@ -45,9 +46,22 @@ def birth_q(rect, data: KernelData) -> float:
     q = rho / (data.side_counts[0] * data.side_counts[1])
     if rho < 1.0:
         j = data.settings.birth_jitter
-        near = np.all(np.abs(data.birth_rects - np.asarray(rect)) <= j, axis=1)
+        near = _near(data.birth_rects, rect[0], rect[1], rect[2], rect[3], int(j))
         q += (1.0 - rho) * float(data.birth_weights[near].sum()) / (2 * j + 1) ** 4
     return q
+
+
+@numba.njit(cache=True, nogil=True)
+def _near(cands, r0, c0, r1, c1, j):  # pragma: no cover - compiled
+    """Indices (ascending) of the candidates with every coordinate within ``j`` of the rectangle."""
+    out = np.empty(cands.shape[0], np.int64)
+    n = 0
+    for i in range(cands.shape[0]):
+        if (abs(cands[i, 0] - r0) <= j and abs(cands[i, 1] - c0) <= j and abs(cands[i, 2] - r1) <= j
+                and abs(cands[i, 3] - c1) <= j):
+            out[n] = i
+            n += 1
+    return out[:n]
 
 
 def _draw_side(rng, data: KernelData, axis: int):
