@@ -84,7 +84,7 @@ def birth_draw(rng, data: KernelData):
     i = min(int(np.searchsorted(cdf, rng.random() * cdf[-1], side="right")), len(cdf) - 1)
     j = data.settings.birth_jitter
     off = [int(rng.random() * (2 * j + 1)) - j for _ in range(4)]
-    rect = tuple(int(v) + o for v, o in zip(data.birth_rects[i], off))
+    rect = tuple(v + o for v, o in zip(data.birth_rects[i].tolist(), off))
     return rect if _valid(rect, data) else None
 
 

@@ -79,6 +79,24 @@ def boxes(a_rect, side: int, near: int, data: KernelData, p=None):
     return s0, s1, far
 
 
+def _box1(side: int, near: int, data: KernelData, p: int):
+    """:func:`boxes` of the one seed ``p``, as Python ints (the same integer arithmetic)."""
+    axis, sign = side // 2, (1 if side % 2 == 0 else -1)
+    t = data.wall_cells
+    length, other = data.shape[axis], data.shape[1 - axis]
+    e = near + t if sign > 0 else near - t - 1
+    if not 0 <= e < length:
+        return _NONE, _NONE, _NONE
+    if axis == 0:
+        back, fwd = int(data.free_left[e, p]), int(data.free_right[e, p])
+        run = int((data.free_down if sign > 0 else data.free_up)[e, p])
+    else:
+        back, fwd = int(data.free_up[p, e]), int(data.free_down[p, e])
+        run = int((data.free_right if sign > 0 else data.free_left)[p, e])
+    far = min(e + run + t, length) if sign > 0 else max(e - run + 1 - t, 0)
+    return max(p - back + 1 - t, 0), min(p + fwd + t, other), far
+
+
 def _coord_q(x: int, b: np.ndarray, lo: int, hi: int, data: KernelData) -> np.ndarray:
     if not lo <= x <= hi:
         return np.zeros(b.shape)
@@ -225,11 +243,10 @@ def propose_allocate(rng, world, data: KernelData):
         return None
     axis, near, far, s0, s1 = rg
     span0, span1 = int(a_rect[1 - axis]), int(a_rect[3 - axis])
-    seed = np.array([span0 + int(rng.random() * (span1 - span0))])
-    bs0, bs1, bfar = boxes(a_rect, side, near, data, seed)
-    x0 = _draw_coord(rng, int(bs0[0]), *s0, data)
-    x1 = _draw_coord(rng, int(bs1[0]), *s1, data)
-    xf = _draw_coord(rng, int(bfar[0]), *far, data)
+    bs0, bs1, bfar = _box1(side, near, data, span0 + int(rng.random() * (span1 - span0)))
+    x0 = _draw_coord(rng, bs0, *s0, data)
+    x1 = _draw_coord(rng, bs1, *s1, data)
+    xf = _draw_coord(rng, bfar, *far, data)
     if x0 is None or x1 is None or xf is None or not data.min_side <= x1 - x0 <= data.max_side:
         return None
     b = [0, 0, 0, 0]

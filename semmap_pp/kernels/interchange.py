@@ -47,7 +47,7 @@ def _proposal(world, pair, s2, n_pairs, wall, data):
     axis, a, b = pair
     set_ = data.settings
     s, lo, hi, w = wall
-    ra, rb = [int(v) for v in world.rects[a]], [int(v) for v in world.rects[b]]
+    ra, rb = world.rects[a].tolist(), world.rects[b].tolist()
     ra[axis + 2], rb[axis] = s2, s2 - data.wall_share
     new = wm.replace(wm.replace(world, a, ra), b, rb)
     total = float(w.sum())

@@ -44,7 +44,7 @@ def wall_range(rect, side: int, data: KernelData):
 def _proposal(world, slot, side, x2, lo, w, data):
     s = data.settings
     x = int(world.rects[slot][side])
-    rect = [int(v) for v in world.rects[slot]]
+    rect = world.rects[slot].tolist()
     rect[side] = x2
     total = float(w.sum())
     lr = (math.log(position_q(x2, x, lo, w, total, s.local_prob, s.local_radius))

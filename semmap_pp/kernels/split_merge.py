@@ -38,7 +38,8 @@ def cut_weights(rect, axis: int, data: KernelData):
 
 
 def pieces(rect, axis: int, s: int, g: int):
-    first, second = list(int(v) for v in rect), list(int(v) for v in rect)
+    first = rect.tolist() if isinstance(rect, np.ndarray) else [int(v) for v in rect]
+    second = list(first)
     first[axis + 2] = s
     second[axis] = s - g
     return tuple(first), tuple(second)
@@ -85,7 +86,7 @@ def propose_split(rng, world, data: KernelData):
 
 def _merge_proposal(world, pair, n_pairs, data):
     axis, a, b = pair
-    union = [int(v) for v in world.rects[a]]
+    union = world.rects[a].tolist()
     union[axis + 2] = int(world.rects[b][axis + 2])
     new = wm.remove(wm.replace(world, a, union), b)
     s = int(world.rects[a][axis + 2])
