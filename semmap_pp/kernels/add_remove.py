@@ -94,7 +94,7 @@ def add_log_ratio(n: int, capacity: int, rect, data: KernelData) -> float:
 
 
 def propose_add(rng, world, data: KernelData):
-    free = np.flatnonzero(~world.active)
+    free = (~world.active).nonzero()[0]
     if free.size == 0:
         return None
     slot = int(free[int(rng.random() * free.size)])
@@ -106,7 +106,7 @@ def propose_add(rng, world, data: KernelData):
 
 
 def propose_remove(rng, world, data: KernelData):
-    act = np.flatnonzero(world.active)
+    act = world.active.nonzero()[0]
     if act.size == 0:
         return None
     slot = int(act[int(rng.random() * act.size)])

@@ -230,8 +230,8 @@ def _draw_coord(rng, b: int, lo: int, hi: int, data: KernelData):
 
 
 def propose_allocate(rng, world, data: KernelData):
-    act = np.flatnonzero(world.active)
-    free = np.flatnonzero(~world.active)
+    act = world.active.nonzero()[0]
+    free = (~world.active).nonzero()[0]
     if act.size == 0 or free.size == 0:
         return None
     a = int(act[int(rng.random() * act.size)])

@@ -53,7 +53,7 @@ def _proposal(world, slot, side, x2, lo, w, data):
 
 
 def propose_shrink_dilate(rng, world, data: KernelData):
-    act = np.flatnonzero(world.active)
+    act = world.active.nonzero()[0]
     if act.size == 0:
         return None
     slot = int(act[int(rng.random() * act.size)])

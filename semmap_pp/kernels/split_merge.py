@@ -69,8 +69,8 @@ def _split_proposal(world, slot, new_slot, axis, s, n, data, cut=None):
 
 
 def propose_split(rng, world, data: KernelData):
-    act = np.flatnonzero(world.active)
-    free = np.flatnonzero(~world.active)
+    act = world.active.nonzero()[0]
+    free = (~world.active).nonzero()[0]
     if act.size == 0 or free.size == 0:
         return None
     slot = int(act[int(rng.random() * act.size)])
