@@ -199,3 +199,21 @@ def test_compiled_helpers_match_their_references(frozen):
             for rect in (r, r + np.array([0, 0, 2, 0]), r - np.array([2, 2, 0, 0])):
                 assert (common.attached_to(rect, wd.rects, wd.active, data.min_side, data.wall_share)
                         == common.attached_to_py(rect, wd.rects, wd.active, data.min_side, data.wall_share))
+
+
+def test_compiled_pairwise_sum_is_numpys_sum():
+    from semmap_pp.kernels.common import _pair_q, pairwise_sum, position_q
+
+    rng = np.random.default_rng(6)
+    for n in list(range(0, 300)) + [511, 512, 513, 1023, 1400, 1601, 2048, 3001, 5000]:
+        for a in (rng.random(n), rng.standard_normal(n) * 10.0 ** rng.integers(-12, 12, n),
+                  0.05 + rng.integers(0, 4, n) / 7):
+            assert pairwise_sum(a, 0, n) == a.sum()
+            if n > 4:
+                assert pairwise_sum(a, 3, n - 4) == a[3:n - 1].sum()
+        if n > 8:
+            w = 0.05 + rng.random(n)
+            x, x2 = int(rng.integers(0, n)), int(rng.integers(0, n))
+            total = float(w.sum())
+            assert _pair_q(x + 5, x2 + 5, 5, w, 0.5, 3) == (position_q(x2 + 5, x + 5, 5, w, total, 0.5, 3),
+                                                            position_q(x + 5, x2 + 5, 5, w, total, 0.5, 3))

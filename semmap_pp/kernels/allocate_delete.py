@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import attached_to, pair_array
+from semmap_pp.kernels.common import attached_to, pair_array, pairwise_sum
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -130,10 +130,11 @@ def _coord_q1(x, b, lo, hi, box_prob, jit_prob, j, uni):  # pragma: no cover - c
             + uni / (hi - lo + 1))
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _seed_q(back, fwd, run, e, sign, span0, span1, t, length, other, x0, lo0, hi0, x1, lo1, hi1, xf, lof,
             hif, box_prob, jit_prob, j, uni):  # pragma: no cover - compiled
-    """Per-seed probabilities ``q0 * q1 * qf`` of :func:`allocate_q_py` (boxes and coordinates fused).
+    """Mean over the seeds of ``q0 * q1 * qf`` of :func:`allocate_q_py` (boxes and coordinates fused;
+    the mean is numpy's: its pairwise sum divided by the count).
 
     ``back, fwd, run`` are the free-run arrays indexed ``[e, p]`` (transposed views for axis 1)."""
     n = span1 - span0
@@ -153,7 +154,7 @@ def _seed_q(back, fwd, run, e, sign, span0, span1, t, length, other, x0, lo0, hi
         out[i] = (_coord_q1(x0, b0, lo0, hi0, box_prob, jit_prob, j, uni)
                   * _coord_q1(x1, b1, lo1, hi1, box_prob, jit_prob, j, uni)
                   * _coord_q1(xf, bf, lof, hif, box_prob, jit_prob, j, uni))
-    return out
+    return pairwise_sum(out, 0, n) / n
 
 
 def allocate_q(b_rect, a_rect, side: int, data: KernelData) -> float:
@@ -178,7 +179,7 @@ def allocate_q(b_rect, a_rect, side: int, data: KernelData) -> float:
                 int(b_rect[3 - axis]), s1[0], s1[1], int(b_rect[fidx]), far[0], far[1],
                 float(s.box_prob), float(s.box_jitter_prob), int(s.box_jitter),
                 1.0 - s.box_prob - s.box_jitter_prob)
-    return float(q.mean())
+    return float(q)
 
 
 def _sources_q(b_rect, world, data: KernelData) -> float:

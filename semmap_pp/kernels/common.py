@@ -216,6 +216,93 @@ def position_q(x_from: int, x_to: int, lo: int, w: np.ndarray, total: float, rho
     return q
 
 
+@numba.njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):  # pragma: no cover - compiled
+    """numpy's pairwise sum of a block of at most 128 values (eight running sums)."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@numba.njit(cache=True, nogil=True)
+def pairwise_sum(a, lo, n):  # pragma: no cover - compiled
+    """``a[lo:lo + n].sum()`` exactly as numpy forms it (its pairwise summation: blocks of at most
+    128 summed in eight running sums, longer ranges split in halves at a multiple of 8 and the two
+    sums added), so a compiled total equals numpy's bit for bit (tests/test_kernels_frozen.py
+    checks it against ``np.sum``). The halving runs on an explicit stack (no recursion)."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    los = np.empty(64, np.int64)
+    ns = np.empty(64, np.int64)
+    stage = np.empty(64, np.int64)
+    vals = np.empty(64)
+    sp, vsp = 0, 0
+    los[0], ns[0], stage[0] = lo, n, 0
+    while sp >= 0:
+        l, m = los[sp], ns[sp]
+        if m <= 128:
+            vals[vsp] = _block_sum(a, l, m)
+            vsp += 1
+            sp -= 1
+            continue
+        n2 = m // 2
+        n2 -= n2 % 8
+        if stage[sp] == 0:
+            stage[sp] = 1
+            sp += 1
+            los[sp], ns[sp], stage[sp] = l, n2, 0
+        elif stage[sp] == 1:
+            stage[sp] = 2
+            sp += 1
+            los[sp], ns[sp], stage[sp] = l + n2, m - n2, 0
+        else:
+            vals[vsp - 2] = vals[vsp - 2] + vals[vsp - 1]
+            vsp -= 1
+            sp -= 1
+    return vals[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def _q1(x_from, x_to, lo, w, total, rho, d):  # pragma: no cover - compiled
+    q = rho / (2 * d) if 1 <= abs(x_to - x_from) <= d else 0.0
+    rest = total - w[x_from - lo]
+    if rest > 0:
+        q += (1.0 - rho) * w[x_to - lo] / rest
+    return q
+
+
+@numba.njit(cache=True, nogil=True)
+def _pair_q(x, x2, lo, w, rho, d):  # pragma: no cover - compiled
+    total = pairwise_sum(w, 0, w.shape[0])
+    return _q1(x2, x, lo, w, total, rho, d), _q1(x, x2, lo, w, total, rho, d)
+
+
+def position_log_ratio(x: int, x2: int, lo: int, w: np.ndarray, rho: float, d: int) -> float:
+    """``log q(x|x2) - log q(x2|x)`` of :func:`position_q` with ``total = w.sum()`` (compiled)."""
+    back, fwd = _pair_q(int(x), int(x2), int(lo), w, float(rho), int(d))
+    return math.log(back) - math.log(fwd)
+
+
 def position_draw(rng, x: int, lo: int, hi: int, w: np.ndarray, rho: float, d: int):
     """Draw a new position from ``x`` (``None``: the draw left ``[lo, hi]`` or no other position)."""
     if rng.random() < rho:

@@ -14,11 +14,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.kernels.common import (attach_pairs, band_weights, pair_array, line_cum, position_draw,
-                                      position_enumerate, position_q)
+                                      position_enumerate, _pair_q)
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -50,10 +49,10 @@ def _proposal(world, pair, s2, n_pairs, wall, data):
     ra, rb = world.rects[a].tolist(), world.rects[b].tolist()
     ra[axis + 2], rb[axis] = s2, s2 - data.wall_share
     new = wm.replace(wm.replace(world, a, ra), b, rb)
-    total = float(w.sum())
+    back, fwd = _pair_q(s, s2, lo, w, float(set_.local_prob), int(set_.local_radius))
     lr = (math.log(n_pairs) - math.log(n_adjacent(new, data))
-          + math.log(position_q(s2, s, lo, w, total, set_.local_prob, set_.local_radius))
-          - math.log(position_q(s, s2, lo, w, total, set_.local_prob, set_.local_radius)))
+          + math.log(back)
+          - math.log(fwd))
     return Proposal(new, lr, (a, b))
 
 

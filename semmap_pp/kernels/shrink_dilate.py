@@ -17,12 +17,12 @@ A SHRINK is undone by a DILATE of the same wall: the pair is one self-reverse ke
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.kernels.common import band_weights, line_cum, position_draw, position_enumerate, position_q
+from semmap_pp.kernels.common import (band_weights, line_cum, position_draw, position_enumerate,
+                                      position_log_ratio)
 from semmap_pp.kernels.data import KernelData
 from semmap_pp.kernels.proposal import Kernel, Proposal
 
@@ -46,9 +46,7 @@ def _proposal(world, slot, side, x2, lo, w, data):
     x = int(world.rects[slot][side])
     rect = world.rects[slot].tolist()
     rect[side] = x2
-    total = float(w.sum())
-    lr = (math.log(position_q(x2, x, lo, w, total, s.local_prob, s.local_radius))
-          - math.log(position_q(x, x2, lo, w, total, s.local_prob, s.local_radius)))
+    lr = position_log_ratio(x, x2, lo, w, s.local_prob, s.local_radius)
     return Proposal(wm.replace(world, slot, rect), lr, (slot,))
 
 
