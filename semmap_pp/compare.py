@@ -164,15 +164,9 @@ def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
     """compare.png: the sampled worlds of each run drawn thin on the map, side by side (paper Fig. 7)."""
     from matplotlib.collections import LineCollection
 
-    from semmap_pp.outputs.figures import DPI, Figure, classified_rgb, crop_box, png, world_outlines
+    from semmap_pp.outputs.figures import classified_rgb, png, side_by_side, world_outlines
 
-    boxes = [crop_box(r.semantic) for r in runs]
-    y0, y1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
-    x0, x1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
-    n = len(runs)
-    panel = 700 / max(y1 - y0, x1 - x0)
-    fig = Figure(figsize=(n * (x1 - x0) * panel / DPI, (y1 - y0) * panel / DPI + 0.6), dpi=DPI)
-    axes = fig.subplots(1, n, squeeze=False).ravel()
+    fig, axes, (y0, y1, x0, x1) = side_by_side([r.semantic for r in runs], extra_h=0.6)
     for ax, run, ws, row in zip(axes, runs, worlds, rows):
         ax.imshow(classified_rgb(run.semantic.grid.classes, light=True)[y0:y1, x0:x1],
                   extent=(x0, x1, y1, y0), interpolation="nearest")

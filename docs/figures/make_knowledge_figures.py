@@ -135,16 +135,10 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle
 
-    from semmap_pp.outputs.figures import DPI, MAGENTA, Figure, classified_rgb, crop_box, png, world_outlines
+    from semmap_pp.outputs.figures import MAGENTA, classified_rgb, png, side_by_side, world_outlines
     from semmap_pp.outputs.graphml import TYPE_LETTER
 
-    boxes = [crop_box(r.semantic) for r in runs]
-    y0, y1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
-    x0, x1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
-    n = len(runs)
-    panel = 700 / max(y1 - y0, x1 - x0)
-    fig = Figure(figsize=(n * (x1 - x0) * panel / DPI, (y1 - y0) * panel / DPI + 0.9), dpi=DPI)
-    axes = fig.subplots(1, n, squeeze=False).ravel()
+    fig, axes, (y0, y1, x0, x1) = side_by_side([r.semantic for r in runs], extra_h=0.9)
     for ax, run, name in zip(axes, runs, names):
         sm, frame, model = run.semantic, run.inputs.frame, run.inputs.model
         c = frame.cells

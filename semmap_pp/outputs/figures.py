@@ -82,6 +82,19 @@ def crop_box(sm, margin_px: int = 10) -> tuple[int, int, int, int]:
             max(cols[0] - margin_px, 0), min(cols[-1] + 1 + margin_px, w))
 
 
+def side_by_side(sms, *, extra_h: float, panel_px: int = 700):
+    """One panel per semantic map, side by side, all showing the union of their :func:`crop_box`
+    with the longer side of a panel ``panel_px`` pixels; returns ``(fig, axes, box)``."""
+    boxes = [crop_box(sm) for sm in sms]
+    y0, y1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+    x0, x1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
+    n = len(sms)
+    panel = panel_px / max(y1 - y0, x1 - x0)
+    fig = Figure(figsize=(n * (x1 - x0) * panel / DPI, (y1 - y0) * panel / DPI + extra_h), dpi=DPI)
+    axes = fig.subplots(1, n, squeeze=False).ravel()
+    return fig, axes, (y0, y1, x0, x1)
+
+
 def _axes(box, *, extra_h: float = 0.0, ncols: int = 1, nrows: int = 1, long_side: int = LONG_SIDE_PX):
     """A figure whose panels show ``box`` at a readable scale; returns (fig, axes list)."""
     y0, y1, x0, x1 = box
