@@ -63,18 +63,53 @@ def category(x: int, region: int, corridor: bool) -> int:
     return int(x) + N_X * (int(region) + 3 * int(bool(corridor)))
 
 
-def wall_like(occupied: np.ndarray, object_max_extent: int) -> np.ndarray:
-    """Occupied cells on a straight lattice-axis run longer than ``object_max_extent`` cells.
+def wall_like(occupied: np.ndarray, object_max_extent: int, tolerance: int = 0,
+              gap: int = 0) -> np.ndarray:
+    """Occupied cells on a lattice-axis line longer than ``object_max_extent`` cells.
 
-    Morphological opening with a line of ``object_max_extent + 1`` cells along rows and along
-    columns: such a cell belongs to something too long to be an object (DESIGN.md), so inside a
-    unit it is a mismatch (an interior wall), not an object.
+    A line along the rows is found in the occupied cells spread ``tolerance`` cells up and down
+    (a wall drawn by a laser is ragged: its cells step a row up or down, and no single row of it
+    is one straight run), with gaps of at most ``gap`` cells along the line closed; a morphological
+    opening with a line of ``object_max_extent + 1`` cells keeps the runs that are long enough,
+    and an occupied cell within ``tolerance`` rows of such a run is wall-like. The same along the
+    columns. Such a cell belongs to something too long to be an object (DESIGN.md), so inside a
+    unit it is a mismatch (an interior wall), not an object. ``tolerance = gap = 0`` is the strict
+    rule: one straight run of ``object_max_extent + 1`` cells.
+
+    Examples
+    --------
+    A 7-cell wall that steps down one row half-way is two straight runs of 4 and 3 cells: an
+    object under the strict rule, a wall with one row of tolerance.
+
+    >>> occ = np.zeros((4, 9), bool); occ[1, 1:5] = True; occ[2, 5:8] = True
+    >>> int(wall_like(occ, 5).sum()), int(wall_like(occ, 5, tolerance=1).sum())
+    (0, 7)
+    >>> occ = np.zeros((3, 9), bool); occ[1, 1:4] = True; occ[1, 5:8] = True  # a 1-cell gap
+    >>> int(wall_like(occ, 5).sum()), int(wall_like(occ, 5, gap=1).sum())
+    (0, 6)
     """
     n = int(object_max_extent) + 1
+    tol, gap = int(tolerance), int(gap)
+    if tol < 0 or gap < 0:
+        raise ValueError(f"tolerance and gap must be >= 0, got {tolerance}, {gap}")
     occ = np.asarray(occupied, dtype=bool)
-    h = ndimage.binary_opening(occ, structure=np.ones((1, n), bool))
-    v = ndimage.binary_opening(occ, structure=np.ones((n, 1), bool))
-    return h | v
+    out = np.zeros(occ.shape, dtype=bool)
+    for along in (1, 0):  # lines along the rows (axis 1), then along the columns (axis 0)
+        across = 1 - along
+        band = occ
+        if tol:
+            band = ndimage.maximum_filter1d(occ.view(np.uint8), 2 * tol + 1, axis=across,
+                                            mode="constant").astype(bool)
+        if gap:
+            pad = gap + 1  # padded so that the map border does not close anything
+            line = np.ones((1, gap + 1) if along == 1 else (gap + 1, 1), bool)
+            band = ndimage.binary_closing(np.pad(band, pad), structure=line)[pad:-pad, pad:-pad]
+        runs = ndimage.binary_opening(band, structure=np.ones((1, n) if along == 1 else (n, 1), bool))
+        if tol:
+            runs = ndimage.maximum_filter1d(runs.view(np.uint8), 2 * tol + 1, axis=across,
+                                            mode="constant").astype(bool)
+        out |= occ & runs
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,7 +170,8 @@ def prepare(frame, model) -> LikelihoodData:
     xcode = np.full(cls.shape, X_FREE, dtype=np.uint8)
     xcode[cls == UNKNOWN] = X_UNKNOWN
     occ = cls == OCCUPIED
-    wl = wall_like(occ, frame.cells.object_max_extent)
+    c = frame.cells
+    wl = wall_like(occ, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap)
     xcode[occ & ~wl] = X_OBJECTLIKE
     xcode[occ & wl] = X_WALLLIKE
     xcode.setflags(write=False)

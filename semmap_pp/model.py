@@ -48,6 +48,8 @@ class LatticeParams:
 class WorldParams:
     wall_thickness_m: float
     object_max_extent_m: float
+    wall_line_tolerance_m: float
+    wall_line_gap_m: float
     door_min_m: float
     door_max_m: float
     min_unit_side_m: float
@@ -119,6 +121,8 @@ class CellParams:
     max_side: int
     adjacency_dilation: int
     unexplored_min_area: int
+    wall_line_tolerance: int = 1
+    wall_line_gap: int = 1
 
 
 @dataclass(frozen=True)
@@ -184,7 +188,9 @@ class Model:
             door_min=max(1, n(w.door_min_m)), door_max=max(1, n(w.door_max_m)),
             min_side=min_side, max_side=max(min_side, n(w.max_unit_side_m)),
             adjacency_dilation=max(1, n(w.adjacency_dilation_m)),
-            unexplored_min_area=max(1, n(w.unexplored_min_area_m2, dims=2)))
+            unexplored_min_area=max(1, n(w.unexplored_min_area_m2, dims=2)),
+            wall_line_tolerance=max(1, n(w.wall_line_tolerance_m)),
+            wall_line_gap=max(1, n(w.wall_line_gap_m)))
 
 
 class _Reader:
@@ -291,7 +297,8 @@ def load_model(path: str | Path | None = None) -> Model:
         refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0))
     world = WorldParams(**{k: r.number(f"world.{k}", positive=True) for k in (
         "wall_thickness_m", "object_max_extent_m", "door_min_m", "door_max_m", "min_unit_side_m",
-        "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2")})
+        "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2",
+        "wall_line_tolerance_m", "wall_line_gap_m")})
     if world.door_max_m < world.door_min_m:
         raise r.error("world.door_max_m", "must be >= world.door_min_m")
     if world.max_unit_side_m < world.min_unit_side_m:

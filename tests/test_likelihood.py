@@ -83,6 +83,39 @@ def test_wall_like_needs_a_run_longer_than_object_max_extent():
     assert wl[2].sum() == 31 and not wl[5].any() and not wl[10:16].any()
 
 
+def test_wall_like_tolerates_a_ragged_wall_but_not_clutter():
+    occ = np.zeros((40, 60), bool)
+    # a ragged 40-cell wall: it steps a row up or down every 5 cells, with two 1-cell holes
+    for i, c in enumerate(range(5, 45, 5)):
+        occ[10 + (i % 2), c:c + 5] = True
+    occ[10:12, 17] = False
+    occ[10:12, 33] = False
+    # clutter: 4-cell boxes 3 cells apart along a line (gaps wider than the gap closed)
+    for c in range(5, 45, 7):
+        occ[25:29, c:c + 4] = True
+    strict = wall_like(occ, 30)
+    ragged = wall_like(occ, 30, tolerance=1, gap=1)
+    assert not strict[5:15].any()               # no single straight run of 31 cells
+    assert ragged[5:15].sum() == occ[5:15].sum()  # every cell of the ragged wall
+    assert not ragged[20:35].any()              # the boxes stay objects
+    # a 2-cell hole splits the wall when only 1-cell gaps are closed: two runs of 20 cells
+    occ2 = np.zeros((5, 60), bool)
+    occ2[2, 5:25] = True
+    occ2[2, 27:47] = True
+    assert not wall_like(occ2, 30, tolerance=1, gap=1).any()
+    assert wall_like(occ2, 30, tolerance=1, gap=2).sum() == 40
+    with pytest.raises(ValueError):
+        wall_like(occ2, 30, tolerance=-1)
+
+
+def test_prepare_uses_the_model_wall_line_tolerance():
+    c = np.zeros((40, 60), np.uint8)
+    for i, col in enumerate(range(5, 45, 5)):   # the ragged wall of the test above
+        c[10 + (i % 2), col:col + 5] = OCCUPIED
+    d = data_for(c)
+    assert (d.xcode[c == OCCUPIED] == X_WALLLIKE).all()
+
+
 def test_shared_wall_bands_are_not_penalised_but_overlapping_interiors_are():
     c = np.zeros((30, 60), np.uint8)
     d = data_for(c)
