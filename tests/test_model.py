@@ -28,10 +28,11 @@ def edited(tmp_path, old, new):
 @pytest.mark.parametrize("old,new,key", [
     ("psi = 0.5", "psi = 1.5", "sensor.psi"),
     ("psi = 0.5", "", "sensor.psi: missing"),
-    ("wall = [0.10, 0.25, 0.65]", "wall = [0.10, 0.25, 0.75]", "sensor.corridor.wall: row must sum to 1"),
-    ("wall = [0.10, 0.25, 0.65]", "wall = [1.10, -0.75, 0.65]", "probabilities must lie in [0, 1]"),
+    ("wall = [0.07, 0.25, 0.68]", "wall = [0.07, 0.25, 0.78]", "sensor.corridor.wall: row must sum to 1"),
+    ("wall = [0.07, 0.25, 0.68]", "wall = [1.07, -0.75, 0.68]", "probabilities must lie in [0, 1]"),
     ("k_max = 64", "k_max = 6.5", "prior.k_max: expected an integer"),
     ('size_measure = "short_side"', 'size_measure = "volume"', "evidence.size_measure"),
+    ("wall_line_gap_m = 0.05", "wall_line_gap_m = -0.05", "world.wall_line_gap_m: must be > 0"),
     ("door_max_m = 2.5", "door_max_m = 0.1", "world.door_max_m"),
     ("unknown = [0.30, 0.60, 0.10]", "unknown = [0.40, 0.50, 0.10]", "must equal sensor.other.unknown"),
 ])
