@@ -4,9 +4,12 @@ For two units ``p`` and ``q`` the *connecting wall* is the strip between their f
 when they sit side by side along the columns (their column gap exceeds their row gap) it is the
 columns from the inner edge of the left unit's right band to the inner edge of the right unit's
 left band, over the rows both interiors share; likewise with rows and columns swapped. A line of
-the strip across the wall is *open* when every cell on it is input-free. A door is a maximal run
-of open lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an open passage
-(the two units are one space), a shorter one a gap in a noisy wall.
+the strip across the wall is *open* when every cell on it is input-free or a *speck*: a non-free
+cell none of whose eight neighbours in the map is non-free (an isolated speck of
+SLAM noise in a doorway would otherwise cut a door into two gaps too narrow to count; a wall, a
+door jamb or a closed leaf is a line of cells, never isolated). A door is a maximal run of open
+lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an open passage (the
+two units are one space), a shorter one a gap in a noisy wall.
 
 Examples
 --------
@@ -68,6 +71,31 @@ def connecting_wall(rp, rq, wall: int):
     return box, vertical
 
 
+def passable(classes: np.ndarray, box) -> np.ndarray:
+    """Cells of the lattice box ``(r0, c0, r1, c1)`` a door may pass: free cells and isolated specks.
+
+    A speck is a non-free cell none of whose eight neighbours in the map is non-free (a wall
+    cell at the end of a strip touches the rest of its wall outside the strip, so it is not one).
+
+    >>> m = np.array([[2, 2, 2, 2], [0, 0, 0, 0], [0, 2, 0, 0], [0, 0, 0, 0], [2, 2, 0, 1]], np.uint8)
+    >>> passable(m, (1, 0, 5, 4)).astype(int).tolist()
+    [[1, 1, 1, 1], [1, 1, 1, 1], [1, 1, 1, 1], [0, 0, 1, 1]]
+    """
+    r0, c0, r1, c1 = (int(v) for v in box)
+    H, W = classes.shape
+    g0, h0, g1, h1 = max(r0 - 1, 0), max(c0 - 1, 0), min(r1 + 1, H), min(c1 + 1, W)
+    blocked = np.pad(np.asarray(classes[g0:g1, h0:h1]) != FREE,
+                     ((1 - (r0 - g0), 1 - (g1 - r1)), (1 - (c0 - h0), 1 - (h1 - c1))))
+    inner = blocked[1:-1, 1:-1]
+    if not inner.any():
+        return ~inner
+    h, w = inner.shape
+    b8 = blocked.astype(np.uint8)
+    neighbours = sum(b8[1 + di:1 + di + h, 1 + dj:1 + dj + w]
+                     for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj)
+    return ~inner | (neighbours == 0)
+
+
 def open_runs(line_open: np.ndarray) -> list[tuple[int, int]]:
     """Maximal runs ``[start, stop)`` of True in a 1-D boolean array.
 
@@ -98,10 +126,10 @@ def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) ->
     a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
     if a0 >= a1 or b0 >= b1:
         return []
-    strip = classes[a0:a1, b0:b1] == FREE
     full_across = (b1 - b0) == (c1 - c0) if vertical else (a1 - a0) == (r1 - r0)
     if not full_across:  # the wall leaves the map: nothing can be seen through it
         return []
+    strip = passable(classes, (a0, b0, a1, b1))
     line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
     doors = []
     for s, e in open_runs(line_open):
@@ -124,6 +152,18 @@ def find_doors(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
     for i, j in zip(*np.nonzero(np.triu(np.asarray(adj, bool), 1))):
         out += doors_between(classes, rects[i], rects[j], cells, int(slots[i]), int(slots[j]))
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _speck(classes, r, c):  # pragma: no cover - compiled
+    """A non-free cell with no non-free 8-neighbour in the map (:func:`passable`)."""
+    H, W = classes.shape
+    for dr in range(-1, 2):
+        for dc in range(-1, 2):
+            rr, cc = r + dr, c + dc
+            if (dr != 0 or dc != 0) and 0 <= rr < H and 0 <= cc < W and classes[rr, cc] != FREE:
+                return False
+    return True
 
 
 @numba.njit(cache=True, nogil=True)
@@ -166,8 +206,8 @@ def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover 
         if k < n_lines:
             is_open = True
             for m in range(n_across):
-                v = classes[a0 + k, b0 + m] if vertical else classes[a0 + m, b0 + k]
-                if v != FREE:
+                r, c = (a0 + k, b0 + m) if vertical else (a0 + m, b0 + k)
+                if classes[r, c] != FREE and not _speck(classes, r, c):
                     is_open = False
                     break
         if is_open:
