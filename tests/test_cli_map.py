@@ -43,6 +43,10 @@ def test_map_writes_every_file(first_run):
     text = (out / "diagnostics.txt").read_text()
     assert "R-hat" in text and "log_posterior" in text
     assert "W*:" in r.stderr
+    # the report links every file of the folder, resume.npz (written after it) included
+    report = (out / "report.html").read_text()
+    for name in names:
+        assert f'href="{name}"' in report, name
 
 
 def test_same_seed_same_world_json(first_run, tmp_path):

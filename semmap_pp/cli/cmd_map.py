@@ -111,6 +111,7 @@ def run(args) -> int:
     from semmap_pp.errors import SemmapError
     from semmap_pp.outputs.write import write_all
     from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
+    from semmap_pp.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.resume import write_resume
     from semmap_pp.step import StopFlag
 
@@ -163,7 +164,8 @@ def run(args) -> int:
         signal.signal(signal.SIGINT, previous)
     for note in result.notes:
         log(f"note: {note}")
-    written = write_all(out, result, rules_name=rules.name, rules_path=rules)
+    written = write_all(out, result, rules_name=rules.name, rules_path=rules,
+                        written_after=(RESUME_FILE,))
     meta = {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
             "model": str(Path(inputs.model.path).resolve()),
             "rules": str(Path(rules).resolve()) if rules is not None else None,

@@ -32,6 +32,7 @@ FILES = {
     "trace.nc": "ArviZ trace of the label-invariant summaries and sampler statistics (open with arviz)",
     "diagnostics.txt": "R-hat, ESS and the convergence verdict as text",
     "report.html": "this page",
+    "resume.npz": "what `semmap map --resume DIR` needs to continue the run (written last)",
 }
 
 CSS = """

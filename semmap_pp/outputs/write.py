@@ -63,7 +63,7 @@ def posterior_worlds(run, n: int) -> list:
 
 
 def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
-              n_worlds: int = N_SAMPLED_WORLDS) -> list[Path]:
+              n_worlds: int = N_SAMPLED_WORLDS, written_after: tuple[str, ...] = ()) -> list[Path]:
     """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
 
     Parameters
@@ -76,6 +76,9 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
         Its path as given (diagnostics.txt); ``rules_name`` when omitted.
     n_worlds : int
         Sampled worlds in posterior.png and posterior_cells.png.
+    written_after : tuple of str
+        Names of files the caller writes into ``out_dir`` after this call (``semmap map``:
+        ``resume.npz``); the report lists them with the others.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -106,7 +109,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
         written.append(out / f"{name}.png")
     pngs["regions"] = fig.regions_preview_png(sm, region_img)
     pngs["roi"] = fig.roi_png(sm, run.inputs.roi_name)
-    names = [p.name for p in written] + ["report.html"]
+    names = [p.name for p in written] + ["report.html"] + list(written_after)
     files = [n for n in FILES if n in names] + [n for n in names if n not in FILES]
     written.append(write_report(out / "report.html",
                                 report_html(run, doc, pngs, regions, rules_name=rules_name, files=files)))
