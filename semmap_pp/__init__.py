@@ -5,3 +5,9 @@ sensor model shaped by editable logic rules (Liu & von Wichert, IROS 2013, re-im
 """
 
 __version__ = "0.1.0"
+
+# numba's cache keyed by this package's source (semmap_pp/jitcache.py): set before any module
+# defines a compiled function.
+from semmap_pp import jitcache as _jitcache  # noqa: E402
+
+_jitcache.configure()

@@ -1,0 +1,85 @@
+"""Where numba keeps the compiled code of semmap_pp, keyed by the package's source.
+
+numba's on-disk cache (``@numba.njit(cache=True)``) is checked against the source file of each
+compiled function only: when a compiled function calls a compiled function of *another* module,
+or reads a constant of another module, a change there is not noticed and the stale machine code
+is loaded (numba documents this limit). semmap_pp's compiled code spans several modules (the
+likelihood's category layout is read by the posterior's compiled scorer), so an edited or
+upgraded package could run old code against new data. :func:`configure` therefore points numba's
+cache at ``<cache>/semmap_pp/numba/<digest>``, where the digest covers the source of every module
+of the package: any change of the source selects a fresh, empty cache.
+
+It is called from ``semmap_pp/__init__.py`` before any module defines a compiled function. An
+explicit ``NUMBA_CACHE_DIR`` of the user is kept as it is. ``SEMMAP_NUMBA_CACHE=off`` leaves
+numba's own default (the ``__pycache__`` folders beside the source); ``SEMMAP_NUMBA_CACHE=DIR``
+uses ``DIR/<digest>``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from pathlib import Path
+
+ENV = "SEMMAP_NUMBA_CACHE"
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+def source_digest(package_dir: str | os.PathLike = PACKAGE_DIR) -> str:
+    """16 hex digits of SHA-256 over the relative path and bytes of every ``*.py`` file, sorted.
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp()); _ = (d / "a.py").write_text("x = 1")
+    >>> one = source_digest(d); _ = (d / "a.py").write_text("x = 2")
+    >>> one != source_digest(d) and len(one) == 16
+    True
+    """
+    root = Path(package_dir)
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode())
+        h.update(b"\0")
+        h.update(path.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def cache_dir(environ=os.environ, package_dir: str | os.PathLike = PACKAGE_DIR) -> Path | None:
+    """The numba cache directory for this source, or None to leave numba's own choice."""
+    if environ.get("NUMBA_CACHE_DIR"):
+        return None
+    setting = environ.get(ENV, "")
+    if setting.lower() in ("off", "0", "false", "no"):
+        return None
+    if setting:
+        base = Path(setting).expanduser()
+    else:
+        home = environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        base = Path(home) / "semmap_pp" / "numba"
+    return base / source_digest(package_dir)
+
+
+def configure(environ=os.environ) -> Path | None:
+    """Point numba's cache at :func:`cache_dir` (if it can be created); return the directory used.
+
+    Works whether or not numba is imported already: the variable is read by numba at import, and
+    ``numba.config.CACHE_DIR`` when a compiled function is defined.
+    """
+    try:
+        path = cache_dir(environ)
+        if path is None:
+            return None
+        path.mkdir(parents=True, exist_ok=True)
+        if not os.access(path, os.W_OK):
+            return None
+    except OSError:
+        return None  # unreadable source or unwritable cache: numba's default (see above)
+    environ["NUMBA_CACHE_DIR"] = str(path)
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        numba.config.CACHE_DIR = str(path)
+    return path
+
+
+__all__ = ["ENV", "source_digest", "cache_dir", "configure"]
