@@ -91,10 +91,12 @@ def test_a_change_in_a_called_module_is_not_served_from_a_stale_cache(tmp_path):
     assert run() == 20
 
 
-def test_the_package_configures_numba_on_import():
+def test_the_package_configures_numba_on_import(tmp_path):
     code = "import os, semmap_pp; print(os.environ.get('NUMBA_CACHE_DIR', ''))"
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", ENV)}
+    env["XDG_CACHE_HOME"] = str(tmp_path)                    # writable wherever the tests run
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
                          timeout=120, cwd=Path(__file__).resolve().parents[1])
     assert out.returncode == 0, out.stderr
-    assert Path(out.stdout.strip()).name == source_digest()
+    path = Path(out.stdout.strip())
+    assert path == tmp_path / "semmap_pp" / "numba" / source_digest() and path.is_dir()
