@@ -45,6 +45,13 @@ def source_digest(package_dir: str | os.PathLike = PACKAGE_DIR) -> str:
     return h.hexdigest()[:16]
 
 
+def cache_home(environ=os.environ) -> Path:
+    """``$XDG_CACHE_HOME/semmap_pp`` (default ``~/.cache/semmap_pp``): where the package's caches
+    on disk live (this numba cache, the knowledge template store)."""
+    home = environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(home) / "semmap_pp"
+
+
 def cache_dir(environ=os.environ, package_dir: str | os.PathLike = PACKAGE_DIR) -> Path | None:
     """The numba cache directory for this source, or None to leave numba's own choice."""
     if environ.get("NUMBA_CACHE_DIR"):
@@ -55,8 +62,7 @@ def cache_dir(environ=os.environ, package_dir: str | os.PathLike = PACKAGE_DIR) 
     if setting:
         base = Path(setting).expanduser()
     else:
-        home = environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        base = Path(home) / "semmap_pp" / "numba"
+        base = cache_home(environ) / "numba"
     return base / source_digest(package_dir)
 
 
@@ -82,4 +88,4 @@ def configure(environ=os.environ) -> Path | None:
     return path
 
 
-__all__ = ["ENV", "source_digest", "cache_dir", "configure"]
+__all__ = ["ENV", "source_digest", "cache_home", "cache_dir", "configure"]

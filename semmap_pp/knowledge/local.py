@@ -38,6 +38,7 @@ import clingo
 import clingo.ast as cast
 import numpy as np
 
+from semmap_pp.jitcache import cache_home
 from semmap_pp.knowledge.dialect import SOFT_PREDICATES, RuleSet, parse_text
 from semmap_pp.knowledge.evidence import Evidence, soft_weight
 from semmap_pp.knowledge.exact import _lse, merged_potentials
@@ -199,8 +200,7 @@ def default_store() -> Path | None:
     env = os.environ.get(STORE_ENV)
     if env is not None:
         return None if env.strip().lower() in ("", "0", "off", "no", "false") else Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "semmap_pp" / "templates"
+    return cache_home() / "templates"
 
 
 def _store_key(rules: RuleSet) -> str:
