@@ -30,7 +30,8 @@ from semmap_pp.errors import MapError, ModelError, SemmapError
 from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
 from semmap_pp.frame import Frame, build_frame
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
-from semmap_pp.init import dispersed_world, refine_world, start_world
+from semmap_pp.ascent import refine_world
+from semmap_pp.init import dispersed_world, start_world
 from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
 from semmap_pp.model import Model, load_model
 from semmap_pp.outputs import SemanticMap, semantic_map
@@ -225,7 +226,7 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import settings_from_mapping
     ks = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
-    if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/init.py)
+    if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/ascent.py)
         clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
                              rounds=ks.start_rounds)
     worlds = [clean]
@@ -316,6 +317,11 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     best_chain = result.best_chain
     if resume is not None:   # W* of the earlier segments may still be the best
         best, best_chain = resume.better_best(best, result.best_logp, best_chain)
+    if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
+        t_polish, before = time.perf_counter(), post.evaluate(best).total
+        best = refine_world(post, best, data, rounds=kernel_settings.polish_rounds)
+        log(f"W* polished by greedy ascent: log posterior {post.evaluate(best).total - before:+.1f} "
+            f"in {time.perf_counter() - t_polish:.1f} s")
     sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
     rate = total_kernels / seconds if seconds > 0 else 0.0
     if result.stopped:

@@ -1,4 +1,4 @@
-"""The start world's greedy ascent (init.refine_world) and the door candidates it relies on."""
+"""The greedy ascent (ascent.refine_world) and the door candidates it relies on."""
 
 import numpy as np
 
@@ -6,7 +6,7 @@ from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
-from semmap_pp.init import refine_world
+from semmap_pp.ascent import refine_world
 from semmap_pp.kernels import build_data, data_from_frame
 from semmap_pp.model import load_model
 from semmap_pp.posterior import Posterior

@@ -35,7 +35,7 @@ KIND_NAMES = ("add_remove", "split_merge", "shrink_dilate", "allocate_delete", "
 
 
 class KernelSettings(NamedTuple):
-    """Tuning of the proposal distributions (defaults here; a model file's ``[sampler]`` table overrides).
+    """Tuning of the proposal distributions (defaults here; a model file's ``[kernels]`` table overrides).
 
     None of these changes the target distribution; they change how fast the chain mixes.
 
@@ -66,7 +66,10 @@ class KernelSettings(NamedTuple):
         Mixing weights of the five kernel pairs.
     start_rounds : int
         Rounds of the greedy ascent that refines the data-driven start world
-        (:func:`semmap_pp.init.refine_world`; 0 = the greedy cover as it is).
+        (:func:`semmap_pp.ascent.refine_world`; 0 = the greedy cover as it is).
+    polish_rounds : int
+        Rounds of the greedy ascent of the full target that polishes W* after sampling (0 = W* as
+        sampled).
     """
 
     line_floor: float = 0.05
@@ -81,11 +84,12 @@ class KernelSettings(NamedTuple):
     max_candidates: int = 2000
     weights: tuple = (("add_remove", 1.0), ("split_merge", 1.0), ("shrink_dilate", 4.0),
                       ("allocate_delete", 1.0), ("interchange", 2.0))
-    start_rounds: int = 3
+    start_rounds: int = 6
+    polish_rounds: int = 3
 
 
-def settings_from_mapping(table: Mapping, source="<model>") -> KernelSettings:
-    """Read a ``[sampler]`` table (e.g. from a model file) into :class:`KernelSettings`.
+def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelSettings:
+    """Read a ``[kernels]`` table (e.g. from a model file) into :class:`KernelSettings`.
 
     Unknown keys and values of the wrong kind raise :class:`~semmap_pp.errors.ModelError`.
     ``weights`` is a table ``{kind = weight}``.
@@ -94,27 +98,27 @@ def settings_from_mapping(table: Mapping, source="<model>") -> KernelSettings:
     out = {}
     for key, value in dict(table).items():
         if key not in base:
-            raise ModelError(source, f"[sampler] unknown key {key!r}")
+            raise ModelError(source, f"unknown key {key!r}")
         if key == "weights":
             if not isinstance(value, Mapping) or any(k not in KIND_NAMES for k in value):
-                raise ModelError(source, f"[sampler] weights must be a table over {KIND_NAMES}")
+                raise ModelError(source, f"weights must be a table over {KIND_NAMES}")
             w = dict(base["weights"]) | {k: float(v) for k, v in value.items()}
             if any(v < 0 for v in w.values()) or sum(w.values()) <= 0:
-                raise ModelError(source, "[sampler] weights must be >= 0 with a positive sum")
+                raise ModelError(source, "weights must be >= 0 with a positive sum")
             out[key] = tuple(w.items())
         elif isinstance(base[key], int):
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ModelError(source, f"[sampler] {key} must be a non-negative integer")
+                raise ModelError(source, f"{key} must be a non-negative integer")
             out[key] = int(value)
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
-                raise ModelError(source, f"[sampler] {key} must be a number in [0, 1]")
+                raise ModelError(source, f"{key} must be a number in [0, 1]")
             out[key] = float(value)
     s = KernelSettings(**(base | out))
     if s.box_prob + s.box_jitter_prob > 1:
-        raise ModelError(source, "[sampler] box_prob + box_jitter_prob must be <= 1")
+        raise ModelError(source, "box_prob + box_jitter_prob must be <= 1")
     if s.local_radius < 1:
-        raise ModelError(source, "[sampler] local_radius must be >= 1")
+        raise ModelError(source, "local_radius must be >= 1")
     return s
 
 
