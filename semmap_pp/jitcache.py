@@ -13,17 +13,26 @@ It is called from ``semmap_pp/__init__.py`` before any module defines a compiled
 explicit ``NUMBA_CACHE_DIR`` of the user is kept as it is. ``SEMMAP_NUMBA_CACHE=off`` leaves
 numba's own default (the ``__pycache__`` folders beside the source); ``SEMMAP_NUMBA_CACHE=DIR``
 uses ``DIR/<digest>``.
+
+Each source (each installed or edited version) gets a folder of its own, 4–17 MB; so that upgrades
+do not pile them up, :func:`configure` marks the current folder as used and deletes sibling digest
+folders (16 hex digits; nothing else is touched) unused for :data:`MAX_AGE_DAYS` days.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
+import shutil
 import sys
+import time
 from pathlib import Path
 
 ENV = "SEMMAP_NUMBA_CACHE"
 PACKAGE_DIR = Path(__file__).resolve().parent
+MAX_AGE_DAYS = 30
+_DIGEST = re.compile(r"[0-9a-f]{16}")
 
 
 def source_digest(package_dir: str | os.PathLike = PACKAGE_DIR) -> str:
@@ -66,6 +75,31 @@ def cache_dir(environ=os.environ, package_dir: str | os.PathLike = PACKAGE_DIR) 
     return base / source_digest(package_dir)
 
 
+def prune(current: Path, max_age_days: float = MAX_AGE_DAYS, now: float | None = None) -> list[Path]:
+    """Delete the digest folders beside ``current`` not modified for ``max_age_days``; return them.
+
+    Only folders named like a digest (16 hex digits) are candidates, and never ``current``; a
+    folder another version is using is touched by that version's :func:`configure` at each start,
+    so it stays young. Errors (a folder vanishing meanwhile, no permission) are ignored.
+    """
+    now = time.time() if now is None else now
+    gone = []
+    try:
+        siblings = list(current.parent.iterdir())
+    except OSError:
+        return gone
+    for d in siblings:
+        try:
+            if (d.name == current.name or not _DIGEST.fullmatch(d.name) or not d.is_dir()
+                    or d.is_symlink() or now - d.stat().st_mtime < max_age_days * 86400):
+                continue
+            shutil.rmtree(d)
+            gone.append(d)
+        except OSError:
+            continue
+    return gone
+
+
 def configure(environ=os.environ) -> Path | None:
     """Point numba's cache at :func:`cache_dir` (if it can be created); return the directory used.
 
@@ -79,8 +113,10 @@ def configure(environ=os.environ) -> Path | None:
         path.mkdir(parents=True, exist_ok=True)
         if not os.access(path, os.W_OK):
             return None
+        os.utime(path)  # in use: keeps it young for prune()
     except OSError:
         return None  # unreadable source or unwritable cache: numba's default (see above)
+    prune(path)
     environ["NUMBA_CACHE_DIR"] = str(path)
     numba = sys.modules.get("numba")
     if numba is not None:
@@ -88,4 +124,4 @@ def configure(environ=os.environ) -> Path | None:
     return path
 
 
-__all__ = ["ENV", "source_digest", "cache_home", "cache_dir", "configure"]
+__all__ = ["ENV", "MAX_AGE_DAYS", "source_digest", "cache_home", "cache_dir", "prune", "configure"]

@@ -6,7 +6,11 @@ import sys
 import textwrap
 from pathlib import Path
 
-from semmap_pp.jitcache import ENV, cache_dir, configure, source_digest
+import time
+
+import numba
+
+from semmap_pp.jitcache import ENV, MAX_AGE_DAYS, cache_dir, configure, prune, source_digest
 
 
 def test_digest_follows_every_source_file(tmp_path):
@@ -44,6 +48,36 @@ def test_configure_sets_numba_and_falls_back_when_it_cannot_write(tmp_path):
     blocker.write_text("")
     env = {ENV: str(blocker)}                                 # a file where a folder must go
     assert configure(env) is None and "NUMBA_CACHE_DIR" not in env
+
+
+def test_old_digest_folders_are_pruned_and_nothing_else(tmp_path):
+    base = tmp_path / "cache"
+    base.mkdir()
+    old, young = base / "0123456789abcdef", base / "fedcba9876543210"
+    not_ours = [base / "keep-me", base / "0123456789abcdef0", base / "0123456789ABCDEF"]
+    for d in (old, young, *not_ours):
+        d.mkdir()
+        (d / "f.nbi").write_text("")
+    (base / "aaaaaaaaaaaaaaaa").write_text("a file named like a digest")
+    past = time.time() - (MAX_AGE_DAYS + 1) * 86400
+    for p in (old, *not_ours, base / "aaaaaaaaaaaaaaaa"):
+        os.utime(p, (past, past))
+    saved = numba.config.CACHE_DIR
+    try:
+        env = {ENV: str(base)}
+        current = configure(env)
+        assert current.parent == base and current.is_dir()
+        assert not old.exists()                                   # unused for too long: deleted
+        assert young.exists() and all(d.exists() for d in not_ours)
+        assert (base / "aaaaaaaaaaaaaaaa").exists()
+        os.utime(current, (past, past))                           # an old current folder ...
+        assert configure({ENV: str(base)}) == current and current.is_dir()   # ... kept, marked used
+        assert time.time() - current.stat().st_mtime < 3600
+    finally:
+        numba.config.CACHE_DIR = saved
+    # prune() alone: the age limit is a parameter; the current folder is never a candidate
+    assert prune(current, max_age_days=0, now=time.time() + 10) == [young]
+    assert current.exists()
 
 
 def test_a_change_in_a_called_module_is_not_served_from_a_stale_cache(tmp_path):
