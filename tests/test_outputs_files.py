@@ -202,6 +202,7 @@ def hostile_run(tmp_path_factory):
     f = build_frame(g, MODEL)
     sm = semantic_map(g, f, Posterior(f, MODEL), floor_world())
     out = tmp_path_factory.mktemp("out")
+    (out / ".world.json.x1y2z3w4.tmp").write_text('{"units": [')   # left by a killed earlier run
     run = make_run(sm)
     written = write_all(out, run, rules_name="<b>rules</b>.lp")
     return out, run, written
@@ -211,6 +212,7 @@ def test_write_all_writes_every_file_once(hostile_run):
     out, run, written = hostile_run
     names = [p.name for p in written]
     assert names[:4] == ["world.json", "labels.png", "trace.nc", "diagnostics.txt"]
+    # exactly the outputs: the killed run's temporary file is gone too
     assert sorted(names) == sorted(p.name for p in out.iterdir()) and len(set(names)) == len(names)
     assert {"world.geojson", "graph.graphml", "regions.png", "overlay.png", "graph.png", "posterior.png",
             "posterior_cells.png", "report.html"} <= set(names)

@@ -62,6 +62,36 @@ def posterior_worlds(run, n: int) -> list:
     return typed_worlds(post, sampled_worlds(run, n))
 
 
+def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
+    """Delete the temporary files an earlier, killed run left in ``out_dir``; return them.
+
+    :mod:`semmap_pp.atomic` writes ``NAME`` through ``.NAME.XXXXXXXX.tmp`` and renames it; a run
+    killed (SIGKILL) while writing leaves that file behind. Only temporaries of the output files
+    (:data:`semmap_pp.outputs.report.FILES`) are removed; any other file is left alone.
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> for n in (".world.json.k2j4h1x0.tmp", ".notes.tmp", "world.json"): _ = (d / n).write_text("")
+    >>> [p.name for p in remove_stale_temps(d)], sorted(p.name for p in d.iterdir())
+    (['.world.json.k2j4h1x0.tmp'], ['.notes.tmp', 'world.json'])
+    """
+    out = Path(out_dir)
+    gone = []
+    for name in FILES:
+        for p in out.glob(f".{glob_escape(name)}.*.tmp"):
+            try:
+                p.unlink()
+                gone.append(p)
+            except OSError:
+                continue
+    return gone
+
+
+def glob_escape(name: str) -> str:
+    """``name`` with glob metacharacters escaped (output names have none, but be exact)."""
+    return "".join(f"[{c}]" if c in "*?[" else c for c in name)
+
+
 def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
               n_worlds: int = N_SAMPLED_WORLDS, written_after: tuple[str, ...] = ()) -> list[Path]:
     """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
@@ -82,6 +112,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(out)
     sm = run.semantic
     written, doc = write_core(out, run, rules_name=rules_name,
                               rules_path=rules_path if rules_path is not None else rules_name)
