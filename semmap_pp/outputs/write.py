@@ -8,6 +8,7 @@ docs/outputs.md describes every file.
 
 from __future__ import annotations
 
+import glob
 import os
 from pathlib import Path
 
@@ -78,18 +79,13 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     out = Path(out_dir)
     gone = []
     for name in FILES:
-        for p in out.glob(f".{glob_escape(name)}.*.tmp"):
+        for p in out.glob(f".{glob.escape(name)}.*.tmp"):
             try:
                 p.unlink()
                 gone.append(p)
             except OSError:
                 continue
     return gone
-
-
-def glob_escape(name: str) -> str:
-    """``name`` with glob metacharacters escaped (output names have none, but be exact)."""
-    return "".join(f"[{c}]" if c in "*?[" else c for c in name)
 
 
 def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
