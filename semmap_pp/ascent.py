@@ -24,6 +24,7 @@ import numpy as np
 
 from semmap_pp import world as wm
 
+
 def _line_peaks(w: np.ndarray, lo: int, k: int) -> list[int]:
     """Positions (``lo`` + index) of the ``k`` largest local maxima of ``w`` above its floor."""
     if w.size == 0:
