@@ -9,7 +9,9 @@ knowledge-free target (types from the geometry class, fixed P(SaLe)) costs a few
 microseconds. So the start world is the local optimum of that target reached by the kernels' own
 moves, each taken only when it raises log p: remove a unit, move one wall to a nearby position or to
 a line of wall evidence (SHRINK/DILATE), merge two units that share a wall (MERGE), add a unit from
-the birth table where free space is left uncovered (ADD), split a unit at a wall line (SPLIT).
+the birth table where free space is left uncovered (ADD), split a unit at a wall line (SPLIT); and
+one compound move no single kernel makes, *bridging* two collinear pieces of a corridor across the
+unit between them (:meth:`_Ascent.bridges`).
 
 After sampling, the same ascent under the full target (knowledge on) polishes W*, the best sampled
 world: a short chain at T = 1 leaves it a few wall moves or one merge short of the nearest local
@@ -45,6 +47,8 @@ class _Ascent:
         self.tr = posterior.start(world)
         self.data, self.peaks, self.local = data, peaks, local
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
+        self.resolution = getattr(getattr(posterior, "cells", None), "resolution", None)
+        self.evidence = getattr(getattr(posterior, "model", None), "evidence", None)
 
     @property
     def world(self) -> wm.World:
@@ -192,6 +196,68 @@ class _Ascent:
                 changed |= self.tentative(wm.replace(wm.remove(self.world, b), a, box), (a, b), [a])
         return changed
 
+    def bridges(self, align: int = 3, max_gap_m: float = 5.0) -> bool:
+        """Join two collinear units across the units between them (a corridor in pieces).
+
+        Pairs whose spans across their axis agree within ``align`` cells at both ends, with a gap
+        along it of at least a unit side and at most ``max_gap_m``, whose bounding box is
+        corridor-like (Table 4's thresholds: long side at least ``corridor_min_ratio`` times the
+        short one, short side under ``hall_min_size``): the first unit becomes the box, the second
+        is dropped, and every other unit overlapping the box is cut back to its largest part beside
+        it (sharing the box's wall band) or dropped when nothing is left; the box and the units
+        near it are then wall-moved twice, and the whole kept only if log p rose. A unit that spans
+        a corridor and the room beside it (their wall has doors, and the pieces between them are
+        too short to be wall-like) is a local optimum for every single move, not for this one.
+        """
+        d, g = self.data, self.data.wall_share
+        max_gap = int(round(max_gap_m / self.resolution)) if self.resolution else 100
+        changed = False
+        act = wm.active_slots(self.world).tolist()
+        for i, a in enumerate(act):
+            for b in act[i + 1:]:
+                if not (self.world.active[a] and self.world.active[b]):
+                    continue
+                ra = [int(v) for v in self.world.rects[a]]
+                rb = [int(v) for v in self.world.rects[b]]
+                for axis in (0, 1):
+                    x = 1 - axis
+                    if abs(ra[x] - rb[x]) > align or abs(ra[x + 2] - rb[x + 2]) > align:
+                        continue
+                    lo_r, hi_r = (ra, rb) if ra[axis] <= rb[axis] else (rb, ra)
+                    gap = hi_r[axis] - lo_r[axis + 2]
+                    if gap < d.min_side or gap > max_gap:   # something unit-sized lies between
+                        continue
+                    box = [min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3])]
+                    sides = sorted((box[2] - box[0], box[3] - box[1]))
+                    if self.evidence is not None and (
+                            sides[1] < self.evidence.corridor_min_ratio * sides[0]
+                            or sides[0] * self.resolution >= self.evidence.hall_min_size):
+                        continue          # only corridor-like boxes: a corridor in pieces
+                    new = wm.remove(wm.replace(self.world, a, box), b)
+                    cut = []
+                    for u in wm.active_slots(new).tolist():
+                        if u == a:
+                            continue
+                        ru = [int(v) for v in new.rects[u]]
+                        if not (ru[0] < box[2] - g and ru[2] > box[0] + g and ru[1] < box[3] - g
+                                and ru[3] > box[1] + g):
+                            continue
+                        options = []
+                        for side, value in ((2, box[0] + g), (0, box[2] - g), (3, box[1] + g), (1, box[3] - g)):
+                            r = list(ru)
+                            r[side] = value
+                            if r[2] - r[0] >= d.min_side and r[3] - r[1] >= d.min_side:
+                                options.append(((r[2] - r[0]) * (r[3] - r[1]), r))
+                        new = wm.replace(new, u, max(options)[1]) if options else wm.remove(new, u)
+                        cut.append(u)
+                    m = 2 * d.wall_cells   # the units along the box move with it
+                    near = [u for u in wm.active_slots(new).tolist() if u != a and not (
+                        new.rects[u][0] >= box[2] + m or new.rects[u][2] <= box[0] - m
+                        or new.rects[u][1] >= box[3] + m or new.rects[u][3] <= box[1] - m)]
+                    changed |= self.tentative(new, (a, b, *cut), [a, *near] * 2)
+                    break
+        return changed
+
     def tentative(self, new: wm.World, changed, polish) -> bool:
         """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo)."""
         if not self.valid(new):
@@ -267,7 +333,8 @@ class _Ascent:
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
                  merges: bool = True) -> wm.World:
-    """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring).
+    """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
+    ``merges=False`` leaves out the merges and the bridges.
 
     Parameters
     ----------
@@ -280,7 +347,8 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     data : KernelData
         The kernels' data of the same lattice (line evidence, birth table).
     rounds : int
-        Passes of removals, wall moves, merges, splits and births (stops early when nothing changes).
+        Passes of removals, wall moves, merges, bridges, splits and births (stops early when nothing
+        changes).
 
     Returns
     -------
@@ -297,6 +365,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         changed |= asc.removals()
         if merges:
             changed |= asc.merges()
+            changed |= asc.bridges()
         changed |= asc.splits()
         if births:
             changed |= asc.births()

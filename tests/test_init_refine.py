@@ -50,3 +50,41 @@ def test_door_candidates_are_gaps_in_wall_lines_not_corridor_rows():
     doors = {tuple(int(v) for v in d) for d in data.door_candidates}
     assert (0, 20, 26, 31) in doors                         # axis 0 = along a row: row 20, cols 26..30
     assert not any(d[0] == 0 and d[2] == 6 and d[3] == 16 for d in doors)  # no corridor row is a door
+
+
+def corridor_and_room() -> np.ndarray:
+    """A 1 m x 14.8 m corridor (0.05 m cells) and a room below its middle; the wall between them
+    has three doors, so its pieces are shorter than ``object_max_extent`` (objects, not walls)."""
+    m = np.full((130, 300), UNKNOWN, np.uint8)
+    m[38:62, 0:300] = OCCUPIED
+    m[40:60, 2:298] = FREE
+    m[60:124, 98:202] = OCCUPIED
+    m[62:122, 100:200] = FREE
+    for c0 in (112, 150, 176):
+        m[60:62, c0:c0 + 14] = FREE
+    return m
+
+
+def test_bridges_join_a_corridor_across_the_unit_that_spans_it_and_a_room():
+    """Two corridor pieces and one unit over the rest of the corridor and the room: no removal,
+    wall move, merge or split raises log p, but joining the pieces across that unit (cut back to
+    the room) does."""
+    from semmap_pp.ascent import _Ascent
+
+    model = load_model()
+    grid = OccupancyGrid(corridor_and_room(), np.zeros((130, 300), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    assert frame.theta == 0.0
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (38, 0, 62, 100)), 1, (38, 200, 62, 300)),
+                   2, (38, 98, 124, 202))
+    asc = _Ascent(post, start, data_from_frame(frame))
+    before = asc.tr.logp
+    assert not asc.removals() and not asc.merges() and not asc.splits()
+    assert not any(asc.wall_moves(s) for s in wm.active_slots(asc.world).tolist())
+    assert asc.tr.logp == before
+    assert asc.bridges()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects == [(38, 0, 62, 300), (60, 98, 124, 202)]
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6      # the tracker agrees
