@@ -175,26 +175,30 @@ class _Ascent:
         """
         t = self.data.wall_cells
         changed = False
+        for a, b, ra, rb in self._pairs():
+            gap_r = max(ra[0], rb[0]) - min(ra[2], rb[2])
+            gap_c = max(ra[1], rb[1]) - min(ra[3], rb[3])
+            if gap_r > t or gap_c > t:
+                continue
+            box = (min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3]))
+            area = lambda r: (r[2] - r[0]) * (r[3] - r[1])  # noqa: E731
+            union = area(ra) + area(rb) - max(0, -gap_r) * max(0, -gap_c)
+            if area(box) > (1 + self.merge_slack) * union:
+                continue
+            if self.boundary_lines(ra, rb) >= self.merge_line_max:
+                continue
+            changed |= self.tentative(wm.replace(wm.remove(self.world, b), a, box), (a, b), [a])
+        return changed
+
+    def _pairs(self):
+        """``(a, b, rect a, rect b)`` for each pair of the units active now, skipping a pair once
+        an accepted move has removed either (the rectangles are read when the pair comes up)."""
         act = wm.active_slots(self.world).tolist()
         for i, a in enumerate(act):
             for b in act[i + 1:]:
-                if not (self.world.active[a] and self.world.active[b]):
-                    continue
-                ra = [int(v) for v in self.world.rects[a]]
-                rb = [int(v) for v in self.world.rects[b]]
-                gap_r = max(ra[0], rb[0]) - min(ra[2], rb[2])
-                gap_c = max(ra[1], rb[1]) - min(ra[3], rb[3])
-                if gap_r > t or gap_c > t:
-                    continue
-                box = (min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3]))
-                area = lambda r: (r[2] - r[0]) * (r[3] - r[1])  # noqa: E731
-                union = area(ra) + area(rb) - max(0, -gap_r) * max(0, -gap_c)
-                if area(box) > (1 + self.merge_slack) * union:
-                    continue
-                if self.boundary_lines(ra, rb) >= self.merge_line_max:
-                    continue
-                changed |= self.tentative(wm.replace(wm.remove(self.world, b), a, box), (a, b), [a])
-        return changed
+                if self.world.active[a] and self.world.active[b]:
+                    yield (a, b, [int(v) for v in self.world.rects[a]],
+                           [int(v) for v in self.world.rects[b]])
 
     def bridges(self, align: int = 3, max_gap_m: float = 5.0) -> bool:
         """Join two collinear units across the units between them (a corridor in pieces).
@@ -212,50 +216,44 @@ class _Ascent:
         d, g = self.data, self.data.wall_share
         max_gap = int(round(max_gap_m / self.resolution)) if self.resolution else 100
         changed = False
-        act = wm.active_slots(self.world).tolist()
-        for i, a in enumerate(act):
-            for b in act[i + 1:]:
-                if not (self.world.active[a] and self.world.active[b]):
+        for a, b, ra, rb in self._pairs():
+            for axis in (0, 1):
+                x = 1 - axis
+                if abs(ra[x] - rb[x]) > align or abs(ra[x + 2] - rb[x + 2]) > align:
                     continue
-                ra = [int(v) for v in self.world.rects[a]]
-                rb = [int(v) for v in self.world.rects[b]]
-                for axis in (0, 1):
-                    x = 1 - axis
-                    if abs(ra[x] - rb[x]) > align or abs(ra[x + 2] - rb[x + 2]) > align:
+                lo_r, hi_r = (ra, rb) if ra[axis] <= rb[axis] else (rb, ra)
+                gap = hi_r[axis] - lo_r[axis + 2]
+                if gap < d.min_side or gap > max_gap:   # something unit-sized lies between
+                    continue
+                box = [min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3])]
+                sides = sorted((box[2] - box[0], box[3] - box[1]))
+                if self.evidence is not None and (
+                        sides[1] < self.evidence.corridor_min_ratio * sides[0]
+                        or sides[0] * self.resolution >= self.evidence.hall_min_size):
+                    continue          # only corridor-like boxes: a corridor in pieces
+                new = wm.remove(wm.replace(self.world, a, box), b)
+                cut = []
+                for u in wm.active_slots(new).tolist():
+                    if u == a:
                         continue
-                    lo_r, hi_r = (ra, rb) if ra[axis] <= rb[axis] else (rb, ra)
-                    gap = hi_r[axis] - lo_r[axis + 2]
-                    if gap < d.min_side or gap > max_gap:   # something unit-sized lies between
+                    ru = [int(v) for v in new.rects[u]]
+                    if not (ru[0] < box[2] - g and ru[2] > box[0] + g and ru[1] < box[3] - g
+                            and ru[3] > box[1] + g):
                         continue
-                    box = [min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3])]
-                    sides = sorted((box[2] - box[0], box[3] - box[1]))
-                    if self.evidence is not None and (
-                            sides[1] < self.evidence.corridor_min_ratio * sides[0]
-                            or sides[0] * self.resolution >= self.evidence.hall_min_size):
-                        continue          # only corridor-like boxes: a corridor in pieces
-                    new = wm.remove(wm.replace(self.world, a, box), b)
-                    cut = []
-                    for u in wm.active_slots(new).tolist():
-                        if u == a:
-                            continue
-                        ru = [int(v) for v in new.rects[u]]
-                        if not (ru[0] < box[2] - g and ru[2] > box[0] + g and ru[1] < box[3] - g
-                                and ru[3] > box[1] + g):
-                            continue
-                        options = []
-                        for side, value in ((2, box[0] + g), (0, box[2] - g), (3, box[1] + g), (1, box[3] - g)):
-                            r = list(ru)
-                            r[side] = value
-                            if r[2] - r[0] >= d.min_side and r[3] - r[1] >= d.min_side:
-                                options.append(((r[2] - r[0]) * (r[3] - r[1]), r))
-                        new = wm.replace(new, u, max(options)[1]) if options else wm.remove(new, u)
-                        cut.append(u)
-                    m = 2 * d.wall_cells   # the units along the box move with it
-                    near = [u for u in wm.active_slots(new).tolist() if u != a and not (
-                        new.rects[u][0] >= box[2] + m or new.rects[u][2] <= box[0] - m
-                        or new.rects[u][1] >= box[3] + m or new.rects[u][3] <= box[1] - m)]
-                    changed |= self.tentative(new, (a, b, *cut), [a, *near] * 2)
-                    break
+                    options = []
+                    for side, value in ((2, box[0] + g), (0, box[2] - g), (3, box[1] + g), (1, box[3] - g)):
+                        r = list(ru)
+                        r[side] = value
+                        if r[2] - r[0] >= d.min_side and r[3] - r[1] >= d.min_side:
+                            options.append(((r[2] - r[0]) * (r[3] - r[1]), r))
+                    new = wm.replace(new, u, max(options)[1]) if options else wm.remove(new, u)
+                    cut.append(u)
+                m = 2 * d.wall_cells   # the units along the box move with it
+                near = [u for u in wm.active_slots(new).tolist() if u != a and not (
+                    new.rects[u][0] >= box[2] + m or new.rects[u][2] <= box[0] - m
+                    or new.rects[u][1] >= box[3] + m or new.rects[u][3] <= box[1] - m)]
+                changed |= self.tentative(new, (a, b, *cut), [a, *near] * 2)
+                break
         return changed
 
     def tentative(self, new: wm.World, changed, polish) -> bool:
