@@ -317,12 +317,15 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     best_chain = result.best_chain
     if resume is not None:   # W* of the earlier segments may still be the best
         best, best_chain = resume.better_best(best, result.best_logp, best_chain)
+    polished = None
     if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
         t_polish, before = time.perf_counter(), post.evaluate(best).total
         best = refine_world(post, best, data, rounds=kernel_settings.polish_rounds)
-        log(f"W* polished by greedy ascent: log posterior {post.evaluate(best).total - before:+.1f} "
-            f"in {time.perf_counter() - t_polish:.1f} s")
+        polished = (before, time.perf_counter() - t_polish)
     sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
+    if polished is not None:            # sm.log_posterior is W*'s, evaluated once
+        log(f"W* polished by greedy ascent: log posterior {sm.log_posterior - polished[0]:+.1f} "
+            f"in {polished[1]:.1f} s")
     rate = total_kernels / seconds if seconds > 0 else 0.0
     if result.stopped:
         notes.insert(0, f"{result.stopped}: sampling stopped early after {seconds:.1f} s; kept "
