@@ -47,8 +47,7 @@ class _Ascent:
         self.tr = posterior.start(world)
         self.data, self.peaks, self.local = data, peaks, local
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
-        self.resolution = getattr(getattr(posterior, "cells", None), "resolution", None)
-        self.evidence = getattr(getattr(posterior, "model", None), "evidence", None)
+        self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
 
     @property
     def world(self) -> wm.World:
@@ -214,7 +213,7 @@ class _Ascent:
         too short to be wall-like) is a local optimum for every single move, not for this one.
         """
         d, g = self.data, self.data.wall_share
-        max_gap = int(round(max_gap_m / self.resolution)) if self.resolution else 100
+        max_gap = int(round(max_gap_m / self.resolution))
         changed = False
         for a, b, ra, rb in self._pairs():
             for axis in (0, 1):
@@ -227,8 +226,7 @@ class _Ascent:
                     continue
                 box = [min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3])]
                 sides = sorted((box[2] - box[0], box[3] - box[1]))
-                if self.evidence is not None and (
-                        sides[1] < self.evidence.corridor_min_ratio * sides[0]
+                if (sides[1] < self.evidence.corridor_min_ratio * sides[0]
                         or sides[0] * self.resolution >= self.evidence.hall_min_size):
                     continue          # only corridor-like boxes: a corridor in pieces
                 new = wm.remove(wm.replace(self.world, a, box), b)
