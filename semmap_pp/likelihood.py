@@ -50,6 +50,9 @@ from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOWN
 # Extended input codes: the input class, with occupied split into object-like and wall-like.
 X_FREE, X_UNKNOWN, X_OBJECTLIKE, X_WALLLIKE = 0, 1, 2, 3
 N_X = 4
+# A side band with fewer seen (free or occupied) cells than this share of its cells has not been
+# seen: the enclosure term counts it as a wall (enclosure_loglik).
+SEEN_MIN = 0.05
 # Regions of a cell relative to the world.
 R_OUT, R_WALL, R_INTERIOR = 0, 1, 2
 N_CATEGORIES = N_X * 3 * 2  # x + 4 * (region + 3 * corridor)
@@ -229,6 +232,46 @@ def loglik_from_tallies(data: LikelihoodData, hist: np.ndarray, gamma_total: int
     """``baseline + hist · gain + log ψ · Σγ`` (the one place the float is formed:
     :func:`tallies_loglik`, which the compiled hot path calls too)."""
     return float(tallies_loglik(hist, data.gain, data.baseline, data.log_psi, int(gamma_total)))
+
+
+@numba.njit(cache=True, nogil=True)
+def enclosure_loglik(xsum, rects, active, wall, min_share, cost):  # pragma: no cover - compiled
+    """The enclosure term of a world (docs/model.md, "Enclosure"); 0 when ``min_share`` or
+    ``cost`` is 0.
+
+    Per side of an active unit, its wall band's *occupied share* is occupied / (occupied + free)
+    input cells (a side whose band holds fewer seen cells than ``SEEN_MIN`` of its cells has not
+    been seen and counts 1). A unit whose second largest share is below ``min_share`` (rays pass
+    through three of its walls) adds ``-cost · area · (1 - share / min_share)``."""
+    total = 0.0
+    if min_share <= 0.0 or cost <= 0.0:
+        return total
+    share = np.empty(4)
+    for s in range(rects.shape[0]):
+        if not active[s]:
+            continue
+        r0, c0, r1, c1 = rects[s, 0], rects[s, 1], rects[s, 2], rects[s, 3]
+        b = min(wall, r1 - r0, c1 - c0)
+        for k in range(4):
+            if k == 0:
+                ra, ca, rb, cb = r0, c0, r0 + b, c1
+            elif k == 1:
+                ra, ca, rb, cb = r1 - b, c0, r1, c1
+            elif k == 2:
+                ra, ca, rb, cb = r0, c0, r1, c0 + b
+            else:
+                ra, ca, rb, cb = r0, c1 - b, r1, c1
+            n = np.zeros(N_X)
+            for x in range(N_X):
+                n[x] = xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
+            occ = n[X_OBJECTLIKE] + n[X_WALLLIKE]
+            seen = occ + n[X_FREE]
+            share[k] = occ / seen if seen >= SEEN_MIN * (rb - ra) * (cb - ca) else 1.0
+        share.sort()
+        s2 = share[2]
+        if s2 < min_share:
+            total -= cost * (r1 - r0) * (c1 - c0) * (1.0 - s2 / min_share)
+    return total
 
 
 @numba.njit(cache=True, nogil=True)

@@ -70,6 +70,8 @@ class SensorParams:
     psi: float
     corridor: np.ndarray
     other: np.ndarray
+    enclosure_min_share: float = 0.0
+    enclosure_cost: float = 0.0
 
     def table(self, corridor: bool) -> np.ndarray:
         """The 3x4 look-up table (input class x world state) of the paper."""
@@ -312,7 +314,10 @@ def load_model(path: str | Path | None = None) -> Model:
     psi = r.number("sensor.psi", positive=True)
     if psi >= 1:
         raise r.error("sensor.psi", f"must lie in (0, 1), got {psi}")
-    sensor = SensorParams(psi=psi, corridor=corridor, other=other)
+    sensor = SensorParams(psi=psi, corridor=corridor, other=other,
+                          enclosure_min_share=r.number("sensor.enclosure_min_share", lo=0.0,
+                                                       hi=1.0),
+                          enclosure_cost=r.number("sensor.enclosure_cost", lo=0.0))
 
     evidence = EvidenceParams(
         size_measure=r.choice("evidence.size_measure", SIZE_MEASURES),

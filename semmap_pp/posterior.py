@@ -37,8 +37,8 @@ from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.derive.doors import door_count
 from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, GeometryTable, build_evidence,
                                 geometry_class, geometry_class_compiled, knowledge_evidence)
-from semmap_pp.likelihood import (covered_free, full_tallies, loglik_from_tallies, prepare,
-                                  tallies_loglik, world_delta)
+from semmap_pp.likelihood import (covered_free, enclosure_loglik, full_tallies,
+                                  loglik_from_tallies, prepare, tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
 from semmap_pp.prior import _all_valid, _sale_pairs, all_valid, log_p_n_table, log_p_rect_const, \
     log_slots, sale_log_factor_slots
@@ -101,7 +101,8 @@ class Posterior:
                              SIZE_MEASURES.index(e.size_measure)], np.int64)
         self._fp = np.array([c.resolution, e.hall_min_size, e.corridor_min_ratio, p.sale_threshold,
                              1.0 / (2.0 * p.sale_sigma_m ** 2), self.data.baseline,
-                             self.data.log_psi], np.float64)
+                             self.data.log_psi, model.sensor.enclosure_min_share,
+                             model.sensor.enclosure_cost], np.float64)
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -253,6 +254,12 @@ class Posterior:
         types, sale = self._types(world, geometry, adj)
         return _Typing(self._typed(world, types), geometry, adj, sale)
 
+    def enclosure(self, world: W.World) -> float:
+        """The enclosure term of the likelihood (:func:`~semmap_pp.likelihood.enclosure_loglik`)."""
+        return float(enclosure_loglik(self.data.xsum, _ro(world.rects), _ro(world.active),
+                                      int(self._ip[I_WALL]), float(self._fp[F_ENC_MIN]),
+                                      float(self._fp[F_ENC_COST])))
+
     def _logprior(self, typ: _Typing) -> float:
         w = typ.world
         n, K = int(np.count_nonzero(w.active)), w.capacity
@@ -274,7 +281,7 @@ class Posterior:
         w = typ.world
         slots = W.active_slots(w)
         hist, g = full_tallies(self.data, w.rects[slots], w.types[slots] == CORRIDOR)
-        loglik = loglik_from_tallies(self.data, hist, g)
+        loglik = loglik_from_tallies(self.data, hist, g) + self.enclosure(w)
         logprior = self._logprior(typ)
         return Terms(loglik, logprior, loglik + logprior, w)
 
@@ -290,7 +297,7 @@ class Posterior:
 # measure; floats: resolution, hall_min_size, corridor_min_ratio, sale threshold, 1/(2 σ²),
 # likelihood baseline, log ψ.
 I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE = range(8)
-F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI = range(7)
+F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI, F_ENC_MIN, F_ENC_COST = range(9)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -336,7 +343,8 @@ def _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, 
         n += 1 if new_active[s] else 0
     gamma_total += world_delta(xsum, old_rects, old_active, old_corr, new_rects, new_active,
                                new_corr, ip[I_WALL], hist)
-    loglik = tallies_loglik(hist, gain, fp[F_BASE], fp[F_LOGPSI], gamma_total)
+    loglik = tallies_loglik(hist, gain, fp[F_BASE], fp[F_LOGPSI], gamma_total) + \
+        enclosure_loglik(xsum, new_rects, new_active, ip[I_WALL], fp[F_ENC_MIN], fp[F_ENC_COST])
     logprior = -np.inf
     if _all_valid(new_rects, new_active, ip[I_H], ip[I_W], ip[I_LO], ip[I_HI]):
         logprior = prior_n[n] + _sale_pairs(new_rects, new_active, adj, sale, new_types, table,
@@ -429,7 +437,8 @@ class Tracker:
         slots = W.active_slots(w)
         self.hist, self.gamma_total = full_tallies(post.data, w.rects[slots],
                                                    w.types[slots] == CORRIDOR)
-        self.loglik = loglik_from_tallies(post.data, self.hist, self.gamma_total)
+        self.loglik = loglik_from_tallies(post.data, self.hist, self.gamma_total) + \
+            post.enclosure(w)
         self.logprior = post._logprior(self._typ)
         self.logp = self.loglik + self.logprior
         self._prior_n = post.prior_n(w.capacity)

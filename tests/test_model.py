@@ -28,6 +28,8 @@ def edited(tmp_path, old, new):
 @pytest.mark.parametrize("old,new,key", [
     ("psi = 0.5", "psi = 1.5", "sensor.psi"),
     ("psi = 0.5", "", "sensor.psi: missing"),
+    ("enclosure_min_share = 0.3", "enclosure_min_share = 1.3", "sensor.enclosure_min_share"),
+    ("enclosure_cost = 0.0", "enclosure_cost = -1.0", "sensor.enclosure_cost"),
     ("wall = [0.07, 0.25, 0.68]", "wall = [0.07, 0.25, 0.78]", "sensor.corridor.wall: row must sum to 1"),
     ("wall = [0.07, 0.25, 0.68]", "wall = [1.07, -0.75, 0.68]", "probabilities must lie in [0, 1]"),
     ("k_max = 64", "k_max = 6.5", "prior.k_max: expected an integer"),
