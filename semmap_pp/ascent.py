@@ -162,6 +162,23 @@ class _Ascent:
         frac = (cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)
         return float(frac.max())
 
+    def crossing_line(self, axis: int, lo_r, hi_r) -> float:
+        """Strongest wall line across the gap between two collinear units (0..1).
+
+        ``lo_r`` ends before ``hi_r`` begins along ``axis``; the lines across that axis strictly
+        inside the gap (a wall band off each unit's end), each as the share of its cells over the
+        two units' common span, wall band excluded, that are wall or door (as
+        :meth:`boundary_lines`). 0 when the gap holds no such line.
+        """
+        d, t = self.data, self.data.wall_cells
+        cum = d.hcum if axis == 0 else d.vcum
+        x = 1 - axis
+        s0, s1 = max(lo_r[x], hi_r[x]) + t, min(lo_r[x + 2], hi_r[x + 2]) - t
+        i0, i1 = lo_r[axis + 2] + t, min(hi_r[axis] - t, cum.shape[0])
+        if s1 <= s0 or i1 <= i0:
+            return 0.0
+        return float(((cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)).max())
+
     def merges(self) -> bool:
         """Replace two nearby units by their bounding box when it adds little area and raises log p.
 
@@ -199,13 +216,14 @@ class _Ascent:
                     yield (a, b, [int(v) for v in self.world.rects[a]],
                            [int(v) for v in self.world.rects[b]])
 
-    def bridges(self, align: int = 3, max_gap_m: float = 5.0) -> bool:
+    def bridges(self, align: int = 3) -> bool:
         """Join two collinear units across the units between them (a corridor in pieces).
 
         Pairs whose spans across their axis agree within ``align`` cells at both ends, with a gap
-        along it of at least a unit side and at most ``max_gap_m``, whose bounding box is
-        corridor-like (Table 4's thresholds: long side at least ``corridor_min_ratio`` times the
-        short one, short side under ``hall_min_size``): the first unit becomes the box, the second
+        along it of at least a unit side and no wall line across the gap (:meth:`crossing_line`
+        below ``merge_line_max``), whose bounding box is corridor-like (Table 4's thresholds: long
+        side at least ``corridor_min_ratio`` times the short one, short side under
+        ``hall_min_size``): the first unit becomes the box, the second
         is dropped, and every other unit overlapping the box is cut back to its largest part beside
         it (sharing the box's wall band) or dropped when nothing is left; the box and the units
         near it are then wall-moved twice, and the whole kept only if log p rose. A unit that spans
@@ -213,7 +231,6 @@ class _Ascent:
         too short to be wall-like) is a local optimum for every single move, not for this one.
         """
         d, g = self.data, self.data.wall_share
-        max_gap = int(round(max_gap_m / self.resolution))
         changed = False
         for a, b, ra, rb in self._pairs():
             for axis in (0, 1):
@@ -222,8 +239,10 @@ class _Ascent:
                     continue
                 lo_r, hi_r = (ra, rb) if ra[axis] <= rb[axis] else (rb, ra)
                 gap = hi_r[axis] - lo_r[axis + 2]
-                if gap < d.min_side or gap > max_gap:   # something unit-sized lies between
+                if gap < d.min_side:    # something unit-sized lies between
                     continue
+                if self.crossing_line(axis, lo_r, hi_r) >= self.merge_line_max:
+                    continue          # a wall crosses the gap: two spaces, not one in pieces
                 box = [min(ra[0], rb[0]), min(ra[1], rb[1]), max(ra[2], rb[2]), max(ra[3], rb[3])]
                 sides = sorted((box[2] - box[0], box[3] - box[1]))
                 if (sides[1] < self.evidence.corridor_min_ratio * sides[0]

@@ -88,3 +88,55 @@ def test_bridges_join_a_corridor_across_the_unit_that_spans_it_and_a_room():
     assert rects == [(38, 0, 62, 300), (60, 98, 124, 202)]
     assert asc.tr.logp > before + 100
     assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6      # the tracker agrees
+
+
+def corridor_and_two_rooms(crossing_wall: bool) -> np.ndarray:
+    """A 1 m x 30 m corridor (0.05 m cells) and two 5 m rooms below its middle, each with three
+    doors to it (wall pieces shorter than ``object_max_extent``); with ``crossing_wall`` the wall
+    between the rooms runs on across the corridor."""
+    m = np.full((130, 600), UNKNOWN, np.uint8)
+    m[38:62, 0:600] = OCCUPIED
+    m[40:60, 2:598] = FREE
+    m[60:124, 198:402] = OCCUPIED
+    m[62:122, 200:299] = FREE
+    m[62:122, 301:400] = FREE
+    for c0 in (212, 250, 276, 312, 350, 376):
+        m[60:62, c0:c0 + 14] = FREE
+    if crossing_wall:
+        m[40:60, 299:301] = OCCUPIED
+    return m
+
+
+def _two_rooms_ascent(crossing_wall: bool):
+    from semmap_pp.ascent import _Ascent
+
+    model = load_model()
+    m = corridor_and_two_rooms(crossing_wall)
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    assert frame.theta == 0.0
+    post = Posterior(frame, model, None)
+    start = wm.empty(8)
+    for s, r in enumerate([(38, 0, 62, 200), (38, 400, 62, 600), (38, 198, 124, 301),
+                           (38, 299, 124, 402)]):
+        start = wm.add(start, s, r)
+    return post, _Ascent(post, start, data_from_frame(frame))
+
+
+def test_bridges_span_two_rooms_wide_gaps_but_not_a_wall_across_the_corridor():
+    """The corridor's pieces are 10 m apart (two units over corridor + room between them): joined.
+    With a wall across the corridor in the gap, two corridors meet at a wall: not joined."""
+    post, asc = _two_rooms_ascent(crossing_wall=False)
+    before = asc.tr.logp
+    assert asc.bridges()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects[0] == (38, 0, 62, 600)
+    assert [r[0] for r in rects[1:]] == [60, 60] and len(rects) == 3   # rooms cut back below it
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6
+
+    post, asc = _two_rooms_ascent(crossing_wall=True)
+    a, b = [int(v) for v in asc.world.rects[0]], [int(v) for v in asc.world.rects[1]]
+    assert asc.crossing_line(1, a, b) >= asc.merge_line_max
+    before = asc.tr.logp
+    assert not asc.bridges()
+    assert asc.tr.logp == before
