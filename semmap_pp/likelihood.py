@@ -261,11 +261,15 @@ def enclosure_loglik(xsum, rects, active, wall, min_share, cost):  # pragma: no 
                 ra, ca, rb, cb = r0, c0, r1, c0 + b
             else:
                 ra, ca, rb, cb = r0, c1 - b, r1, c1
-            n = np.zeros(N_X)
+            occ = 0
+            free = 0
             for x in range(N_X):
-                n[x] = xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
-            occ = n[X_OBJECTLIKE] + n[X_WALLLIKE]
-            seen = occ + n[X_FREE]
+                n = xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
+                if x == X_FREE:
+                    free += n
+                elif x != X_UNKNOWN:
+                    occ += n
+            seen = occ + free
             share[k] = occ / seen if seen >= SEEN_MIN * (rb - ra) * (cb - ca) else 1.0
         share.sort()
         s2 = share[2]

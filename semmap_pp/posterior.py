@@ -295,7 +295,7 @@ class Posterior:
 # Packed arguments of the compiled hot path (one call per proposal; fewer arguments, cheaper call).
 # ints: corridor type, wall, adjacency dilation, lattice height, width, min side, max side, size
 # measure; floats: resolution, hall_min_size, corridor_min_ratio, sale threshold, 1/(2 σ²),
-# likelihood baseline, log ψ.
+# likelihood baseline, log ψ, enclosure min share and cost.
 I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE = range(8)
 F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI, F_ENC_MIN, F_ENC_COST = range(9)
 
