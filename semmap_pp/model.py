@@ -212,6 +212,13 @@ class _Reader:
             node = node[part]
         return node
 
+    def has(self, key: str) -> bool:
+        try:
+            self.raw(key)
+        except ModelError:
+            return False
+        return True
+
     def number(self, key: str, *, lo: float | None = None, hi: float | None = None,
                positive: bool = False) -> float:
         v = self.raw(key)
@@ -314,10 +321,10 @@ def load_model(path: str | Path | None = None) -> Model:
     psi = r.number("sensor.psi", positive=True)
     if psi >= 1:
         raise r.error("sensor.psi", f"must lie in (0, 1), got {psi}")
-    sensor = SensorParams(psi=psi, corridor=corridor, other=other,
-                          enclosure_min_share=r.number("sensor.enclosure_min_share", lo=0.0,
-                                                       hi=1.0),
-                          enclosure_cost=r.number("sensor.enclosure_cost", lo=0.0))
+    # the enclosure term is optional (off when its keys are absent: model files written before it)
+    enclosure = {k: r.number(f"sensor.{k}", lo=0.0, hi=hi) for k, hi in
+                 (("enclosure_min_share", 1.0), ("enclosure_cost", None)) if r.has(f"sensor.{k}")}
+    sensor = SensorParams(psi=psi, corridor=corridor, other=other, **enclosure)
 
     evidence = EvidenceParams(
         size_measure=r.choice("evidence.size_measure", SIZE_MEASURES),

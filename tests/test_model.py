@@ -52,3 +52,13 @@ def test_unreadable_and_invalid_toml(tmp_path):
     p.write_text("[sensor\npsi = ")
     with pytest.raises(ModelError, match="not valid TOML"):
         load_model(p)
+
+
+def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path):
+    text = DEFAULT_MODEL.read_text()
+    kept = [line for line in text.splitlines() if not line.startswith("enclosure_")]
+    assert len(kept) == len(text.splitlines()) - 2
+    p = tmp_path / "old.toml"
+    p.write_text("\n".join(kept) + "\n")
+    m = load_model(p)
+    assert m.sensor.enclosure_min_share == 0.0 and m.sensor.enclosure_cost == 0.0
