@@ -11,7 +11,8 @@ import pytest
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.likelihood import SEEN_MIN, X_FREE, X_OBJECTLIKE, X_WALLLIKE, enclosure_loglik, prepare
+from semmap_pp.likelihood import (SEEN_MIN, X_FREE, X_OBJECTLIKE, X_WALLLIKE, enclosure_loglik,
+                                  prepare)
 from semmap_pp.model import load_model
 from semmap_pp.posterior import Posterior
 
@@ -132,3 +133,36 @@ def test_tracker_equals_full_evaluation_with_the_term_on(seed):
         assert prop.loglik == pytest.approx(full.loglik, rel=1e-9, abs=0)
         if rng.random() < 0.7:
             tr.accept(prop)
+
+
+def room_with_window_fan():
+    """A walled 3 m room and a fan of 41 rays leaving it through a window in its right wall, out
+    into unknown space (0.05 m cells)."""
+    c = np.full((140, 200), UNKNOWN, np.uint8)
+    c[35:95, 5:65] = FREE
+    c[35:95, [5, 6, 63, 64]] = OCCUPIED
+    c[[35, 36, 93, 94], 5:65] = OCCUPIED
+    for a in np.linspace(-0.75, 0.75, 41):
+        for t in np.arange(0, 130, 0.5):
+            r, q = int(round(65 + t * np.sin(a))), int(round(63 + t * np.cos(a)))
+            if 0 <= r < 140 and 0 <= q < 200:
+                c[r, q] = FREE
+    return c
+
+
+@pytest.mark.parametrize("model,kept", [(DEFAULT, True), (ON, False)])
+def test_the_ascent_keeps_a_unit_over_a_ray_fan_only_with_the_term_off(model, kept):
+    """Without the term the per-cell model pays for covering the fan (+1,182 nats); with it the
+    unit costs thousands and the ascent's removals drop it. The room is kept either way."""
+    from semmap_pp.ascent import _Ascent
+    from semmap_pp.kernels import data_from_frame
+
+    frame = build_frame_from_classes(room_with_window_fan(), 0.05, model, theta=0.0)
+    post = Posterior(frame, model)
+    room = W.add(W.empty(4), 0, (35, 5, 95, 65))
+    both = W.add(room, 1, (20, 65, 110, 160))
+    gain = post.evaluate(both).total - post.evaluate(room).total
+    assert (gain > 500) if kept else (gain < -1000)
+    asc = _Ascent(post, both, data_from_frame(post.frame))
+    asc.removals()
+    assert W.active_slots(asc.world).tolist() == ([0, 1] if kept else [0])
