@@ -16,7 +16,12 @@ from semmap_pp.diagnostics import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = json.loads((ROOT / "docs" / "world.schema.json").read_text())
-LONG = ["--tune", "2", "--draws", "5000", "--n-inner", "5", "--progress", "plain", "--progress-every", "0.2"]
+# Far more draws than any budget or interruption of these tests lets a run make (a 3 s budget once
+# finished the 5,000 draws left after an interruption on a fast, idle machine, so the budget never
+# ended the run and its message was missing).
+DRAWS = 100_000
+LONG = ["--tune", "2", "--draws", str(DRAWS), "--n-inner", "5", "--progress", "plain",
+        "--progress-every", "0.2"]
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +87,7 @@ def interrupted(floor, tmp_path_factory):
 def test_sigint_one_core_writes_partial_results(interrupted):
     out, tree, meta = interrupted
     done = [c["draw"] for c in meta["chains"]]
-    assert 4 <= max(done) < 5002                 # stopped long before the 5002 planned draws
+    assert 4 <= max(done) < DRAWS + 2            # stopped long before the planned draws
     assert (out / "diagnostics.txt").is_file() and (out / "labels.png").is_file()
 
 
