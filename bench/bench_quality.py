@@ -337,7 +337,8 @@ def bench_synthetic(args, model, rules) -> dict:
         row = {"seed": seed, "rotation": round(float(floor.truth.get("rotation_deg", math.nan)), 1)
                if isinstance(floor.truth.get("rotation_deg"), (int, float)) else None,
                "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
-               "units": len(sm.unit_ids), "cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
+               "units": len(sm.unit_ids), "log_posterior": round(float(sm.log_posterior), 1),
+               "cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
                "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
