@@ -59,12 +59,24 @@ class _Ascent:
         return wm.is_valid(world, self.data.shape, self.data.min_side) and bool(
             np.all(r[:, 2:] - r[:, :2] <= self.data.max_side))
 
+    def propose_above(self, new: wm.World, changed, floor: float):
+        """``new``'s proposal, for a caller that takes it only when its log p exceeds ``floor``.
+
+        A tracker that :attr:`supports_floor` may skip the knowledge inference of a proposal whose
+        type-free upper bound is already below ``floor`` (its ``logp`` is then ``-inf``): the same
+        choices as with every proposal evaluated, fewer inferences.
+        """
+        if getattr(self.tr, "supports_floor", False):
+            return self.tr.propose(new, changed, floor=floor)
+        return self.tr.propose(new, changed)
+
     def try_world(self, new: wm.World, changed) -> bool:
         """Accept ``new`` when it raises log p (strictly); returns whether it did."""
         if not self.valid(new):
             return False
-        prop = self.tr.propose(new, tuple(int(s) for s in changed))
-        if prop.logp > self.tr.logp + 1e-9:
+        floor = self.tr.logp + 1e-9
+        prop = self.propose_above(new, tuple(int(s) for s in changed), floor)
+        if prop.logp > floor:
             self.tr.accept(prop)
             return True
         return False
@@ -75,7 +87,7 @@ class _Ascent:
         for new in worlds:
             if not self.valid(new):
                 continue
-            prop = self.tr.propose(new, changed)
+            prop = self.propose_above(new, changed, best_lp)
             if prop.logp > best_lp:
                 best, best_lp = prop, prop.logp
         if best is None:
@@ -126,7 +138,7 @@ class _Ascent:
                 new, gone = self.absorb(wm.replace(self.world, slot, r), slot)
                 if not self.valid(new):
                     continue
-                prop = self.tr.propose(new, (slot, *gone))
+                prop = self.propose_above(new, (slot, *gone), best_lp)
                 if prop.logp > best_lp:
                     best, best_lp = prop, prop.logp
             if best is not None:

@@ -140,3 +140,42 @@ def test_bridges_span_two_rooms_wide_gaps_but_not_a_wall_across_the_corridor():
     before = asc.tr.logp
     assert not asc.bridges()
     assert asc.tr.logp == before
+
+
+def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
+    """With knowledge on, the ascent passes its acceptance threshold to the tracker as a floor, so
+    proposals whose type-free bound is below it skip the knowledge engine; the moves taken, the
+    world and its log p are those of the ascent without floors."""
+    from pathlib import Path
+
+    from semmap_pp.ascent import _Ascent
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.pipeline import TargetFactory
+    from semmap_pp.posterior import Tracker
+
+    model = load_model()
+    m = corridor_and_two_rooms(crossing_wall=False)
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    rules = load_rules(Path(__file__).resolve().parents[1] / "rules" / "table3.lp")
+    start = wm.empty(8)
+    for s, r in enumerate([(38, 0, 62, 210), (38, 390, 62, 600), (38, 198, 124, 301),
+                           (38, 299, 124, 402)]):
+        start = wm.add(start, s, r)
+
+    def ascend():
+        post = TargetFactory(frame, model, rules)()
+        post.knowledge_on = True
+        asc = _Ascent(post, start, data_from_frame(frame))
+        for s in wm.active_slots(asc.world).tolist():
+            asc.wall_moves(s)
+        asc.bridges()
+        return asc
+
+    with_floors = ascend()
+    assert sum(with_floors.tr.skipped) > 0
+    monkeypatch.setattr(Tracker, "supports_floor", False)
+    without = ascend()
+    assert sum(without.tr.skipped) == 0
+    assert np.array_equal(with_floors.world.active, without.world.active)
+    assert np.array_equal(with_floors.world.rects, without.world.rects)
+    assert with_floors.tr.logp == without.tr.logp
