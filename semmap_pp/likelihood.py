@@ -234,6 +234,12 @@ def loglik_from_tallies(data: LikelihoodData, hist: np.ndarray, gamma_total: int
     return float(tallies_loglik(hist, data.gain, data.baseline, data.log_psi, int(gamma_total)))
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _box_count(xsum, ra, ca, rb, cb, x):  # pragma: no cover - compiled
+    """Cells of extended code ``x`` in rows ``ra:rb``, columns ``ca:cb`` (from the prefix sums)."""
+    return xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
+
+
 @numba.njit(cache=True, nogil=True)
 def enclosure_loglik(xsum, rects, active, wall, min_share, cost):  # pragma: no cover - compiled
     """The enclosure term of a world (docs/model.md, "Enclosure"); 0 when ``min_share`` or
@@ -261,15 +267,9 @@ def enclosure_loglik(xsum, rects, active, wall, min_share, cost):  # pragma: no 
                 ra, ca, rb, cb = r0, c0, r1, c0 + b
             else:
                 ra, ca, rb, cb = r0, c1 - b, r1, c1
-            occ = 0
-            free = 0
-            for x in range(N_X):
-                n = xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
-                if x == X_FREE:
-                    free += n
-                elif x != X_UNKNOWN:
-                    occ += n
-            seen = occ + free
+            occ = (_box_count(xsum, ra, ca, rb, cb, X_OBJECTLIKE)
+                   + _box_count(xsum, ra, ca, rb, cb, X_WALLLIKE))
+            seen = occ + _box_count(xsum, ra, ca, rb, cb, X_FREE)
             share[k] = occ / seen if seen >= SEEN_MIN * (rb - ra) * (cb - ca) else 1.0
         share.sort()
         s2 = share[2]
@@ -512,7 +512,7 @@ def _change_delta(xsum, rects, corr, on, skip, a, a_on, a_corr, b, b_on, b_corr,
             dgamma += (g_b - g_a) * (rb - ra) * (cb - ca)
             if off_a != off_b:
                 for x in range(N_X):
-                    cnt = xsum[rb, cb, x] - xsum[ra, cb, x] - xsum[rb, ca, x] + xsum[ra, ca, x]
+                    cnt = _box_count(xsum, ra, ca, rb, cb, x)
                     hist[x + off_b] += cnt
                     hist[x + off_a] -= cnt
     return dgamma

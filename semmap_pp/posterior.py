@@ -256,9 +256,10 @@ class Posterior:
 
     def enclosure(self, world: W.World) -> float:
         """The enclosure term of the likelihood (:func:`~semmap_pp.likelihood.enclosure_loglik`)."""
+        sensor = self.model.sensor
         return float(enclosure_loglik(self.data.xsum, _ro(world.rects), _ro(world.active),
-                                      int(self._ip[I_WALL]), float(self._fp[F_ENC_MIN]),
-                                      float(self._fp[F_ENC_COST])))
+                                      self.cells.wall, sensor.enclosure_min_share,
+                                      sensor.enclosure_cost))
 
     def _logprior(self, typ: _Typing) -> float:
         w = typ.world
