@@ -337,7 +337,8 @@ def bench_synthetic(args, model, rules) -> dict:
         row = {"seed": seed, "rotation": round(float(floor.truth.get("rotation_deg", math.nan)), 1)
                if isinstance(floor.truth.get("rotation_deg"), (int, float)) else None,
                "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
-               "units": len(sm.unit_ids), "log_posterior": round(float(sm.log_posterior), 1),
+               "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids or {}),
+               "log_posterior": round(float(sm.log_posterior), 1),
                "cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
                "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
@@ -358,6 +359,7 @@ def bench_synthetic(args, model, rules) -> dict:
               for k in ("pred_unmatched", "pred_outside_building", "true_missed", "true_missed_unseen",
                         "true_missed_cut")}
     errors |= {"pred_units": sum(r["units"] for r in rows if "units" in r),
+               "pred_exterior": sum(r.get("exterior", 0) for r in rows),
                "true_units": sum(r["true_units"] for r in rows if "true_units" in r)}
     return {"rows": rows, "means": means, "errors": errors,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
@@ -380,7 +382,8 @@ def bench_real(args, model, rules) -> dict:
             continue
         sm = run.semantic
         ttb = time_to_best(run, clock)
-        row = {"map": path.stem, "units": len(sm.unit_ids), "cpr": round(sm.cpr, 4),
+        row = {"map": path.stem, "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids or {}),
+               "cpr": round(sm.cpr, 4),
                "paper_cpr": PUBLISHED["cpr"].get(path.stem), "log_posterior": round(sm.log_posterior, 1),
                "run_s": round(run.seconds, 1), "time_to_wstar_s": ttb.get("seconds"),
                "wstar_draw": ttb.get("draw"), "draws_per_chain": ttb.get("of"),

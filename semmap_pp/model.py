@@ -56,6 +56,8 @@ class WorldParams:
     max_unit_side_m: float
     adjacency_dilation_m: float
     unexplored_min_area_m2: float
+    exterior_max_share: float = 0.0
+    exterior_seen_min: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -125,6 +127,8 @@ class CellParams:
     unexplored_min_area: int
     wall_line_tolerance: int = 1
     wall_line_gap: int = 1
+    exterior_max_share: float = 0.0
+    exterior_seen_min: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -192,7 +196,8 @@ class Model:
             adjacency_dilation=max(1, n(w.adjacency_dilation_m)),
             unexplored_min_area=max(1, n(w.unexplored_min_area_m2, dims=2)),
             wall_line_tolerance=max(1, n(w.wall_line_tolerance_m)),
-            wall_line_gap=max(1, n(w.wall_line_gap_m)))
+            wall_line_gap=max(1, n(w.wall_line_gap_m)),
+            exterior_max_share=w.exterior_max_share, exterior_seen_min=w.exterior_seen_min)
 
 
 class _Reader:
@@ -304,10 +309,13 @@ def load_model(path: str | Path | None = None) -> Model:
         identity_below_deg=r.number("lattice.identity_below_deg", lo=0.0, hi=45.0),
         angle_bin_deg=r.number("lattice.angle_bin_deg", positive=True, hi=15.0),
         refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0))
+    # the exterior test is optional (off when its keys are absent: model files written before it)
+    exterior = {k: r.number(f"world.{k}", lo=0.0, hi=1.0) for k in
+                ("exterior_max_share", "exterior_seen_min") if r.has(f"world.{k}")}
     world = WorldParams(**{k: r.number(f"world.{k}", positive=True) for k in (
         "wall_thickness_m", "object_max_extent_m", "door_min_m", "door_max_m", "min_unit_side_m",
         "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2",
-        "wall_line_tolerance_m", "wall_line_gap_m")})
+        "wall_line_tolerance_m", "wall_line_gap_m")}, **exterior)
     if world.door_max_m < world.door_min_m:
         raise r.error("world.door_max_m", "must be >= world.door_min_m")
     if world.max_unit_side_m < world.min_unit_side_m:

@@ -30,6 +30,8 @@ def edited(tmp_path, old, new):
     ("psi = 0.5", "", "sensor.psi: missing"),
     ("enclosure_min_share = 0.3", "enclosure_min_share = 1.3", "sensor.enclosure_min_share"),
     ("enclosure_cost = 0.0", "enclosure_cost = -1.0", "sensor.enclosure_cost"),
+    ("exterior_max_share = 0.3", "exterior_max_share = 1.5", "world.exterior_max_share"),
+    ("exterior_seen_min = 0.1", 'exterior_seen_min = "low"', "world.exterior_seen_min"),
     ("wall = [0.07, 0.25, 0.68]", "wall = [0.07, 0.25, 0.78]", "sensor.corridor.wall: row must sum to 1"),
     ("wall = [0.07, 0.25, 0.68]", "wall = [1.07, -0.75, 0.68]", "probabilities must lie in [0, 1]"),
     ("k_max = 64", "k_max = 6.5", "prior.k_max: expected an integer"),
@@ -62,3 +64,13 @@ def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path)
     p.write_text("\n".join(kept) + "\n")
     m = load_model(p)
     assert m.sensor.enclosure_min_share == 0.0 and m.sensor.enclosure_cost == 0.0
+
+
+def test_model_files_without_the_exterior_keys_load_with_the_test_off(tmp_path):
+    text = DEFAULT_MODEL.read_text()
+    kept = [line for line in text.splitlines() if not line.startswith("exterior_")]
+    assert len(kept) == len(text.splitlines()) - 2
+    p = tmp_path / "old.toml"
+    p.write_text("\n".join(kept) + "\n")
+    assert load_model(p).cells(0.05).exterior_max_share == 0.0
+    assert load_model().cells(0.05).exterior_max_share == 0.3

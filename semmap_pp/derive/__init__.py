@@ -1,5 +1,6 @@
-"""Derived elements of a world on the lattice map: cell states, doors, objects, adjacency and
-unexplored areas (one module each). :func:`derive_world` computes all of them for the outputs.
+"""Derived elements of a world on the lattice map: cell states, doors, objects, adjacency,
+unexplored areas and exterior units (one module each). :func:`derive_world` computes all of them
+for the outputs.
 
 Examples
 --------
@@ -7,12 +8,13 @@ Examples
 >>> from semmap_pp import world as W
 >>> from semmap_pp.model import load_model
 >>> from semmap_pp.frame import build_frame_from_classes
->>> cls = np.zeros((40, 80), np.uint8); cls[:, 38:42] = 2; cls[10:26, 38:42] = 0
+>>> cls = np.full((40, 80), 2, np.uint8); cls[2:38, 2:78] = 0   # free inside outer walls
+>>> cls[:, 38:42] = 2; cls[10:26, 38:42] = 0                    # a wall with a door
 >>> frame = build_frame_from_classes(cls, 0.05, load_model(), theta=0.0)
 >>> w = W.add(W.add(W.empty(4), 0, (0, 0, 40, 40)), 1, (0, 40, 40, 80))
 >>> d = derive_world(frame, w)
->>> d.adjacency.tolist(), [(x.p, x.q, x.box) for x in d.doors]
-([[False, True], [True, False]], [(0, 1, (10, 38, 26, 42))])
+>>> d.adjacency.tolist(), [(x.p, x.q, x.box) for x in d.doors], d.exterior
+([[False, True], [True, False]], [(0, 1, (10, 38, 26, 42))], [])
 """
 
 from __future__ import annotations
@@ -24,17 +26,28 @@ import numpy as np
 from semmap_pp import world as W
 from semmap_pp.derive.adjacency import adjacency_matrix
 from semmap_pp.derive.doors import Door, find_doors
+from semmap_pp.derive.exterior import find_exterior
 from semmap_pp.derive.states import Object, cell_states, find_objects
 from semmap_pp.derive.unexplored import Unexplored, find_unexplored
 
-__all__ = ["Derived", "Door", "Object", "Unexplored", "derive_world"]
+__all__ = ["Derived", "Door", "Exterior", "Object", "Unexplored", "derive_world"]
+
+
+class Exterior(NamedTuple):
+    """An exterior unit (:mod:`semmap_pp.derive.exterior`): its slot and the slots of the
+    building's units it is adjacent to."""
+
+    slot: int
+    neighbours: tuple
 
 
 class Derived(NamedTuple):
     """Everything derived from one world.
 
-    ``slots`` are the active slots in order; ``adjacency`` is (n, n) over them; doors and objects
-    name units by slot.
+    ``slots`` are the active slots of the building's units in order (exterior units left out);
+    ``adjacency`` is (n, n) over them; doors and objects name units by slot and join or lie in
+    building units only. ``states`` (and so the CPR) and ``unexplored`` come from every unit,
+    exterior ones included; ``exterior`` lists those.
     """
 
     slots: np.ndarray
@@ -43,10 +56,12 @@ class Derived(NamedTuple):
     objects: list
     adjacency: np.ndarray
     unexplored: list
+    exterior: list
 
 
 def derive_world(frame, world: W.World) -> Derived:
-    """Cell states, doors, objects, adjacency and unexplored areas of ``world`` on ``frame``."""
+    """Cell states, doors, objects, adjacency, unexplored areas and exterior units of ``world`` on
+    ``frame``."""
     c = frame.cells
     slots = W.active_slots(world)
     rects = world.rects[slots]
@@ -55,4 +70,12 @@ def derive_world(frame, world: W.World) -> Derived:
     objects = find_objects(frame.classes, rects, c.wall, c.object_max_extent, slots)
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
-    return Derived(slots, states, doors, objects, adj, unexplored)
+    ext = find_exterior(frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min)
+    if not ext.any():
+        return Derived(slots, states, doors, objects, adj, unexplored, [])
+    inside = {int(s) for s in slots[~ext]}
+    exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))
+                for i in np.flatnonzero(ext)]
+    return Derived(slots[~ext], states, [d for d in doors if d.p in inside and d.q in inside],
+                   [o for o in objects if o.unit in inside], adj[np.ix_(~ext, ~ext)], unexplored,
+                   exterior)

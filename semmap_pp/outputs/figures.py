@@ -20,7 +20,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.patches import Patch, Polygon  # noqa: E402
 from scipy import ndimage  # noqa: E402
 
 from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN, W_OBJECT, W_WALL  # noqa: E402
@@ -30,6 +30,7 @@ from semmap_pp.outputs.graphml import TYPE_LETTER  # noqa: E402
 RGB = {"free": (255, 255, 255), "unknown": (160, 160, 160), "occupied": (0, 0, 0),
        "wall": (0, 0, 255), "door": (0, 230, 230), "object": (0, 170, 0)}
 MAGENTA = "#e000e0"
+EXTERIOR = "#d35400"   # exterior units (free space seen outside the building): dashed orange
 TYPE_FACE = {"room": "#fff3b0", "corridor": "#bde0ff", "hall": "#ffd1a6", "other": "#e4e4e4"}
 LONG_SIDE_PX = 1400     # a figure's longer side on screen, in pixels (at DPI)
 DPI = 100
@@ -126,7 +127,8 @@ def _legend(fig, handles, ncol=None):
 
 def overlay_png(sm, doc: dict) -> bytes:
     """overlay.png (paper Fig. 5c): W* on the classified map, type letter and id at each unit's
-    centre (R room, C corridor, H hall, E other), magenta N at unexplored areas."""
+    centre (R room, C corridor, H hall, E other), magenta N at unexplored areas, exterior units
+    (free space seen outside the building) dashed with X and their id."""
     box = crop_box(sm)
     fig, (ax,) = _axes(box, extra_h=0.4)
     _show(ax, overlay_rgb(sm), box)
@@ -136,8 +138,15 @@ def overlay_png(sm, doc: dict) -> bytes:
     for n in doc["unexplored"]:
         ax.text(*n["center_px"], f"N{n['id']}", ha="center", va="center", color=MAGENTA, fontsize=11,
                 fontweight="bold")
+    for e in doc.get("exterior", []):
+        v = np.asarray(e["vertices_px"], float)
+        ax.add_patch(Polygon(v, closed=True, fill=False, ec=EXTERIOR, lw=2.0, ls="--", zorder=4))
+        ax.text(*v.mean(axis=0), f"X{e['id']}", ha="center", va="center", color=EXTERIOR, fontsize=11,
+                fontweight="bold", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
     handles = [Patch(fc=np.array(RGB[k]) / 255, ec="0.5", label=k) for k in
                ("occupied", "unknown", "free", "wall", "door", "object")]
+    if doc.get("exterior"):
+        handles.append(Patch(fc="none", ec=EXTERIOR, ls="--", lw=2.0, label="exterior (X)"))
     _legend(fig, handles)
     fig.subplots_adjust(0.005, 0.4 / fig.get_figheight(), 0.995, 0.995)
     return png(fig)

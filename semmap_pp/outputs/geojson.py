@@ -14,6 +14,9 @@ Features (``properties.kind`` says which; ``properties.id`` is the id of world.j
 - ``door``: LineString across the opening, from one end to the other; ``units``, ``width_m``.
 - ``object``: Point at its centre; ``unit``, ``extent_m``, ``cells``.
 - ``unexplored``: Point at its centre; ``area_m2``.
+- ``exterior``: Polygon like a unit's (free space seen outside the building through its windows
+  and exits, docs/model.md); ``length_m``, ``width_m``, ``area_m2``, ``units`` (the building's
+  units it is adjacent to).
 """
 
 from __future__ import annotations
@@ -95,6 +98,12 @@ def geojson_dict(sm, doc: dict | None = None, regions: dict[int, int] | None = N
                                  {"unit": o["unit"], "extent_m": o["extent_m"], "cells": o["cells"]}))
     for n in doc["unexplored"]:
         features.append(_feature("unexplored", n["id"], _point(n["center_m"]), {"area_m2": n["area_m2"]}))
+    for e in doc.get("exterior", []):
+        length, width = e["size_m"]
+        features.append(_feature("exterior", e["id"], {"type": "Polygon",
+                                                       "coordinates": [closed_ccw(e["vertices_m"])]},
+                                 {"length_m": length, "width_m": width,
+                                  "area_m2": round(length * width, 4), "units": e["units"]}))
     m = doc["map"]
     name = m["yaml"] or m["image"] or "map"
     return {

@@ -159,7 +159,10 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
     world = _kv([
         ("units", f"{len(doc['units'])} (" + ", ".join(f"{counts[t]} {t}" for t in UNIT_TYPES) + ")"),
         ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])), ("objects", len(doc["objects"])),
-        ("unexplored areas", len(doc["unexplored"])), ("log posterior", f"{sm.log_posterior:.2f}"),
+        ("unexplored areas", len(doc["unexplored"])),
+        ("exterior units", f"{len(doc.get('exterior', []))} (free space seen outside the building; "
+                           "not in the units, labels or graph)"),
+        ("log posterior", f"{sm.log_posterior:.2f}"),
         ("cell prediction rate", f"{cpr} over the region of interest “{inputs.roi_name}”"),
     ])
     names = files if files is not None else list(FILES)

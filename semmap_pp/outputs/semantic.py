@@ -34,6 +34,7 @@ class SemanticMap:
     roi : (H, W) bool, the region of interest of ``cpr``
     cpr : float (NaN when the ROI is empty)
     log_posterior : float
+    exterior_ids : dict slot -> exterior id (1..m) of the exterior units (not in ``slot_ids``)
     """
 
     grid: object
@@ -48,6 +49,7 @@ class SemanticMap:
     roi: np.ndarray
     cpr: float
     log_posterior: float
+    exterior_ids: dict = None
 
     @property
     def unit_ids(self) -> list[int]:
@@ -60,9 +62,10 @@ class SemanticMap:
         return UNIT_TYPES[int(self.world.types[self.slot_of(unit_id)])]
 
 
-def number_units(frame, world: W.World) -> dict[int, int]:
-    """Unit ids 1..n for the active slots, in reading order of their centres in the image."""
-    slots = [int(s) for s in W.active_slots(world)]
+def number_units(frame, world: W.World, slots=None) -> dict[int, int]:
+    """Unit ids 1..n for ``slots`` (default: the active slots), in reading order of their centres
+    in the image."""
+    slots = [int(s) for s in (W.active_slots(world) if slots is None else slots)]
     keys = []
     for s in slots:
         v = frame.rect_vertices_px(world.rects[s])
@@ -96,8 +99,9 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
     """Derive the semantic map of ``world`` (types re-assigned by ``posterior``)."""
     terms = posterior.evaluate(world)
     world = terms.world
-    slot_ids = number_units(frame, world)
     derived = derive_world(frame, world)
+    slot_ids = number_units(frame, world, derived.slots)
+    exterior_ids = number_units(frame, world, [e.slot for e in derived.exterior])
     result = posterior.knowledge_result(world) if W.n_units(world) else None
     marginals = {}
     for s, uid in slot_ids.items():
@@ -111,7 +115,7 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
                                                              grid.resolution))
     rate, _ = cpr(grid.classes, states_img, roi)
     return SemanticMap(grid, frame, world, slot_ids, derived, marginals, labels_lat, states_img,
-                       labels_img, roi, float(rate), float(terms.total))
+                       labels_img, roi, float(rate), float(terms.total), exterior_ids)
 
 
 __all__ = ["SemanticMap", "semantic_map", "number_units", "label_lattice",

@@ -85,6 +85,18 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
     for i, un in enumerate(unexplored, 1):
         un["id"] = i
 
+    exterior = []
+    ext_ids = sm.exterior_ids or {}
+    for e in sorted(d.exterior, key=lambda o: ext_ids[o.slot]):
+        r0, c0, r1, c1 = (int(v) for v in world.rects[e.slot])
+        vpx = frame.rect_vertices_px(world.rects[e.slot])
+        vm = _m(frame, vpx)
+        exterior.append({"id": ext_ids[e.slot], "vertices_px": [_r(v, 3) for v in vpx],
+                         "vertices_m": [_r(v, 4) for v in vm], "center_m": _r(vm.mean(axis=0), 4),
+                         "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)],
+                                          reverse=True),
+                         "units": sorted(ids[s] for s in e.neighbours)})
+
     adjacency = sorted({tuple(sorted((ids[int(d.slots[i])], ids[int(d.slots[j])])))
                         for i, j in zip(*np.nonzero(np.triu(d.adjacency, 1)))})
     units = []
@@ -120,6 +132,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         "doors": doors,
         "objects": objects,
         "unexplored": unexplored,
+        "exterior": exterior,
         "log_posterior": round(lp, 6) if math.isfinite(lp) else -1e308,
         "cpr": None if not math.isfinite(sm.cpr) else round(sm.cpr, 6),
         "roi": roi_name,

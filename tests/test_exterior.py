@@ -1,0 +1,127 @@
+"""Exterior units (semmap_pp.derive.exterior): free space seen outside the building through its
+windows is flagged, rooms and pieces of a corridor are not, and the outputs list the flagged units
+apart without changing the world's cell states or CPR."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+from PIL import Image
+
+from semmap_pp import world as W
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.derive.exterior import find_exterior, side_shares
+from semmap_pp.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.model import load_model
+from semmap_pp.outputs import semantic_map, world_dict, write_labels_png
+from semmap_pp.outputs.geojson import geojson_dict
+from semmap_pp.posterior import Posterior
+
+SCHEMA = json.loads((Path(__file__).parents[1] / "docs" / "world.schema.json").read_text())
+MODEL = load_model()
+
+
+def room_with_window():
+    """A 3 x 2.6 m room (walls 2 cells) with a 1 m window in its right wall, and the rays that
+    left through the window: a fan of free lines, unknown between them, nothing hit."""
+    c = np.full((80, 160), UNKNOWN, np.uint8)
+    c[10:62, 10:72] = OCCUPIED
+    c[12:60, 12:70] = FREE
+    c[26:46, 70:72] = FREE                                # the window
+    for row in range(-40, 120, 3):                        # rays beyond it, spreading out
+        r = np.linspace(36, row, 80).round().astype(int)
+        ok = (r >= 0) & (r < 79)
+        c[r[ok], np.arange(72, 152)[ok]] = FREE
+        c[r[ok] + 1, np.arange(72, 152)[ok]] = FREE
+    return c
+
+
+def grid_of(c):
+    return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                         origin=(0.0, 0.0, 0.0), source=None, image_path=None)
+
+
+ROOM, FAN = (10, 10, 62, 72), (20, 70, 54, 150)
+
+
+def test_a_fan_beyond_a_window_is_exterior_and_the_room_is_not():
+    c = room_with_window()
+    flags = find_exterior(c, np.array([ROOM, FAN]), wall=2, max_share=0.3, seen_min=0.1)
+    assert flags.tolist() == [False, True]
+    # the fan's shares: its left side is the wall with the window (enclosed), rays leave the others
+    count = np.zeros(c.shape, np.int32)
+    for r0, c0, r1, c1 in (ROOM, FAN):
+        count[r0:r1, c0:c1] += 1
+    shares = np.sort(side_shares(c, FAN, count, 2, 0.1))
+    assert shares[3] > 0.9 and shares[2] < 0.3
+
+
+def test_the_test_is_off_at_zero_and_order_does_not_matter():
+    c = room_with_window()
+    assert not find_exterior(c, np.array([ROOM, FAN]), 2, 0.0, 0.1).any()
+    assert find_exterior(c, np.array([FAN, ROOM]), 2, 0.3, 0.1).tolist() == [True, False]
+
+
+def test_pieces_of_a_corridor_are_not_exterior():
+    """A corridor junction: walls above, free space continuing left, right and down into
+    neighbouring units. Its open sides lead into units, not out of the building."""
+    c = np.full((60, 120), UNKNOWN, np.uint8)
+    c[12:14, 0:120] = OCCUPIED                            # the wall above the corridor
+    c[14:30, 0:120] = FREE                                # the corridor
+    c[30:32, 0:50] = OCCUPIED                             # the wall below, broken by a branch
+    c[30:32, 70:120] = OCCUPIED
+    c[30:60, 50:70] = FREE                                # the branch going down
+    c[30:60, 48:50] = OCCUPIED
+    c[30:60, 70:72] = OCCUPIED
+    rects = np.array([(12, 0, 32, 50), (12, 48, 32, 72), (12, 70, 32, 120), (30, 48, 60, 72)])
+    assert not find_exterior(c, rects, 2, 0.3, 0.1).any()
+    # alone, the junction piece would be flagged: only the cover of its neighbours keeps it
+    assert find_exterior(c, rects[1:2], 2, 0.3, 0.1).tolist() == [True]
+
+
+def test_a_side_seen_too_little_counts_as_enclosed():
+    """A room seen only through its door: the far half unknown. Its far side has almost no seen
+    cells, so it counts as enclosed; the room is not exterior."""
+    c = np.full((60, 60), UNKNOWN, np.uint8)
+    c[10:50, 10:12] = OCCUPIED                            # left wall, seen
+    c[10:12, 10:30] = OCCUPIED; c[48:50, 10:30] = OCCUPIED  # top and bottom walls, half seen
+    c[12:48, 12:30] = FREE                                 # half of the inside seen
+    c[20:40, 48:50] = FREE                                 # a sliver of the far side
+    flags = find_exterior(c, np.array([(10, 10, 50, 50)]), 2, 0.3, 0.1)
+    assert flags.tolist() == [False]
+
+
+def fan_map():
+    g = grid_of(room_with_window())
+    f = build_frame(g, MODEL)
+    assert f.theta == 0.0
+    w = W.add(W.add(W.empty(4), 0, ROOM), 1, FAN)
+    return g, f, w
+
+
+def test_outputs_list_exterior_units_apart_and_keep_the_cpr(tmp_path):
+    g, f, w = fan_map()
+    sm = semantic_map(g, f, Posterior(f, MODEL), w)
+    off = dataclasses.replace(MODEL, world=dataclasses.replace(MODEL.world, exterior_max_share=0.0))
+    f_off = build_frame(g, off)
+    sm_off = semantic_map(g, f_off, Posterior(f_off, off), w)
+    doc, doc_off = world_dict(sm), world_dict(sm_off)
+    jsonschema.validate(doc, SCHEMA)
+    assert [u["id"] for u in doc["units"]] == [1] and len(doc_off["units"]) == 2
+    assert len(doc["exterior"]) == 1 and doc_off["exterior"] == []
+    x = doc["exterior"][0]
+    assert x["id"] == 1 and x["units"] == [1]
+    assert x["vertices_px"] == [[70.0, 20.0], [150.0, 20.0], [150.0, 54.0], [70.0, 54.0]]
+    assert doc["adjacency"] == [] and doc["doors"] == []          # the window joins no two units
+    assert doc["cpr"] == doc_off["cpr"] and doc["log_posterior"] == doc_off["log_posterior"]
+    assert np.array_equal(sm.states_image, sm_off.states_image)
+    # labels.png: the room only; the fan's cells are 0 where the room does not reach
+    write_labels_png(tmp_path / "labels.png", sm.labels_image)
+    lab = np.asarray(Image.open(tmp_path / "labels.png"))
+    assert set(np.unique(lab).tolist()) == {0, 1}
+    assert (lab[20:54, 75:150] == 0).all() and (lab[12:60, 12:70] == 1).all()
+    kinds = [ft["properties"]["kind"] for ft in geojson_dict(sm, doc)["features"]]
+    assert kinds.count("exterior") == 1 and kinds.count("unit") == 1
