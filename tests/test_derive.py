@@ -3,6 +3,8 @@
 Map legend: '#' occupied, '.' free, '?' unknown.
 """
 
+import dataclasses
+
 import numpy as np
 
 from semmap_pp import world as W
@@ -201,3 +203,36 @@ def test_compiled_adjacency_row_equals_the_closed_form():
         out = np.zeros(K, bool)
         adjacency_row(rects.astype(np.int64), active, s, 2, 1, out)
         assert np.array_equal(out, adjacency_rows(rects, [s], 2, 1)[0] & active)
+
+
+def test_an_opening_without_a_jamb_is_a_passage_and_its_cells_are_free():
+    """A corridor ending in a hall: the whole wall the two units share is open. Within door
+    width, but with no jamb on the shared wall (none wider than the wall band): a passage, not a
+    door; its cells are FREE in the world's states, as door cells are."""
+    from semmap_pp.derive.doors import door_count, openings_between
+
+    m = grid("""
+    ##########
+    #........#
+    #........#
+    ###....###
+    ..#....#..
+    ..#....#..
+    ..#....#..
+    ..######..
+    """)
+    hall, corridor = (0, 0, 4, 10), (3, 2, 8, 8)
+    doors, passages = openings_between(m, hall, corridor, CELLS, 1, 2)
+    assert doors == [] and [(d.box, d.width) for d in passages] == [((3, 3, 4, 7), 4)]
+    assert door_count(m, hall, corridor, CELLS) == 0
+    m2 = m.copy()
+    m2[3, 3:5] = OCCUPIED            # a jamb of two cells: the opening narrowed to 2 is a door
+    doors, passages = openings_between(m2, hall, corridor, CELLS, 1, 2)
+    assert [(d.box, d.width) for d in doors] == [((3, 5, 4, 7), 2)] and passages == []
+    assert door_count(m2, hall, corridor, CELLS) == 1
+    cells = dataclasses.replace(load_model().cells(0.05), wall=1, door_min=2, door_max=4)
+    frame = build_frame_from_classes(m, 0.05, load_model(), theta=0.0)
+    frame = dataclasses.replace(frame, cells=cells)
+    d = derive_world(frame, W.add(W.add(W.empty(3), 0, hall), 1, corridor))
+    assert d.doors == [] and len(d.passages) == 1
+    assert (d.states[3, 3:7] == W_FREE).all() and d.states[3, 2] == W_WALL

@@ -25,7 +25,7 @@ import numpy as np
 
 from semmap_pp import world as W
 from semmap_pp.derive.adjacency import adjacency_matrix
-from semmap_pp.derive.doors import Door, find_doors
+from semmap_pp.derive.doors import Door, find_openings
 from semmap_pp.derive.exterior import find_exterior
 from semmap_pp.derive.states import Object, cell_states, find_objects
 from semmap_pp.derive.unexplored import Unexplored, find_unexplored
@@ -45,8 +45,9 @@ class Derived(NamedTuple):
     """Everything derived from one world.
 
     ``slots`` are the active slots of the building's units in order (exterior units left out);
-    ``adjacency`` is (n, n) over them; doors and objects name units by slot and join or lie in
-    building units only. ``states`` (and so the CPR) and ``unexplored`` come from every unit,
+    ``adjacency`` is (n, n) over them; doors, passages (open stretches of a shared wall that are
+    not doors: wider than a door or without a jamb) and objects name units by slot and join or lie
+    in building units only. ``states`` (and so the CPR) and ``unexplored`` come from every unit,
     exterior ones included; ``exterior`` lists those.
     """
 
@@ -57,6 +58,7 @@ class Derived(NamedTuple):
     adjacency: np.ndarray
     unexplored: list
     exterior: list
+    passages: list = []
 
 
 def derive_world(frame, world: W.World) -> Derived:
@@ -66,16 +68,16 @@ def derive_world(frame, world: W.World) -> Derived:
     slots = W.active_slots(world)
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
-    doors = find_doors(frame.classes, rects, adj, c, slots)
+    doors, passages = find_openings(frame.classes, rects, adj, c, slots)
     objects = find_objects(frame.classes, rects, c.wall, c.object_max_extent, slots)
-    states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors)
+    states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
     ext = find_exterior(frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min)
     if not ext.any():
-        return Derived(slots, states, doors, objects, adj, unexplored, [])
+        return Derived(slots, states, doors, objects, adj, unexplored, [], passages)
     inside = {int(s) for s in slots[~ext]}
     exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))
                 for i in np.flatnonzero(ext)]
     return Derived(slots[~ext], states, [d for d in doors if d.p in inside and d.q in inside],
                    [o for o in objects if o.unit in inside], adj[np.ix_(~ext, ~ext)], unexplored,
-                   exterior)
+                   exterior, [d for d in passages if d.p in inside and d.q in inside])

@@ -9,7 +9,11 @@ cell none of whose eight neighbours in the map is non-free (an isolated speck of
 SLAM noise in a doorway would otherwise cut a door into two gaps too narrow to count; a wall, a
 door jamb or a closed leaf is a line of cells, never isolated). A door is a maximal run of open
 lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an open passage (the
-two units are one space), a shorter one a gap in a noisy wall.
+two units are one space), a shorter one a gap in a noisy wall. A run that reaches within ``wall``
+cells of both ends of the strip has no jamb on the shared wall — the whole boundary the two units
+share is open, as where a corridor ends in a hall — and is an open passage too, whatever its width
+(docs/quality.md, session 6). Passages are not doors, but their cells are open: the world's cell
+states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
 
 Examples
 --------
@@ -107,8 +111,11 @@ def open_runs(line_open: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
-def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) -> list[Door]:
-    """Doors on the connecting wall of units ``p`` (rectangle ``rp``) and ``q`` (``rq``).
+def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
+                     q: int = 1) -> tuple[list[Door], list[Door]]:
+    """``(doors, passages)`` on the connecting wall of units ``p`` (rectangle ``rp``) and ``q``
+    (``rq``): maximal runs of open lines at least ``door_min`` wide; a run is a *passage* when it
+    is wider than ``door_max`` or has no jamb on the shared wall (module docstring), else a door.
 
     Parameters
     ----------
@@ -120,24 +127,33 @@ def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) ->
     """
     cw = connecting_wall(rp, rq, cells.wall)
     if cw is None:
-        return []
+        return [], []
     (r0, c0, r1, c1), vertical = cw
     H, W = classes.shape
     a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
     if a0 >= a1 or b0 >= b1:
-        return []
+        return [], []
     full_across = (b1 - b0) == (c1 - c0) if vertical else (a1 - a0) == (r1 - r0)
     if not full_across:  # the wall leaves the map: nothing can be seen through it
-        return []
+        return [], []
     strip = passable(classes, (a0, b0, a1, b1))
     line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
-    doors = []
+    doors, passages = [], []
+    n_lines = len(line_open)
     for s, e in open_runs(line_open):
         width = e - s
-        if cells.door_min <= width <= cells.door_max:
-            box = (a0 + s, b0, a0 + e, b1) if vertical else (a0, b0 + s, a1, b0 + e)
-            doors.append(Door(int(p), int(q), tuple(int(v) for v in box), bool(vertical), width))
-    return doors
+        if width < cells.door_min:
+            continue
+        box = (a0 + s, b0, a0 + e, b1) if vertical else (a0, b0 + s, a1, b0 + e)
+        door = Door(int(p), int(q), tuple(int(v) for v in box), bool(vertical), width)
+        no_jamb = s <= cells.wall and e >= n_lines - cells.wall
+        (passages if width > cells.door_max or no_jamb else doors).append(door)
+    return doors, passages
+
+
+def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) -> list[Door]:
+    """The doors of :func:`openings_between` (passages left out)."""
+    return openings_between(classes, rp, rq, cells, p, q)[0]
 
 
 def find_doors(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
@@ -146,12 +162,20 @@ def find_doors(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
 
     ``rects`` (n, 4) and ``adj`` (n, n) of the active units; ``slots`` their ids (default 0..n-1).
     """
+    return find_openings(classes, rects, adj, cells, slots)[0]
+
+
+def find_openings(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
+                  slots=None) -> tuple[list[Door], list[Door]]:
+    """``(doors, passages)`` of a world: :func:`openings_between` for every adjacent pair."""
     rects = np.asarray(rects).reshape(-1, 4)
     slots = np.arange(len(rects)) if slots is None else np.asarray(slots)
-    out = []
+    doors, passages = [], []
     for i, j in zip(*np.nonzero(np.triu(np.asarray(adj, bool), 1))):
-        out += doors_between(classes, rects[i], rects[j], cells, int(slots[i]), int(slots[j]))
-    return out
+        d, p = openings_between(classes, rects[i], rects[j], cells, int(slots[i]), int(slots[j]))
+        doors += d
+        passages += p
+    return doors, passages
 
 
 @numba.njit(cache=True, nogil=True)
@@ -213,7 +237,8 @@ def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover 
         if is_open:
             run += 1
         else:
-            if run > 0 and door_min <= run <= door_max:
+            passage = k - run <= wall and k >= n_lines - wall
+            if run > 0 and door_min <= run <= door_max and not passage:
                 count += 1
             run = 0
     return count

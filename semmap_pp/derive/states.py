@@ -1,7 +1,8 @@
 """World cell states WALL / FREE / OBJECT / UNKNOWN on the lattice, and the objects of each unit.
 
 Output definition (DESIGN.md, the paper): a cell outside every unit is UNKNOWN; a cell in some
-unit's wall band is WALL, unless it is a door cell (FREE); an interior cell is OBJECT when the
+unit's wall band is WALL, unless it is a door or passage cell (FREE: where the wall two units
+share is open); an interior cell is OBJECT when the
 input is unknown (the paper: "unknown cells of the input map that are located within a unit are
 considered as object cells") or when it is occupied and its 8-connected component of non-free
 cells *within that unit's interior* spans at most ``object_max_extent`` cells along both axes;
@@ -108,7 +109,7 @@ def cell_states(classes: np.ndarray, rects: np.ndarray, wall: int, object_max_ex
     wall, object_max_extent : int
         In cells.
     doors : iterable of Door
-        Door boxes become FREE.
+        Door (and passage) boxes become FREE.
     objects : {"components", "lines"}
         "components": the per-unit connected-component rule (the output definition);
         "lines": the likelihood's rule, occupied cells are objects unless ``wall_like``.
