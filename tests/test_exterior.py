@@ -30,6 +30,8 @@ def room_with_window():
     c = np.full((80, 160), UNKNOWN, np.uint8)
     c[10:62, 10:72] = OCCUPIED
     c[12:60, 12:70] = FREE
+    c[60:80, 10:72] = OCCUPIED                            # a second room below it
+    c[62:78, 12:70] = FREE
     c[26:46, 70:72] = FREE                                # the window
     for row in range(-40, 120, 3):                        # rays beyond it, spreading out
         r = np.linspace(36, row, 80).round().astype(int)
@@ -44,16 +46,16 @@ def grid_of(c):
                          origin=(0.0, 0.0, 0.0), source=None, image_path=None)
 
 
-ROOM, FAN = (10, 10, 62, 72), (20, 70, 54, 150)
+ROOM, FAN, ROOM2 = (10, 10, 62, 72), (20, 70, 54, 150), (60, 10, 80, 72)
 
 
 def test_a_fan_beyond_a_window_is_exterior_and_the_room_is_not():
     c = room_with_window()
-    flags = find_exterior(c, np.array([ROOM, FAN]), wall=2, max_share=0.3, seen_min=0.1)
-    assert flags.tolist() == [False, True]
+    flags = find_exterior(c, np.array([ROOM, FAN, ROOM2]), wall=2, max_share=0.3, seen_min=0.1)
+    assert flags.tolist() == [False, True, False]
     # the fan's shares: its left side is the wall with the window (enclosed), rays leave the others
     count = np.zeros(c.shape, np.int32)
-    for r0, c0, r1, c1 in (ROOM, FAN):
+    for r0, c0, r1, c1 in (ROOM, FAN, ROOM2):
         count[r0:r1, c0:c1] += 1
     shares = np.sort(side_shares(c, FAN, count, 2, 0.1))
     assert shares[3] > 0.9 and shares[2] < 0.3
@@ -61,8 +63,8 @@ def test_a_fan_beyond_a_window_is_exterior_and_the_room_is_not():
 
 def test_the_test_is_off_at_zero_and_order_does_not_matter():
     c = room_with_window()
-    assert not find_exterior(c, np.array([ROOM, FAN]), 2, 0.0, 0.1).any()
-    assert find_exterior(c, np.array([FAN, ROOM]), 2, 0.3, 0.1).tolist() == [True, False]
+    assert not find_exterior(c, np.array([ROOM, FAN, ROOM2]), 2, 0.0, 0.1).any()
+    assert find_exterior(c, np.array([ROOM2, FAN, ROOM]), 2, 0.3, 0.1).tolist() == [False, True, False]
 
 
 def test_pieces_of_a_corridor_are_not_exterior():
@@ -78,8 +80,10 @@ def test_pieces_of_a_corridor_are_not_exterior():
     c[30:60, 70:72] = OCCUPIED
     rects = np.array([(12, 0, 32, 50), (12, 48, 32, 72), (12, 70, 32, 120), (30, 48, 60, 72)])
     assert not find_exterior(c, rects, 2, 0.3, 0.1).any()
-    # alone, the junction piece would be flagged: only the cover of its neighbours keeps it
-    assert find_exterior(c, rects[1:2], 2, 0.3, 0.1).tolist() == [True]
+    # without its neighbours' cover the junction's shares would flag it
+    alone = np.zeros(c.shape, np.int32)
+    alone[12:32, 48:72] = 1
+    assert np.sort(side_shares(c, rects[1], alone, 2, 0.1))[2] < 0.3
 
 
 def test_a_side_seen_too_little_counts_as_enclosed():
@@ -98,7 +102,7 @@ def fan_map():
     g = grid_of(room_with_window())
     f = build_frame(g, MODEL)
     assert f.theta == 0.0
-    w = W.add(W.add(W.empty(4), 0, ROOM), 1, FAN)
+    w = W.add(W.add(W.add(W.empty(4), 0, ROOM), 1, FAN), 2, ROOM2)
     return g, f, w
 
 
@@ -110,18 +114,31 @@ def test_outputs_list_exterior_units_apart_and_keep_the_cpr(tmp_path):
     sm_off = semantic_map(g, f_off, Posterior(f_off, off), w)
     doc, doc_off = world_dict(sm), world_dict(sm_off)
     jsonschema.validate(doc, SCHEMA)
-    assert [u["id"] for u in doc["units"]] == [1] and len(doc_off["units"]) == 2
+    assert [u["id"] for u in doc["units"]] == [1, 2] and len(doc_off["units"]) == 3
     assert len(doc["exterior"]) == 1 and doc_off["exterior"] == []
     x = doc["exterior"][0]
     assert x["id"] == 1 and x["units"] == [1]
     assert x["vertices_px"] == [[70.0, 20.0], [150.0, 20.0], [150.0, 54.0], [70.0, 54.0]]
-    assert doc["adjacency"] == [] and doc["doors"] == []          # the window joins no two units
+    assert doc["adjacency"] == [[1, 2]] and doc["doors"] == []    # the window joins no two units
     assert doc["cpr"] == doc_off["cpr"] and doc["log_posterior"] == doc_off["log_posterior"]
     assert np.array_equal(sm.states_image, sm_off.states_image)
     # labels.png: the room only; the fan's cells are 0 where the room does not reach
     write_labels_png(tmp_path / "labels.png", sm.labels_image)
     lab = np.asarray(Image.open(tmp_path / "labels.png"))
-    assert set(np.unique(lab).tolist()) == {0, 1}
+    assert set(np.unique(lab).tolist()) == {0, 1, 2}
     assert (lab[20:54, 75:150] == 0).all() and (lab[12:60, 12:70] == 1).all()
     kinds = [ft["properties"]["kind"] for ft in geojson_dict(sm, doc)["features"]]
-    assert kinds.count("exterior") == 1 and kinds.count("unit") == 1
+    assert kinds.count("exterior") == 1 and kinds.count("unit") == 2
+
+
+def test_a_unit_inside_the_building_footprint_is_not_exterior():
+    """A fan of rays through a door into a room the robot never entered looks like a window fan,
+    but it lies within the convex hull of the other units: the building's footprint."""
+    c = room_with_window()
+    far = (10, 150, 62, 160)           # another unit right of the fan: the fan is now between
+    c[10:62, 150:160] = OCCUPIED
+    c[12:60, 152:158] = FREE
+    flags = find_exterior(c, np.array([ROOM, FAN, ROOM2, far]), 2, 0.3, 0.1)
+    assert flags.tolist() == [False, False, False, False]
+    # a footprint needs two units besides the one tested: a world keeps at least two
+    assert find_exterior(c, np.array([ROOM, FAN]), 2, 0.3, 0.1).tolist() == [False, False]

@@ -11,6 +11,10 @@ through at least three of its four sides: per side, the *enclosed share* of its 
 building; a side with fewer seen cells than ``seen_min`` of its band counts as enclosed), and the
 unit is exterior when its second largest share is below ``max_share``. A unit next to an exterior
 unit loses that neighbour's cover, so the test is repeated until no further unit is flagged.
+Rays also leave a unit that covers the part of a room seen through its door (a room the robot
+never entered); such a unit lies within the building's footprint, so a unit is flagged only when
+more than half its area lies outside the convex hull of the other units not flagged, and at
+least two of those remain (a footprint needs them; a world is never left without units).
 
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
@@ -19,18 +23,18 @@ labels.png, doors, adjacency and objects hold the building's units only (docs/mo
 
 Examples
 --------
-A room closed by walls on three sides and open to its right neighbour, which is a fan: free cells
-leaving through its top, bottom and right sides.
+Two rooms, the upper one with a window in its right wall, and a fan of rays beyond the window:
+free cells leave the fan's unit through its top, bottom and right sides; its left side is the
+wall with the window.
 
 >>> import numpy as np
->>> cls = np.ones((20, 30), np.uint8)
->>> cls[2:18, 2:14] = 0                       # room interior
->>> cls[2:18, 2] = 2; cls[2, 2:14] = 2; cls[17, 2:14] = 2; cls[2:18, 13] = 2   # its walls
->>> cls[8:12, 13] = 0                         # a window in the right wall
->>> cls[2:18, 14:28] = 0                      # rays beyond the window
->>> rects = np.array([[2, 2, 18, 14], [2, 13, 18, 28]])
+>>> cls = np.ones((30, 30), np.uint8)
+>>> cls[2:28, 2:14] = 2; cls[3:15, 3:13] = 0; cls[16:27, 3:13] = 0   # two rooms in walls
+>>> cls[6:10, 13] = 0                         # a window in the upper room's right wall
+>>> cls[1:20, 14:28] = 0                      # free space seen beyond the window
+>>> rects = np.array([[2, 2, 16, 14], [2, 13, 18, 28], [15, 2, 28, 14]])
 >>> find_exterior(cls, rects, wall=1, max_share=0.3, seen_min=0.1).tolist()
-[False, True]
+[False, True, False]
 """
 
 from __future__ import annotations
@@ -63,29 +67,84 @@ def side_shares(classes: np.ndarray, rect, count: np.ndarray, wall: int, seen_mi
     return out
 
 
+def _outside_share(rect, hull) -> float:
+    """The share of ``rect``'s area outside the convex polygon ``hull`` ((k, 2) lattice points in
+    order), on a grid of 10 x 10 sample points; 1.0 without a hull (fewer than 3 points)."""
+    r0, c0, r1, c1 = (float(v) for v in rect)
+    if hull is None:
+        return 1.0
+    t = (np.arange(10) + 0.5) / 10.0
+    rr, cc = np.meshgrid(r0 + t * (r1 - r0), c0 + t * (c1 - c0), indexing="ij")
+    pts = np.stack([rr.ravel(), cc.ravel()], axis=1)
+    a, b = hull, np.roll(hull, -1, axis=0)
+    cross = ((b[:, 0] - a[:, 0])[None, :] * (pts[:, 1, None] - a[:, 1][None, :])
+             - (b[:, 1] - a[:, 1])[None, :] * (pts[:, 0, None] - a[:, 0][None, :]))
+    inside = np.all(cross >= -1e-9, axis=1) | np.all(cross <= 1e-9, axis=1)
+    return float(1.0 - inside.mean())
+
+
+def _hull(rects: np.ndarray):
+    """Convex hull (counter-clockwise points) of the corners of ``rects``, or None if degenerate."""
+    if len(rects) == 0:
+        return None
+    pts = np.unique(np.concatenate([rects[:, [0, 1]], rects[:, [0, 3]], rects[:, [2, 1]],
+                                    rects[:, [2, 3]]]).astype(float), axis=0)
+    if len(pts) < 3:
+        return None
+    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+
+    def half(points):
+        out = []
+        for p in points:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    hull = np.array(lower[:-1] + upper[:-1])
+    return hull if len(hull) >= 3 else None
+
+
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
-                  seen_min: float) -> np.ndarray:
+                  seen_min: float, outside_min: float = 0.5) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
-    when ``max_share`` is 0 (the test is off). Each round tests every unit not yet flagged against
-    the same cover, so the result does not depend on the order of ``rects``."""
+    when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
+    share is below ``max_share`` and more than ``outside_min`` of its area lies outside the convex
+    hull of the other units not flagged (the building's footprint: a fan of rays through a door
+    into a room the robot never entered lies within it), and at least two other units are left.
+    Units are flagged one at a time, the one most outside the footprint first (ties: the lower
+    share, then the rectangle), each test against the cover and footprint of the units not yet
+    flagged, so the result does not depend on the order of ``rects``."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
     exterior = np.zeros(n, dtype=bool)
-    if max_share <= 0.0 or n == 0:
+    if max_share <= 0.0 or n < 3:
         return exterior
     count = np.zeros(classes.shape, dtype=np.int32)
     for r0, c0, r1, c1 in rects:
         count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
-    while True:
-        new = [i for i in np.flatnonzero(~exterior)
-               if np.sort(side_shares(classes, rects[i], count, wall, seen_min))[2] < max_share]
-        if not new:
-            return exterior
-        for i in new:
-            r0, c0, r1, c1 = rects[i]
-            exterior[i] = True
-            count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] -= 1
+    while np.count_nonzero(~exterior) > 2:
+        best = None
+        for i in np.flatnonzero(~exterior):
+            share = np.sort(side_shares(classes, rects[i], count, wall, seen_min))[2]
+            if share >= max_share:
+                continue
+            others = ~exterior
+            others[i] = False
+            out = _outside_share(rects[i], _hull(rects[others]))
+            key = (-out, share, tuple(int(v) for v in rects[i]))
+            if out > outside_min and (best is None or key < best[0]):
+                best = (key, i)
+        if best is None:
+            break
+        i = best[1]
+        r0, c0, r1, c1 = rects[i]
+        exterior[i] = True
+        count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] -= 1
+    return exterior
 
 
 __all__ = ["find_exterior", "side_shares"]
