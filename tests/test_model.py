@@ -56,21 +56,21 @@ def test_unreadable_and_invalid_toml(tmp_path):
         load_model(p)
 
 
-def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path):
+def without_lines(tmp_path, prefix):
+    """The default model file with the lines starting with ``prefix`` (two keys) left out."""
     text = DEFAULT_MODEL.read_text()
-    kept = [line for line in text.splitlines() if not line.startswith("enclosure_")]
+    kept = [line for line in text.splitlines() if not line.startswith(prefix)]
     assert len(kept) == len(text.splitlines()) - 2
     p = tmp_path / "old.toml"
     p.write_text("\n".join(kept) + "\n")
-    m = load_model(p)
+    return load_model(p)
+
+
+def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path):
+    m = without_lines(tmp_path, "enclosure_")
     assert m.sensor.enclosure_min_share == 0.0 and m.sensor.enclosure_cost == 0.0
 
 
 def test_model_files_without_the_exterior_keys_load_with_the_test_off(tmp_path):
-    text = DEFAULT_MODEL.read_text()
-    kept = [line for line in text.splitlines() if not line.startswith("exterior_")]
-    assert len(kept) == len(text.splitlines()) - 2
-    p = tmp_path / "old.toml"
-    p.write_text("\n".join(kept) + "\n")
-    assert load_model(p).cells(0.05).exterior_max_share == 0.0
+    assert without_lines(tmp_path, "exterior_").cells(0.05).exterior_max_share == 0.0
     assert load_model().cells(0.05).exterior_max_share == 0.3
