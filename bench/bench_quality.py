@@ -346,7 +346,7 @@ def bench_synthetic(args, model, rules) -> dict:
         row = {"seed": seed, "rotation": round(float(floor.truth.get("rotation_deg", math.nan)), 1)
                if isinstance(floor.truth.get("rotation_deg"), (int, float)) else None,
                "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
-               "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids or {}),
+               "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
                "log_posterior": round(float(sm.log_posterior), 1),
                "cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
                "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
@@ -393,7 +393,7 @@ def bench_real(args, model, rules) -> dict:
             continue
         sm = run.semantic
         ttb = time_to_best(run, clock)
-        row = {"map": path.stem, "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids or {}),
+        row = {"map": path.stem, "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
                "cpr": round(sm.cpr, 4),
                "paper_cpr": PUBLISHED["cpr"].get(path.stem), "log_posterior": round(sm.log_posterior, 1),
                "run_s": round(run.seconds, 1), "time_to_wstar_s": ttb.get("seconds"),

@@ -156,18 +156,12 @@ def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) ->
     return openings_between(classes, rp, rq, cells, p, q)[0]
 
 
-def find_doors(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
-               slots=None) -> list[Door]:
-    """All doors of a world: :func:`doors_between` for every adjacent pair.
+def find_openings(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
+                  slots=None) -> tuple[list[Door], list[Door]]:
+    """``(doors, passages)`` of a world: :func:`openings_between` for every adjacent pair.
 
     ``rects`` (n, 4) and ``adj`` (n, n) of the active units; ``slots`` their ids (default 0..n-1).
     """
-    return find_openings(classes, rects, adj, cells, slots)[0]
-
-
-def find_openings(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
-                  slots=None) -> tuple[list[Door], list[Door]]:
-    """``(doors, passages)`` of a world: :func:`openings_between` for every adjacent pair."""
     rects = np.asarray(rects).reshape(-1, 4)
     slots = np.arange(len(rects)) if slots is None else np.asarray(slots)
     doors, passages = [], []

@@ -7,7 +7,7 @@ their centres), so ids do not depend on which slot a unit happened to occupy.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -49,7 +49,7 @@ class SemanticMap:
     roi: np.ndarray
     cpr: float
     log_posterior: float
-    exterior_ids: dict = None
+    exterior_ids: dict = field(default_factory=dict)
 
     @property
     def unit_ids(self) -> list[int]:

@@ -45,6 +45,16 @@ def _box_centre(box) -> tuple[float, float]:
     return (r0 + r1 - 1) / 2.0, (c0 + c1 - 1) / 2.0
 
 
+def _rect_geometry(frame, rect, res: float) -> dict:
+    """``vertices_px``, ``vertices_m``, ``center_m`` and ``size_m`` of a unit's lattice rectangle."""
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    vpx = frame.rect_vertices_px(rect)
+    vm = _m(frame, vpx)
+    return {"vertices_px": [_r(v, 3) for v in vpx], "vertices_m": [_r(v, 4) for v in vm],
+            "center_m": _r(vm.mean(axis=0), 4),
+            "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)], reverse=True)}
+
+
 def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: int | None = None,
                roi_name: str = "default") -> dict:
     """The world.json content of a :class:`~semmap_pp.outputs.semantic.SemanticMap`."""
@@ -85,35 +95,21 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
     for i, un in enumerate(unexplored, 1):
         un["id"] = i
 
-    exterior = []
-    ext_ids = sm.exterior_ids or {}
-    for e in sorted(d.exterior, key=lambda o: ext_ids[o.slot]):
-        r0, c0, r1, c1 = (int(v) for v in world.rects[e.slot])
-        vpx = frame.rect_vertices_px(world.rects[e.slot])
-        vm = _m(frame, vpx)
-        exterior.append({"id": ext_ids[e.slot], "vertices_px": [_r(v, 3) for v in vpx],
-                         "vertices_m": [_r(v, 4) for v in vm], "center_m": _r(vm.mean(axis=0), 4),
-                         "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)],
-                                          reverse=True),
-                         "units": sorted(ids[s] for s in e.neighbours)})
+    exterior = [{"id": sm.exterior_ids[e.slot], **_rect_geometry(frame, world.rects[e.slot], res),
+                 "units": sorted(ids[s] for s in e.neighbours)}
+                for e in sorted(d.exterior, key=lambda o: sm.exterior_ids[o.slot])]
 
     adjacency = sorted({tuple(sorted((ids[int(d.slots[i])], ids[int(d.slots[j])])))
                         for i, j in zip(*np.nonzero(np.triu(d.adjacency, 1)))})
     units = []
     for uid in sm.unit_ids:
         s = sm.slot_of(uid)
-        r0, c0, r1, c1 = (int(v) for v in world.rects[s])
-        vpx = frame.rect_vertices_px(world.rects[s])
-        vm = _m(frame, vpx)
         marg = sm.marginals[uid]
         units.append({
             "id": uid,
             "type": UNIT_TYPES[int(world.types[s])],
             "type_marginals": {t: round(float(marg[k]), 6) for k, t in enumerate(UNIT_TYPES)},
-            "vertices_px": [_r(v, 3) for v in vpx],
-            "vertices_m": [_r(v, 4) for v in vm],
-            "center_m": _r(vm.mean(axis=0), 4),
-            "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)], reverse=True),
+            **_rect_geometry(frame, world.rects[s], res),
             "doors": [o["id"] for o in doors if uid in o["units"]],
             "objects": [o["id"] for o in objects if o["unit"] == uid],
         })
