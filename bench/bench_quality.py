@@ -19,8 +19,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
 * **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation``, loaded with the benchmark's own
   pixel rule (grey >= 250 free, anything else obstacle: ``free_thresh=0.0197``,
   ``occupied_thresh=0.0198``; the YAML's 0.65 / 0.03 would make grey obstacles unknown). Segments are
-  *regions*: units joined where their connecting wall is open wider than a door (one space cut in
-  two units), see :func:`regions_of`. Precision / recall micro, published protocol and restricted.
+  *regions*: regions.png's, units joined where their connecting wall holds an open passage (one
+  space cut in two units), see :func:`regions_of`. Precision / recall micro, published protocol and restricted.
 * **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
   corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
 
@@ -177,47 +177,12 @@ class MapFailed(RuntimeError):
 
 
 def regions_of(sm) -> tuple[np.ndarray, dict]:
-    """Image-frame region labels: units joined (union-find) where adjacent without a door between them.
-
-    Two adjacent units are one region when their connecting wall holds an open run (lines of free
-    cells across the wall) wider than the widest door: one space cut into two rectangles. Returns
-    ``(labels_image, unit id -> region id)``.
-    """
-    from semmap_pp.derive.doors import connecting_wall, open_runs
-    from semmap_pp.cells import FREE
-    frame, world, d = sm.frame, sm.world, sm.derived
-    c = frame.cells
-    slots = [int(s) for s in d.slots]
-    parent = {s: s for s in slots}
-
-    def find(x):
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    H, W = frame.classes.shape
-    adj = np.asarray(d.adjacency, bool)
-    for i, j in zip(*np.nonzero(np.triu(adj, 1))):
-        p, q = slots[i], slots[j]
-        cw = connecting_wall(world.rects[p], world.rects[q], c.wall)
-        if cw is None:
-            continue
-        (r0, c0, r1, c1), vertical = cw
-        a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
-        if a0 >= a1 or b0 >= b1:
-            continue
-        strip = frame.classes[a0:a1, b0:b1] == FREE
-        line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
-        if any(e - s > c.door_max for s, e in open_runs(line_open)):
-            parent[find(p)] = find(q)
-    roots = sorted({find(s) for s in slots})
-    rid = {r: k + 1 for k, r in enumerate(roots)}
-    unit_region = {sm.slot_ids[s]: rid[find(s)] for s in slots}
-    lut = np.zeros(max(sm.slot_ids.values(), default=0) + 1, np.int32)
-    for uid, r in unit_region.items():
-        lut[uid] = r
-    return lut[sm.labels_image], unit_region
+    """Image-frame region labels and ``unit id -> region id``: regions.png's regions
+    (:mod:`semmap_pp.outputs.regions`: units joined where their connecting wall holds an open
+    passage, one space cut into two rectangles)."""
+    from semmap_pp.outputs.regions import regions_image, unit_regions
+    unit_region = unit_regions(sm)
+    return regions_image(sm, unit_region).astype(np.int32), unit_region
 
 
 def _mean(rows, key):

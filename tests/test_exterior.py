@@ -18,6 +18,7 @@ from semmap_pp.grid import OccupancyGrid
 from semmap_pp.model import load_model
 from semmap_pp.outputs import semantic_map, world_dict, write_labels_png
 from semmap_pp.outputs.geojson import geojson_dict
+from semmap_pp.outputs.graphml import world_graph
 from semmap_pp.posterior import Posterior
 
 SCHEMA = json.loads((Path(__file__).parents[1] / "docs" / "world.schema.json").read_text())
@@ -129,6 +130,9 @@ def test_outputs_list_exterior_units_apart_and_keep_the_cpr(tmp_path):
     assert (lab[20:54, 75:150] == 0).all() and (lab[12:60, 12:70] == 1).all()
     kinds = [ft["properties"]["kind"] for ft in geojson_dict(sm, doc)["features"]]
     assert kinds.count("exterior") == 1 and kinds.count("unit") == 2
+    g = world_graph(sm, doc)
+    assert [n for n, a in g.nodes(data=True) if a["kind"] == "exterior"] == ["x1"]
+    assert g.edges["x1", "u1"]["relation"] == "next_to" and g.degree("x1") == 1
 
 
 def test_a_unit_inside_the_building_footprint_is_not_exterior():

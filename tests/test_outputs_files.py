@@ -31,7 +31,7 @@ from semmap_pp.outputs import dumps, semantic_map, world_dict
 from semmap_pp.outputs import figures
 from semmap_pp.outputs.geojson import geojson_dict, ring_area, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
-from semmap_pp.outputs.regions import (is_passage, join_regions, opening, passage_pairs, regions_image,
+from semmap_pp.outputs.regions import (join_regions, passage_pairs, regions_image,
                                        unit_regions, write_regions_png)
 from semmap_pp.outputs.write import write_all
 from semmap_pp.pipeline import Inputs, MapRun, RunSettings
@@ -90,19 +90,30 @@ def test_join_regions_is_union_find_numbered_by_smallest_unit():
 
 
 def test_an_opening_is_a_passage_when_wider_than_a_door_or_the_whole_wall():
-    cells = MODEL.cells(0.05)                                    # doors 12..50 cells
+    from semmap_pp.derive.doors import openings_between
+
+    cells = MODEL.cells(0.05)                                    # doors 12..50 cells, wall 2
     cls = np.full((40, 40), OCCUPIED, np.uint8)
     cls[2:38, 2:18] = FREE
     cls[2:38, 22:38] = FREE
     left, right = (0, 0, 40, 20), (0, 18, 40, 40)                # shared wall: columns 18..19
-    assert opening(cls, left, right, wall=2) == (0, 36)          # closed
+
+    def widths():
+        doors, passages = openings_between(cls, left, right, cells)
+        return [d.width for d in doors], [p.width for p in passages]
+
+    assert widths() == ([], [])                                  # closed
     cls[10:30, 18:20] = FREE
-    assert opening(cls, left, right, wall=2) == (20, 36)         # a door, wall on both sides
-    assert not is_passage(20, 36, cells)
+    assert widths() == ([20], [])                                # a door, wall on both sides
     cls[2:38, 18:20] = FREE
-    assert opening(cls, left, right, wall=2) == (36, 36)         # no wall left: a corridor cut in two
-    assert is_passage(36, 36, cells) and is_passage(51, 80, cells) and not is_passage(50, 80, cells)
-    assert not is_passage(8, 8, cells)                           # a gap narrower than any door
+    assert widths() == ([], [36])                                # no wall left: a corridor cut in two
+    big = np.full((100, 40), FREE, np.uint8)
+    big[:, 18:20] = OCCUPIED
+    big[10:61, 18:20] = FREE                                     # 51 cells: wider than any door
+    assert [p.width for p in openings_between(big, (0, 0, 100, 20), (0, 18, 100, 40), cells)[1]] == [51]
+    big[10:61, 18:20] = OCCUPIED
+    big[10:18, 18:20] = FREE                                     # 8 cells: narrower than any door
+    assert openings_between(big, (0, 0, 100, 20), (0, 18, 100, 40), cells) == ([], [])
 
 
 def test_regions_join_only_through_an_open_wall(floor, tmp_path):

@@ -154,7 +154,8 @@ def overlay_png(sm, doc: dict) -> bytes:
 
 def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
     """graph.png (paper Fig. 5b): units as ellipses at their centres, doors solid, adjacency without
-    a door dashed, objects blue squares, unexplored areas magenta squares.
+    a door dashed, objects blue squares, unexplored areas magenta squares, exterior units orange
+    squares.
 
     Objects are drawn one node each when there are at most ``max_object_nodes`` of them; otherwise
     one node per unit holding its object count (a map with hundreds of objects would bury the graph).
@@ -190,9 +191,10 @@ def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
                             va="center", fontsize=7, color="white", bbox=dict(fc="tab:blue", ec="navy", **square),
                             arrowprops=dict(arrowstyle="-", color="tab:blue", lw=0.8, shrinkA=0, shrinkB=0))
     for n, a in graph.nodes(data=True):
-        if a["kind"] == "unexplored":
+        if a["kind"] in ("unexplored", "exterior"):
+            face, edge = (MAGENTA, "purple") if a["kind"] == "unexplored" else (EXTERIOR, "black")
             ax.text(*pos[n], a["label"], ha="center", va="center", fontsize=7, color="white",
-                    bbox=dict(fc=MAGENTA, ec="purple", **square))
+                    bbox=dict(fc=face, ec=edge, **square))
     for u in units:
         a = graph.nodes[u]
         ax.text(*pos[u], a["label"], ha="center", va="center", fontsize=9, fontweight="bold", zorder=5,
@@ -201,8 +203,10 @@ def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
                Line2D([], [], color="black", lw=1.2, ls="--", label="adjacent, no door"),
                Patch(fc="tab:blue", label="objects" if len(objects) <= max_object_nodes else "objects per unit"),
                Patch(fc=MAGENTA, label="unexplored (N)")]
+    if any(a["kind"] == "exterior" for _, a in graph.nodes(data=True)):
+        handles.append(Patch(fc=EXTERIOR, label="exterior (X)"))
     handles += [Patch(fc=TYPE_FACE[t], ec="black", label=f"{TYPE_LETTER[t]} = {t}") for t in UNIT_TYPES]
-    _legend(fig, handles, ncol=8)
+    _legend(fig, handles, ncol=len(handles))
     fig.subplots_adjust(0.005, 0.4 / fig.get_figheight(), 0.995, 0.995)
     return png(fig)
 

@@ -6,13 +6,15 @@ Nodes (``kind`` says which; ``id`` is the id of world.json):
   ``width_m``, ``area_m2``, ``region``, centre ``x_m, y_m`` (map frame) and ``x_px, y_px`` (image).
 - ``o<id>`` object: ``unit``, ``extent_m``, ``cells``, centre.
 - ``n<id>`` unexplored area: ``area_m2``, centre.
+- ``x<id>`` exterior unit (free space seen outside the building, docs/model.md): ``label`` (X +
+  id), ``length_m``, ``width_m``, ``area_m2``, centre.
 
 Edges (``relation``): ``door`` between units connected by one or more doors (``doors``: their ids,
 comma-separated; ``n_doors``; ``width_m`` of the widest), ``adjacent`` between units adjacent
 without a door (on both, ``passage``: True when the wall between them is open, see
 :mod:`semmap_pp.outputs.regions`), ``contains`` from a unit to each of its objects, and ``next_to``
 from an unexplored area to every unit whose rectangle its bounding box touches (grown by the
-adjacency dilation). GraphML holds scalars only, so id lists are comma-separated strings.
+adjacency dilation) and from an exterior unit to every unit it is adjacent to. GraphML holds scalars only, so id lists are comma-separated strings.
 """
 
 from __future__ import annotations
@@ -100,6 +102,14 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
     for nid, units in unexplored_neighbours(sm).items():
         for uid in units:
             g.add_edge(f"n{nid}", f"u{uid}", relation="next_to")
+    for e in doc.get("exterior", []):
+        x, y = _centre_px(e["vertices_px"])
+        length, width = e["size_m"]
+        g.add_node(f"x{e['id']}", kind="exterior", id=e["id"], label=f"X{e['id']}",
+                   length_m=float(length), width_m=float(width), area_m2=round(length * width, 4),
+                   x_m=float(e["center_m"][0]), y_m=float(e["center_m"][1]), x_px=x, y_px=y)
+        for uid in e["units"]:
+            g.add_edge(f"x{e['id']}", f"u{uid}", relation="next_to")
     doors_of: dict[tuple, list] = {}
     for d in doc["doors"]:
         doors_of.setdefault(tuple(d["units"]), []).append(d)

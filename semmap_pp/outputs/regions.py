@@ -2,10 +2,9 @@
 
 A unit is a rectangle; a room of the building may take several (an L-shaped room is two units).
 Two units belong to the same *region* when they are adjacent and the wall between them is open:
-their connecting wall (:func:`semmap_pp.derive.doors.connecting_wall`) holds a run of input-free
-lines wider than a door (``door_max``), which :mod:`semmap_pp.derive.doors` calls an open passage —
-"the two units are one space" — or is open along its whole length (a corridor cut in two units: the
-opening is as wide as the corridor, which may fit a door's width, but no wall stands beside it).
+their connecting wall holds an open passage (:mod:`semmap_pp.derive.doors`: a run of open lines
+wider than a door, or one without a jamb on the shared wall — a corridor cut in two units, whose
+opening is as wide as the corridor and may fit a door's width, but no wall stands beside it).
 Adjacent units separated by a closed wall (two offices side by side) stay apart, as they would on a
 floor plan; so do units joined by a door in a wall.
 Regions are the connected components of that relation (union–find), numbered 1..m by their
@@ -26,8 +25,6 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from semmap_pp import atomic
-from semmap_pp.cells import FREE
-from semmap_pp.derive.doors import connecting_wall, open_runs
 from semmap_pp.outputs.world_json import png_bytes
 
 
@@ -58,45 +55,11 @@ def join_regions(unit_ids: Sequence[int], pairs: Iterable[tuple[int, int]]) -> d
     return {u: number[find(u)] for u in sorted(parent)}
 
 
-def opening(classes: np.ndarray, rp, rq, wall: int) -> tuple[int, int]:
-    """``(widest, length)``: the widest run of open lines across the connecting wall of ``rp`` and
-    ``rq``, and the wall's length, in cells.
-
-    A line across the wall is open when every cell on it is input-free (as for doors). ``(0, 0)``
-    when the units have no connecting wall or it leaves the map.
-
-    >>> cls = np.zeros((20, 40), np.uint8); cls[:, 18:22] = 2; cls[2:16, 18:22] = 0
-    >>> opening(cls, (0, 0, 20, 20), (0, 20, 20, 40), wall=2)
-    (14, 16)
-    """
-    cw = connecting_wall(rp, rq, wall)
-    if cw is None:
-        return 0, 0
-    (r0, c0, r1, c1), vertical = cw
-    H, W = classes.shape
-    a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
-    if a0 >= a1 or b0 >= b1 or (a0, b0, a1, b1) != (r0, c0, r1, c1):
-        return 0, 0
-    strip = classes[a0:a1, b0:b1] == FREE
-    line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
-    return max((e - s for s, e in open_runs(line_open)), default=0), len(line_open)
-
-
-def is_passage(widest: int, length: int, cells) -> bool:
-    """An open wall: an opening wider than any door, or no wall at all along a wall at least a door wide
-    (a corridor cut in two: its opening is the corridor's width, which may fit a door)."""
-    return widest > cells.door_max or (length >= cells.door_min and widest == length)
-
-
 def passage_pairs(sm) -> list[tuple[int, int]]:
-    """Adjacent unit-id pairs ``(a, b)``, ``a < b``, whose connecting wall is open (:func:`is_passage`)."""
-    d, ids, cells = sm.derived, sm.slot_ids, sm.frame.cells
-    pairs = []
-    for i, j in zip(*np.nonzero(np.triu(np.asarray(d.adjacency, bool), 1))):
-        p, q = int(d.slots[i]), int(d.slots[j])
-        if is_passage(*opening(sm.frame.classes, sm.world.rects[p], sm.world.rects[q], cells.wall), cells):
-            pairs.append(tuple(sorted((ids[p], ids[q]))))
-    return sorted(pairs)
+    """Unit-id pairs ``(a, b)``, ``a < b``, whose connecting wall holds an open passage
+    (``sm.derived.passages``)."""
+    ids = sm.slot_ids
+    return sorted({tuple(sorted((ids[d.p], ids[d.q]))) for d in sm.derived.passages})
 
 
 def unit_regions(sm) -> dict[int, int]:
@@ -120,5 +83,5 @@ def write_regions_png(path: str | os.PathLike, image: np.ndarray) -> Path:
     return Path(path)
 
 
-__all__ = ["join_regions", "opening", "is_passage", "passage_pairs", "unit_regions", "regions_image",
+__all__ = ["join_regions", "passage_pairs", "unit_regions", "regions_image",
            "write_regions_png"]
