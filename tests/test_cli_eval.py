@@ -46,6 +46,7 @@ def test_sampled_run_against_its_synthetic_floor(floor, tmp_path, capsys):
     s = doc["scores"]
     assert doc["kind"] == "synthetic" and s["units_true"] == 4
     assert s["units_predicted"] == len(json.loads((run / "world.json").read_text())["units"])
+    assert s["units_exterior"] == len(json.loads((run / "world.json").read_text())["exterior"])
     for k in ("unit_f1", "unit_precision", "unit_recall", "segmentation_precision", "segmentation_iou", "cpr"):
         assert 0.0 <= s[k] <= 1.0, k
     assert main(["eval", str(run), "--truth", str(floor / "truth.json")]) == 0

@@ -106,7 +106,8 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
 
     kind = kind or detect_kind(truth)
     world, labels = _read_run(run_dir)
-    scores: dict = {"units_predicted": len(world.get("units", [])), "cpr": world.get("cpr")}
+    scores: dict = {"units_predicted": len(world.get("units", [])),
+                    "units_exterior": len(world.get("exterior", [])), "cpr": world.get("cpr")}
     if kind == "synthetic":
         truth_json = truth / "truth.json" if truth.is_dir() else truth
         t = read_json(truth_json)
