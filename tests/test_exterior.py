@@ -7,6 +7,8 @@ import json
 from pathlib import Path
 
 import jsonschema
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 from PIL import Image
 
@@ -146,3 +148,21 @@ def test_a_unit_inside_the_building_footprint_is_not_exterior():
     assert flags.tolist() == [False, False, False, False]
     # a footprint needs two units besides the one tested: a world keeps at least two
     assert find_exterior(c, np.array([ROOM, FAN]), 2, 0.3, 0.1).tolist() == [False, False]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 7))
+def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
+    """Random maps and rectangles (some reaching past the map): the flags follow the units when
+    their order is permuted, a world keeps at least two (or all, below three) of its units, and
+    the input arrays are not edited."""
+    rng = np.random.default_rng(seed)
+    c = rng.choice(np.array([FREE, UNKNOWN, OCCUPIED], np.uint8), size=(40, 50), p=[0.5, 0.3, 0.2])
+    r0, c0 = rng.integers(-5, 35, n), rng.integers(-5, 45, n)
+    rects = np.stack([r0, c0, r0 + rng.integers(4, 20, n), c0 + rng.integers(4, 20, n)], axis=1)
+    c_before, rects_before = c.copy(), rects.copy()
+    flags = find_exterior(c, rects, 1, 0.6, 0.1)
+    assert np.array_equal(c, c_before) and np.array_equal(rects, rects_before)
+    assert np.count_nonzero(~flags) >= min(n, 2)
+    perm = rng.permutation(n)
+    assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1), flags[perm])
