@@ -1,6 +1,5 @@
 """The PyMC step: points, chains on one and two cores, re-sync, the -inf guard, annealing, W*."""
 
-import math
 import pickle
 
 import cloudpickle

@@ -144,8 +144,8 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
     map_name = doc["map"]["yaml"] or doc["map"]["image"] or str(grid.source)
     counts = {t: sum(1 for u in doc["units"] if u["type"] == t) for t in UNIT_TYPES}
     cpr = "–" if doc["cpr"] is None else f"{100 * doc['cpr']:.1f} %"
-    verdict = (f'<span class="verdict ok">converged</span>' if rep.ok else
-               f'<span class="verdict fail">NOT converged</span>')
+    verdict = ('<span class="verdict ok">converged</span>' if rep.ok else
+               '<span class="verdict fail">NOT converged</span>')
     summary = _kv([
         ("map", grid.source), ("image", f"{grid.width} × {grid.height} cells at {grid.resolution} m/cell"),
         ("building orientation", f"{doc['map']['orientation_deg']:.1f}°"),
