@@ -300,32 +300,53 @@ class _Ascent:
         self.tr.accept(self.tr.propose(old, tuple(int(s) for s in diff)))
         return False
 
-    def splits(self) -> bool:
-        """Split a unit at its strongest interior wall line when that helps (pieces share the wall)."""
+    def cuts(self, rect) -> list[tuple[list, list]]:
+        """The two pieces of ``rect`` cut at each of its three strongest interior wall lines per
+        axis (the pieces share the wall band)."""
         from semmap_pp.kernels.common import band_weights, line_cum
         d = self.data
         m, t, g = d.min_side, d.wall_cells, d.wall_share
+        rect = [int(v) for v in rect]
+        out = []
+        for axis in (0, 1):
+            lo, hi = rect[axis] + m, rect[axis + 2] + g - m
+            if hi < lo:
+                continue
+            w = band_weights(line_cum(d, axis), lo, hi, -t, t - g, rect[1 - axis], rect[3 - axis],
+                             d.settings.line_floor)
+            for cut in _line_peaks(w, lo, 3):
+                a, b = list(rect), list(rect)
+                a[axis + 2], b[axis] = cut, cut - g
+                out.append((a, b))
+        return out
+
+    def splits(self) -> bool:
+        """Split a unit at its strongest interior wall line when that helps (pieces share the
+        wall); when no single cut helps, cut one of the two pieces again (a room inside an L of
+        walls needs both cuts: each alone leaves a wall-less band across open floor)."""
         changed = False
         for s in wm.active_slots(self.world).tolist():
             free = wm.free_slots(self.world)
             if free.size == 0:
                 break
-            rect = [int(v) for v in self.world.rects[s]]
-            worlds = []
-            for axis in (0, 1):
-                lo, hi = rect[axis] + m, rect[axis + 2] + g - m
-                if hi < lo:
-                    continue
-                w = band_weights(line_cum(d, axis), lo, hi, -t, t - g, rect[1 - axis], rect[3 - axis],
-                                 d.settings.line_floor)
-                for cut in _line_peaks(w, lo, 3):
-                    a, b = list(rect), list(rect)
-                    a[axis + 2], b[axis] = cut, cut - g
-                    worlds.append(wm.add(wm.replace(self.world, s, a), int(free[0]), b))
-            if worlds and self.best_of(worlds, (s, int(free[0]))):
+            f = int(free[0])
+            singles = [wm.add(wm.replace(self.world, s, a), f, b)
+                       for a, b in self.cuts(self.world.rects[s])]
+            if singles and self.best_of(singles, (s, f)):
                 changed = True
                 self.wall_moves(s)
-                self.wall_moves(int(free[0]))
+                self.wall_moves(f)
+                continue
+            if free.size < 2 or not singles:
+                continue
+            f2 = int(free[1])
+            doubles = [wm.add(wm.replace(w1, piece, a), f2, b)
+                       for w1 in singles for piece in (s, f)
+                       for a, b in self.cuts(w1.rects[piece])]
+            if doubles and self.best_of(doubles, (s, f, f2)):
+                changed = True
+                for slot in (s, f, f2):
+                    self.wall_moves(slot)
         return changed
 
     def births(self, covered_frac: float = 0.5) -> bool:

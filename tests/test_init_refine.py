@@ -179,3 +179,38 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
     assert np.array_equal(with_floors.world.active, without.world.active)
     assert np.array_equal(with_floors.world.rects, without.world.rects)
     assert with_floors.tr.logp == without.tr.logp
+
+
+def l_of_walls(T=50, V=80, H=40, O=45) -> np.ndarray:
+    """One space whose lower-left room is closed off by an L of walls (a horizontal wall ``H``
+    cells long under ``T`` rows of open floor, then a vertical one ``V`` cells long with a 0.8 m
+    door); right of the L an ``O``-cell strip stays open to the space above (floor 10's corner)."""
+    rows, cols = 4 + T + 2 + V + 2, 4 + H + 2 + O + 2
+    m = np.full((rows + 2, cols + 2), UNKNOWN, np.uint8)
+    m[2:rows, 2:cols] = OCCUPIED
+    m[4:rows - 2, 4:cols - 2] = FREE
+    hw, vw = 4 + T, 4 + H
+    m[hw:hw + 2, 4:vw + 2] = OCCUPIED
+    m[hw:rows - 2, vw:vw + 2] = OCCUPIED
+    door = hw + 2 + V // 2 - 8
+    m[door:door + 16, vw:vw + 2] = FREE
+    return m
+
+
+def test_a_room_in_an_l_of_walls_is_cut_out_by_two_cuts_when_no_single_cut_helps():
+    from semmap_pp.ascent import _Ascent
+
+    m = l_of_walls()
+    model = load_model()
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.empty(8), 0, (2, 2, m.shape[0] - 2, m.shape[1] - 2))
+    asc = _Ascent(post, start, data_from_frame(frame))
+    before = asc.tr.logp
+    singles = [wm.add(wm.replace(start, 0, a), 1, b) for a, b in asc.cuts(start.rects[0])]
+    assert singles and max(post.evaluate(w).total for w in singles) < before   # no cut alone helps
+    assert asc.splits()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert len(rects) == 3 and (54, 2, 138, 46) in rects      # the room inside the L, on its walls
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6
