@@ -166,3 +166,17 @@ def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
     assert np.count_nonzero(~flags) >= min(n, 2)
     perm = rng.permutation(n)
     assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1), flags[perm])
+
+
+def test_two_fans_side_by_side_do_not_shield_each_other():
+    """A fan cut into two units: each covers the other's shared side, but neither is enclosed by
+    walls of its own, so neither gives cover: both are exterior."""
+    c = room_with_window()
+    fan_a, fan_b = (20, 70, 54, 112), (20, 110, 54, 150)
+    flags = find_exterior(c, np.array([ROOM, fan_a, fan_b, ROOM2]), 2, 0.3, 0.1)
+    assert flags.tolist() == [False, True, True, False]
+    # with the other fan's cover, fan_a's shares would keep it
+    count = np.zeros(c.shape, np.int32)
+    for r0, c0, r1, c1 in (ROOM, fan_a, fan_b, ROOM2):
+        count[r0:r1, c0:c1] += 1
+    assert np.sort(side_shares(c, fan_a, count, 2, 0.1))[2] >= 0.3

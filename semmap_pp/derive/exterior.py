@@ -5,12 +5,13 @@ the building. They are free space, and the sampler covers them with units (every
 is explained), but they are not rooms of the building. A unit is *exterior* when rays leave it
 through at least three of its four sides: per side, the *enclosed share* of its wall band is
 
-    (occupied cells + free cells inside another, non-exterior unit) / (occupied + free cells)
+    (occupied cells + free cells inside another, *supported* unit) / (occupied + free cells)
 
 (free cells that continue into a neighbouring unit are a shared boundary, not a ray leaving the
 building; a side with fewer seen cells than ``seen_min`` of its band counts as enclosed), and the
-unit is exterior when its second largest share is below ``max_share``. A unit next to an exterior
-unit loses that neighbour's cover, so the test is repeated until no further unit is flagged.
+unit is exterior when its second largest share is below ``max_share``. A unit is supported when
+it passes that test on its own walls (no cover counted): pieces of a corridor cover each other,
+but two fans side by side do not. The test is repeated until no further unit is flagged.
 Rays also leave a unit that covers the part of a room seen through its door (a room the robot
 never entered); such a unit lies within the building's footprint, so a unit is flagged only when
 more than half its area lies outside the convex hull of the other units not flagged, and at
@@ -44,10 +45,12 @@ import numpy as np
 from semmap_pp.cells import FREE, OCCUPIED
 
 
-def side_shares(classes: np.ndarray, rect, count: np.ndarray, wall: int, seen_min: float) -> np.ndarray:
+def side_shares(classes: np.ndarray, rect, count: np.ndarray, wall: int, seen_min: float,
+                own: int = 1) -> np.ndarray:
     """The enclosed share of each side band of ``rect`` (top, bottom, left, right).
 
-    ``count`` is the number of non-exterior units covering each cell, this unit included."""
+    ``count`` is the number of units giving cover at each cell, ``own`` of them this unit itself
+    (1 when it is counted in ``count``, else 0)."""
     r0, c0, r1, c1 = (int(v) for v in rect)
     b = max(1, min(wall, r1 - r0, c1 - c0))
     bands = ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1), (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
@@ -60,7 +63,7 @@ def side_shares(classes: np.ndarray, rect, count: np.ndarray, wall: int, seen_mi
         occ = int(np.count_nonzero(cls == OCCUPIED))
         free = cls == FREE
         n_free = int(np.count_nonzero(free))
-        shared = int(np.count_nonzero(free & (count[ra:rb, ca:cb] > 1)))
+        shared = int(np.count_nonzero(free & (count[ra:rb, ca:cb] > own)))
         seen = occ + n_free
         if seen > 0 and seen >= seen_min * cls.size:
             out[k] = (occ + shared) / seen
@@ -123,13 +126,17 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     exterior = np.zeros(n, dtype=bool)
     if max_share <= 0.0 or n < 3:
         return exterior
+    none = np.zeros(classes.shape, dtype=np.int32)
+    supported = np.array([np.sort(side_shares(classes, r, none, wall, seen_min, own=0))[2]
+                          >= max_share for r in rects])
     count = np.zeros(classes.shape, dtype=np.int32)
-    for r0, c0, r1, c1 in rects:
+    for r0, c0, r1, c1 in rects[supported]:
         count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
     while np.count_nonzero(~exterior) > 2:
         best = None
         for i in np.flatnonzero(~exterior):
-            share = np.sort(side_shares(classes, rects[i], count, wall, seen_min))[2]
+            share = np.sort(side_shares(classes, rects[i], count, wall, seen_min,
+                                        own=int(supported[i])))[2]
             if share >= max_share:
                 continue
             others = ~exterior
@@ -141,9 +148,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
         if best is None:
             break
         i = best[1]
-        r0, c0, r1, c1 = rects[i]
         exterior[i] = True
-        count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] -= 1
     return exterior
 
 
