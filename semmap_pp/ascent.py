@@ -39,6 +39,12 @@ def _line_peaks(w: np.ndarray, lo: int, k: int) -> list[int]:
     return (idx + lo).tolist()
 
 
+def _strongest_line(cum: np.ndarray, i0: int, i1: int, s0: int, s1: int) -> float:
+    """The largest share of wall or door cells on lines ``i0..i1`` over the span ``s0..s1``
+    (``cum``: the lines' cumulative counts along the span)."""
+    return float(((cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)).max())
+
+
 class _Ascent:
     """Greedy ascent state: a tracker of the target and the kernels' data."""
 
@@ -171,8 +177,7 @@ class _Ascent:
         i1 = min(max(lo_r[axis + 2], hi_r[axis]) + t, cum.shape[0])
         if i1 <= i0:
             return 1.0
-        frac = (cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)
-        return float(frac.max())
+        return _strongest_line(cum, i0, i1, s0, s1)
 
     def crossing_line(self, axis: int, lo_r, hi_r) -> float:
         """Strongest wall line across the gap between two collinear units (0..1).
@@ -189,7 +194,7 @@ class _Ascent:
         i0, i1 = lo_r[axis + 2] + t, min(hi_r[axis] - t, cum.shape[0])
         if s1 <= s0 or i1 <= i0:
             return 0.0
-        return float(((cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)).max())
+        return _strongest_line(cum, i0, i1, s0, s1)
 
     def merges(self) -> bool:
         """Replace two nearby units by their bounding box when it adds little area and raises log p.

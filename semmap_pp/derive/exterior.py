@@ -45,12 +45,12 @@ import numpy as np
 from semmap_pp.cells import FREE, OCCUPIED
 
 
-def side_shares(classes: np.ndarray, rect, count: np.ndarray, wall: int, seen_min: float,
+def side_shares(classes: np.ndarray, rect, count: np.ndarray | None, wall: int, seen_min: float,
                 own: int = 1) -> np.ndarray:
     """The enclosed share of each side band of ``rect`` (top, bottom, left, right).
 
     ``count`` is the number of units giving cover at each cell, ``own`` of them this unit itself
-    (1 when it is counted in ``count``, else 0)."""
+    (1 when it is counted in ``count``, else 0); None: no cover at all."""
     r0, c0, r1, c1 = (int(v) for v in rect)
     b = max(1, min(wall, r1 - r0, c1 - c0))
     bands = ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1), (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
@@ -63,7 +63,7 @@ def side_shares(classes: np.ndarray, rect, count: np.ndarray, wall: int, seen_mi
         occ = int(np.count_nonzero(cls == OCCUPIED))
         free = cls == FREE
         n_free = int(np.count_nonzero(free))
-        shared = int(np.count_nonzero(free & (count[ra:rb, ca:cb] > own)))
+        shared = 0 if count is None else int(np.count_nonzero(free & (count[ra:rb, ca:cb] > own)))
         seen = occ + n_free
         if seen > 0 and seen >= seen_min * cls.size:
             out[k] = (occ + shared) / seen
@@ -117,32 +117,30 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the convex
     hull of the other units not flagged (the building's footprint: a fan of rays through a door
     into a room the robot never entered lies within it), and at least two other units are left.
-    Units are flagged one at a time, the one most outside the footprint first (ties: the lower
-    share, then the rectangle), each test against the cover and footprint of the units not yet
-    flagged, so the result does not depend on the order of ``rects``."""
+    Only supported units give cover, and a flagged unit is never supported, so the shares are
+    computed once. Units are flagged one at a time, the one most outside the footprint of the
+    units not yet flagged first (ties: the lower share, then the rectangle), so the result does
+    not depend on the order of ``rects``."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
     exterior = np.zeros(n, dtype=bool)
     if max_share <= 0.0 or n < 3:
         return exterior
-    none = np.zeros(classes.shape, dtype=np.int32)
-    supported = np.array([np.sort(side_shares(classes, r, none, wall, seen_min, own=0))[2]
+    supported = np.array([np.sort(side_shares(classes, r, None, wall, seen_min, own=0))[2]
                           >= max_share for r in rects])
     count = np.zeros(classes.shape, dtype=np.int32)
     for r0, c0, r1, c1 in rects[supported]:
         count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
+    share = np.array([np.sort(side_shares(classes, r, count, wall, seen_min, own=int(sup)))[2]
+                      for r, sup in zip(rects, supported)])
     while np.count_nonzero(~exterior) > 2:
         best = None
-        for i in np.flatnonzero(~exterior):
-            share = np.sort(side_shares(classes, rects[i], count, wall, seen_min,
-                                        own=int(supported[i])))[2]
-            if share >= max_share:
-                continue
+        for i in np.flatnonzero(~exterior & (share < max_share)):
             others = ~exterior
             others[i] = False
             out = _outside_share(rects[i], _hull(rects[others]))
-            key = (-out, share, tuple(int(v) for v in rects[i]))
+            key = (-out, share[i], tuple(int(v) for v in rects[i]))
             if out > outside_min and (best is None or key < best[0]):
                 best = (key, i)
         if best is None:
