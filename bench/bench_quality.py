@@ -72,7 +72,7 @@ def _budget(text: str) -> str | float:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--subset", default="all", choices=["synthetic", "real", "ipa", "types", "all"])
+    parser.add_argument("--subset", default="all", choices=["synthetic", "truth", "real", "ipa", "types", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
     parser.add_argument("--budget", default="model", type=_budget,
@@ -342,6 +342,77 @@ def bench_synthetic(args, model, rules) -> dict:
                 "cpr": TARGETS["synthetic_cpr"]}}
 
 
+def truth_world(frame, truth: dict, capacity: int):
+    """The seen true units of a synthetic floor as a world on ``frame``'s lattice: each unit's
+    corners (pixel frame) taken to the lattice and rounded to the enclosing cell box (the inverse of
+    :meth:`semmap_pp.frame.Frame.rect_vertices_px`); units the robot never saw are left out."""
+    from semmap_pp import world as wm
+    w = wm.empty(capacity)
+    units = observed_truth(truth)["units"]
+    if len(units) > capacity:
+        raise ValueError(f"{len(units)} true units, world capacity {capacity}")
+    for slot, u in enumerate(units):
+        p = np.asarray(u["corners_px"], dtype=np.float64)
+        r, c = frame.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
+        rect = tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
+        w = wm.add(w, slot, rect)
+    return w
+
+
+def bench_truth(args, model, rules) -> dict:
+    """The ceiling of the synthetic targets: each floor's seen true units as the world, their walls
+    set on the lattice's best positions by the ascent's wall moves (:func:`semmap_pp.ascent.align_walls`,
+    no unit added, removed, merged or cut), types assigned by the full target, and everything
+    derived and scored exactly as W* is in :func:`bench_synthetic`. What a mapper that found every
+    seen unit would score: unit recall is capped by the units never seen, and CPR by what the
+    building's units leave unexplained (free space seen outside the building through windows
+    and exits lies in the default ROI). ``log_posterior`` is the aligned truth's, to compare with
+    W*'s (a higher W* means the target prefers W* to the truth)."""
+    from semmap_pp.ascent import align_walls
+    from semmap_pp.evaluate import cpr, score_world
+    from semmap_pp.grid import OccupancyGrid
+    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.outputs import world_dict
+    from semmap_pp.outputs.semantic import semantic_map
+    from semmap_pp.pipeline import TargetFactory
+    from semmap_pp.synth import generate_floor
+    rows = []
+    for seed in range(args.first_floor, args.first_floor + args.floors):
+        t0 = time.perf_counter()
+        floor = generate_floor(seed)
+        grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
+                             source=Path(f"synth-{seed}"))
+        inputs = _inputs_from_grid(grid, model, rules)
+        post = TargetFactory(inputs.frame, model, rules)()
+        post.knowledge_on = rules is not None
+        data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
+        start = truth_world(inputs.frame, floor.truth, model.prior.k_max)
+        world = align_walls(post, start, data)
+        sm = semantic_map(grid, inputs.frame, post, world, roi=inputs.roi)
+        pred = world_dict(sm)
+        sc = score_world(pred, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
+        so = score_world(pred, observed_truth(floor.truth), shape=floor.classes.shape,
+                         resolution=floor.resolution)
+        row = {"seed": seed, "true_units": len(floor.truth["units"]), "units": len(sm.unit_ids),
+               "exterior": len(sm.exterior_ids), "log_posterior": round(float(sm.log_posterior), 1),
+               "cpr": round(sm.cpr, 4),
+               "cpr_building": _r4(cpr(floor.classes, sm.states_image, building_roi(
+                   floor.truth, floor.classes.shape, sm.roi, floor.resolution))[0]),
+               "unit_f1": round(sc.unit_f1, 4), "unit_f1_observed": round(so.unit_f1, 4),
+               "type_accuracy": _r4(sc.type_accuracy), "door_f1": _r4(_door_f1(sc)),
+               "door_f1_observed": _r4(_door_f1(so)), "seconds": round(time.perf_counter() - t0, 1)}
+        rows.append(row)
+        _save(args, f"truth-{seed}", sm)
+        _log(args, f"truth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} "
+                   f"(building {row['cpr_building']})  F1 {row['unit_f1']:.3f} (seen {row['unit_f1_observed']})  "
+                   f"types {row['type_accuracy']}  doors {row['door_f1']} (seen {row['door_f1_observed']})  "
+                   f"log p {row['log_posterior']}")
+    keys = ("cpr", "cpr_building", "unit_f1", "unit_f1_observed", "type_accuracy", "door_f1",
+            "door_f1_observed", "seconds")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys}}
+
+
 def bench_real(args, model, rules) -> dict:
     from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
     rows = []
@@ -470,7 +541,8 @@ def run(args) -> dict:
            | {"budget": args.budget},
            "published": PUBLISHED, "targets": TARGETS}
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
-    fns = {"synthetic": bench_synthetic, "real": bench_real, "ipa": bench_ipa, "types": bench_types}
+    fns = {"synthetic": bench_synthetic, "truth": bench_truth, "real": bench_real, "ipa": bench_ipa,
+           "types": bench_types}
     for name in subsets:
         t0 = time.perf_counter()
         out[name] = fns[name](args, model, rules)

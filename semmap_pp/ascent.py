@@ -426,3 +426,25 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             break
     out = asc.world
     return wm.make(out.rects, out.active, np.full(out.capacity, wm.NO_TYPE))
+
+
+def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:
+    """Wall moves only: each wall of each unit to its best position, for up to ``rounds`` passes.
+
+    Sets given rectangles (a ground truth drawn in another frame, a hand-made world) on the
+    lattice's best walls without adding, removing, merging or cutting units — except that a wall
+    moved outwards may swallow a unit lying mostly inside the grown one (:meth:`_Ascent.wall_moves`).
+    Returns a world whose log posterior is at least that of ``world`` (types left undecided), or
+    ``world`` itself when its log posterior is not finite.
+    """
+    asc = _Ascent(posterior, world, data)
+    if not np.isfinite(asc.tr.logp):
+        return world
+    for _ in range(rounds):
+        changed = False
+        for s in wm.active_slots(asc.world).tolist():
+            changed |= asc.wall_moves(s)
+        if not changed:
+            break
+    out = asc.world
+    return wm.make(out.rects, out.active, np.full(out.capacity, wm.NO_TYPE))
