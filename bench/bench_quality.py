@@ -1,6 +1,6 @@
 """Quality of the whole pipeline: synthetic truth, real-map CPR, ipa segmentation and typing.
 
-``python bench/run.py quality --json [--subset synthetic|real|ipa|types|all] [--floors N] [--budget B]``
+``python bench/run.py quality --json [--subset synthetic|truth|real|ipa|types|all] [--floors N] [--budget B]``
 
 Every map goes through :func:`semmap_pp.pipeline.run_map` with the model file's defaults (``--budget
 model``), a shorter run (``--budget quick``) or the model's run capped at a number of seconds of
@@ -14,6 +14,9 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   building) are not predictions of the building's units; ``unit_f1_with_exterior`` scores them as
   if they were. ``*_observed`` scores against the units the simulated robot saw
   (:func:`observed_truth`); ``errors`` is :func:`error_breakdown`.
+* **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
+  world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
+  scored as W* is (:func:`bench_truth`).
 * **real**: ``data/maps/*.yaml`` of the repository (cartesium, intel), CPR with the default ROI, and
   the time to W*.
 * **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation``, loaded with the benchmark's own

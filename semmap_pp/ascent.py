@@ -49,10 +49,12 @@ class _Ascent:
     """Greedy ascent state: a tracker of the target and the kernels' data."""
 
     def __init__(self, posterior, world: wm.World, data, *, peaks: int = 8, local: int = 3,
-                 absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5):
+                 absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5,
+                 merge_keep: float = 0.5, trim_line_min: float = 0.5):
         self.tr = posterior.start(world)
         self.data, self.peaks, self.local = data, peaks, local
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
+        self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
         self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
 
     @property
@@ -204,7 +206,10 @@ class _Ascent:
         ``merge_line_max``): one space cut into two rectangles, e.g. a room cut at a row of furniture
         or a corridor in pieces. A wall between two rooms is a line along most of its length (door
         gaps included as door candidates), so rooms are not merged here even where the
-        knowledge-free target would take it.
+        knowledge-free target would take it. A unit overlapping the box is trimmed to its largest
+        part beside it (:meth:`cut_back`) when that part keeps at least ``merge_keep`` of its area
+        and a wall line (:meth:`boundary_lines` at least ``trim_line_min``) stands along the new
+        boundary; otherwise the pair is skipped. The box and the trimmed units are then wall-moved.
         """
         t = self.data.wall_cells
         changed = False
@@ -220,7 +225,12 @@ class _Ascent:
                 continue
             if self.boundary_lines(ra, rb) >= self.merge_line_max:
                 continue
-            changed |= self.tentative(wm.replace(wm.remove(self.world, b), a, box), (a, b), [a])
+            new, cut = self.cut_back(wm.replace(wm.remove(self.world, b), a, box), a, box)
+            if any(not new.active[u] or area(new.rects[u]) < self.merge_keep * area(self.world.rects[u])
+                   or self.boundary_lines(box, [int(v) for v in new.rects[u]]) < self.trim_line_min
+                   for u in cut):
+                continue      # the box would swallow a unit, or trim one where no wall stands
+            changed |= self.tentative(new, (a, b, *cut), [a, *cut])
         return changed
 
     def _pairs(self):
@@ -247,7 +257,7 @@ class _Ascent:
         a corridor and the room beside it (their wall has doors, and the pieces between them are
         too short to be wall-like) is a local optimum for every single move, not for this one.
         """
-        d, g = self.data, self.data.wall_share
+        d = self.data
         changed = False
         for a, b, ra, rb in self._pairs():
             for axis in (0, 1):
@@ -265,23 +275,7 @@ class _Ascent:
                 if (sides[1] < self.evidence.corridor_min_ratio * sides[0]
                         or sides[0] * self.resolution >= self.evidence.hall_min_size):
                     continue          # only corridor-like boxes: a corridor in pieces
-                new = wm.remove(wm.replace(self.world, a, box), b)
-                cut = []
-                for u in wm.active_slots(new).tolist():
-                    if u == a:
-                        continue
-                    ru = [int(v) for v in new.rects[u]]
-                    if not (ru[0] < box[2] - g and ru[2] > box[0] + g and ru[1] < box[3] - g
-                            and ru[3] > box[1] + g):
-                        continue
-                    options = []
-                    for side, value in ((2, box[0] + g), (0, box[2] - g), (3, box[1] + g), (1, box[3] - g)):
-                        r = list(ru)
-                        r[side] = value
-                        if r[2] - r[0] >= d.min_side and r[3] - r[1] >= d.min_side:
-                            options.append(((r[2] - r[0]) * (r[3] - r[1]), r))
-                    new = wm.replace(new, u, max(options)[1]) if options else wm.remove(new, u)
-                    cut.append(u)
+                new, cut = self.cut_back(wm.remove(wm.replace(self.world, a, box), b), a, box)
                 m = 2 * d.wall_cells   # the units along the box move with it
                 near = [u for u in wm.active_slots(new).tolist() if u != a and not (
                     new.rects[u][0] >= box[2] + m or new.rects[u][2] <= box[0] - m
@@ -289,6 +283,29 @@ class _Ascent:
                 changed |= self.tentative(new, (a, b, *cut), [a, *near] * 2)
                 break
         return changed
+
+    def cut_back(self, world: wm.World, a: int, box) -> tuple[wm.World, list]:
+        """``world`` with every unit but ``a`` that overlaps ``box`` (by more than the wall band)
+        cut back to its largest part beside the box, sharing the box's wall band, or dropped when
+        no part of at least a unit side is left; and the slots so changed."""
+        g, min_side = self.data.wall_share, self.data.min_side
+        cut = []
+        for u in wm.active_slots(world).tolist():
+            if u == a:
+                continue
+            ru = [int(v) for v in world.rects[u]]
+            if not (ru[0] < box[2] - g and ru[2] > box[0] + g and ru[1] < box[3] - g
+                    and ru[3] > box[1] + g):
+                continue
+            options = []
+            for side, value in ((2, box[0] + g), (0, box[2] - g), (3, box[1] + g), (1, box[3] - g)):
+                r = list(ru)
+                r[side] = value
+                if r[2] - r[0] >= min_side and r[3] - r[1] >= min_side:
+                    options.append(((r[2] - r[0]) * (r[3] - r[1]), r))
+            world = wm.replace(world, u, max(options)[1]) if options else wm.remove(world, u)
+            cut.append(u)
+        return world, cut
 
     def tentative(self, new: wm.World, changed, polish) -> bool:
         """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo)."""

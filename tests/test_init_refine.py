@@ -6,7 +6,7 @@ from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
-from semmap_pp.ascent import refine_world
+from semmap_pp.ascent import align_walls, refine_world
 from semmap_pp.kernels import build_data, data_from_frame
 from semmap_pp.model import load_model
 from semmap_pp.posterior import Posterior
@@ -39,6 +39,90 @@ def test_refine_reaches_the_walls_and_swallows_the_fragment():
     left, right = rects
     assert abs(left[3] - 72) <= 2 and left[:3] == (2, 2, 82)  # its wall band now sits on the shared wall
     assert right == (2, 70, 82, 142)
+
+
+def test_align_walls_moves_walls_only():
+    """Rectangles a few cells off their walls are set on them; no unit is added, removed, merged
+    or cut, even where refine_world would (a fragment-free world of two misplaced rooms)."""
+    model = load_model()
+    grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.add(wm.empty(8), 3, (4, 1, 79, 69)), 5, (1, 73, 84, 140))
+    out = align_walls(post, start, data_from_frame(frame))
+    assert wm.active_slots(out).tolist() == [3, 5]
+    assert post.evaluate(out).total > post.evaluate(start).total
+    assert tuple(int(v) for v in out.rects[3]) == (2, 2, 82, 72)
+    assert tuple(int(v) for v in out.rects[5]) == (2, 70, 82, 142)
+    assert np.array_equal(start.rects[3], (4, 1, 79, 69))      # the input is not edited
+
+
+def hall_with_window() -> np.ndarray:
+    """A 4.8 m x 4 m hall (2-cell walls) with a 0.45 m window in its top wall and free space seen
+    through it above (outside the building)."""
+    m = np.full((140, 120), UNKNOWN, np.uint8)
+    m[40:120, 2:102] = OCCUPIED
+    m[42:118, 4:100] = FREE
+    m[10:40, 60:95] = FREE
+    m[40:42, 74:83] = FREE
+    return m
+
+
+def test_a_merge_trims_the_unit_that_blocks_its_box(monkeypatch):
+    """The hall in two pieces (a strip along its right wall) and a third unit over the space seen
+    through the window and the hall's top right corner: merging the two pieces is only a gain
+    when the third unit is cut back to the hall's top wall (a wall line), which the merge does."""
+    from semmap_pp import ascent
+
+    model = load_model()
+    grid = OccupancyGrid(hall_with_window(), np.zeros((140, 120), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    post = Posterior(frame, model, None)
+    data = data_from_frame(frame)
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (60, 70, 120, 102)),
+                   2, (8, 70, 62, 102))
+    asc = ascent._Ascent(post, start, data)
+    assert asc.merges()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert (40, 2, 120, 102) in rects                        # the hall is one unit
+    (fan,) = [r for r in rects if r != (40, 2, 120, 102)]
+    assert fan[0] < 40 and fan[2] <= 42                       # the third one ends at the hall's top wall
+    assert asc.tr.logp > post.evaluate(start).total
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+
+    # without the trim the two pieces cannot be merged (the box would overlap the third unit)
+    monkeypatch.setattr(ascent._Ascent, "cut_back", lambda self, world, a, box: (world, []))
+    old = ascent._Ascent(post, start, data)
+    old.merges()
+    assert (40, 2, 120, 102) not in {tuple(int(v) for v in old.world.rects[s])
+                                     for s in wm.active_slots(old.world)}
+
+
+def test_a_merge_trims_a_unit_only_along_a_wall_line():
+    """Two rooms; the left one in two pieces, the second reaching across the shared wall into the
+    right room. Their box would cut the right room back at a column of open floor (no wall line
+    there), so the merge is refused, although the target would take it (intel's rooms and
+    corridor ends were merged into one hall that way; docs/sampler.md)."""
+    from semmap_pp import ascent
+
+    model = load_model()
+    grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 60)), 1, (2, 58, 82, 100)),
+                   2, (2, 70, 82, 142))
+    asc = ascent._Ascent(post, start, data_from_frame(frame))
+    box = (2, 2, 82, 100)
+    trimmed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
+    assert cut == [2] and tuple(int(v) for v in trimmed.rects[2]) == (2, 98, 82, 142)
+    assert asc.boundary_lines(box, trimmed.rects[2]) < asc.trim_line_min    # open floor at column 98
+    assert not asc.merges()
+    assert np.array_equal(asc.world.rects, start.rects)
+    # the other guard: a unit left with less than half its area is not trimmed but kept whole
+    keep = ascent._Ascent(post, start, data_from_frame(frame), merge_keep=0.7, trim_line_min=0.0)
+    assert not keep.merges()                                  # 44 of 72 columns kept: 0.61 < 0.7
+    loose = ascent._Ascent(post, start, data_from_frame(frame), merge_keep=0.5, trim_line_min=0.0)
+    assert loose.merges()                                     # without both guards the merge is taken
 
 
 def test_door_candidates_are_gaps_in_wall_lines_not_corridor_rows():
