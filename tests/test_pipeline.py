@@ -123,7 +123,7 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
                       RunSettings.from_model(model, seed=3, chains=1, cores=1, tune=0, draws=4,
                                              n_inner=1), log=logs.append, starts=[start])
         out[rounds] = (run.semantic.log_posterior, run.world, logs)
-    (lp0, w0, logs0), (lp3, w3, logs3) = out[0], out[3]
+    (lp0, _, logs0), (lp3, w3, logs3) = out[0], out[3]
     assert lp3 > lp0 + 10
     assert any("W* polished" in m for m in logs3) and not any("W* polished" in m for m in logs0)
     rects = sorted(tuple(int(v) for v in w3.rects[s]) for s in W.active_slots(w3))
