@@ -278,18 +278,37 @@ def building_roi(truth: dict, shape, default: np.ndarray, resolution: float, mar
 
 # ------------------------------------------------------------------ subsets
 
-def bench_synthetic(args, model, rules) -> dict:
-    from semmap_pp.evaluate import cpr, score_world
+def _floor(seed: int, model, rules):
+    """Synthetic floor ``seed``, its grid and the pipeline's inputs for it (default ROI)."""
     from semmap_pp.grid import OccupancyGrid
-    from semmap_pp.outputs import world_dict
     from semmap_pp.synth import generate_floor
+    floor = generate_floor(seed)
+    grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
+                         source=Path(f"synth-{seed}"))
+    return floor, grid, _inputs_from_grid(grid, model, rules)
+
+
+def _floor_scores(floor, sm, pred: dict):
+    """The scores W* and the truth ceiling share: ``(row fields, score against the truth, score
+    against the seen truth)``."""
+    from semmap_pp.evaluate import cpr, score_world
+    sc = score_world(pred, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
+    so = score_world(pred, observed_truth(floor.truth), shape=floor.classes.shape,
+                     resolution=floor.resolution)
+    cpr_building = cpr(floor.classes, sm.states_image, building_roi(floor.truth, floor.classes.shape,
+                                                                   sm.roi, floor.resolution))[0]
+    fields = {"cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
+              "unit_f1_observed": round(so.unit_f1, 4), "door_f1_observed": _r4(_door_f1(so))}
+    return fields, sc, so
+
+
+def bench_synthetic(args, model, rules) -> dict:
+    from semmap_pp.evaluate import score_world
+    from semmap_pp.outputs import world_dict
     rows = []
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
-        floor = generate_floor(seed)
-        grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
-                             source=Path(f"synth-{seed}"))
-        inputs = _inputs_from_grid(grid, model, rules)
+        floor, grid, inputs = _floor(seed, model, rules)
         settings = _settings(model, args)
         try:
             run, clock = _run(inputs, settings, args.quiet)
@@ -299,12 +318,8 @@ def bench_synthetic(args, model, rules) -> dict:
             continue
         sm = run.semantic
         pred = world_dict(sm)
-        sc = score_world(pred, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
+        shared, sc, so = _floor_scores(floor, sm, pred)
         door_f1 = _door_f1(sc)
-        seen = observed_truth(floor.truth)
-        cpr_building = cpr(floor.classes, sm.states_image, building_roi(floor.truth, floor.classes.shape,
-                                                                       sm.roi, floor.resolution))[0]
-        so = score_world(pred, seen, shape=floor.classes.shape, resolution=floor.resolution)
         # exterior units counted as predicted units too (what unit F1 would be without the flag)
         with_ext = dict(pred, units=pred["units"] + [
             {"id": 100000 + e["id"], "type": "other", "vertices_px": e["vertices_px"]}
@@ -316,13 +331,14 @@ def bench_synthetic(args, model, rules) -> dict:
                "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
                "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
                "log_posterior": round(float(sm.log_posterior), 1),
-               "cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
+               "cpr": shared["cpr"], "cpr_building": shared["cpr_building"], "unit_f1": shared["unit_f1"],
                "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "unit_f1_with_exterior": round(sx.unit_f1, 4),
-               "observed_units": len(seen["units"]), "unit_f1_observed": round(so.unit_f1, 4),
-               "type_accuracy_observed": _r4(so.type_accuracy), "door_f1_observed": _r4(_door_f1(so)),
+               "observed_units": len(observed_truth(floor.truth)["units"]),
+               "unit_f1_observed": shared["unit_f1_observed"],
+               "type_accuracy_observed": _r4(so.type_accuracy), "door_f1_observed": shared["door_f1_observed"],
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
@@ -372,39 +388,26 @@ def bench_truth(args, model, rules) -> dict:
     and exits lies in the default ROI). ``log_posterior`` is the aligned truth's, to compare with
     W*'s (a higher W* means the target prefers W* to the truth)."""
     from semmap_pp.ascent import align_walls
-    from semmap_pp.evaluate import cpr, score_world
-    from semmap_pp.grid import OccupancyGrid
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import settings_from_mapping
     from semmap_pp.outputs import world_dict
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.pipeline import TargetFactory
-    from semmap_pp.synth import generate_floor
     rows = []
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
-        floor = generate_floor(seed)
-        grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
-                             source=Path(f"synth-{seed}"))
-        inputs = _inputs_from_grid(grid, model, rules)
+        floor, grid, inputs = _floor(seed, model, rules)
         post = TargetFactory(inputs.frame, model, rules)()
         post.knowledge_on = rules is not None
         data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
         start = truth_world(inputs.frame, floor.truth, model.prior.k_max)
         world = align_walls(post, start, data)
         sm = semantic_map(grid, inputs.frame, post, world, roi=inputs.roi)
-        pred = world_dict(sm)
-        sc = score_world(pred, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
-        so = score_world(pred, observed_truth(floor.truth), shape=floor.classes.shape,
-                         resolution=floor.resolution)
+        shared, sc, _ = _floor_scores(floor, sm, world_dict(sm))
         row = {"seed": seed, "true_units": len(floor.truth["units"]), "units": len(sm.unit_ids),
                "exterior": len(sm.exterior_ids), "log_posterior": round(float(sm.log_posterior), 1),
-               "cpr": round(sm.cpr, 4),
-               "cpr_building": _r4(cpr(floor.classes, sm.states_image, building_roi(
-                   floor.truth, floor.classes.shape, sm.roi, floor.resolution))[0]),
-               "unit_f1": round(sc.unit_f1, 4), "unit_f1_observed": round(so.unit_f1, 4),
-               "type_accuracy": _r4(sc.type_accuracy), "door_f1": _r4(_door_f1(sc)),
-               "door_f1_observed": _r4(_door_f1(so)), "seconds": round(time.perf_counter() - t0, 1)}
+               **shared, "type_accuracy": _r4(sc.type_accuracy), "door_f1": _r4(_door_f1(sc)),
+               "seconds": round(time.perf_counter() - t0, 1)}
         rows.append(row)
         _save(args, f"truth-{seed}", sm)
         _log(args, f"truth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} "

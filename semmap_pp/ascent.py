@@ -154,6 +154,17 @@ class _Ascent:
                 moved = True
         return moved
 
+    def all_wall_moves(self) -> bool:
+        """:meth:`wall_moves` for every unit active now, in slot order."""
+        changed = False
+        for s in wm.active_slots(self.world).tolist():
+            changed |= self.wall_moves(s)
+        return changed
+
+    def untyped(self) -> wm.World:
+        """The current world with its types left undecided (what the ascent returns)."""
+        return wm.make(self.world.rects, self.world.active, np.full(self.world.capacity, wm.NO_TYPE))
+
     def removals(self) -> bool:
         changed = False
         for s in wm.active_slots(self.world).tolist():
@@ -430,8 +441,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         return world
     for _ in range(rounds):
         changed = asc.removals()
-        for s in wm.active_slots(asc.world).tolist():
-            changed |= asc.wall_moves(s)
+        changed |= asc.all_wall_moves()
         changed |= asc.removals()
         if merges:
             changed |= asc.merges()
@@ -441,8 +451,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             changed |= asc.births()
         if not changed:
             break
-    out = asc.world
-    return wm.make(out.rects, out.active, np.full(out.capacity, wm.NO_TYPE))
+    return asc.untyped()
 
 
 def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:
@@ -458,10 +467,6 @@ def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.Worl
     if not np.isfinite(asc.tr.logp):
         return world
     for _ in range(rounds):
-        changed = False
-        for s in wm.active_slots(asc.world).tolist():
-            changed |= asc.wall_moves(s)
-        if not changed:
+        if not asc.all_wall_moves():
             break
-    out = asc.world
-    return wm.make(out.rects, out.active, np.full(out.capacity, wm.NO_TYPE))
+    return asc.untyped()
