@@ -153,6 +153,10 @@ class DiagnosticsParams:
     #: Adjacent rooms whose connecting walls differ by more than this (metres) are a topological
     #: defect (semmap_pp.derive.defects); a missing key means 2 * prior.sale_sigma_m.
     defect_tolerance_m: float
+    #: A W* unit whose interior holds at least this share of the map's wall-like cells gets a note
+    #: (semmap_pp.derive.walls_inside: the map probably shows the outside as free); a missing key
+    #: means 0.5, 1.0 switches the note off.
+    walls_inside_max: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -371,9 +375,11 @@ def load_model(path: str | Path | None = None) -> Model:
     diag = r.raw("diagnostics")
     defect_tol = (r.number("diagnostics.defect_tolerance_m", lo=0.0)
                   if isinstance(diag, dict) and "defect_tolerance_m" in diag else 2.0 * prior.sale_sigma_m)
+    walls_inside_max = (r.number("diagnostics.walls_inside_max", lo=0.0, hi=1.0)
+                        if r.has("diagnostics.walls_inside_max") else 0.5)
     diagnostics = DiagnosticsParams(rhat_max=r.number("diagnostics.rhat_max", lo=1.0),
                                     ess_min=r.number("diagnostics.ess_min", lo=0.0),
-                                    defect_tolerance_m=defect_tol)
+                                    defect_tolerance_m=defect_tol, walls_inside_max=walls_inside_max)
     kernels = r.raw("kernels")
     if not isinstance(kernels, dict):
         raise r.error("kernels", "must be a table")

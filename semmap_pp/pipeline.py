@@ -327,6 +327,9 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         log(f"W* polished by greedy ascent: log posterior {sm.log_posterior - polished[0]:+.1f} "
             f"in {polished[1]:.1f} s")
     rate = total_kernels / seconds if seconds > 0 else 0.0
+    swallowed = _walls_inside_note(sm, post, model)
+    if swallowed:
+        notes.append(swallowed)   # semmap map logs the notes ("note: ...") and report.html lists them
     if result.stopped:
         notes.insert(0, f"{result.stopped}: sampling stopped early after {seconds:.1f} s; kept "
                         f"{len(kept_chains)} chain(s) x {n_kept} draws")
@@ -336,6 +339,24 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     return MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, samples, seconds,
                   rate, best_chain, notes, result.stopped, records, list(first),
                   (tuple(kept_chains), n_kept))
+
+
+def _walls_inside_note(sm, post, model) -> str | None:
+    """A note when a unit of W* holds ``[diagnostics] walls_inside_max`` or more of the map's
+    wall-like cells inside its walls (:mod:`semmap_pp.derive.walls_inside`), else None."""
+    from semmap_pp.derive.walls_inside import walls_inside
+    slots = sorted(sm.slot_ids) + sorted(sm.exterior_ids)
+    if not slots:
+        return None
+    share = walls_inside(post.data.xcode, sm.world.rects[slots], post.cells.wall)
+    k = int(np.argmax(share))
+    if share[k] < model.diagnostics.walls_inside_max or model.diagnostics.walls_inside_max >= 1.0:
+        return None                      # 1.0: the note is off
+    s = slots[k]
+    name = f"unit {sm.slot_ids[s]}" if s in sm.slot_ids else f"exterior unit X{sm.exterior_ids[s]}"
+    return (f"{name} holds {100 * share[k]:.0f} % of the map's wall-like cells inside its walls: the "
+            f"map probably shows the outside of the building as free space (one unit over everything "
+            f"explains it best); mark the outside unknown or crop the map to the building")
 
 
 def sampled_worlds(run: MapRun, n: int) -> list[wm.World]:

@@ -128,3 +128,27 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
     assert any("W* polished" in m for m in logs3) and not any("W* polished" in m for m in logs0)
     rects = sorted(tuple(int(v) for v in w3.rects[s]) for s in W.active_slots(w3))
     assert rects == [(6, 6, 54, 60), (6, 58, 54, 114)]
+
+
+def test_a_unit_over_the_building_and_its_free_surroundings_gets_a_note():
+    """The map shows the space around two rooms as free (as a rendering that marks every crossed
+    cell free would): one unit over everything holds the rooms' walls inside it, and W* gets a
+    note saying what is wrong with the map; the two rooms as units get none."""
+    from semmap_pp.pipeline import _walls_inside_note
+
+    c = rooms_grid().classes.copy()
+    c[c == UNKNOWN] = FREE
+    g = OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                      origin=(0.0, 0.0, 0.0), source=None, image_path=None)
+    f = build_frame(g, MODEL)
+    post = Posterior(f, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    everything = W.add(W.empty(8), 0, (0, 0, 60, 120))
+    note = _walls_inside_note(semantic_map(g, f, post, everything, roi=roi), post, MODEL)
+    assert note is not None and note.startswith("unit 1 holds ") and "outside of the building as free" in note
+    rooms = W.add(W.add(W.empty(8), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    assert _walls_inside_note(semantic_map(g, f, post, rooms, roi=roi), post, MODEL) is None
+    import dataclasses
+    off = dataclasses.replace(MODEL, diagnostics=dataclasses.replace(MODEL.diagnostics, walls_inside_max=1.0))
+    assert " holds 100 % " in note        # every wall of the building lies inside it
+    assert _walls_inside_note(semantic_map(g, f, post, everything, roi=roi), post, off) is None
