@@ -16,7 +16,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   (:func:`observed_truth`); ``errors`` is :func:`error_breakdown`.
 * **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
   world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
-  scored as W* is (:func:`bench_truth`).
+  scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
+  of the W*s a synthetic run saved in DIR, to compare log posteriors inside the building.
 * **real**: ``data/maps/*.yaml`` of the repository (cartesium, intel), CPR with the default ROI, and
   the time to W*.
 * **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation``, loaded with the benchmark's own
@@ -38,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 import time
@@ -86,6 +88,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--anneal", type=float, default=None, help="override the burn-in temperature")
     parser.add_argument("--maps", default=None, help="comma-separated map names to keep (real/ipa/types)")
     parser.add_argument("--save", type=Path, default=None, help="write W* pictures/world.json here")
+    parser.add_argument("--outside-from", type=Path, default=None,
+                        help="truth subset: add the units lying mostly outside the building of the W*s "
+                             "saved here (--subset synthetic --save DIR) to the seen truth")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--model", type=Path, default=None, help="model file (default models/default.toml)")
     parser.add_argument("--rules", type=Path, default=None, help="rule file (default rules/table3.lp)")
@@ -251,7 +256,7 @@ def error_breakdown(pred: dict, truth: dict, shape, iou_min: float = 0.5) -> dic
     for i, p in enumerate(P):
         if not len(T) or iou[i].max() < iou_min:
             out["pred_unmatched"] += 1
-            out["pred_outside_building"] += int((p & ~union).sum() > 0.5 * p.sum())
+            out["pred_outside_building"] += int(_mostly_outside(p, union))
     for j, t in enumerate(T):
         if not len(P) or iou[:, j].max() < iou_min:
             out["true_missed"] += 1
@@ -361,21 +366,45 @@ def bench_synthetic(args, model, rules) -> dict:
                 "cpr": TARGETS["synthetic_cpr"]}}
 
 
-def truth_world(frame, truth: dict, capacity: int):
-    """The seen true units of a synthetic floor as a world on ``frame``'s lattice: each unit's
-    corners (pixel frame) taken to the lattice and rounded to the enclosing cell box (the inverse of
-    :meth:`semmap_pp.frame.Frame.rect_vertices_px`); units the robot never saw are left out."""
+def lattice_rect(frame, corners_px) -> tuple:
+    """The lattice cell box enclosing a polygon given in the pixel frame (the inverse of
+    :meth:`semmap_pp.frame.Frame.rect_vertices_px`, rounded)."""
+    p = np.asarray(corners_px, dtype=np.float64)
+    r, c = frame.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
+    return tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
+
+
+def truth_world(frame, truth: dict, capacity: int, extra=()):
+    """The seen true units of a synthetic floor as a world on ``frame``'s lattice (units the robot
+    never saw left out), plus the polygons ``extra`` (pixel frame), each as :func:`lattice_rect`."""
     from semmap_pp import world as wm
+    polygons = [u["corners_px"] for u in observed_truth(truth)["units"]] + list(extra)
+    if len(polygons) > capacity:
+        raise ValueError(f"{len(polygons)} units, world capacity {capacity}")
     w = wm.empty(capacity)
-    units = observed_truth(truth)["units"]
-    if len(units) > capacity:
-        raise ValueError(f"{len(units)} true units, world capacity {capacity}")
-    for slot, u in enumerate(units):
-        p = np.asarray(u["corners_px"], dtype=np.float64)
-        r, c = frame.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
-        rect = tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
-        w = wm.add(w, slot, rect)
+    for slot, corners in enumerate(polygons):
+        w = wm.add(w, slot, lattice_rect(frame, corners))
     return w
+
+
+def outside_units(pred: dict, truth: dict, shape) -> list:
+    """The polygons (pixel frame) of the predicted units and exterior units of ``pred`` lying mostly
+    (more than half their cells) outside every true unit: W*'s cover of the space seen outside
+    the building."""
+    from semmap_pp.evaluate.truth import polygon_mask
+    inside = np.zeros(shape, bool)
+    for u in truth["units"]:
+        inside |= polygon_mask(u["corners_px"], shape)
+    out = []
+    for u in pred["units"] + pred.get("exterior", []):
+        if _mostly_outside(polygon_mask(u["vertices_px"], shape), inside):
+            out.append(u["vertices_px"])
+    return out
+
+
+def _mostly_outside(mask: np.ndarray, inside: np.ndarray) -> bool:
+    """More than half the cells of ``mask`` lie outside ``inside`` (the true units' union)."""
+    return bool(np.count_nonzero(mask & ~inside) > 0.5 * np.count_nonzero(mask))
 
 
 def bench_truth(args, model, rules) -> dict:
@@ -386,7 +415,10 @@ def bench_truth(args, model, rules) -> dict:
     seen unit would score: unit recall is capped by the units never seen, and CPR by what the
     building's units leave unexplained (free space seen outside the building through windows
     and exits lies in the default ROI). ``log_posterior`` is the aligned truth's, to compare with
-    W*'s (a higher W* means the target prefers W* to the truth)."""
+    W*'s (a higher W* means the target prefers W* to the truth). With ``--outside-from DIR`` (the
+    saved W*s of ``--subset synthetic --save DIR``) W*'s units over the space outside the building
+    (:func:`outside_units`) join the seen truth before the walls are aligned, so that the two log
+    posteriors differ only inside the building; rows then carry W*'s log posterior too."""
     from semmap_pp.ascent import align_walls
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import settings_from_mapping
@@ -400,7 +432,10 @@ def bench_truth(args, model, rules) -> dict:
         post = TargetFactory(inputs.frame, model, rules)()
         post.knowledge_on = rules is not None
         data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
-        start = truth_world(inputs.frame, floor.truth, model.prior.k_max)
+        wstar = (json.loads((args.outside_from / f"synth-{seed}" / "world.json").read_text())
+                 if args.outside_from else None)
+        extra = outside_units(wstar, floor.truth, floor.classes.shape) if wstar else []
+        start = truth_world(inputs.frame, floor.truth, model.prior.k_max, extra)
         world = align_walls(post, start, data)
         sm = semantic_map(grid, inputs.frame, post, world, roi=inputs.roi)
         shared, sc, _ = _floor_scores(floor, sm, world_dict(sm))
@@ -408,6 +443,8 @@ def bench_truth(args, model, rules) -> dict:
                "exterior": len(sm.exterior_ids), "log_posterior": round(float(sm.log_posterior), 1),
                **shared, "type_accuracy": _r4(sc.type_accuracy), "door_f1": _r4(_door_f1(sc)),
                "seconds": round(time.perf_counter() - t0, 1)}
+        if wstar:
+            row |= {"outside_units": len(extra), "wstar_log_posterior": wstar["log_posterior"]}
         rows.append(row)
         _save(args, f"truth-{seed}", sm)
         _log(args, f"truth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} "
@@ -416,7 +453,12 @@ def bench_truth(args, model, rules) -> dict:
                    f"log p {row['log_posterior']}")
     keys = ("cpr", "cpr_building", "unit_f1", "unit_f1_observed", "type_accuracy", "door_f1",
             "door_f1_observed", "seconds")
-    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys}}
+    out = {"rows": rows, "means": {k: _mean(rows, k) for k in keys}}
+    if args.outside_from:
+        diff = [r["log_posterior"] - r["wstar_log_posterior"] for r in rows if "wstar_log_posterior" in r]
+        out["truth_minus_wstar"] = {"higher": sum(d > 0.05 for d in diff), "equal": sum(abs(d) <= 0.05 for d in diff),
+                                    "lower": sum(d < -0.05 for d in diff)}
+    return out
 
 
 def bench_real(args, model, rules) -> dict:
