@@ -13,7 +13,7 @@ def test_default_model_loads_and_converts_to_cells():
     assert np.allclose(m.sensor.corridor.sum(axis=1), 1) and np.allclose(m.sensor.other.sum(axis=1), 1)
     assert m.sensor.table(True).shape == (3, 4)
     c = m.cells(0.05)
-    assert (c.wall, c.object_max_extent, c.door_min, c.door_max) == (2, 30, 12, 50)
+    assert (c.wall, c.object_max_extent, c.door_min, c.door_max) == (2, 30, 10, 50)
     assert c.min_side >= 2 * c.wall + 1
 
 

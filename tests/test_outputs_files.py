@@ -1,6 +1,6 @@
 """The output files of `semmap map` beyond world.json: GeoJSON, GraphML, regions, figures, report.
 
-One literal floor explains every case (0.05 m cells, walls 2 cells, doors 12..50 cells)::
+One literal floor explains every case (0.05 m cells, walls 2 cells, doors 10..50 cells)::
 
     +------+------+------+      A | B : a 1 m door          -> separate regions, edge "door"
     |  A o |  B   :  C   |      B : C : wall open for 3.1 m -> one region (an open passage)
@@ -92,7 +92,7 @@ def test_join_regions_is_union_find_numbered_by_smallest_unit():
 def test_an_opening_is_a_passage_when_wider_than_a_door_or_the_whole_wall():
     from semmap_pp.derive.doors import openings_between
 
-    cells = MODEL.cells(0.05)                                    # doors 12..50 cells, wall 2
+    cells = MODEL.cells(0.05)                                    # doors 10..50 cells, wall 2
     cls = np.full((40, 40), OCCUPIED, np.uint8)
     cls[2:38, 2:18] = FREE
     cls[2:38, 22:38] = FREE

@@ -19,7 +19,7 @@ Examples
 --------
 >>> import numpy as np
 >>> from semmap_pp.model import load_model
->>> cells = load_model().cells(0.05)       # wall 2 cells, doors 12..50 cells
+>>> cells = load_model().cells(0.05)       # wall 2 cells, doors 10..50 cells
 >>> free = np.zeros((60, 80), np.uint8)    # all free ...
 >>> free[:, 38:42] = 2                     # ... but a wall at columns 38..41
 >>> free[20:36, 38:42] = 0                 # with a 16-cell doorway
