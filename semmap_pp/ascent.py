@@ -295,6 +295,46 @@ class _Ascent:
                 break
         return changed
 
+    def recuts(self, align: int = 3) -> bool:
+        """Cut an L-shaped pair of units the other way.
+
+        Two units stacked along one axis (sharing their wall band), one end aligned (within
+        ``align`` cells) and one narrower than the other, cover an L. The L has a second cut, along
+        the narrower unit's free side: the narrower unit then runs the L's full length and the
+        wider one keeps the part beside it (sharing the wall band). Tried for every such pair where
+        a wall line (:meth:`boundary_lines` at least ``trim_line_min``) stands along the new cut,
+        both units then wall-moved, kept only if log p rose. Two rooms side by side, the second
+        shorter, cut across both at the shorter one's end wall (synthetic floor 5) are a local
+        optimum for every other move.
+        """
+        g, t = self.data.wall_share, self.data.wall_cells
+        changed = False
+        for a, b, ra, rb in self._pairs():
+            for axis in (0, 1):                    # stacked along rows (0) or along columns (1)
+                x = 1 - axis
+                lo_r, hi_r = (ra, rb) if ra[axis] <= rb[axis] else (rb, ra)
+                if not 0 <= lo_r[axis + 2] - hi_r[axis] <= max(g, t):
+                    continue                       # not stacked with a shared wall band
+                wa, wb = ra[x + 2] - ra[x], rb[x + 2] - rb[x]
+                if abs(wa - wb) <= align:
+                    continue                       # a rectangle, not an L
+                (n, rn), (w, rw) = ((a, ra), (b, rb)) if wa < wb else ((b, rb), (a, ra))
+                long, short = list(rn), list(rw)
+                long[axis], long[axis + 2] = min(ra[axis], rb[axis]), max(ra[axis + 2], rb[axis + 2])
+                if abs(rn[x + 2] - rw[x + 2]) <= align:      # aligned at the far end
+                    long[x + 2] = max(rn[x + 2], rw[x + 2])
+                    short[x + 2] = rn[x] + g
+                elif abs(rn[x] - rw[x]) <= align:            # aligned at the near end
+                    long[x] = min(rn[x], rw[x])
+                    short[x] = rn[x + 2] - g
+                else:
+                    continue                       # a T, not an L
+                if self.boundary_lines(long, short) >= self.trim_line_min:
+                    new = wm.replace(wm.replace(self.world, n, long), w, short)
+                    changed |= self.tentative(new, (n, w), [n, w])
+                break
+        return changed
+
     def cut_back(self, world: wm.World, a: int, box) -> tuple[wm.World, list]:
         """``world`` with every unit but ``a`` that overlaps ``box`` (by more than the wall band)
         cut back to its largest part beside the box, sharing the box's wall band, or dropped when
@@ -413,9 +453,10 @@ class _Ascent:
 
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
-                 merges: bool = True) -> wm.World:
+                 merges: bool = True, recuts: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
-    ``merges=False`` leaves out the merges and the bridges.
+    ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
+    L-shaped pairs (:meth:`_Ascent.recuts`; W*'s polish uses them).
 
     Parameters
     ----------
@@ -446,6 +487,8 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         if merges:
             changed |= asc.merges()
             changed |= asc.bridges()
+        if recuts:
+            changed |= asc.recuts()
         changed |= asc.splits()
         if births:
             changed |= asc.births()

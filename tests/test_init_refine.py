@@ -125,6 +125,52 @@ def test_a_merge_trims_a_unit_only_along_a_wall_line():
     assert loose.merges()                                     # without both guards the merge is taken
 
 
+def room_and_alcove_room() -> np.ndarray:
+    """A tall room (rows 2..92, columns 62..122) and a shorter room beside its lower part (rows
+    22..92, columns 2..60), 2-cell walls, a 0.8 m door between them."""
+    m = np.full((96, 126), UNKNOWN, np.uint8)
+    m[0:94, 60:124] = OCCUPIED
+    m[20:94, 0:62] = OCCUPIED
+    m[2:92, 62:122] = FREE
+    m[22:92, 2:60] = FREE
+    m[60:76, 60:62] = FREE
+    return m
+
+
+def test_an_l_shaped_pair_is_cut_the_other_way_along_a_wall_when_that_raises_log_p(monkeypatch):
+    """The two rooms split the wrong way round (the tall room's top as one unit; the short room
+    and the tall room's bottom as the other, the wall between them inside it): the recut makes
+    the tall room one unit and the short room the other; from there no recut helps, and a recut
+    whose new cut crosses open floor is not tried."""
+    from semmap_pp import ascent
+
+    model = load_model()
+    grid = OccupancyGrid(room_and_alcove_room(), np.zeros((96, 126), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    post = Posterior(frame, model, None)
+    data = data_from_frame(frame)
+    wrong = wm.add(wm.add(wm.empty(8), 0, (0, 60, 22, 124)), 1, (20, 0, 94, 124))
+    asc = ascent._Ascent(post, wrong, data)
+    assert asc.recuts()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects == [(0, 60, 94, 124), (20, 0, 94, 62)]
+    assert asc.tr.logp > post.evaluate(wrong).total
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+    assert not ascent._Ascent(post, asc.world, data).recuts()           # the right cut is kept
+    polished = refine_world(post, wrong, data, rounds=1, recuts=True)   # W*'s polish takes it too
+    assert sorted(tuple(int(v) for v in polished.rects[s]) for s in wm.active_slots(polished)) == rects
+    # the same pair with no wall along the other cut (the wall between the rooms taken away: an
+    # opening of 3.5 m, wider than a door)
+    m = room_and_alcove_room()
+    m[22:92, 60:62] = FREE
+    open_grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
+    open_frame = build_frame(open_grid, model)
+    tried = []
+    monkeypatch.setattr(ascent._Ascent, "tentative", lambda self, new, changed, polish: tried.append(1))
+    ascent._Ascent(Posterior(open_frame, model, None), wrong, data_from_frame(open_frame)).recuts()
+    assert tried == []
+
+
 def test_door_candidates_are_gaps_in_wall_lines_not_corridor_rows():
     m = np.full((30, 40), FREE, np.uint8)
     m[:, 5] = m[:, 16] = OCCUPIED     # a corridor 10 cells wide between two walls (columns 6..15)
