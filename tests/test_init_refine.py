@@ -22,6 +22,14 @@ def two_rooms() -> np.ndarray:
     return m
 
 
+def knowledge_free(m: np.ndarray):
+    """The knowledge-free target and the kernels' data of lattice map ``m`` (0.05 m cells, no
+    rotation): ``(posterior, data)``."""
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), load_model())
+    assert frame.theta == 0.0
+    return Posterior(frame, load_model(), None), data_from_frame(frame)
+
+
 def test_refine_reaches_the_walls_and_swallows_the_fragment():
     model = load_model()
     grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
@@ -44,12 +52,9 @@ def test_refine_reaches_the_walls_and_swallows_the_fragment():
 def test_align_walls_moves_walls_only():
     """Rectangles a few cells off their walls are set on them; no unit is added, removed, merged
     or cut, even where refine_world would (a fragment-free world of two misplaced rooms)."""
-    model = load_model()
-    grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
-    frame = build_frame(grid, model)
-    post = Posterior(frame, model, None)
+    post, data = knowledge_free(two_rooms())
     start = wm.add(wm.add(wm.empty(8), 3, (4, 1, 79, 69)), 5, (1, 73, 84, 140))
-    out = align_walls(post, start, data_from_frame(frame))
+    out = align_walls(post, start, data)
     assert wm.active_slots(out).tolist() == [3, 5]
     assert post.evaluate(out).total > post.evaluate(start).total
     assert tuple(int(v) for v in out.rects[3]) == (2, 2, 82, 72)
@@ -74,11 +79,7 @@ def test_a_merge_trims_the_unit_that_blocks_its_box(monkeypatch):
     when the third unit is cut back to the hall's top wall (a wall line), which the merge does."""
     from semmap_pp import ascent
 
-    model = load_model()
-    grid = OccupancyGrid(hall_with_window(), np.zeros((140, 120), np.float32), 0.05)
-    frame = build_frame(grid, model)
-    post = Posterior(frame, model, None)
-    data = data_from_frame(frame)
+    post, data = knowledge_free(hall_with_window())
     start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (60, 70, 120, 102)),
                    2, (8, 70, 62, 102))
     asc = ascent._Ascent(post, start, data)
@@ -105,13 +106,10 @@ def test_a_merge_trims_a_unit_only_along_a_wall_line():
     corridor ends were merged into one hall that way; docs/sampler.md)."""
     from semmap_pp import ascent
 
-    model = load_model()
-    grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
-    frame = build_frame(grid, model)
-    post = Posterior(frame, model, None)
+    post, data = knowledge_free(two_rooms())
     start = wm.add(wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 60)), 1, (2, 58, 82, 100)),
                    2, (2, 70, 82, 142))
-    asc = ascent._Ascent(post, start, data_from_frame(frame))
+    asc = ascent._Ascent(post, start, data)
     box = (2, 2, 82, 100)
     trimmed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
     assert cut == [2] and tuple(int(v) for v in trimmed.rects[2]) == (2, 98, 82, 142)
@@ -119,9 +117,9 @@ def test_a_merge_trims_a_unit_only_along_a_wall_line():
     assert not asc.merges()
     assert np.array_equal(asc.world.rects, start.rects)
     # the other guard: a unit left with less than half its area is not trimmed but kept whole
-    keep = ascent._Ascent(post, start, data_from_frame(frame), merge_keep=0.7, trim_line_min=0.0)
+    keep = ascent._Ascent(post, start, data, merge_keep=0.7, trim_line_min=0.0)
     assert not keep.merges()                                  # 44 of 72 columns kept: 0.61 < 0.7
-    loose = ascent._Ascent(post, start, data_from_frame(frame), merge_keep=0.5, trim_line_min=0.0)
+    loose = ascent._Ascent(post, start, data, merge_keep=0.5, trim_line_min=0.0)
     assert loose.merges()                                     # without both guards the merge is taken
 
 
@@ -144,11 +142,7 @@ def test_an_l_shaped_pair_is_cut_the_other_way_along_a_wall_when_that_raises_log
     whose new cut crosses open floor is not tried."""
     from semmap_pp import ascent
 
-    model = load_model()
-    grid = OccupancyGrid(room_and_alcove_room(), np.zeros((96, 126), np.float32), 0.05)
-    frame = build_frame(grid, model)
-    post = Posterior(frame, model, None)
-    data = data_from_frame(frame)
+    post, data = knowledge_free(room_and_alcove_room())
     wrong = wm.add(wm.add(wm.empty(8), 0, (0, 60, 22, 124)), 1, (20, 0, 94, 124))
     asc = ascent._Ascent(post, wrong, data)
     assert asc.recuts()
@@ -163,11 +157,10 @@ def test_an_l_shaped_pair_is_cut_the_other_way_along_a_wall_when_that_raises_log
     # opening of 3.5 m, wider than a door)
     m = room_and_alcove_room()
     m[22:92, 60:62] = FREE
-    open_grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
-    open_frame = build_frame(open_grid, model)
+    open_post, open_data = knowledge_free(m)
     tried = []
     monkeypatch.setattr(ascent._Ascent, "tentative", lambda self, new, changed, polish: tried.append(1))
-    ascent._Ascent(Posterior(open_frame, model, None), wrong, data_from_frame(open_frame)).recuts()
+    ascent._Ascent(open_post, wrong, open_data).recuts()
     assert tried == []
 
 
