@@ -372,9 +372,9 @@ def load_model(path: str | Path | None = None) -> Model:
         tune=r.integer("sampler.tune", lo=0), draws=r.integer("sampler.draws", lo=4),
         n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
         start_factor=r.integer("sampler.start_factor", lo=1))
-    diag = r.raw("diagnostics")
+    r.raw("diagnostics")                   # a missing table is named as such
     defect_tol = (r.number("diagnostics.defect_tolerance_m", lo=0.0)
-                  if isinstance(diag, dict) and "defect_tolerance_m" in diag else 2.0 * prior.sale_sigma_m)
+                  if r.has("diagnostics.defect_tolerance_m") else 2.0 * prior.sale_sigma_m)
     walls_inside_max = (r.number("diagnostics.walls_inside_max", lo=0.0, hi=1.0)
                         if r.has("diagnostics.walls_inside_max") else 0.5)
     diagnostics = DiagnosticsParams(rhat_max=r.number("diagnostics.rhat_max", lo=1.0),
