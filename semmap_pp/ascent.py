@@ -220,7 +220,10 @@ class _Ascent:
         knowledge-free target would take it. A unit overlapping the box is trimmed to its largest
         part beside it (:meth:`cut_back`) when that part keeps at least ``merge_keep`` of its area
         and a wall line (:meth:`boundary_lines` at least ``trim_line_min``) stands along the new
-        boundary; otherwise the pair is skipped. The box and the trimmed units are then wall-moved.
+        boundary; otherwise the pair is skipped. A unit with no part of a unit side left beside the
+        box is dropped (a third piece of the same space: a strip along a hall's wall in three
+        pieces joins the hall two at a time only so; the slack bounds what the box can swallow).
+        The box and the trimmed units are then wall-moved, and the whole kept only if log p rose.
         """
         t = self.data.wall_cells
         changed = False
@@ -237,10 +240,10 @@ class _Ascent:
             if self.boundary_lines(ra, rb) >= self.merge_line_max:
                 continue
             new, cut = self.cut_back(wm.replace(wm.remove(self.world, b), a, box), a, box)
-            if any(not new.active[u] or area(new.rects[u]) < self.merge_keep * area(self.world.rects[u])
-                   or self.boundary_lines(box, [int(v) for v in new.rects[u]]) < self.trim_line_min
+            if any(new.active[u] and (area(new.rects[u]) < self.merge_keep * area(self.world.rects[u])
+                   or self.boundary_lines(box, [int(v) for v in new.rects[u]]) < self.trim_line_min)
                    for u in cut):
-                continue      # the box would swallow a unit, or trim one where no wall stands
+                continue      # the box would trim a unit to a sliver, or where no wall stands
             changed |= self.tentative(new, (a, b, *cut), [a, *cut])
         return changed
 

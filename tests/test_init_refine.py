@@ -99,6 +99,29 @@ def test_a_merge_trims_the_unit_that_blocks_its_box(monkeypatch):
                                      for s in wm.active_slots(old.world)}
 
 
+def test_a_merge_swallows_a_third_piece_that_lies_inside_its_box(monkeypatch):
+    """The hall in three pieces, a strip along its right wall cut in two: the box of the hall's
+    main piece and either strip piece holds the other strip piece whole, so the merge drops it
+    (before, a unit the box swallowed blocked the merge and the hall stayed in pieces: synthetic
+    floor 7, docs/quality.md)."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(hall_with_window())
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (40, 70, 100, 102)),
+                   2, (98, 70, 120, 102))
+    asc = ascent._Ascent(post, start, data)
+    assert asc.merges()
+    rects = [tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world)]
+    assert rects == [(40, 2, 120, 102)]
+    assert asc.tr.logp > post.evaluate(start).total
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+
+    # what the merge does with the third piece: no part of a unit side is left beside the box
+    box = (40, 2, 120, 102)
+    swallowed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
+    assert cut == [2] and not swallowed.active[2]
+
+
 def test_a_merge_trims_a_unit_only_along_a_wall_line():
     """Two rooms; the left one in two pieces, the second reaching across the shared wall into the
     right room. Their box would cut the right room back at a column of open floor (no wall line
