@@ -523,6 +523,7 @@ def bench_ipa(args, model, rules) -> dict:
                "precision": round(pub.precision, 4), "recall": round(pub.recall, 4),
                "precision_restricted": round(res.precision, 4), "recall_restricted": round(res.recall, 4),
                "precision_units": round(units.precision, 4), "recall_units": round(units.recall, 4),
+               "log_posterior": round(float(sm.log_posterior), 1),
                "run_s": round(run.seconds, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, name, sm)
@@ -567,6 +568,7 @@ def bench_types(args, model, rules) -> dict:
                "balanced_accuracy": round(sc.balanced_accuracy, 4), "recall_room": round(sc.recall_room, 4),
                "recall_corridor": round(sc.recall_corridor, 4), "coverage": round(sc.coverage, 4),
                "accuracy_covered": round(sc.accuracy_covered, 4), "units": len(sm.unit_ids),
+               "log_posterior": round(float(sm.log_posterior), 1),
                "run_s": round(run.seconds, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, row["map"], sm)

@@ -11,7 +11,10 @@ is uncertain, so each unit also gets probabilities
 
 a unit whose thresholded class has probability below ``hard_above`` is passed as soft evidence
 (:attr:`Evidence.soft`) instead of a hard fact. ``MulDoor(u)`` holds when ``u`` has at least
-``multiple_doors`` doors; ``Adj`` is the adjacency of :mod:`semmap_pp.derive.adjacency`.
+``multiple_doors`` doors; with ``muldoor_scope = "space"`` a corridor-like unit counts the doors
+of every unit joined to it by open passages (:func:`muldoor_counts`: a corridor cut into
+rectangles, an L or a loop, has its doors spread over the pieces). ``Adj`` is the adjacency of
+:mod:`semmap_pp.derive.adjacency`.
 
 Unit ids are the world's slot indices.
 
@@ -86,6 +89,85 @@ def geometry_class_compiled(rect, resolution, measure, hall_min_size,
     if size >= hall_min_size:
         return HALIKE
     return COLIKE if long_ / max(short, 1e-12) >= corridor_min_ratio else ROLIKE
+
+
+@numba.njit(cache=True, nogil=True)
+def _muldoor_counts(doors, passages, colike, out):  # pragma: no cover - compiled
+    n = doors.shape[0]
+    comp = np.full(n, -1, np.int64)
+    stack = np.empty(n, np.int64)
+    for i in range(n):
+        own = 0
+        for j in range(n):
+            own += doors[i, j]
+        out[i] = own
+    for s in range(n):                      # components of the passage graph
+        if comp[s] >= 0:
+            continue
+        comp[s] = s
+        stack[0] = s
+        top = 1
+        while top > 0:
+            top -= 1
+            u = stack[top]
+            for v in range(n):
+                if comp[v] < 0 and passages[u, v] > 0:
+                    comp[v] = s
+                    stack[top] = v
+                    top += 1
+    for s in range(n):
+        if comp[s] != s:
+            continue
+        total, size = 0, 0
+        for u in range(n):
+            if comp[u] == s:
+                size += 1
+                total += out[u]
+                for v in range(u + 1, n):
+                    if comp[v] == s:
+                        total -= doors[u, v]     # a door between two members, counted once
+        if size > 1:
+            for u in range(n):
+                if comp[u] == s and colike[u]:
+                    out[u] = total
+
+
+def muldoor_counts(doors: np.ndarray, passages: np.ndarray, colike: np.ndarray) -> np.ndarray:
+    """Doors that count towards MulDoor, per unit (``muldoor_scope = "space"``).
+
+    A unit counts its own doors; a corridor-like unit joined to other units by open passages
+    (transitively) counts every door of that group, each once: the doors of the corridor as a
+    space, not of one rectangle of it.
+
+    Parameters
+    ----------
+    doors : (n, n) int
+        Doors between each pair of units (symmetric).
+    passages : (n, n) int or bool
+        Open passages between each pair (symmetric; non-zero joins the pair).
+    colike : (n,) bool
+        Corridor-like units (the thresholded Table 4 class).
+
+    Examples
+    --------
+    A corridor in two pieces (0, 1) joined by a passage, with two and one doors to rooms 2, 3, 4;
+    room 4 also has a door to room 5. The pieces count the corridor's three doors, the rooms
+    their own:
+
+    >>> import numpy as np
+    >>> d = np.zeros((6, 6), np.int64)
+    >>> for p, q in ((0, 2), (0, 3), (1, 4), (4, 5)):
+    ...     d[p, q] = d[q, p] = 1
+    >>> g = np.zeros((6, 6), np.int64); g[0, 1] = g[1, 0] = 1
+    >>> muldoor_counts(d, g, np.array([1, 1, 0, 0, 0, 0], bool)).tolist()
+    [3, 3, 1, 1, 2, 1]
+    """
+    doors = np.ascontiguousarray(doors, dtype=np.int64)
+    out = np.zeros(len(doors), np.int64)
+    if len(doors):
+        _muldoor_counts(doors, np.ascontiguousarray(passages, dtype=np.int64),
+                        np.ascontiguousarray(colike, dtype=np.bool_), out)
+    return out
 
 
 def _quantise(p: np.ndarray, step: float) -> np.ndarray:

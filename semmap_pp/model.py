@@ -29,6 +29,9 @@ from semmap_pp.errors import ModelError
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "models" / "default.toml"
 SIZE_MEASURES = ("short_side", "long_side", "area")
+# Whose doors count towards MulDoor: the unit's own, or for a corridor-like unit those of the
+# space it forms with the units joined to it by open passages (semmap_pp.evidence.muldoor_counts).
+MULDOOR_SCOPES = ("unit", "space")
 N_PRIORS = ("poisson", "geometric")
 # Sanity limits (not modelling choices): a model file is a few kilobytes; unit slots are allocated
 # up front, so k_max bounds memory; a length in cells must fit the int32 arrays of the samples.
@@ -90,6 +93,7 @@ class EvidenceParams:
     hard_above: float
     soft_step: float
     multiple_doors: int
+    muldoor_scope: str = "unit"
 
 
 @dataclass(frozen=True)
@@ -346,7 +350,10 @@ def load_model(path: str | Path | None = None) -> Model:
         ratio_scale=r.number("evidence.ratio_scale", positive=True),
         hard_above=r.number("evidence.hard_above", lo=0.5, hi=1.0),
         soft_step=r.number("evidence.soft_step", positive=True, hi=0.5),
-        multiple_doors=r.integer("evidence.multiple_doors", lo=1))
+        multiple_doors=r.integer("evidence.multiple_doors", lo=1),
+        # optional (model files written before it: each unit its own doors)
+        muldoor_scope=(r.choice("evidence.muldoor_scope", MULDOOR_SCOPES)
+                       if r.has("evidence.muldoor_scope") else "unit"))
 
     prior = PriorParams(
         n_prior=r.choice("prior.n_prior", N_PRIORS),

@@ -34,9 +34,10 @@ import numpy as np
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
-from semmap_pp.derive.doors import door_count
-from semmap_pp.evidence import (GEOMETRY_TYPE, FixedProvider, GeometryTable, build_evidence,
-                                geometry_class, geometry_class_compiled, knowledge_evidence)
+from semmap_pp.derive.doors import opening_counts
+from semmap_pp.evidence import (COLIKE, GEOMETRY_TYPE, FixedProvider, GeometryTable,
+                                build_evidence, geometry_class, geometry_class_compiled,
+                                knowledge_evidence, muldoor_counts)
 from semmap_pp.likelihood import (covered_free, enclosure_loglik, full_tallies,
                                   loglik_from_tallies, prepare, tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
@@ -124,23 +125,31 @@ class Posterior:
         return table
 
     def door_counts(self, rects: np.ndarray, adj: np.ndarray) -> np.ndarray:
-        """Doors of each unit (cached per pair of rectangles)."""
+        """Doors of each unit that count towards MulDoor (:meth:`muldoor_counts`; openings cached
+        per pair of rectangles)."""
         n = len(rects)
-        counts = np.zeros(n, dtype=np.int64)
+        openings = np.zeros((n, n, 2), dtype=np.int64)
         for p, q in zip(*np.nonzero(np.triu(adj, 1))):
-            k = self.pair_doors(rects[p], rects[q])
-            counts[p] += k
-            counts[q] += k
-        return counts
+            openings[p, q] = openings[q, p] = self.pair_openings(rects[p], rects[q])
+        colike = geometry_class(rects, self.cells.resolution, self.model.evidence) == COLIKE
+        return self.muldoor_counts(openings, colike)
 
-    def pair_doors(self, rp, rq) -> int:
-        """Number of doors between two rectangles (cached per pair)."""
+    def muldoor_counts(self, openings: np.ndarray, colike: np.ndarray) -> np.ndarray:
+        """Doors counted towards MulDoor per unit, from ``openings`` (n, n, 2) (doors, passages)
+        between each pair and the corridor-like units ``colike`` (n,): each unit's own doors, or
+        with ``[evidence] muldoor_scope = "space"`` :func:`semmap_pp.evidence.muldoor_counts`."""
+        if self.model.evidence.muldoor_scope == "space":
+            return muldoor_counts(openings[..., 0], openings[..., 1], colike)
+        return openings[..., 0].sum(axis=1)
+
+    def pair_openings(self, rp, rq) -> tuple[int, int]:
+        """``(doors, passages)`` between two rectangles (cached per pair)."""
         key = (*np.asarray(rp).tolist(), *np.asarray(rq).tolist())
         k = self._door_cache.get(key)
         if k is None:
             if len(self._door_cache) > 200_000:
                 self._door_cache.clear()
-            k = door_count(self.frame.classes, rp, rq, self.cells)
+            k = opening_counts(self.frame.classes, rp, rq, self.cells)
             self._door_cache[key] = k
         return k
 
@@ -444,18 +453,20 @@ class Tracker:
         self.logp = self.loglik + self.logprior
         self._prior_n = post.prior_n(w.capacity)
         self._fixed = isinstance(self._provider, FixedProvider)
-        self._doors = self._evidence = None
+        self._openings = self._evidence = None
         #: proposals skipped below their floor: by the type-free bound, by the MAP-types bound
         self.skipped = [0, 0]
         if not self._fixed:
             self._with_doors = getattr(self._provider, "needs_doors", True)
             self._map_only = bool(getattr(self._provider, "has_map_only", False))
-            self._doors = np.zeros((w.capacity, w.capacity), np.int32)
+            # (doors, passages) between each pair of slots
+            self._openings = np.zeros((w.capacity, w.capacity, 2), np.int64)
             if self._with_doors:
                 for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
-                    self._doors[p, q] = self._doors[q, p] = post.pair_doors(w.rects[p], w.rects[q])
-            self._evidence = self._knowledge_evidence(w, self._typ.adj, self._doors)
-            self._many = self._muldoor(w, self._doors)
+                    self._openings[p, q] = self._openings[q, p] = post.pair_openings(w.rects[p],
+                                                                                     w.rects[q])
+            self._many = self._muldoor(w, self._openings, self._typ.geometry)
+            self._evidence = self._knowledge_evidence(w, self._typ.adj, self._many)
 
     @property
     def world(self) -> W.World:
@@ -466,7 +477,7 @@ class Tracker:
         hist = self.hist if hist is None else hist
         return covered_free(hist) / max(self.post.data.n_free, 1)
 
-    def _knowledge_evidence(self, world, adj, doors):
+    def _knowledge_evidence(self, world, adj, many):
         post = self.post
         active = world.active
         units = np.flatnonzero(active).tolist()
@@ -474,26 +485,26 @@ class Tracker:
         get = post._geometry.get   # = unit_geometry by size
         items = [get(h, w) for h, w in zip((r[:, 2] - r[:, 0]).tolist(),
                                              (r[:, 3] - r[:, 1]).tolist())]
-        muldoor = []
-        if self._with_doors:
-            many = doors.sum(axis=1) >= post.model.evidence.multiple_doors
-            muldoor = np.flatnonzero(many & active).tolist()
+        muldoor = np.flatnonzero(many & active).tolist()
         iu, ju = np.nonzero(adj)   # row-major: the pairs p < q come out sorted
         up = iu < ju
         return knowledge_evidence(units, items, muldoor,
                                   list(zip(iu[up].tolist(), ju[up].tolist())))
 
-    def _muldoor(self, world, doors):
-        """Slots with multiple doors (bool (K,), the MulDoor evidence; all False without doors)."""
+    def _muldoor(self, world, openings, geometry):
+        """Slots with multiple doors (bool (K,), the MulDoor evidence; all False without doors),
+        from the (doors, passages) ``openings`` (K, K, 2) and the geometry classes (K,)."""
         if not self._with_doors:
             return np.zeros(world.capacity, dtype=bool)
-        return (doors.sum(axis=1) >= self.post.model.evidence.multiple_doors) & world.active
+        counts = self.post.muldoor_counts(openings, geometry == COLIKE)
+        return (counts >= self.post.model.evidence.multiple_doors) & world.active
 
-    def _same_evidence(self, world, adj, doors, changed) -> bool:
+    def _same_evidence(self, world, adj, many, changed) -> bool:
         """Whether the evidence of the proposed world equals the current world's, checked on
         the changed slots alone (without building it): every part of the evidence is the same
         when each changed slot keeps its presence, its geometry item and its adjacency row (the
-        edit touches no other row) and no unit's MulDoor flag changes."""
+        edit touches no other row) and no unit's MulDoor flag changes (``many``: the proposed
+        world's flags)."""
         cur = self._typ
         ow, oadj = cur.world, cur.adj
         get = self.post._geometry.get
@@ -510,40 +521,41 @@ class Tracker:
                 return False
             if adj[s].tobytes() != oadj[s].tobytes():
                 return False
-        return (not self._with_doors
-                or self._muldoor(world, doors).tobytes() == self._many.tobytes())
+        return many.tobytes() == self._many.tobytes()
 
-    def _knowledge_types(self, world, adj, changed, map_only=False):
-        """Types, P(SaLe), pair doors and evidence of a proposed world (knowledge on).
+    def _knowledge_types(self, world, adj, geometry, changed, map_only=False):
+        """Types, P(SaLe) and the knowledge patch ``(openings, evidence, MulDoor flags)`` of a
+        proposed world (knowledge on); ``geometry`` its geometry classes (K,).
 
         With ``map_only`` (and a provider that :attr:`has_map_only`) an uncached result comes
         back with P(SaLe) ``None``: the MAP types alone, without the marginals."""
         post = self.post
-        doors = self._doors
+        openings = self._openings
         if self._with_doors:
-            doors = doors.copy()
+            openings = openings.copy()
             rects, active = world.rects, world.active
             for s in changed.tolist():
-                doors[s, :] = 0
-                doors[:, s] = 0
+                openings[s, :] = 0
+                openings[:, s] = 0
                 if active[s]:
                     for t in np.flatnonzero(adj[s]).tolist():
                         p, q = (s, t) if s < t else (t, s)
-                        doors[p, q] = doors[q, p] = post.pair_doors(rects[p], rects[q])
-        if self._same_evidence(world, adj, doors, changed):
-            cur = self._typ
-            return cur.world.types, cur.sale, doors, self._evidence
-        ev = self._knowledge_evidence(world, adj, doors)
+                        openings[p, q] = openings[q, p] = post.pair_openings(rects[p], rects[q])
+        many = self._muldoor(world, openings, geometry)
+        cur = self._typ
+        if self._same_evidence(world, adj, many, changed):
+            return cur.world.types, cur.sale, (openings, self._evidence, many)
+        ev = self._knowledge_evidence(world, adj, many)
+        patch = (openings, ev, many)
         if ev.key == self._evidence.key:
-            cur = self._typ
-            return cur.world.types, cur.sale, doors, self._evidence
+            return cur.world.types, cur.sale, (openings, self._evidence, many)
         if map_only and self._map_only:
             hit = post._cached_arrays(self._provider, ev, world.capacity)
             if hit is None:
-                return post._map_arrays(self._provider, ev, world.capacity), None, doors, ev
-            return hit[0], hit[1], doors, ev
+                return post._map_arrays(self._provider, ev, world.capacity), None, patch
+            return hit[0], hit[1], patch
         types, sale = post._result_arrays(self._provider, ev, world.capacity)
-        return types, sale, doors, ev
+        return types, sale, patch
 
     def propose(self, new_world: W.World, changed_slots, floor: float | None = None) -> Proposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
@@ -590,7 +602,7 @@ class Tracker:
             else:
                 _retype_changed(_ro(new_world.rects), _ro(new_world.active), changed, geometry,
                                 adj, _NO_TYPES, _NO_TYPES, post._ip, post._fp)
-            types, sale, doors, ev = self._knowledge_types(new_world, adj, changed,
+            types, sale, knowledge = self._knowledge_types(new_world, adj, geometry, changed,
                                                            map_only=floor is not None)
             if sale is None:
                 # bound 2, the MAP types alone (no marginals yet): the exact log-likelihood and
@@ -602,12 +614,11 @@ class Tracker:
                 if bound + 1e-9 * abs(bound) < floor:
                     self.skipped[1] += 1
                     return self._bounded(new_world)
-                types, sale = post._result_arrays(self._provider, ev, new_world.capacity)
+                types, sale = post._result_arrays(self._provider, knowledge[1], new_world.capacity)
             loglik, logprior, gamma_total = _score_ro(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
                 post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp)
-            knowledge = (doors, ev)
         new = W.World(new_world.rects, new_world.active, types)
         return Proposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale), (hist, gamma_total, knowledge))
@@ -628,6 +639,5 @@ class Tracker:
         self.hist, self.gamma_total, knowledge = prop.patch
         self._typ = prop.typing
         if knowledge is not None:
-            self._doors, self._evidence = knowledge
-            self._many = self._muldoor(prop.world, self._doors)
+            self._openings, self._evidence, self._many = knowledge
         self.loglik, self.logprior, self.logp = prop.loglik, prop.logprior, prop.logp

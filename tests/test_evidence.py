@@ -114,3 +114,34 @@ def test_geometry_table_equals_unit_geometry_size_by_size():
             assert item == unit_geometry(h, w, RES, p), (measure, h, w)
             n_soft += item[1] is not None
         assert n_soft > 0 and table.blocks < len(sizes)
+
+
+def test_muldoor_counts_equal_a_reference_over_random_door_and_passage_graphs():
+    """Own doors for every unit; for a corridor-like unit in a passage-joined group, the doors
+    of the whole group, a door between two members once (reference: networkx components)."""
+    import itertools
+
+    import networkx as nx
+
+    from semmap_pp.evidence import muldoor_counts
+
+    rng = np.random.default_rng(5)
+    grouped = 0
+    for _ in range(300):
+        n = int(rng.integers(1, 9))
+        d = np.triu(rng.integers(0, 3, (n, n)) * (rng.random((n, n)) < 0.4), 1)
+        d = d + d.T
+        g = np.triu(rng.random((n, n)) < 0.25, 1)
+        g = g | g.T
+        colike = rng.random(n) < 0.5
+        want = d.sum(axis=1)
+        graph = nx.Graph(list(zip(*np.nonzero(g))))
+        for comp in nx.connected_components(graph):
+            comp = sorted(int(u) for u in comp)
+            total = d[comp].sum() - sum(d[u, v] for u, v in itertools.combinations(comp, 2))
+            for u in comp:
+                if colike[u]:
+                    want[u] = total
+                    grouped += total != d[u].sum()
+        assert muldoor_counts(d, g, colike).tolist() == want.tolist()
+    assert grouped >= 50

@@ -33,6 +33,8 @@ def edited(tmp_path, old, new):
     ("exterior_max_share = 0.3", "exterior_max_share = 1.5", "world.exterior_max_share"),
     ("exterior_seen_min = 0.1", 'exterior_seen_min = "low"', "world.exterior_seen_min"),
     ("walls_inside_max = 0.5", "walls_inside_max = 1.5", "diagnostics.walls_inside_max"),
+    ('muldoor_scope = "space"', 'muldoor_scope = "building"', "evidence.muldoor_scope"),
+    ('muldoor_scope = "space"', "muldoor_scope = 1", "evidence.muldoor_scope"),
     ("wall = [0.07, 0.25, 0.68]", "wall = [0.07, 0.25, 0.78]", "sensor.corridor.wall: row must sum to 1"),
     ("wall = [0.07, 0.25, 0.68]", "wall = [1.07, -0.75, 0.68]", "probabilities must lie in [0, 1]"),
     ("k_max = 64", "k_max = 6.5", "prior.k_max: expected an integer"),
@@ -86,3 +88,13 @@ def test_model_files_without_walls_inside_max_get_the_default(tmp_path):
     assert load_model(p).diagnostics.walls_inside_max == 0.5
     p.write_text("\n".join(kept).replace("defect_tolerance_m = 1.0", "defect_tolerance_m = 1.0\nwalls_inside_max = 1.0"))
     assert load_model(p).diagnostics.walls_inside_max == 1.0
+
+
+def test_model_files_without_muldoor_scope_count_each_units_own_doors(tmp_path):
+    text = DEFAULT_MODEL.read_text()
+    kept = [line for line in text.splitlines() if not line.startswith("muldoor_scope")]
+    assert len(kept) == len(text.splitlines()) - 1
+    p = tmp_path / "old.toml"
+    p.write_text("\n".join(kept) + "\n")
+    assert load_model(p).evidence.muldoor_scope == "unit"
+    assert load_model().evidence.muldoor_scope == "space"

@@ -226,10 +226,11 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels():
     assert W.n_units(tr.world) >= 2
 
 
-def test_pair_doors_equal_the_door_detector():
-    """The compiled, cached door count of a pair equals ``len(doors_between(...))``, in both
-    orders, for pairs around the true rooms of a floor (doors present) and random pairs."""
-    from semmap_pp.derive.doors import doors_between
+def test_pair_openings_equal_the_door_detector():
+    """The compiled, cached (doors, passages) count of a pair equals the lengths of
+    ``openings_between(...)``, in both orders, for pairs around the true rooms of a floor (doors
+    and passages present) and random pairs."""
+    from semmap_pp.derive.doors import openings_between
 
     post = Posterior(build_frame_from_classes(knowledge_floor(), 0.25, MODEL, theta=0.0), MODEL)
     rng = np.random.default_rng(12)
@@ -243,10 +244,11 @@ def test_pair_doors_equal_the_door_detector():
         else:
             rp, rq = (np.array(random_rect(rng, post.frame.shape, lo=4)) for _ in range(2))
         for a, b in ((rp, rq), (rq, rp)):
-            expected = len(doors_between(post.frame.classes, a, b, post.cells))
-            assert post.pair_doors(a.astype(np.int32), b.astype(np.int32)) == expected
+            doors, passages = openings_between(post.frame.classes, a, b, post.cells)
+            expected = (len(doors), len(passages))
+            assert post.pair_openings(a.astype(np.int32), b.astype(np.int32)) == expected
             seen.add(expected)
-    assert {0, 1} <= seen and max(seen) >= 2
+    assert {d for d, _ in seen} >= {0, 1, 2} and max(p for _, p in seen) >= 1
 
 
 def test_floor_skips_the_provider_only_below_the_bound():
@@ -361,11 +363,11 @@ def test_same_evidence_shortcut_is_exact_and_makes_the_same_moves(monkeypatch):
     same = Tracker._same_evidence
     seen = {True: 0, False: 0}
 
-    def checked(self, world, adj, doors, changed):
-        out = same(self, world, adj, doors, changed)
+    def checked(self, world, adj, many, changed):
+        out = same(self, world, adj, many, changed)
         seen[out] += 1
         if out:
-            assert self._knowledge_evidence(world, adj, doors) == self._evidence
+            assert self._knowledge_evidence(world, adj, many) == self._evidence
         return out
 
     def chain(check):
@@ -385,3 +387,38 @@ def test_same_evidence_shortcut_is_exact_and_makes_the_same_moves(monkeypatch):
     without, _ = chain(False)
     assert with_shortcut == without and sum(ok for ok, _ in without) >= 10
     assert tr.logp == pytest.approx(tr.post.evaluate(tr.world).total, rel=1e-9, abs=0)
+
+
+@pytest.mark.parametrize("scope", ["unit", "space"])
+def test_a_corridor_in_two_pieces_counts_its_doors_as_one_space(scope):
+    """The corridor of the knowledge floor cut in two at column 62, joined by an open passage:
+    the west piece has three room doors and the hall door, the east piece one room door. With
+    ``muldoor_scope = "unit"`` the east piece has no MulDoor and table3 types it *other* (CoLi and
+    not MulDoor); with "space" it counts the corridor's five doors and is typed corridor. The
+    tracker agrees with the full evaluation either way, also after the cut moves."""
+    from pathlib import Path
+
+    from semmap_pp.knowledge import KnowledgeEngine
+
+    model = dataclasses.replace(MODEL, evidence=dataclasses.replace(MODEL.evidence,
+                                                                    muldoor_scope=scope))
+    frame = build_frame_from_classes(knowledge_floor(), 0.25, model, theta=0.0)
+    engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
+    post = Posterior(frame, model, engine)
+    post.knowledge_on = True
+    rooms = [(1, 1, 19, 27), (1, 25, 19, 51), (1, 49, 19, 75), (1, 73, 19, 99)]
+    rects = rooms + [(26, 1, 67, 99), (18, 1, 28, 63), (18, 61, 28, 99)]
+    world = W.empty(10)
+    for s, r in enumerate(rects):
+        world = W.add(world, s, r)
+    assert post.pair_openings(rects[5], rects[6]) == (0, 1)     # an open passage, no door
+    assert post.door_counts(np.array(rects), post.typing(world).adj[:7, :7]).tolist()[5:] == \
+        ([4, 1] if scope == "unit" else [5, 5])
+    types = [UNIT_TYPES[t] for t in post.typing(world).world.types[:7]]
+    assert types[:4] == ["room"] * 4 and types[5] == "corridor"
+    assert types[6] == ("other" if scope == "unit" else "corridor")
+    tr = post.start(world)
+    moved = W.replace(W.replace(world, 5, (18, 1, 28, 41)), 6, (18, 39, 28, 99))
+    tr.accept(tr.propose(moved, (5, 6)))
+    assert tr.logp == pytest.approx(post.evaluate(moved).total, rel=1e-12)
+    assert np.array_equal(tr.world.types, post.typing(moved).world.types)

@@ -185,8 +185,9 @@ def _speck(classes, r, c):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover - compiled
-    """``len(doors_between(...))`` compiled: the same strip, lines and widths."""
+def _opening_counts(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover - compiled
+    """``(len(doors), len(passages))`` of ``openings_between(...)`` compiled: the same strip,
+    lines and widths."""
     col_gap = max(rp[1], rq[1]) - min(rp[3], rq[3])
     row_gap = max(rp[0], rq[0]) - min(rp[2], rq[2])
     vertical = col_gap >= row_gap
@@ -200,7 +201,7 @@ def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover 
     s0 = max(rp[b], rq[b]) + wall
     s1 = min(rp[b + 2], rq[b + 2]) - wall
     if s1 <= s0 or hi <= lo:
-        return 0
+        return 0, 0
     if vertical:
         r0, c0, r1, c1 = s0, lo, s1, hi
     else:
@@ -208,16 +209,17 @@ def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover 
     H, W = classes.shape
     a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
     if a0 >= a1 or b0 >= b1:
-        return 0
+        return 0, 0
     if vertical:
         if (b1 - b0) != (c1 - c0):
-            return 0
+            return 0, 0
         n_lines, n_across = a1 - a0, b1 - b0
     else:
         if (a1 - a0) != (r1 - r0):
-            return 0
+            return 0, 0
         n_lines, n_across = b1 - b0, a1 - a0
     count = 0
+    passages = 0
     run = 0
     for k in range(n_lines + 1):
         is_open = False
@@ -232,13 +234,23 @@ def _door_count(classes, rp, rq, wall, door_min, door_max):  # pragma: no cover 
             run += 1
         else:
             passage = k - run <= wall and k >= n_lines - wall
-            if run > 0 and door_min <= run <= door_max and not passage:
-                count += 1
+            if run >= door_min:
+                if run <= door_max and not passage:
+                    count += 1
+                else:
+                    passages += 1
             run = 0
-    return count
+    return count, passages
+
+
+def opening_counts(classes: np.ndarray, rp, rq, cells) -> tuple[int, int]:
+    """``(len(doors), len(passages))`` of :func:`openings_between`, compiled (the sampler's hot
+    path)."""
+    d, p = _opening_counts(classes, np.asarray(rp, np.int64), np.asarray(rq, np.int64),
+                           int(cells.wall), int(cells.door_min), int(cells.door_max))
+    return int(d), int(p)
 
 
 def door_count(classes: np.ndarray, rp, rq, cells) -> int:
-    """``len(doors_between(classes, rp, rq, cells))``, compiled (the sampler's hot path)."""
-    return int(_door_count(classes, np.asarray(rp, np.int64), np.asarray(rq, np.int64),
-                           int(cells.wall), int(cells.door_min), int(cells.door_max)))
+    """``len(doors_between(classes, rp, rq, cells))``, compiled."""
+    return opening_counts(classes, rp, rq, cells)[0]
