@@ -92,14 +92,14 @@ def geometry_class_compiled(rect, resolution, measure, hall_min_size,
 
 
 @numba.njit(cache=True, nogil=True)
-def _muldoor_counts(doors, passages, colike, out):  # pragma: no cover - compiled
-    n = doors.shape[0]
+def _muldoor_counts(openings, colike, out):  # pragma: no cover - compiled
+    n = openings.shape[0]
     comp = np.full(n, -1, np.int64)
     stack = np.empty(n, np.int64)
     for i in range(n):
         own = 0
         for j in range(n):
-            own += doors[i, j]
+            own += openings[i, j, 0]
         out[i] = own
     for s in range(n):                      # components of the passage graph
         if comp[s] >= 0:
@@ -111,7 +111,7 @@ def _muldoor_counts(doors, passages, colike, out):  # pragma: no cover - compile
             top -= 1
             u = stack[top]
             for v in range(n):
-                if comp[v] < 0 and passages[u, v] > 0:
+                if comp[v] < 0 and openings[u, v, 1] > 0:
                     comp[v] = s
                     stack[top] = v
                     top += 1
@@ -125,14 +125,14 @@ def _muldoor_counts(doors, passages, colike, out):  # pragma: no cover - compile
                 total += out[u]
                 for v in range(u + 1, n):
                     if comp[v] == s:
-                        total -= doors[u, v]     # a door between two members, counted once
+                        total -= openings[u, v, 0]   # a door between two members, counted once
         if size > 1:
             for u in range(n):
                 if comp[u] == s and colike[u]:
                     out[u] = total
 
 
-def muldoor_counts(doors: np.ndarray, passages: np.ndarray, colike: np.ndarray) -> np.ndarray:
+def muldoor_counts(openings: np.ndarray, colike: np.ndarray) -> np.ndarray:
     """Doors that count towards MulDoor, per unit (``muldoor_scope = "space"``).
 
     A unit counts its own doors; a corridor-like unit joined to other units by open passages
@@ -141,10 +141,9 @@ def muldoor_counts(doors: np.ndarray, passages: np.ndarray, colike: np.ndarray) 
 
     Parameters
     ----------
-    doors : (n, n) int
-        Doors between each pair of units (symmetric).
-    passages : (n, n) int or bool
-        Open passages between each pair (symmetric; non-zero joins the pair).
+    openings : (n, n, 2) int
+        Doors (``[..., 0]``) and open passages (``[..., 1]``; non-zero joins the pair) between
+        each pair of units (symmetric).
     colike : (n,) bool
         Corridor-like units (the thresholded Table 4 class).
 
@@ -155,18 +154,19 @@ def muldoor_counts(doors: np.ndarray, passages: np.ndarray, colike: np.ndarray) 
     their own:
 
     >>> import numpy as np
-    >>> d = np.zeros((6, 6), np.int64)
+    >>> o = np.zeros((6, 6, 2), np.int32)
     >>> for p, q in ((0, 2), (0, 3), (1, 4), (4, 5)):
-    ...     d[p, q] = d[q, p] = 1
-    >>> g = np.zeros((6, 6), np.int64); g[0, 1] = g[1, 0] = 1
-    >>> muldoor_counts(d, g, np.array([1, 1, 0, 0, 0, 0], bool)).tolist()
+    ...     o[p, q, 0] = o[q, p, 0] = 1
+    >>> o[0, 1, 1] = o[1, 0, 1] = 1
+    >>> muldoor_counts(o, np.array([1, 1, 0, 0, 0, 0], bool)).tolist()
     [3, 3, 1, 1, 2, 1]
     """
-    doors = np.ascontiguousarray(doors, dtype=np.int64)
-    out = np.zeros(len(doors), np.int64)
-    if len(doors):
-        _muldoor_counts(doors, np.ascontiguousarray(passages, dtype=np.int64),
-                        np.ascontiguousarray(colike, dtype=np.bool_), out)
+    openings = np.asarray(openings)
+    if openings.dtype != np.int32:
+        openings = openings.astype(np.int32)
+    out = np.zeros(len(openings), np.int64)
+    if len(openings):
+        _muldoor_counts(openings, np.asarray(colike, dtype=np.bool_), out)
     return out
 
 

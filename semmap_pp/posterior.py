@@ -128,7 +128,7 @@ class Posterior:
         """Doors of each unit that count towards MulDoor (:meth:`muldoor_counts`; openings cached
         per pair of rectangles)."""
         n = len(rects)
-        openings = np.zeros((n, n, 2), dtype=np.int64)
+        openings = np.zeros((n, n, 2), dtype=np.int32)
         for p, q in zip(*np.nonzero(np.triu(adj, 1))):
             openings[p, q] = openings[q, p] = self.pair_openings(rects[p], rects[q])
         colike = geometry_class(rects, self.cells.resolution, self.model.evidence) == COLIKE
@@ -139,7 +139,7 @@ class Posterior:
         between each pair and the corridor-like units ``colike`` (n,): each unit's own doors, or
         with ``[evidence] muldoor_scope = "space"`` :func:`semmap_pp.evidence.muldoor_counts`."""
         if self.model.evidence.muldoor_scope == "space":
-            return muldoor_counts(openings[..., 0], openings[..., 1], colike)
+            return muldoor_counts(openings, colike)
         return openings[..., 0].sum(axis=1)
 
     def pair_openings(self, rp, rq) -> tuple[int, int]:
@@ -460,7 +460,7 @@ class Tracker:
             self._with_doors = getattr(self._provider, "needs_doors", True)
             self._map_only = bool(getattr(self._provider, "has_map_only", False))
             # (doors, passages) between each pair of slots
-            self._openings = np.zeros((w.capacity, w.capacity, 2), np.int64)
+            self._openings = np.zeros((w.capacity, w.capacity, 2), np.int32)
             if self._with_doors:
                 for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
                     self._openings[p, q] = self._openings[q, p] = post.pair_openings(w.rects[p],

@@ -143,5 +143,5 @@ def test_muldoor_counts_equal_a_reference_over_random_door_and_passage_graphs():
                 if colike[u]:
                     want[u] = total
                     grouped += total != d[u].sum()
-        assert muldoor_counts(d, g, colike).tolist() == want.tolist()
+        assert muldoor_counts(np.stack([d, g], axis=2), colike).tolist() == want.tolist()
     assert grouped >= 50
