@@ -59,11 +59,11 @@ def test_unreadable_and_invalid_toml(tmp_path):
         load_model(p)
 
 
-def without_lines(tmp_path, prefix):
-    """The default model file with the lines starting with ``prefix`` (two keys) left out."""
+def without_lines(tmp_path, prefix, n=2):
+    """The default model file with the lines starting with ``prefix`` (``n`` keys) left out."""
     text = DEFAULT_MODEL.read_text()
     kept = [line for line in text.splitlines() if not line.startswith(prefix)]
-    assert len(kept) == len(text.splitlines()) - 2
+    assert len(kept) == len(text.splitlines()) - n
     p = tmp_path / "old.toml"
     p.write_text("\n".join(kept) + "\n")
     return load_model(p)
@@ -91,10 +91,5 @@ def test_model_files_without_walls_inside_max_get_the_default(tmp_path):
 
 
 def test_model_files_without_muldoor_scope_count_each_units_own_doors(tmp_path):
-    text = DEFAULT_MODEL.read_text()
-    kept = [line for line in text.splitlines() if not line.startswith("muldoor_scope")]
-    assert len(kept) == len(text.splitlines()) - 1
-    p = tmp_path / "old.toml"
-    p.write_text("\n".join(kept) + "\n")
-    assert load_model(p).evidence.muldoor_scope == "unit"
+    assert without_lines(tmp_path, "muldoor_scope", n=1).evidence.muldoor_scope == "unit"
     assert load_model().evidence.muldoor_scope == "space"
