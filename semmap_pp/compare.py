@@ -13,6 +13,10 @@ Pure functions over :class:`~semmap_pp.pipeline.MapRun` objects. Per rule set:
   disagree about wall (:func:`semmap_pp.outputs.spread.wall_disagreement_m2`). The mean divides by a
   number of cells that differs from run to run (and grows with every rare excursion), so only the
   area compares two rule sets on the same cells (docs/knowledge_comparison.md).
+* conditional wall spread (:func:`conditional_wall_sd`): per wall of W*, the posterior standard
+  deviation of its position given the rest of W*, computed exactly over the offsets within
+  ``CONDITIONAL_OFFSET_M`` (no sampling, so it does not depend on the chains converging);
+  ``wall_sd_m`` is its mean over W*'s walls.
 * topological defects (:mod:`semmap_pp.derive.defects`): adjacent rooms whose connecting walls
   differ by more than ``[diagnostics] defect_tolerance_m``, in W* and averaged over the sampled
   worlds (typed as the sampler typed them).
@@ -34,6 +38,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from semmap_pp import world as W
 from semmap_pp.derive.defects import count_defects
 from semmap_pp.diagnostics import SpreadAccumulator
 
@@ -57,6 +62,45 @@ class RuleSetSummary:
     defects_mean: float   # mean over the sampled worlds
     seconds: float
     wall_disagreement_m2: float = math.nan
+    wall_sd_m: float = math.nan   # mean conditional sd of W*'s wall positions
+
+
+# Offsets tried per wall by :func:`conditional_wall_sd` in ``summarise``: +- 0.25 m.
+CONDITIONAL_OFFSET_M = 0.25
+
+
+def conditional_wall_sd(post, world, max_offset: int) -> np.ndarray:
+    """Posterior standard deviation (cells) of each wall of ``world`` given the rest of it.
+
+    For every active unit and each of its four sides (top, bottom, left, right, in slot order),
+    the side is moved by ``-max_offset .. max_offset`` cells with everything else fixed; the
+    target ``post`` (log posterior, knowledge as configured) weighs each offset, ``p(o) ∝
+    exp(log π(W_o))`` (invalid worlds weigh 0), and the standard deviation of ``o`` under ``p``
+    is the wall's spread: the exact Gibbs conditional, no sampling involved. Proposals go
+    through one tracker (:meth:`Posterior.start`), so each costs an incremental update.
+
+    Returns
+    -------
+    np.ndarray of float, shape (4 * n_units,)
+    """
+    tr = post.start(world)
+    offsets = np.arange(-max_offset, max_offset + 1)
+    out = []
+    for s in W.active_slots(world).tolist():
+        rect = [int(v) for v in world.rects[s]]
+        for side in range(4):
+            lp = np.full(len(offsets), -np.inf)
+            for k, o in enumerate(offsets.tolist()):
+                r = list(rect)
+                r[side] += o
+                if r[2] - r[0] < 1 or r[3] - r[1] < 1:
+                    continue
+                lp[k] = tr.logp if o == 0 else tr.propose(W.replace(world, s, tuple(r)), (s,)).logp
+            p = np.exp(lp - lp.max())
+            p /= p.sum()
+            mean = float((p * offsets).sum())
+            out.append(math.sqrt(max(float((p * (offsets - mean) ** 2).sum()), 0.0)))
+    return np.array(out)
 
 
 def typed_sampled_worlds(run, n: int) -> list:
@@ -103,6 +147,11 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
     from semmap_pp.outputs.spread import wall_disagreement_m2
 
     acc = _accumulate(worlds, frame.shape, c.wall)
+    from semmap_pp.pipeline import TargetFactory
+
+    post = TargetFactory(frame, model, run.inputs.rules)()
+    post.knowledge_on = run.inputs.rules is not None
+    sd = conditional_wall_sd(post, run.world, max(1, round(CONDITIONAL_OFFSET_M / c.resolution)))
     return RuleSetSummary(
         name=name, rules=rules, n_units=len(run.semantic.unit_ids), cpr=float(run.semantic.cpr),
         log_posterior=float(run.semantic.log_posterior), converged=bool(run.report.ok),
@@ -110,7 +159,8 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
         ess_tail={x.name: x.ess_tail for x in q},
         wall_spread=acc.wall_spread(), n_worlds=len(worlds),
         defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
-        seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution))
+        seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution),
+        wall_sd_m=float(sd.mean()) * c.resolution if len(sd) else math.nan)
 
 
 def _fmt(v, spec: str) -> str:
@@ -136,6 +186,7 @@ def compare_table(rows: list[RuleSetSummary]) -> str:
     add("defects, mean over sampled worlds", [_fmt(r.defects_mean, ".2f") for r in rows])
     add("wall spread (mean p(1-p) over cells ever wall)", [_fmt(r.wall_spread, ".4f") for r in rows])
     add("wall disagreement, m² (Σ 2p(1-p) · cell area)", [_fmt(r.wall_disagreement_m2, ".2f") for r in rows])
+    add("wall sd given the rest of W*, mean over its walls, m", [_fmt(r.wall_sd_m, ".4f") for r in rows])
     add("sampled worlds", [str(r.n_worlds) for r in rows])
     names = list(rows[0].rhat)
     for n in names:

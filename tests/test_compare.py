@@ -1,5 +1,6 @@
 """The knowledge-set comparison: spread, defects and the table, on literal worlds and a tiny run."""
 
+import dataclasses
 import json
 import math
 
@@ -108,4 +109,35 @@ def test_summarise_a_tiny_run():
     assert s.cpr == pytest.approx(run.semantic.cpr) and s.n_units == len(run.semantic.unit_ids)
     assert set(s.rhat) == {q.name for q in run.report.quantities}
     assert 0.0 <= s.wall_spread <= 0.25 and s.defects_best >= 0 and s.defects_mean >= 0
+    assert 0.0 <= s.wall_sd_m <= 0.25    # the conditional spread over +- 0.25 m
     assert all((w.types[w.active] >= 0).all() for w in worlds)   # typed as the sampler typed them
+
+
+def test_conditional_wall_sd_is_the_exact_gibbs_conditional_of_each_wall():
+    """Against a brute force over full evaluations: each side of each unit moved by -k..k cells,
+    the offsets weighed by exp(log π) (invalid worlds by 0), the standard deviation taken."""
+    from semmap_pp.compare import conditional_wall_sd
+    from semmap_pp.posterior import Posterior
+
+    post = Posterior(build_frame(two_rooms_grid(), MODEL), MODEL, None)
+    # a map this clear pins every wall to one position (sd 0); with the evidence per cell scaled
+    # down the conditionals spread over several offsets, so that the comparison has content
+    post.data = dataclasses.replace(post.data, gain=post.data.gain * 1e-3)
+    world = W.add(W.add(W.empty(4), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    k = 3
+    got = conditional_wall_sd(post, world, k)
+    offsets = np.arange(-k, k + 1)
+    want = []
+    for s in (0, 1):
+        for side in range(4):
+            lp = []
+            for o in offsets:
+                r = [int(v) for v in world.rects[s]]
+                r[side] += int(o)
+                lp.append(post.evaluate(W.replace(world, s, tuple(r))).total)
+            p = np.exp(np.array(lp) - max(lp))
+            p /= p.sum()
+            mean = (p * offsets).sum()
+            want.append(math.sqrt((p * (offsets - mean) ** 2).sum()))
+    assert got == pytest.approx(np.array(want), abs=1e-9)
+    assert got.shape == (8,) and (got >= 0).all() and (got <= k).all()

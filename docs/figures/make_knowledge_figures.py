@@ -46,10 +46,11 @@ sys.path.insert(0, str(ROOT))
 
 from semmap_pp import atomic  # noqa: E402
 from semmap_pp import world as W  # noqa: E402
-from semmap_pp.compare import compare_dict, compare_png, summarise, typed_sampled_worlds  # noqa: E402
+from semmap_pp.compare import (CONDITIONAL_OFFSET_M, compare_dict, compare_png,  # noqa: E402
+                               conditional_wall_sd, summarise, typed_sampled_worlds)
 from semmap_pp.derive.defects import ROOM, count_defects, topological_defects  # noqa: E402
 from semmap_pp.knowledge import load_rules  # noqa: E402
-from semmap_pp.pipeline import RunSettings, load_inputs, run_map  # noqa: E402
+from semmap_pp.pipeline import RunSettings, TargetFactory, load_inputs, run_map  # noqa: E402
 
 RULES = {"table3": ROOT / "rules" / "table3.lp", "none": ROOT / "rules" / "none.lp"}
 ORANGE = "#ff8c00"
@@ -77,8 +78,6 @@ def all_rooms(world):
 
 def reference_target(inputs):
     """The table3 target, knowledge on: types every world the same way, whichever rule set sampled it."""
-    from semmap_pp.pipeline import TargetFactory
-
     post = TargetFactory(inputs.frame, inputs.model, load_rules(RULES["table3"]))()
     post.knowledge_on = True
     return post
@@ -202,6 +201,12 @@ def run_rule_sets(map_path, model_path, seed, draws, n_inner, chains, n_worlds, 
         ws = typed_sampled_worlds(b, n_worlds)
         out[name].update(sample=b, worlds=ws, numbers=spread_numbers(b, ws, reference))
         out[name]["wstar_table3_typing"] = typed_worlds(reference, [out[name]["find"].world])[0]
+        # the conditional wall spread of one world, table3's W*, under each rule set's target
+        post = TargetFactory(inputs.frame, model, inputs.rules)()
+        post.knowledge_on = True
+        sd = conditional_wall_sd(post, out["table3"]["find"].world,
+                                 max(1, round(CONDITIONAL_OFFSET_M / inputs.frame.cells.resolution)))
+        out[name]["numbers"]["wall_sd_table3_wstar_m"] = float(sd.mean()) * inputs.frame.cells.resolution
     return model, out
 
 
@@ -234,7 +239,8 @@ def main(argv=None) -> int:
                                       o["find"].world, *_defect_args(o["find"]))),
                                   "wstar_defects_table3_typing": len(topological_defects(
                                       o["wstar_table3_typing"], *_defect_args(o["find"]))),
-                                  "converged": s.converged, **{k: _round(v) for k, v in o["numbers"].items()}}),
+                                  "converged": s.converged, "wall_sd_m": _round(s.wall_sd_m),
+                                  **{k: _round(v) for k, v in o["numbers"].items()}}),
                       flush=True)
         return 0
 
@@ -328,6 +334,10 @@ def _markdown(names, wstar, spread, rows, settings) -> str:
         [f"{spread[n]['wall_spread_mean_ever_wall']:.4f}" for n in names])
     add("cells ever wall", [spread[n]["cells_ever_wall"] for n in names])
     add("wall disagreement, m² (Σ 2p(1-p) · cell area)", [f"{spread[n]['wall_disagreement_m2']:.2f}" for n in names])
+    add("wall sd given the rest of W*, mean over its walls, m (compare.conditional_wall_sd)",
+        [f"{r.wall_sd_m:.4f}" for r in rows])
+    add("the same on table3's W* (one world, each rule set's target), m",
+        [f"{spread[n]['wall_sd_table3_wstar_m']:.4f}" for n in names])
     add("acceptance rate (kernels)", [f"{spread[n]['accept_rate']:.3f}" for n in names])
     add("converged", ["yes" if r.converged else "no" for r in rows])
     for q in rows[0].rhat:
