@@ -333,8 +333,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     if result.stopped:
         notes.insert(0, f"{result.stopped}: sampling stopped early after {seconds:.1f} s; kept "
                         f"{len(kept_chains)} chain(s) x {n_kept} draws")
-    ext = f" (+{len(sm.exterior_ids)} exterior)" if sm.exterior_ids else ""
-    log(f"W*: {len(sm.unit_ids)} units{ext}, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
+    log(f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
         f"(ROI {inputs.roi_name}); {rate:.0f} kernels/s over {seconds:.1f} s")
     return MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, samples, seconds,
                   rate, best_chain, notes, result.stopped, records, list(first),

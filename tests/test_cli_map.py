@@ -42,7 +42,12 @@ def test_map_writes_every_file(first_run):
     assert set(np.unique(labels)) - {0} == {u["id"] for u in doc["units"]}
     text = (out / "diagnostics.txt").read_text()
     assert "R-hat" in text and "log_posterior" in text
-    assert "W*:" in r.stderr
+    # the W* line names the units by type, as world.json types them; diagnostics.txt repeats it
+    line = next(x for x in r.stderr.splitlines() if "W*:" in x)
+    types = [u["type"] for u in doc["units"]]
+    assert f"W*: {len(types)} units (" in line
+    assert all(f"{types.count(t)} {t}" in line for t in set(types))
+    assert line[line.index("W*:"):line.index(", log posterior")] in text
     # the report links every file of the folder, resume.npz (written after it) included
     report = (out / "report.html").read_text()
     for name in names:

@@ -61,6 +61,15 @@ class SemanticMap:
     def type_of(self, unit_id: int) -> str:
         return UNIT_TYPES[int(self.world.types[self.slot_of(unit_id)])]
 
+    def units_text(self) -> str:
+        """The units of W* in words, for logs and diagnostics.txt, e.g. ``"20 units (18 room,
+        1 corridor, 1 other; +1 exterior)"`` (types with no unit left out)."""
+        types = [self.type_of(u) for u in self.unit_ids]
+        parts = [f"{types.count(t)} {t}" for t in UNIT_TYPES if t in types]
+        ext = f"+{len(self.exterior_ids)} exterior" if self.exterior_ids else ""
+        inner = "; ".join(x for x in (", ".join(parts), ext) if x)
+        return f"{len(types)} units" + (f" ({inner})" if inner else "")
+
 
 def number_units(frame, world: W.World, slots=None) -> dict[int, int]:
     """Unit ids 1..n for ``slots`` (default: the active slots), in reading order of their centres

@@ -31,9 +31,7 @@ def diagnostics_text(run, rules_path) -> str:
     return (f"map: {inputs.grid.source}\nrules: {rules_path}\nmodel: {inputs.model.path}\n"
             f"seed: {settings.seed}; sampling took {run.seconds:.1f} s "
             f"({run.kernels_per_second:.0f} kernels/s)\n"
-            f"W*: {len(sm.unit_ids)} units"
-            f"{f' (+{len(sm.exterior_ids)} exterior)' if sm.exterior_ids else ''}, "
-            f"log posterior {sm.log_posterior:.2f}, "
+            f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.2f}, "
             f"CPR {sm.cpr:.4f} (ROI {inputs.roi_name})\n\n{run.report.to_text()}\n")
 
 
