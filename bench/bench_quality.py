@@ -424,13 +424,12 @@ def bench_truth(args, model, rules) -> dict:
     from semmap_pp.kernels.data import settings_from_mapping
     from semmap_pp.outputs import world_dict
     from semmap_pp.outputs.semantic import semantic_map
-    from semmap_pp.pipeline import TargetFactory
+    from semmap_pp.pipeline import run_target
     rows = []
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules)
-        post = TargetFactory(inputs.frame, model, rules)()
-        post.knowledge_on = rules is not None
+        post = run_target(inputs)
         data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
         wstar = (json.loads((args.outside_from / f"synth-{seed}" / "world.json").read_text())
                  if args.outside_from else None)

@@ -103,15 +103,20 @@ def conditional_wall_sd(post, world, max_offset: int) -> np.ndarray:
     return np.array(out)
 
 
-def typed_sampled_worlds(run, n: int) -> list:
-    """Up to ``n`` recorded worlds of ``run``, typed by its own target (knowledge on when it had rules)."""
-    from semmap_pp.outputs.spread import typed_worlds
-    from semmap_pp.pipeline import TargetFactory, sampled_worlds
+def mean_wall_sd_m(post, world) -> float:
+    """:func:`conditional_wall_sd` over offsets within ``CONDITIONAL_OFFSET_M``, averaged over the
+    walls of ``world``, in metres (NaN for a world without units)."""
+    res = post.cells.resolution
+    sd = conditional_wall_sd(post, world, max(1, round(CONDITIONAL_OFFSET_M / res)))
+    return float(sd.mean()) * res if len(sd) else math.nan
 
-    inputs = run.inputs
-    post = TargetFactory(inputs.frame, inputs.model, inputs.rules)()
-    post.knowledge_on = inputs.rules is not None
-    return typed_worlds(post, sampled_worlds(run, n))
+
+def typed_sampled_worlds(run, n: int) -> list:
+    """Up to ``n`` recorded worlds of ``run``, typed by its own target (knowledge on when it had rules):
+    :func:`semmap_pp.outputs.write.posterior_worlds`."""
+    from semmap_pp.outputs.write import posterior_worlds
+
+    return posterior_worlds(run, n)
 
 
 def _accumulate(worlds, shape, wall: int) -> SpreadAccumulator:
@@ -145,13 +150,9 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
     best = count_defects([run.world], c.resolution, c.wall, c.adjacency_dilation, tol)
     q = run.report.quantities
     from semmap_pp.outputs.spread import wall_disagreement_m2
+    from semmap_pp.pipeline import run_target
 
     acc = _accumulate(worlds, frame.shape, c.wall)
-    from semmap_pp.pipeline import TargetFactory
-
-    post = TargetFactory(frame, model, run.inputs.rules)()
-    post.knowledge_on = run.inputs.rules is not None
-    sd = conditional_wall_sd(post, run.world, max(1, round(CONDITIONAL_OFFSET_M / c.resolution)))
     return RuleSetSummary(
         name=name, rules=rules, n_units=len(run.semantic.unit_ids), cpr=float(run.semantic.cpr),
         log_posterior=float(run.semantic.log_posterior), converged=bool(run.report.ok),
@@ -160,7 +161,7 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
         wall_spread=acc.wall_spread(), n_worlds=len(worlds),
         defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
         seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution),
-        wall_sd_m=float(sd.mean()) * c.resolution if len(sd) else math.nan)
+        wall_sd_m=mean_wall_sd_m(run_target(run.inputs), run.world))
 
 
 def _fmt(v, spec: str) -> str:
@@ -236,5 +237,5 @@ def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
     return png(fig)
 
 
-__all__ = ["RuleSetSummary", "typed_sampled_worlds", "wall_spread", "wall_disagreement", "summarise", "compare_table",
+__all__ = ["RuleSetSummary", "conditional_wall_sd", "mean_wall_sd_m", "typed_sampled_worlds", "wall_spread", "wall_disagreement", "summarise", "compare_table",
            "compare_dict", "compare_png"]

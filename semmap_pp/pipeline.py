@@ -117,6 +117,13 @@ class TargetFactory:
         return Posterior(self.frame, self.model, engine)
 
 
+def run_target(inputs: Inputs) -> Posterior:
+    """The full target of a run on ``inputs``, as W* is scored: knowledge on when it has rules."""
+    post = TargetFactory(inputs.frame, inputs.model, inputs.rules)()
+    post.knowledge_on = inputs.rules is not None
+    return post
+
+
 # Which (extended input code, region) pairs count as correctly explained (DESIGN.md, CPR): the sampler's
 # cell categories are x + N_X * (region + 3 * corridor).
 _CORRECT = np.zeros((N_X, 3), bool)
@@ -311,8 +318,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
                "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
 
-    post = factory()
-    post.knowledge_on = inputs.rules is not None
+    post = run_target(inputs)
     best = result.best_world if result.best_world is not None else starts[0]
     best_chain = result.best_chain
     if resume is not None:   # W* of the earlier segments may still be the best

@@ -46,11 +46,11 @@ sys.path.insert(0, str(ROOT))
 
 from semmap_pp import atomic  # noqa: E402
 from semmap_pp import world as W  # noqa: E402
-from semmap_pp.compare import (CONDITIONAL_OFFSET_M, compare_dict, compare_png,  # noqa: E402
-                               conditional_wall_sd, summarise, typed_sampled_worlds)
+from semmap_pp.compare import (compare_dict, compare_png, mean_wall_sd_m, summarise,  # noqa: E402
+                               typed_sampled_worlds)
 from semmap_pp.derive.defects import ROOM, count_defects, topological_defects  # noqa: E402
 from semmap_pp.knowledge import load_rules  # noqa: E402
-from semmap_pp.pipeline import RunSettings, TargetFactory, load_inputs, run_map  # noqa: E402
+from semmap_pp.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402
 
 RULES = {"table3": ROOT / "rules" / "table3.lp", "none": ROOT / "rules" / "none.lp"}
 ORANGE = "#ff8c00"
@@ -202,11 +202,8 @@ def run_rule_sets(map_path, model_path, seed, draws, n_inner, chains, n_worlds, 
         out[name].update(sample=b, worlds=ws, numbers=spread_numbers(b, ws, reference))
         out[name]["wstar_table3_typing"] = typed_worlds(reference, [out[name]["find"].world])[0]
         # the conditional wall spread of one world, table3's W*, under each rule set's target
-        post = TargetFactory(inputs.frame, model, inputs.rules)()
-        post.knowledge_on = True
-        sd = conditional_wall_sd(post, out["table3"]["find"].world,
-                                 max(1, round(CONDITIONAL_OFFSET_M / inputs.frame.cells.resolution)))
-        out[name]["numbers"]["wall_sd_table3_wstar_m"] = float(sd.mean()) * inputs.frame.cells.resolution
+        out[name]["numbers"]["wall_sd_table3_wstar_m"] = mean_wall_sd_m(run_target(inputs),
+                                                                      out["table3"]["find"].world)
     return model, out
 
 

@@ -55,12 +55,9 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
 
 def posterior_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of ``run``, typed as the sampler typed them."""
-    from semmap_pp.pipeline import TargetFactory, sampled_worlds
+    from semmap_pp.pipeline import run_target, sampled_worlds
 
-    inputs = run.inputs
-    post = TargetFactory(inputs.frame, inputs.model, inputs.rules)()
-    post.knowledge_on = inputs.rules is not None
-    return typed_worlds(post, sampled_worlds(run, n))
+    return typed_worlds(run_target(run.inputs), sampled_worlds(run, n))
 
 
 def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
