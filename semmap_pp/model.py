@@ -33,6 +33,9 @@ SIZE_MEASURES = ("short_side", "long_side", "area")
 # space it forms with the units joined to it by open passages (semmap_pp.evidence.muldoor_counts).
 MULDOOR_SCOPES = ("unit", "space")
 N_PRIORS = ("poisson", "geometric")
+#: [outside] mode: read the free space outside the building as unknown when the map's border is
+#: mostly free ("auto"), always ("unknown") or never ("keep"; semmap_pp.grid.outside)
+OUTSIDE_MODES = ("auto", "unknown", "keep")
 # Sanity limits (not modelling choices): a model file is a few kilobytes; unit slots are allocated
 # up front, so k_max bounds memory; a length in cells must fit the int32 arrays of the samples.
 MAX_MODEL_BYTES = 1 << 20
@@ -164,6 +167,17 @@ class DiagnosticsParams:
 
 
 @dataclass(frozen=True)
+class OutsideParams:
+    """``[outside]``: free space around the building in maps that show it (semmap_pp.grid.outside).
+
+    A model file without the table gets ``mode = "keep"`` (the map as it is)."""
+
+    mode: str = "keep"
+    border_free_min: float = 0.25
+    seal_gap_m: float = 1.5
+
+
+@dataclass(frozen=True)
 class Model:
     path: Path
     lattice: LatticeParams
@@ -176,6 +190,7 @@ class Model:
     sampler: SamplerParams
     diagnostics: DiagnosticsParams
     kernels: dict  # the [kernels] table: proposal tuning, read by kernels.settings_from_mapping
+    outside: OutsideParams = OutsideParams()
 
     def cells(self, resolution: float) -> CellParams:
         """Convert the model's lengths to whole lattice cells at ``resolution`` metres per cell.
@@ -390,9 +405,17 @@ def load_model(path: str | Path | None = None) -> Model:
     kernels = r.raw("kernels")
     if not isinstance(kernels, dict):
         raise r.error("kernels", "must be a table")
+    outside = OutsideParams()   # optional table (model files written before it: the map as it is)
+    if r.has("outside"):
+        if not isinstance(r.raw("outside"), dict):
+            raise r.error("outside", "must be a table")
+        outside = OutsideParams(
+            mode=r.choice("outside.mode", OUTSIDE_MODES),
+            border_free_min=r.number("outside.border_free_min", lo=0.0, hi=1.0),
+            seal_gap_m=r.number("outside.seal_gap_m", positive=True))
     return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
                  prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
-                 diagnostics=diagnostics, kernels=dict(kernels))
+                 diagnostics=diagnostics, kernels=dict(kernels), outside=outside)
 
 
 def _row(r: _Reader, key: str, raw: list, i: int, n: int) -> np.ndarray:

@@ -50,15 +50,18 @@ class Inputs:
     frame: Frame
     roi: np.ndarray           # (H, W) bool, image frame
     roi_name: str
+    notes: tuple[str, ...] = ()  # what loading changed (the outside read as unknown), for the run's notes
 
 
 def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path=None,
                 map_options: dict | None = None) -> Inputs:
     """Read and validate the map, model, rules and region of interest (each error names its file)."""
+    from semmap_pp.grid.outside import clear_outside
     from semmap_pp.knowledge import load_rules
 
     grid = load_map(map_path, **(map_options or {}))
     model = load_model(model_path)
+    grid, outside_note = clear_outside(grid, model.outside)
     rules = load_rules(rules_path) if rules_path is not None else None
     check_model_for_map(grid, model, (map_options or {}).get("max_cells") or MAX_CELLS)
     frame = build_frame(grid, model)
@@ -67,7 +70,7 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
     else:
         roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
         roi_name = "default"
-    return Inputs(grid, model, rules, frame, roi, roi_name)
+    return Inputs(grid, model, rules, frame, roi, roi_name, (outside_note,) if outside_note else ())
 
 
 def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> None:
@@ -307,6 +310,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     total_kernels = new_draws * settings.n_inner
     records = merge_records(history, result.records)
     kept_chains, n_kept, recorded, notes = keep_common_draws(records)
+    notes[:0] = inputs.notes
     summaries = {"log_posterior": np.stack([records[c].stats["logp"][recorded[c]] for c in kept_chains])}
     for name in SUMMARIES[1:]:
         summaries[name] = np.stack([records[c].stats[name][recorded[c]] for c in kept_chains])

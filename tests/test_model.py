@@ -93,3 +93,24 @@ def test_model_files_without_walls_inside_max_get_the_default(tmp_path):
 def test_model_files_without_muldoor_scope_count_each_units_own_doors(tmp_path):
     assert without_lines(tmp_path, "muldoor_scope", n=1).evidence.muldoor_scope == "unit"
     assert load_model().evidence.muldoor_scope == "space"
+
+
+def test_model_files_without_the_outside_table_keep_the_map_as_it_is(tmp_path):
+    m = without_lines(tmp_path, ("[outside]", "mode =", "border_free_min", "seal_gap_m"), n=4)
+    assert m.outside.mode == "keep"
+    assert load_model().outside.mode == "auto"
+
+
+@pytest.mark.parametrize("line, message", [
+    ('mode = "sometimes"', "outside.mode: must be one of auto, unknown, keep, got 'sometimes'"),
+    ("border_free_min = 1.5", "outside.border_free_min: must be <= 1.0, got 1.5"),
+    ("seal_gap_m = 0", "outside.seal_gap_m: must be > 0, got 0.0"),
+])
+def test_a_bad_outside_key_is_one_line_naming_file_and_key(tmp_path, line, message):
+    key = line.split(" =")[0] + " ="
+    text = "\n".join(line if ln.startswith(key) else ln for ln in DEFAULT_MODEL.read_text().splitlines())
+    p = tmp_path / "bad.toml"
+    p.write_text(text + "\n")
+    with pytest.raises(ModelError) as info:
+        load_model(p)
+    assert str(info.value) == f"{p}: {message}"

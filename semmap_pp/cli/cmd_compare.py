@@ -77,6 +77,8 @@ def run(args) -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
+    for note in inputs.notes:       # what loading changed, e.g. the outside read as unknown
+        log(f"note: {note}")
     stop = StopFlag()
 
     def on_sigint(signum, frame):

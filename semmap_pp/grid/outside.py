@@ -1,0 +1,117 @@
+"""Free space outside the building: maps that mark every cell a long ray crossed as free.
+
+Most SLAM maps leave the outside of a building unknown: the robot saw it only through windows and
+exits, as thin ray fans. Some renderings (the Radish map freiburg-079, maps drawn from raw logs with
+the full beam length) mark every cell any ray crossed as free, so the building sits in a sea of free
+space that reaches the image border. One unit over everything then explains such a map best (its
+walls read as clutter inside it; docs/robustness.md).
+
+:func:`outside_free` finds that sea: free space farther than ``seal_gap / 2`` from every occupied
+cell and joined to the image border (so a wall with gaps narrower than ``seal_gap`` keeps it out),
+grown back by ``seal_gap / 2`` to reach the walls' outer faces. :func:`clear_outside` reads those
+cells as unknown before anything else sees the map, when the model's ``[outside] mode`` says so:
+``"unknown"`` always, ``"auto"`` when at least ``border_free_min`` of the image's border cells are
+free (freiburg-079: 0.93; cartesium, intel and the ipa plans: 0; aces 0.02), ``"keep"`` never.
+
+Limits: an exit or a gap in an outer wall wider than ``seal_gap`` lets the sea in, and through a
+narrower one the grown border bites a little way into the room behind it; free pockets in a concave corner of
+the outer wall, farther than ``seal_gap / 2`` from the sea's core, stay free.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import ndimage
+
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.model import OUTSIDE_MODES, OutsideParams
+
+
+def border_free_share(classes: np.ndarray) -> float:
+    """Share of the image's border cells (first and last row and column) that are free.
+
+    >>> c = np.full((3, 4), UNKNOWN, np.uint8); c[0] = FREE
+    >>> border_free_share(c)  # 4 of the 10 border cells
+    0.4
+    """
+    c = np.asarray(classes)
+    if c.shape[0] < 3 or c.shape[1] < 3:
+        return float((c == FREE).mean())
+    border = np.concatenate([c[0], c[-1], c[1:-1, 0], c[1:-1, -1]])
+    return float((border == FREE).mean())
+
+
+def outside_free(classes: np.ndarray, seal_radius: int) -> np.ndarray:
+    """Free cells of the space outside the building, as a bool mask of ``classes``' shape.
+
+    The core is the free and unknown space farther than ``seal_radius`` cells from every occupied
+    cell (gaps of the occupied cells narrower than ``2 * seal_radius + 1`` are closed) that is
+    joined to the image border; the mask is its free cells within ``seal_radius`` of the core and
+    nearer to it than to the core of any space inside (the rest of that free space: the rooms).
+    Through a gap in an outer wall the mask reaches a little way into the room behind it, at most
+    ``seal_radius`` cells, less the nearer the room's own core is.
+
+    >>> c = np.full((40, 40), FREE, np.uint8)
+    >>> c[10, 10:30] = c[29, 10:30] = OCCUPIED; c[10:30, 10] = c[10:30, 29] = OCCUPIED
+    >>> c[29, 18:21] = FREE                      # a 3-cell door in the bottom wall
+    >>> out = outside_free(c, 3)
+    >>> bool(out[0, 0]), bool(out[20, 20]), bool(out[28, 19]), int(out[11:29, 11:29].sum())
+    (True, False, False, 0)
+    """
+    c = np.asarray(classes)
+    r = int(seal_radius)
+    if r < 1:
+        raise ValueError(f"seal_radius must be >= 1 cell, got {seal_radius}")
+    occupied = c == OCCUPIED
+    # padded with open space, so that the border itself is outside and joins every border region;
+    # distance transforms rather than dilations with a disc: linear in the cells at any radius
+    padded = np.pad(occupied, 1)
+    barrier = ndimage.distance_transform_edt(~padded) <= r if padded.any() else padded
+    labels, _ = ndimage.label(~barrier)
+    ring = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    core = np.isin(labels, np.unique(ring[ring > 0]))
+    if not core.any():
+        return np.zeros(c.shape, bool)
+    d_out = ndimage.distance_transform_edt(~core)
+    grown = d_out <= r
+    inner = (labels > 0) & ~core          # the rooms' own cores: a cell nearer one stays inside
+    if inner.any():
+        grown &= d_out < ndimage.distance_transform_edt(~inner)
+    grown = grown[1:-1, 1:-1]
+    return grown & (c == FREE)
+
+
+def clear_outside(grid, params: OutsideParams):
+    """``(grid, note)``: the grid with :func:`outside_free`'s cells read as unknown, and a note.
+
+    ``params`` is the model's ``[outside]`` table (mode one of :data:`OUTSIDE_MODES`); the note (``None`` when nothing changed) says how
+    many free cells were read as unknown and how to keep them. The occupancy values stay as
+    they are (``semmap info`` shows the map as loaded).
+    """
+    mode, seal_gap_m = params.mode, params.seal_gap_m
+    if mode not in OUTSIDE_MODES:
+        raise ValueError(f"mode must be one of {OUTSIDE_MODES}, got {mode!r}")
+    if mode == "keep":
+        return grid, None
+    share = border_free_share(grid.classes)
+    if mode == "auto" and share < params.border_free_min:
+        return grid, None
+    radius = max(1, int(round(0.5 * seal_gap_m / grid.resolution)))
+    mask = outside_free(grid.classes, radius)
+    n_free = int((grid.classes == FREE).sum())
+    if not mask.any():
+        return grid, None
+    classes = np.array(grid.classes, copy=True)
+    classes[mask] = UNKNOWN
+    why = (f"{share:.0%} of the map's border cells are free" if mode == "auto"
+           else "[outside] mode = \"unknown\"")
+    note = (f"{why}: {int(mask.sum())} free cells ({mask.sum() / max(n_free, 1):.0%} of the free "
+            f"cells) joined to the border through gaps wider than {seal_gap_m:g} m are read as "
+            f"unknown, the outside of the building (docs/robustness.md); a model file with "
+            f"[outside] mode = \"keep\" keeps them free")
+    return dataclasses.replace(grid, classes=classes, notes=tuple(grid.notes) + (note,)), note
+
+
+__all__ = ["OUTSIDE_MODES", "border_free_share", "outside_free", "clear_outside"]
