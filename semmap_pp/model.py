@@ -173,7 +173,7 @@ class OutsideParams:
     A model file without the table gets ``mode = "keep"`` (the map as it is)."""
 
     mode: str = "keep"
-    border_free_min: float = 0.25
+    border_open_min: float = 0.25
     seal_gap_m: float = 1.5
 
 
@@ -411,7 +411,7 @@ def load_model(path: str | Path | None = None) -> Model:
             raise r.error("outside", "must be a table")
         outside = OutsideParams(
             mode=r.choice("outside.mode", OUTSIDE_MODES),
-            border_free_min=r.number("outside.border_free_min", lo=0.0, hi=1.0),
+            border_open_min=r.number("outside.border_open_min", lo=0.0, hi=1.0),
             seal_gap_m=r.number("outside.seal_gap_m", positive=True))
     return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
                  prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,

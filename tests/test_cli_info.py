@@ -107,17 +107,19 @@ def test_info_on_a_map_written_by_write_map(capsys, tmp_path):
     assert facts["origin"] == [1.0, 2.0, 0.0] and facts["width_m"] == 0.5
 
 
-def test_a_map_whose_border_is_free_is_pointed_at_the_outside_setting(capsys, tmp_path):
+def test_a_map_whose_border_is_open_space_is_pointed_at_the_outside_setting(capsys, tmp_path):
     from semmap_pp.grid import OccupancyGrid
     from semmap_pp.grid.write import save_grid
 
-    c = np.zeros((10, 10), np.uint8)                 # free everywhere ...
+    c = np.zeros((40, 40), np.uint8)                 # free everywhere ...
     c[:, 0] = 1                                      # ... but the left column unknown
+    c[38, 20] = 2                                    # and an occupied cell near the bottom edge
     path = save_grid(OccupancyGrid(c, np.zeros(c.shape), 0.05), tmp_path / "m.yaml")
     assert main(["info", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "border       72.22 % of the border cells free (the outside is shown as free" in out
+    # 156 border cells: 40 unknown, 29 within 0.75 m (15 cells) of the occupied one
+    assert "border       55.77 % of the border cells open free space (the outside is shown as free" in out
     assert main(["info", str(path), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["border_free"] == pytest.approx(26 / 36)
+    assert json.loads(capsys.readouterr().out)["border_open"] == pytest.approx(87 / 156)
     assert main(["info", str(DATA / "tiny.yaml")]) == 0
     assert "border" in (out := capsys.readouterr().out) and "shown as free" not in out

@@ -5,7 +5,7 @@ import pytest
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.grid import OccupancyGrid, load_map
-from semmap_pp.grid.outside import border_free_share, clear_outside, outside_free
+from semmap_pp.grid.outside import border_open_share, clear_outside, outside_free
 from semmap_pp.grid.write import save_grid
 from semmap_pp.model import DEFAULT_MODEL, OutsideParams
 
@@ -46,7 +46,7 @@ def test_a_gap_narrower_than_the_seal_keeps_the_sea_out_and_a_wider_one_lets_it_
 
 def test_a_map_without_a_free_border_is_left_alone():
     c = building(sea=UNKNOWN)
-    assert border_free_share(c) == 0.0
+    assert border_open_share(c, 15) == 0.0
     assert not outside_free(c, 15).any()
     g = grid_of(c)
     assert clear_outside(g, OutsideParams(mode="auto"))[0] is g
@@ -62,20 +62,31 @@ def test_modes(mode, cleared):
     assert (g2.classes[:20] == UNKNOWN).all() and (g2.classes[20:80, 20:140] == g.classes[20:80, 20:140]).all()
     assert (g2.classes == OCCUPIED).sum() == (g.classes == OCCUPIED).sum()
     assert note in g2.notes and "read as unknown" in note and 'mode = "keep"' in note
-    assert ("border cells are free" in note) == (mode == "auto")
+    assert ("border cells are open free space" in note) == (mode == "auto")
     assert not g.classes.flags.writeable and not g2.classes.flags.writeable
 
 
-def test_auto_needs_the_border_share():
+def test_auto_needs_open_space_along_the_border():
     g = grid_of(building())
-    share = border_free_share(g.classes)
-    assert share == 1.0
-    assert clear_outside(g, OutsideParams(mode="auto", border_free_min=1.0))[1] is not None
+    assert border_open_share(g.classes, 15) == 1.0
+    assert clear_outside(g, OutsideParams(mode="auto", border_open_min=1.0))[1] is not None
     c = building()
-    c[:, :3] = UNKNOWN                              # the left side unknown: 80 % of the border free
-    assert border_free_share(c) == pytest.approx(1 - 104 / 516)
-    assert clear_outside(grid_of(c), OutsideParams(mode="auto", border_free_min=0.8))[1] is None
-    assert clear_outside(grid_of(c), OutsideParams(mode="auto", border_free_min=0.75))[1] is not None
+    c[:, :3] = UNKNOWN                              # the left side unknown: 80 % of the border open
+    assert border_open_share(c, 15) == pytest.approx(1 - 104 / 516)
+    assert clear_outside(grid_of(c), OutsideParams(mode="auto", border_open_min=0.8))[1] is None
+    assert clear_outside(grid_of(c), OutsideParams(mode="auto", border_open_min=0.75))[1] is not None
+
+
+def test_a_map_cropped_through_its_rooms_is_not_a_building_in_open_space():
+    """The bundled crop of intel's corner: 26 % of its border cells are free (its rooms and
+    corridors run off the image) but few are farther than 0.75 m from a wall; auto keeps it."""
+    from pathlib import Path
+
+    g = load_map(Path(__file__).parent / "data" / "maps" / "intel_corner.yaml")
+    border = np.concatenate([g.classes[0], g.classes[-1], g.classes[1:-1, 0], g.classes[1:-1, -1]])
+    assert (border == FREE).mean() > 0.25
+    assert border_open_share(g.classes, 15) < 0.05
+    assert clear_outside(g, OutsideParams(mode="auto"))[0] is g
 
 
 def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):

@@ -96,14 +96,14 @@ def test_model_files_without_muldoor_scope_count_each_units_own_doors(tmp_path):
 
 
 def test_model_files_without_the_outside_table_keep_the_map_as_it_is(tmp_path):
-    m = without_lines(tmp_path, ("[outside]", "mode =", "border_free_min", "seal_gap_m"), n=4)
+    m = without_lines(tmp_path, ("[outside]", "mode =", "border_open_min", "seal_gap_m"), n=4)
     assert m.outside.mode == "keep"
     assert load_model().outside.mode == "auto"
 
 
 @pytest.mark.parametrize("line, message", [
     ('mode = "sometimes"', "outside.mode: must be one of auto, unknown, keep, got 'sometimes'"),
-    ("border_free_min = 1.5", "outside.border_free_min: must be <= 1.0, got 1.5"),
+    ("border_open_min = 1.5", "outside.border_open_min: must be <= 1.0, got 1.5"),
     ("seal_gap_m = 0", "outside.seal_gap_m: must be > 0, got 0.0"),
 ])
 def test_a_bad_outside_key_is_one_line_naming_file_and_key(tmp_path, line, message):

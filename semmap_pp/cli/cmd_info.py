@@ -14,7 +14,7 @@ import json
 from semmap_pp.cells import INPUT_CLASSES
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
-from semmap_pp.grid.outside import border_free_share
+from semmap_pp.grid.outside import border_open_share, seal_radius
 from semmap_pp.grid.pixels import MODES
 from semmap_pp.model import OutsideParams
 
@@ -75,8 +75,9 @@ def describe(grid: OccupancyGrid) -> dict:
         "free_thresh": grid.free_thresh,
         "counts": counts,
         "fractions": {name: counts[name] / total for name in INPUT_CLASSES},
-        # above the model's [outside] border_free_min, `semmap map` reads the outside as unknown
-        "border_free": border_free_share(grid.classes),
+        # at the default model's [outside] border_open_min or above, `semmap map` reads the
+        # outside as unknown (semmap_pp.grid.outside)
+        "border_open": border_open_share(grid.classes, seal_radius(OutsideParams.seal_gap_m, grid.resolution)),
         "notes": list(grid.notes),
     }
 
@@ -97,9 +98,9 @@ def format_text(facts: dict) -> str:
     for name in INPUT_CLASSES:
         lines.append(f"{name:<11} {facts['counts'][name]:>10d} cells  "
                      f"{100.0 * facts['fractions'][name]:6.2f} %")
-    lines.append(f"border      {100.0 * facts['border_free']:6.2f} % of the border cells free"
+    lines.append(f"border      {100.0 * facts['border_open']:6.2f} % of the border cells open free space"
                  + (" (the outside is shown as free: see [outside] in the model file)"
-                    if facts["border_free"] >= OutsideParams.border_free_min else ""))
+                    if facts["border_open"] >= OutsideParams.border_open_min else ""))
     lines += [f"note        {note}" for note in facts["notes"]]
     return "\n".join(lines)
 

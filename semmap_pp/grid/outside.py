@@ -10,10 +10,14 @@ walls read as clutter inside it; docs/robustness.md).
 cell and joined to the image border (so a wall with gaps narrower than ``seal_gap`` keeps it out),
 grown back by ``seal_gap / 2`` to reach the walls' outer faces. :func:`clear_outside` reads those
 cells as unknown before anything else sees the map, when the model's ``[outside] mode`` says so:
-``"unknown"`` always, ``"auto"`` when at least ``border_free_min`` of the image's border cells are
-free (freiburg-079: 0.93; cartesium, intel and the ipa plans: 0; aces 0.02), ``"keep"`` never.
+``"unknown"`` always, ``"auto"`` when at least ``border_open_min`` of the image's border cells are
+free and farther than ``seal_gap / 2`` from every occupied cell (:func:`border_open_share`;
+freiburg-079: 0.93; cartesium, intel, the ipa plans: 0; aces 0.02; the bundled test crop of a
+corner of intel, whose border runs through its rooms and corridors, 0.01 with 0.26 of its
+border cells free), ``"keep"`` never.
 
-Limits: an exit or a gap in an outer wall wider than ``seal_gap`` lets the sea in, and through a
+Limits: a map cropped through large rooms, so that a quarter of its border runs through open
+floor, looks like a map with its outside free (``mode = "keep"`` is the way out); an exit or a gap in an outer wall wider than ``seal_gap`` lets the sea in, and through a
 narrower one the grown border bites a little way into the room behind it; free pockets in a concave corner of
 the outer wall, farther than ``seal_gap / 2`` from the sea's core, stay free.
 """
@@ -29,18 +33,32 @@ from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.model import OUTSIDE_MODES, OutsideParams
 
 
-def border_free_share(classes: np.ndarray) -> float:
-    """Share of the image's border cells (first and last row and column) that are free.
+def border_open_share(classes: np.ndarray, seal_radius: int) -> float:
+    """Share of the image's border cells (first and last row and column) that are free and farther
+    than ``seal_radius`` cells from every occupied cell: open space, as around a building in a map
+    that shows its outside as free. A map cropped through its rooms has free border cells too, but
+    few of them far from a wall.
 
-    >>> c = np.full((3, 4), UNKNOWN, np.uint8); c[0] = FREE
-    >>> border_free_share(c)  # 4 of the 10 border cells
-    0.4
+    >>> c = np.full((4, 6), UNKNOWN, np.uint8); c[0] = FREE; c[1, 5] = OCCUPIED
+    >>> border_open_share(c, 1)  # 6 of the 16 border cells are free, 5 of them far from (1, 5)
+    0.3125
     """
     c = np.asarray(classes)
+    occupied = c == OCCUPIED
+    if occupied.any():
+        far = ndimage.distance_transform_edt(~occupied) > seal_radius
+    else:
+        far = np.ones(c.shape, bool)
+    open_ = far & (c == FREE)
     if c.shape[0] < 3 or c.shape[1] < 3:
-        return float((c == FREE).mean())
-    border = np.concatenate([c[0], c[-1], c[1:-1, 0], c[1:-1, -1]])
-    return float((border == FREE).mean())
+        return float(open_.mean())
+    border = np.concatenate([open_[0], open_[-1], open_[1:-1, 0], open_[1:-1, -1]])
+    return float(border.mean())
+
+
+def seal_radius(seal_gap_m: float, resolution: float) -> int:
+    """Cells of half the seal gap at ``resolution`` (at least one)."""
+    return max(1, int(round(0.5 * seal_gap_m / resolution)))
 
 
 def outside_free(classes: np.ndarray, seal_radius: int) -> np.ndarray:
@@ -95,17 +113,17 @@ def clear_outside(grid, params: OutsideParams):
         raise ValueError(f"mode must be one of {OUTSIDE_MODES}, got {mode!r}")
     if mode == "keep":
         return grid, None
-    share = border_free_share(grid.classes)
-    if mode == "auto" and share < params.border_free_min:
+    radius = seal_radius(seal_gap_m, grid.resolution)
+    share = border_open_share(grid.classes, radius)
+    if mode == "auto" and share < params.border_open_min:
         return grid, None
-    radius = max(1, int(round(0.5 * seal_gap_m / grid.resolution)))
     mask = outside_free(grid.classes, radius)
     n_free = int((grid.classes == FREE).sum())
     if not mask.any():
         return grid, None
     classes = np.array(grid.classes, copy=True)
     classes[mask] = UNKNOWN
-    why = (f"{share:.0%} of the map's border cells are free" if mode == "auto"
+    why = (f"{share:.0%} of the map's border cells are open free space" if mode == "auto"
            else "[outside] mode = \"unknown\"")
     note = (f"{why}: {int(mask.sum())} free cells ({mask.sum() / max(n_free, 1):.0%} of the free "
             f"cells) joined to the border through gaps wider than {seal_gap_m:g} m are read as "
@@ -114,4 +132,4 @@ def clear_outside(grid, params: OutsideParams):
     return dataclasses.replace(grid, classes=classes, notes=tuple(grid.notes) + (note,)), note
 
 
-__all__ = ["OUTSIDE_MODES", "border_free_share", "outside_free", "clear_outside"]
+__all__ = ["OUTSIDE_MODES", "border_open_share", "seal_radius", "outside_free", "clear_outside"]
