@@ -130,3 +130,19 @@ def test_load_roi_shape_mismatch_and_missing_file_are_map_errors(tmp_path):
     (tmp_path / "junk.png").write_bytes(b"not an image")
     with pytest.raises(MapError, match="cannot read image"):
         load_roi(tmp_path / "junk.png", (2, 3))
+
+
+def test_closing_by_distance_transforms_equals_scipys_closing_with_the_disk():
+    """closing_disk (linear time) = scipy.ndimage.binary_closing with disk(r) on padded masks."""
+    from scipy import ndimage as ndi
+
+    from semmap_pp.evaluate.cpr import closing_disk, disk
+
+    rng = np.random.default_rng(7)
+    for _ in range(150):
+        h, w = rng.integers(3, 50, 2)
+        r = int(rng.integers(1, 9))
+        m = np.pad(rng.random((h, w)) < rng.uniform(0.02, 0.6), r + 1)
+        inner = (slice(r + 1, -(r + 1)), slice(r + 1, -(r + 1)))
+        assert np.array_equal(closing_disk(m, r)[inner], ndi.binary_closing(m, structure=disk(r))[inner])
+    assert not closing_disk(np.zeros((5, 5), bool), 2).any()
