@@ -44,16 +44,21 @@ def border_open_share(classes: np.ndarray, seal_radius: int) -> float:
     0.3125
     """
     c = np.asarray(classes)
+    if _border(c == FREE).mean() == 0.0:
+        return 0.0                      # the common case (no free border cell): no distance transform
     occupied = c == OCCUPIED
     if occupied.any():
         far = ndimage.distance_transform_edt(~occupied) > seal_radius
     else:
         far = np.ones(c.shape, bool)
-    open_ = far & (c == FREE)
-    if c.shape[0] < 3 or c.shape[1] < 3:
-        return float(open_.mean())
-    border = np.concatenate([open_[0], open_[-1], open_[1:-1, 0], open_[1:-1, -1]])
-    return float(border.mean())
+    return float(_border(far & (c == FREE)).mean())
+
+
+def _border(a: np.ndarray) -> np.ndarray:
+    """The first and last row and column of ``a``, each cell once."""
+    if a.shape[0] < 3 or a.shape[1] < 3:
+        return a.ravel()
+    return np.concatenate([a[0], a[-1], a[1:-1, 0], a[1:-1, -1]])
 
 
 def seal_radius(seal_gap_m: float, resolution: float) -> int:
