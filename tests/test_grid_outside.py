@@ -113,3 +113,14 @@ def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     run = run_map(kept, RunSettings.from_model(kept.model, seed=1, chains=1, cores=1, tune=5,
                                                draws=5), log=lambda m: None)
     assert W.n_units(run.world) > 2
+
+
+@pytest.mark.parametrize("seal_gap_m", [1e-9, 1e308])
+def test_extreme_seal_gaps_are_harmless(seal_gap_m):
+    """A seal gap under a cell is one cell; one beyond any map leaves nothing open to clear."""
+    g = grid_of(building())
+    g2, note = clear_outside(g, OutsideParams(mode="unknown", seal_gap_m=seal_gap_m))
+    if seal_gap_m > 1:
+        assert g2 is g and note is None
+    else:
+        assert (g2.classes[:18] == UNKNOWN).all() and note is not None

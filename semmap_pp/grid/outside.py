@@ -62,8 +62,14 @@ def _border(a: np.ndarray) -> np.ndarray:
 
 
 def seal_radius(seal_gap_m: float, resolution: float) -> int:
-    """Cells of half the seal gap at ``resolution`` (at least one)."""
-    return max(1, int(round(0.5 * seal_gap_m / resolution)))
+    """Cells of half the seal gap at ``resolution``: at least one, at most 10^9 (a radius beyond
+    any map: nothing is open, nothing cleared).
+
+    >>> seal_radius(1.5, 0.05), seal_radius(1e-9, 0.05), seal_radius(1e308, 1e-3)
+    (15, 1, 1000000000)
+    """
+    cells = 0.5 * seal_gap_m / resolution
+    return int(max(1, round(cells))) if cells < 1e9 else 10 ** 9
 
 
 def outside_free(classes: np.ndarray, seal_radius: int) -> np.ndarray:
