@@ -18,6 +18,10 @@ world: a short chain at T = 1 leaves it a few wall moves or one merge short of t
 maximum (on the 30 synthetic floors the polish raised log p on most floors, by up to 700 nats;
 docs/quality.md). The search is greedy, so it proves nothing and never lowers log p; it changes
 neither the chains nor their diagnostics, only the world reported as W*.
+
+A split or a birth needs an empty slot: when every slot holds a unit, the ascent doubles the
+world's capacity (:func:`semmap_pp.world.grow`, up to :data:`MAX_CAPACITY`), so a building with more
+units than ``[prior] k_max`` is not cut off at that number (docs/model.md, "Prior").
 """
 
 from __future__ import annotations
@@ -25,6 +29,10 @@ from __future__ import annotations
 import numpy as np
 
 from semmap_pp import world as wm
+from semmap_pp.model import MAX_K
+
+#: The ascent grows a full world's capacity up to this many slots (the model's bound on k_max).
+MAX_CAPACITY = MAX_K
 
 
 def _line_peaks(w: np.ndarray, lo: int, k: int) -> list[int]:
@@ -51,6 +59,7 @@ class _Ascent:
     def __init__(self, posterior, world: wm.World, data, *, peaks: int = 8, local: int = 3,
                  absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5,
                  merge_keep: float = 0.5, trim_line_min: float = 0.5):
+        self.posterior = posterior
         self.tr = posterior.start(world)
         self.data, self.peaks, self.local = data, peaks, local
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
@@ -60,6 +69,16 @@ class _Ascent:
     @property
     def world(self) -> wm.World:
         return self.tr.world
+
+    def free(self, n: int = 1) -> np.ndarray:
+        """The empty slots; when fewer than ``n`` are left, the capacity is doubled first (the
+        tracker rebuilt on the grown world: its log p changes by the slot term only)."""
+        free = wm.free_slots(self.world)
+        if free.size < n and self.world.capacity < MAX_CAPACITY:
+            grown = wm.grow(self.world, min(2 * self.world.capacity, MAX_CAPACITY))
+            self.tr = self.posterior.start(grown)
+            free = wm.free_slots(self.world)
+        return free
 
     def valid(self, world: wm.World) -> bool:
         """Inside the lattice, every side within ``[min_side, max_side]``."""
@@ -402,7 +421,7 @@ class _Ascent:
         walls needs both cuts: each alone leaves a wall-less band across open floor)."""
         changed = False
         for s in wm.active_slots(self.world).tolist():
-            free = wm.free_slots(self.world)
+            free = self.free(2)
             if free.size == 0:
                 break
             f = int(free[0])
@@ -430,7 +449,7 @@ class _Ascent:
         d = self.data
         changed = False
         for box in d.birth_rects.tolist():
-            free = wm.free_slots(self.world)
+            free = self.free(1)
             if free.size == 0:
                 break
             r0, c0, r1, c1 = box

@@ -78,6 +78,21 @@ def empty(capacity: int) -> World:
     return make(np.zeros((capacity, 4)), np.zeros(capacity, bool), np.full(capacity, NO_TYPE))
 
 
+def grow(world: World, capacity: int) -> World:
+    """The same units in ``capacity`` slots (the new slots empty; ``capacity`` >= the old one).
+
+    >>> w = grow(add(empty(2), 1, (0, 0, 5, 5)), 4)
+    >>> w.capacity, active_slots(w).tolist(), w.rects[1].tolist()
+    (4, [1], [0, 0, 5, 5])
+    """
+    extra = int(capacity) - world.capacity
+    if extra < 0:
+        raise ValueError(f"cannot shrink a world of {world.capacity} slots to {capacity}")
+    return make(np.concatenate([world.rects, np.zeros((extra, 4), world.rects.dtype)]),
+                np.concatenate([world.active, np.zeros(extra, bool)]),
+                np.concatenate([world.types, np.full(extra, NO_TYPE, world.types.dtype)]))
+
+
 def n_units(world: World) -> int:
     return int(np.count_nonzero(world.active))
 

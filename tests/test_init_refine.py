@@ -360,3 +360,52 @@ def test_a_room_in_an_l_of_walls_is_cut_out_by_two_cuts_when_no_single_cut_helps
     assert len(rects) == 3 and (54, 2, 138, 46) in rects      # the room inside the L, on its walls
     assert asc.tr.logp > before + 100
     assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6
+
+
+def row_of_rooms(n: int) -> np.ndarray:
+    """``n`` 3 m x 2.5 m rooms in a row (0.05 m cells, 2-cell walls), a 0.8 m door near the top
+    of each shared wall."""
+    w = 52
+    m = np.full((66, 2 + n * w + 4), UNKNOWN, np.uint8)
+    m[2:64, 2:2 + n * w + 2] = OCCUPIED
+    for i in range(n):
+        c0 = 4 + i * w
+        m[4:62, c0:c0 + w - 2] = FREE
+        if i:
+            m[8:24, c0 - 2:c0] = FREE
+    return m
+
+
+def test_the_ascent_grows_a_full_world_to_split_every_room():
+    """A world of 2 slots over a row of 6 rooms: each split needs an empty slot, so the ascent
+    doubles the capacity (2 -> 4 -> 8) and cuts every room out, its log p tracked exactly."""
+    m = row_of_rooms(6)
+    post, data = knowledge_free(m)
+    start = wm.add(wm.empty(2), 0, (2, 2, 64, m.shape[1] - 2))
+    out = refine_world(post, start, data, rounds=6)
+    assert out.capacity == 8 and wm.n_units(out) == 6
+    widths = sorted(int(out.rects[s][3] - out.rects[s][1]) for s in wm.active_slots(out))
+    assert widths == [54] * 6                                  # each room on its own walls
+    assert post.evaluate(out).total > post.evaluate(wm.grow(start, 8)).total + 500
+
+
+def test_start_worlds_have_room_for_a_building_larger_than_k_max():
+    """k_max = 4 and 6 rooms: the greedy cover fills the 4 slots, so its capacity is doubled until
+    it does not (its pieces need 16 here), and the start world is the one k_max = 64 gives (where
+    the capacity stays 64)."""
+    import dataclasses
+
+    from semmap_pp.evaluate import default_roi
+    from semmap_pp.pipeline import Inputs, start_worlds
+
+    m = row_of_rooms(6)
+    grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
+    found = {}
+    for k_max, capacity in ((4, 16), (64, 64)):
+        model = load_model()
+        model = dataclasses.replace(model, prior=dataclasses.replace(model.prior, k_max=k_max))
+        inputs = Inputs(grid, model, None, build_frame(grid, model), default_roi(m, 20), "default")
+        worlds = start_worlds(inputs, 2, np.random.default_rng(0))
+        assert [w.capacity for w in worlds] == [capacity, capacity]
+        found[k_max] = sorted(tuple(int(v) for v in worlds[0].rects[s]) for s in wm.active_slots(worlds[0]))
+    assert len(found[4]) > 4 and found[4] == found[64]
