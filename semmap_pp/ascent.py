@@ -21,7 +21,9 @@ neither the chains nor their diagnostics, only the world reported as W*.
 
 A split or a birth needs an empty slot: when every slot holds a unit, the ascent doubles the
 world's capacity (:func:`semmap_pp.world.grow`, up to :data:`MAX_CAPACITY`), so a building with more
-units than ``[prior] k_max`` is not cut off at that number (docs/model.md, "Prior").
+units than ``[prior] k_max`` is not cut off at that number (docs/model.md, "Prior"). A result that
+fits the capacity it started with is returned in it (:func:`semmap_pp.world.fit`): the slot term of
+the log posterior, ``-log C(K, n)``, depends on the capacity K.
 """
 
 from __future__ import annotations
@@ -516,7 +518,10 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             changed |= asc.births()
         if not changed:
             break
-    return asc.untyped()
+    out = asc.untyped()
+    if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
+        out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots
+    return out
 
 
 def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:

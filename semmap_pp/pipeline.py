@@ -33,7 +33,7 @@ from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.ascent import refine_world
 from semmap_pp.init import dispersed_world, start_world
 from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
-from semmap_pp.model import MAX_K, Model, load_model
+from semmap_pp.model import Model, load_model
 from semmap_pp.outputs import SemanticMap, semantic_map
 from semmap_pp.posterior import Posterior
 
@@ -224,22 +224,14 @@ class MapRun:
 def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[wm.World]:
     """One start world per chain: the greedy data-driven world, then dispersed variants of it.
 
-    The worlds have ``[prior] k_max`` slots, doubled until the greedy cover no longer fills them
-    all (a building with more units than k_max; the start ascent and W*'s polish double again
-    when a split or a birth finds no empty slot, :meth:`semmap_pp.ascent._Ascent.free`)."""
+    The greedy cover has ``[prior] k_max`` slots (its smallest pieces are left out when they do not
+    fit); the start ascent doubles the world's capacity when a split or a birth finds no empty slot
+    (:meth:`semmap_pp.ascent._Ascent.free`: a building with more units than k_max), and W*'s
+    polish does the same."""
     frame, model = inputs.frame, inputs.model
     c = frame.cells
-    capacity = model.prior.k_max
-
-    def cover(capacity):
-        return start_world(frame.classes, capacity, min_side=c.min_side, wall_cells=c.wall,
-                           factor=model.sampler.start_factor)
-
-    base = cover(capacity)
-    # a cover that fills every slot was cut off: a larger building than k_max units; double
-    while wm.n_units(base) == capacity and capacity < MAX_K:
-        capacity = min(2 * capacity, MAX_K)
-        base = cover(capacity)
+    base = start_world(frame.classes, model.prior.k_max, min_side=c.min_side, wall_cells=c.wall,
+                       factor=model.sampler.start_factor)
     # keep the start inside the prior's support (sides within [min_side, max_side])
     ok = [s for s in wm.active_slots(base)
           if np.all(np.diff(base.rects[s].reshape(2, 2), axis=0) <= c.max_side)]

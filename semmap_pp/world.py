@@ -93,6 +93,29 @@ def grow(world: World, capacity: int) -> World:
                 np.concatenate([world.types, np.full(extra, NO_TYPE, world.types.dtype)]))
 
 
+def fit(world: World, capacity: int) -> World:
+    """The same units in ``capacity`` slots: slot order kept, units moved into the first slots
+    when the world has more slots than ``capacity`` (which must hold them all), empty slots added
+    when it has fewer.
+
+    >>> w = fit(add(empty(8), 5, (0, 0, 5, 5)), 2)
+    >>> w.capacity, active_slots(w).tolist()
+    (2, [0])
+    """
+    n = n_units(world)
+    if n > capacity:
+        raise ValueError(f"{n} units do not fit in {capacity} slots")
+    if world.capacity <= capacity:
+        return grow(world, capacity)
+    slots = active_slots(world)
+    out = empty(capacity)
+    rects, types = out.rects.copy(), out.types.copy()
+    rects[:n], types[:n] = world.rects[slots], world.types[slots]
+    active = np.zeros(capacity, bool)
+    active[:n] = True
+    return make(rects, active, types)
+
+
 def n_units(world: World) -> int:
     return int(np.count_nonzero(world.active))
 

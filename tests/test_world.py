@@ -42,3 +42,21 @@ def test_validity():
     assert not wm.is_valid(w, (10, 10), min_side=4)
     assert not wm.is_valid(w, (2, 10), min_side=1)
     assert wm.with_types(w, [1, 1]).types.tolist() == [1, -1]
+
+
+def test_fit_moves_units_into_fewer_slots_and_grow_adds_empty_ones():
+    w = wm.empty(8)
+    for slot, rect in ((1, (0, 0, 10, 10)), (4, (0, 12, 10, 30)), (7, (12, 0, 30, 30))):
+        w = wm.add(w, slot, rect, type_index=slot % 3)
+    small = wm.fit(w, 3)
+    assert small.capacity == 3 and small.active.all()
+    assert small.rects.tolist() == [w.rects[s].tolist() for s in (1, 4, 7)]
+    assert small.types.tolist() == [w.types[s] for s in (1, 4, 7)]
+    big = wm.grow(w, 12)
+    assert big.capacity == 12 and np.array_equal(big.rects[:8], w.rects)
+    assert not big.active[8:].any() and (big.types[8:] == wm.NO_TYPE).all()
+    assert wm.fit(w, 12).capacity == 12
+    with pytest.raises(ValueError):
+        wm.fit(w, 2)
+    with pytest.raises(ValueError):
+        wm.grow(w, 4)
