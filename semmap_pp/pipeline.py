@@ -334,6 +334,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         best, best_chain = resume.better_best(best, result.best_logp, best_chain)
     polished = None
     if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
+        log(f"polishing W* ({wm.n_units(best)} units) by greedy ascent of the full target")
         t_polish, before = time.perf_counter(), post.evaluate(best).total
         best = refine_world(post, best, data, rounds=kernel_settings.polish_rounds, recuts=True)
         polished = (before, time.perf_counter() - t_polish)
