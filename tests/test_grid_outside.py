@@ -89,6 +89,16 @@ def test_a_map_cropped_through_its_rooms_is_not_a_building_in_open_space():
     assert clear_outside(g, OutsideParams(mode="auto"))[0] is g
 
 
+def _validate(doc):
+    import json
+    from pathlib import Path
+
+    import jsonschema
+
+    schema = json.loads((Path(__file__).parents[1] / "docs" / "world.schema.json").read_text())
+    jsonschema.validate(doc, schema)
+
+
 def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     """End to end: the map file as a renderer that marks every crossed cell free writes it; the
     run reads the sea as unknown, says so, and W* holds the two rooms, not one unit over all."""
@@ -102,6 +112,10 @@ def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     run = run_map(inputs, RunSettings.from_model(inputs.model, seed=1, chains=1, cores=1, tune=5,
                                                  draws=5), log=lambda m: None)
     assert run.notes[0] == inputs.notes[0]
+    from semmap_pp.outputs.world_json import world_dict
+    doc = world_dict(run.semantic)
+    assert doc["map"]["notes"] == [inputs.notes[0]]        # programs reading world.json see it too
+    _validate(doc)
     rects = sorted(tuple(int(v) for v in run.world.rects[s]) for s in W.active_slots(run.world))
     assert len(rects) == 2 and run.semantic.cpr > 0.9
     assert load_map(path).classes[0, 0] == FREE     # the file itself is untouched
