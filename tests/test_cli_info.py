@@ -123,3 +123,17 @@ def test_a_map_whose_border_is_open_space_is_pointed_at_the_outside_setting(caps
     assert json.loads(capsys.readouterr().out)["border_open"] == pytest.approx(87 / 156)
     assert main(["info", str(DATA / "tiny.yaml")]) == 0
     assert "border" in (out := capsys.readouterr().out) and "shown as free" not in out
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """``semmap info MAP --json | head -c 10``-like: stdout's reader closes early; exit 141, no
+    traceback on stderr."""
+    code = ("import sys\n"
+            "from semmap_pp.cli import main\n"
+            "class Gone:\n"
+            "    def write(self, s): raise BrokenPipeError(32, 'Broken pipe')\n"
+            "    def flush(self): pass\n"
+            "sys.stdout = Gone()\n"
+            f"sys.exit(main(['info', {str(DATA / 'tiny.yaml')!r}]))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 141 and "Traceback" not in r.stderr, r.stderr

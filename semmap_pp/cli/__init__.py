@@ -6,13 +6,16 @@ Modules are discovered, so adding a subcommand never touches this file.
 
 Every :class:`~semmap_pp.errors.SemmapError` becomes one line on stderr and exit status 2; so does
 running out of memory (a map too large for the machine: docs/robustness.md gives the memory per
-cell). Ctrl-C becomes exit status 130. No traceback reaches the user for an input error.
+cell). Ctrl-C becomes exit status 130; a reader of stdout that goes away (``semmap diagnose DIR |
+head``) ends the command quietly with status 141, as SIGPIPE would. No traceback reaches the user
+for an input error.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 
@@ -46,6 +49,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("semmap: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        try:    # stdout's reader is gone: no flush error at exit either
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+        return 141
     except MemoryError:
         print("semmap: error: out of memory: the input is too large for this machine "
               "(docs/robustness.md: memory per map cell); --max-cells refuses such maps early",
