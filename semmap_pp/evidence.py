@@ -170,6 +170,83 @@ def muldoor_counts(openings: np.ndarray, colike: np.ndarray) -> np.ndarray:
     return out
 
 
+#: the geometry item (:func:`unit_geometry`) of a corridor piece: hard corridor-like
+PIECE_ITEM = (COLIKE, None)
+
+
+@numba.njit(cache=True, nogil=True)
+def _space_colike(openings, short, classes, ratio, out):  # pragma: no cover - compiled
+    n = openings.shape[0]
+    width = np.zeros(n, np.float64)
+    member = np.zeros(n, np.bool_)
+    for u in range(n):
+        if classes[u] == 1:                  # COLIKE
+            member[u] = True
+            width[u] = short[u]
+    changed = True
+    while changed:                          # the least fixpoint: members and widths only grow
+        changed = False
+        for u in range(n):
+            if classes[u] != 0:              # ROLIKE only
+                continue
+            best = width[u]
+            for v in range(n):
+                if member[v] and openings[u, v, 1] > 0 and short[u] <= ratio * width[v] \
+                        and width[v] > best:
+                    best = width[v]
+            if best > width[u]:
+                width[u] = best
+                member[u] = True
+                changed = True
+    for u in range(n):
+        out[u] = member[u] and classes[u] == 0
+
+
+def space_colike(openings: np.ndarray, short: np.ndarray, classes: np.ndarray,
+                 ratio: float) -> np.ndarray:
+    """Room-like units that are pieces of a corridor space (``colike_scope = "space"``).
+
+    A room-like unit joined by an open passage to a corridor-like unit, or to such a piece, is
+    a piece of the corridor (a junction square, a bend, a stretch cut short) when its shorter
+    side is at most ``ratio`` times the corridor's width (the corridor-like unit's shorter side;
+    along a chain of pieces the widest corridor reached counts). The set is the least fixpoint of
+    that rule, so it does not depend on the order of the units.
+
+    Parameters
+    ----------
+    openings : (n, n, 2) int
+        Doors and open passages between each pair of units (``[..., 1]`` non-zero: a passage).
+    short : (n,) number
+        Each unit's shorter side (any unit of length, the same for all).
+    classes : (n,) int
+        Table 4 classes (ROLIKE, COLIKE, HALIKE; any other value: no unit).
+    ratio : float
+
+    Returns
+    -------
+    (n,) bool: the room-like units that are corridor pieces (corridor-like units are not listed).
+
+    Examples
+    --------
+    A corridor 2 units wide (0), a junction square 2 wide joined to it (1), a room 5 wide open
+    to the square (2), a square 3 wide behind a door of the corridor (3):
+
+    >>> o = np.zeros((4, 4, 2), np.int32)
+    >>> o[0, 1, 1] = o[1, 0, 1] = o[1, 2, 1] = o[2, 1, 1] = 1
+    >>> o[0, 3, 0] = o[3, 0, 0] = 1
+    >>> space_colike(o, np.array([2, 2, 5, 3]), np.array([COLIKE, ROLIKE, ROLIKE, ROLIKE]), 2.0).tolist()
+    [False, True, False, False]
+    """
+    openings = np.asarray(openings)
+    if openings.dtype != np.int32:
+        openings = openings.astype(np.int32)
+    out = np.zeros(len(openings), np.bool_)
+    if len(openings) and openings[..., 1].any():     # no passage: no piece
+        _space_colike(openings, np.asarray(short, np.float64), np.asarray(classes, np.int8),
+                      float(ratio), out)
+    return out
+
+
 def _quantise(p: np.ndarray, step: float) -> np.ndarray:
     """``p`` rounded to multiples of ``step`` and kept in ``[step, 1 - step]``."""
     return np.clip(np.round(p / step) * step, step, 1.0 - step)
@@ -270,7 +347,7 @@ class Evidence:
 
 
 def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float, params,
-                   door_counts: np.ndarray | None = None) -> Evidence:
+                   door_counts: np.ndarray | None = None, pieces: np.ndarray | None = None) -> Evidence:
     """Evidence of the units ``units`` with rectangles ``rects`` (n, 4) and adjacency (n, n).
 
     Parameters
@@ -284,10 +361,15 @@ def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float,
     params : EvidenceParams
     door_counts : (n,) int, optional
         Doors per unit; ``None`` when doors were not detected (no MulDoor evidence).
+    pieces : (n,) bool, optional
+        Room-like units that are pieces of a corridor space (:func:`space_colike`): hard
+        corridor-like evidence (:data:`PIECE_ITEM`).
     """
     units = [int(u) for u in units]
     items = [unit_geometry(int(r[2]) - int(r[0]), int(r[3]) - int(r[1]), resolution, params)
              for r in np.asarray(rects).reshape(-1, 4)]
+    if pieces is not None:
+        items = [PIECE_ITEM if f else it for it, f in zip(items, pieces)]
     geometry = tuple((u, GEOMETRY_CLASSES[c]) for u, (c, _) in zip(units, items))
     soft = tuple((u, pr) for u, (_, pr) in zip(units, items) if pr is not None)
     muldoor = frozenset()

@@ -32,6 +32,9 @@ SIZE_MEASURES = ("short_side", "long_side", "area")
 # Whose doors count towards MulDoor: the unit's own, or for a corridor-like unit those of the
 # space it forms with the units joined to it by open passages (semmap_pp.evidence.muldoor_counts).
 MULDOOR_SCOPES = ("unit", "space")
+#: [evidence] colike_scope: each unit's own Table 4 class, or room-like pieces of a corridor space
+#: corridor-like (semmap_pp.evidence.space_colike)
+COLIKE_SCOPES = ("unit", "space")
 N_PRIORS = ("poisson", "geometric")
 #: [outside] mode: read the free space outside the building as unknown when the map's border is
 #: mostly free ("auto"), always ("unknown") or never ("keep"; semmap_pp.grid.outside)
@@ -97,6 +100,10 @@ class EvidenceParams:
     soft_step: float
     multiple_doors: int
     muldoor_scope: str = "unit"
+    #: "space": room-like units joined by open passages to a corridor-like unit at most
+    #: space_width_ratio times as wide are corridor-like (semmap_pp.evidence.space_colike)
+    colike_scope: str = "unit"
+    space_width_ratio: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -368,7 +375,12 @@ def load_model(path: str | Path | None = None) -> Model:
         multiple_doors=r.integer("evidence.multiple_doors", lo=1),
         # optional (model files written before it: each unit its own doors)
         muldoor_scope=(r.choice("evidence.muldoor_scope", MULDOOR_SCOPES)
-                       if r.has("evidence.muldoor_scope") else "unit"))
+                       if r.has("evidence.muldoor_scope") else "unit"),
+        # optional too (model files written before it: each unit its own geometry class)
+        colike_scope=(r.choice("evidence.colike_scope", COLIKE_SCOPES)
+                      if r.has("evidence.colike_scope") else "unit"),
+        space_width_ratio=(r.number("evidence.space_width_ratio", lo=1.0, hi=100.0)
+                           if r.has("evidence.space_width_ratio") else 2.0))
 
     prior = PriorParams(
         n_prior=r.choice("prior.n_prior", N_PRIORS),

@@ -35,7 +35,7 @@ from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.derive.doors import opening_counts
-from semmap_pp.evidence import (COLIKE, GEOMETRY_TYPE, FixedProvider, GeometryTable,
+from semmap_pp.evidence import (COLIKE, PIECE_ITEM, space_colike, GEOMETRY_TYPE, FixedProvider, GeometryTable,
                                 build_evidence, geometry_class, geometry_class_compiled,
                                 knowledge_evidence, muldoor_counts)
 from semmap_pp.likelihood import (covered_free, enclosure_loglik, full_tallies,
@@ -124,15 +124,29 @@ class Posterior:
             self._prior_n[capacity] = table
         return table
 
-    def door_counts(self, rects: np.ndarray, adj: np.ndarray) -> np.ndarray:
-        """Doors of each unit that count towards MulDoor (:meth:`muldoor_counts`; openings cached
-        per pair of rectangles)."""
+    def door_counts(self, rects: np.ndarray, adj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(doors, pieces)``: the doors of each unit that count towards MulDoor
+        (:meth:`muldoor_counts`) and the room-like units that are pieces of a corridor space
+        (:meth:`corridor_pieces`), from the openings between adjacent units (cached per pair of
+        rectangles)."""
         n = len(rects)
         openings = np.zeros((n, n, 2), dtype=np.int32)
         for p, q in zip(*np.nonzero(np.triu(adj, 1))):
             openings[p, q] = openings[q, p] = self.pair_openings(rects[p], rects[q])
-        colike = geometry_class(rects, self.cells.resolution, self.model.evidence) == COLIKE
-        return self.muldoor_counts(openings, colike)
+        classes = geometry_class(rects, self.cells.resolution, self.model.evidence)
+        pieces = self.corridor_pieces(openings, rects, classes)
+        return self.muldoor_counts(openings, (classes == COLIKE) | pieces), pieces
+
+    def corridor_pieces(self, openings: np.ndarray, rects: np.ndarray, classes: np.ndarray) -> np.ndarray:
+        """Room-like units that count as corridor-like (bool (n,)): with ``[evidence]
+        colike_scope = "space"`` :func:`semmap_pp.evidence.space_colike` (pieces of a corridor
+        space), none with ``"unit"``. ``classes`` are the Table 4 classes (-1: no unit)."""
+        e = self.model.evidence
+        if e.colike_scope != "space" or len(rects) == 0 or not openings[..., 1].any():
+            return np.zeros(len(classes), dtype=bool)
+        r = np.asarray(rects)
+        short = np.minimum(r[:, 2] - r[:, 0], r[:, 3] - r[:, 1])
+        return space_colike(openings, short, classes, e.space_width_ratio)
 
     def muldoor_counts(self, openings: np.ndarray, colike: np.ndarray) -> np.ndarray:
         """Doors counted towards MulDoor per unit, from ``openings`` (n, n, 2) (doors, passages)
@@ -158,8 +172,10 @@ class Posterior:
         slots = W.active_slots(world)
         rects = world.rects[slots]
         sub = adj[np.ix_(slots, slots)]
-        doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
-        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
+        doors, pieces = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True)
+                         else (None, None))
+        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
+                            pieces)
         return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
 
     def _cached_arrays(self, provider, evidence, capacity: int):
@@ -231,8 +247,10 @@ class Posterior:
         slots = W.active_slots(world)
         rects = world.rects[slots]
         sub = adj[np.ix_(slots, slots)]
-        doors = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True) else None)
-        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors)
+        doors, pieces = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True)
+                         else (None, None))
+        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
+                            pieces)
         types, sale = self._result_arrays(provider, ev.to_knowledge(), world.capacity)
         return types.copy(), sale
 
@@ -465,8 +483,8 @@ class Tracker:
                 for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
                     self._openings[p, q] = self._openings[q, p] = post.pair_openings(w.rects[p],
                                                                                      w.rects[q])
-            self._many = self._muldoor(w, self._openings, self._typ.geometry)
-            self._evidence = self._knowledge_evidence(w, self._typ.adj, self._many)
+            self._many, self._pieces = self._muldoor(w, self._openings, self._typ.geometry)
+            self._evidence = self._knowledge_evidence(w, self._typ.adj, self._many, self._pieces)
 
     @property
     def world(self) -> W.World:
@@ -477,7 +495,7 @@ class Tracker:
         hist = self.hist if hist is None else hist
         return covered_free(hist) / max(self.post.data.n_free, 1)
 
-    def _knowledge_evidence(self, world, adj, many):
+    def _knowledge_evidence(self, world, adj, many, pieces):
         post = self.post
         active = world.active
         units = np.flatnonzero(active).tolist()
@@ -485,6 +503,8 @@ class Tracker:
         get = post._geometry.get   # = unit_geometry by size
         items = [get(h, w) for h, w in zip((r[:, 2] - r[:, 0]).tolist(),
                                              (r[:, 3] - r[:, 1]).tolist())]
+        if pieces.any():            # corridor pieces: hard corridor-like (build_evidence's rule)
+            items = [PIECE_ITEM if pieces[u] else it for u, it in zip(units, items)]
         muldoor = np.flatnonzero(many & active).tolist()
         iu, ju = np.nonzero(adj)   # row-major: the pairs p < q come out sorted
         up = iu < ju
@@ -492,19 +512,24 @@ class Tracker:
                                   list(zip(iu[up].tolist(), ju[up].tolist())))
 
     def _muldoor(self, world, openings, geometry):
-        """Slots with multiple doors (bool (K,), the MulDoor evidence; all False without doors),
-        from the (doors, passages) ``openings`` (K, K, 2) and the geometry classes (K,)."""
+        """``(many, pieces)``: the slots with multiple doors (bool (K,), the MulDoor evidence) and
+        the room-like slots that are corridor pieces (:meth:`Posterior.corridor_pieces`), from the
+        (doors, passages) ``openings`` (K, K, 2) and the geometry classes (K,); all False without
+        doors."""
         if not self._with_doors:
-            return np.zeros(world.capacity, dtype=bool)
-        counts = self.post.muldoor_counts(openings, geometry == COLIKE)
-        return (counts >= self.post.model.evidence.multiple_doors) & world.active
+            none = np.zeros(world.capacity, dtype=bool)
+            return none, none
+        classes = np.where(world.active, geometry, np.int8(-1))
+        pieces = self.post.corridor_pieces(openings, world.rects, classes)   # inactive: class -1
+        counts = self.post.muldoor_counts(openings, (geometry == COLIKE) | pieces)
+        return (counts >= self.post.model.evidence.multiple_doors) & world.active, pieces
 
-    def _same_evidence(self, world, adj, many, changed) -> bool:
+    def _same_evidence(self, world, adj, many, pieces, changed) -> bool:
         """Whether the evidence of the proposed world equals the current world's, checked on
         the changed slots alone (without building it): every part of the evidence is the same
         when each changed slot keeps its presence, its geometry item and its adjacency row (the
-        edit touches no other row) and no unit's MulDoor flag changes (``many``: the proposed
-        world's flags)."""
+        edit touches no other row) and no unit's MulDoor or corridor-piece flag changes
+        (``many``, ``pieces``: the proposed world's flags)."""
         cur = self._typ
         ow, oadj = cur.world, cur.adj
         get = self.post._geometry.get
@@ -521,10 +546,11 @@ class Tracker:
                 return False
             if adj[s].tobytes() != oadj[s].tobytes():
                 return False
-        return many.tobytes() == self._many.tobytes()
+        return many.tobytes() == self._many.tobytes() and pieces.tobytes() == self._pieces.tobytes()
 
     def _knowledge_types(self, world, adj, geometry, changed, map_only=False):
-        """Types, P(SaLe) and the knowledge patch ``(openings, evidence, MulDoor flags)`` of a
+        """Types, P(SaLe) and the knowledge patch ``(openings, evidence, MulDoor flags, corridor
+        pieces)`` of a
         proposed world (knowledge on); ``geometry`` its geometry classes (K,).
 
         With ``map_only`` (and a provider that :attr:`has_map_only`) an uncached result comes
@@ -541,14 +567,14 @@ class Tracker:
                     for t in np.flatnonzero(adj[s]).tolist():
                         p, q = (s, t) if s < t else (t, s)
                         openings[p, q] = openings[q, p] = post.pair_openings(rects[p], rects[q])
-        many = self._muldoor(world, openings, geometry)
+        many, pieces = self._muldoor(world, openings, geometry)
         cur = self._typ
-        if self._same_evidence(world, adj, many, changed):
-            return cur.world.types, cur.sale, (openings, self._evidence, many)
-        ev = self._knowledge_evidence(world, adj, many)
-        patch = (openings, ev, many)
+        if self._same_evidence(world, adj, many, pieces, changed):
+            return cur.world.types, cur.sale, (openings, self._evidence, many, pieces)
+        ev = self._knowledge_evidence(world, adj, many, pieces)
+        patch = (openings, ev, many, pieces)
         if ev.key == self._evidence.key:
-            return cur.world.types, cur.sale, (openings, self._evidence, many)
+            return cur.world.types, cur.sale, (openings, self._evidence, many, pieces)
         if map_only and self._map_only:
             hit = post._cached_arrays(self._provider, ev, world.capacity)
             if hit is None:
@@ -639,5 +665,5 @@ class Tracker:
         self.hist, self.gamma_total, knowledge = prop.patch
         self._typ = prop.typing
         if knowledge is not None:
-            self._openings, self._evidence, self._many = knowledge
+            self._openings, self._evidence, self._many, self._pieces = knowledge
         self.loglik, self.logprior, self.logp = prop.loglik, prop.logprior, prop.logp

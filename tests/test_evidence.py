@@ -145,3 +145,44 @@ def test_muldoor_counts_equal_a_reference_over_random_door_and_passage_graphs():
                     grouped += total != d[u].sum()
         assert muldoor_counts(np.stack([d, g], axis=2), colike).tolist() == want.tolist()
     assert grouped >= 50
+
+
+def _pieces_reference(passage, short, classes, ratio):
+    """space_colike by its definition: grow (member, width) until nothing changes."""
+    n = len(classes)
+    width = {u: float(short[u]) for u in range(n) if classes[u] == COLIKE}
+    while True:
+        changed = False
+        for u in range(n):
+            if classes[u] != ROLIKE:
+                continue
+            ok = [width[v] for v in width if passage[u][v] and short[u] <= ratio * width[v]]
+            if ok and max(ok) > width.get(u, 0.0):
+                width[u] = max(ok)
+                changed = True
+        if not changed:
+            return [classes[u] == ROLIKE and u in width for u in range(n)]
+
+
+def test_corridor_pieces_equal_their_definition_whatever_the_order_of_the_units():
+    from semmap_pp.evidence import space_colike
+
+    rng = np.random.default_rng(11)
+    found = 0
+    for _ in range(300):
+        n = int(rng.integers(1, 12))
+        passage = np.triu(rng.random((n, n)) < 0.3, 1)
+        passage = passage | passage.T
+        openings = np.zeros((n, n, 2), np.int32)
+        openings[..., 1] = passage
+        openings[..., 0] = rng.integers(0, 2, (n, n))
+        short = rng.integers(4, 40, n)
+        classes = rng.choice([ROLIKE, COLIKE, HALIKE, -1], n, p=[0.5, 0.25, 0.15, 0.1])
+        ratio = float(rng.choice([1.0, 1.5, 2.0, 3.0]))
+        got = space_colike(openings, short, classes, ratio)
+        assert got.tolist() == _pieces_reference(passage, short, classes, ratio)
+        perm = rng.permutation(n)
+        again = space_colike(openings[np.ix_(perm, perm)], short[perm], classes[perm], ratio)
+        assert again.tolist() == got[perm].tolist()
+        found += int(got.sum())
+    assert found > 50

@@ -114,3 +114,23 @@ def test_a_bad_outside_key_is_one_line_naming_file_and_key(tmp_path, line, messa
     with pytest.raises(ModelError) as info:
         load_model(p)
     assert str(info.value) == f"{p}: {message}"
+
+
+def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
+    m = without_lines(tmp_path, ("colike_scope", "space_width_ratio"), n=2)
+    assert (m.evidence.colike_scope, m.evidence.space_width_ratio) == ("unit", 2.0)
+    assert load_model().evidence.colike_scope == "space"
+
+
+@pytest.mark.parametrize("line, message", [
+    ('colike_scope = "corridor"', "evidence.colike_scope: must be one of unit, space, got 'corridor'"),
+    ("space_width_ratio = 0.5", "evidence.space_width_ratio: must be >= 1.0, got 0.5"),
+])
+def test_a_bad_colike_key_is_one_line_naming_file_and_key(tmp_path, line, message):
+    key = line.split(" =")[0] + " ="
+    text = "\n".join(line if ln.startswith(key) else ln for ln in DEFAULT_MODEL.read_text().splitlines())
+    p = tmp_path / "bad.toml"
+    p.write_text(text + "\n")
+    with pytest.raises(ModelError) as info:
+        load_model(p)
+    assert str(info.value) == f"{p}: {message}"
