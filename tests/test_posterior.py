@@ -389,6 +389,27 @@ def test_same_evidence_shortcut_is_exact_and_makes_the_same_moves(monkeypatch):
     assert tr.logp == pytest.approx(tr.post.evaluate(tr.world).total, rel=1e-9, abs=0)
 
 
+def corridor_in_pieces(pieces, **evidence):
+    """The knowledge floor's four rooms, hall and corridor, the corridor as the rectangles
+    ``pieces``, under table3 with knowledge on and the ``[evidence]`` keys ``evidence``:
+    ``(posterior, rects, world)``."""
+    from pathlib import Path
+
+    from semmap_pp.knowledge import KnowledgeEngine
+
+    model = dataclasses.replace(MODEL, evidence=dataclasses.replace(MODEL.evidence, **evidence))
+    frame = build_frame_from_classes(knowledge_floor(), 0.25, model, theta=0.0)
+    engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
+    post = Posterior(frame, model, engine)
+    post.knowledge_on = True
+    rooms = [(1, 1, 19, 27), (1, 25, 19, 51), (1, 49, 19, 75), (1, 73, 19, 99)]
+    rects = rooms + [(26, 1, 67, 99)] + list(pieces)
+    world = W.empty(10)
+    for s, r in enumerate(rects):
+        world = W.add(world, s, r)
+    return post, rects, world
+
+
 @pytest.mark.parametrize("scope", ["unit", "space"])
 def test_a_corridor_in_two_pieces_counts_its_doors_as_one_space(scope):
     """The corridor of the knowledge floor cut in two at column 62, joined by an open passage:
@@ -396,21 +417,7 @@ def test_a_corridor_in_two_pieces_counts_its_doors_as_one_space(scope):
     ``muldoor_scope = "unit"`` the east piece has no MulDoor and table3 types it *other* (CoLi and
     not MulDoor); with "space" it counts the corridor's five doors and is typed corridor. The
     tracker agrees with the full evaluation either way, also after the cut moves."""
-    from pathlib import Path
-
-    from semmap_pp.knowledge import KnowledgeEngine
-
-    model = dataclasses.replace(MODEL, evidence=dataclasses.replace(MODEL.evidence,
-                                                                    muldoor_scope=scope))
-    frame = build_frame_from_classes(knowledge_floor(), 0.25, model, theta=0.0)
-    engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
-    post = Posterior(frame, model, engine)
-    post.knowledge_on = True
-    rooms = [(1, 1, 19, 27), (1, 25, 19, 51), (1, 49, 19, 75), (1, 73, 19, 99)]
-    rects = rooms + [(26, 1, 67, 99), (18, 1, 28, 63), (18, 61, 28, 99)]
-    world = W.empty(10)
-    for s, r in enumerate(rects):
-        world = W.add(world, s, r)
+    post, rects, world = corridor_in_pieces([(18, 1, 28, 63), (18, 61, 28, 99)], muldoor_scope=scope)
     assert post.pair_openings(rects[5], rects[6]) == (0, 1)     # an open passage, no door
     assert post.door_counts(np.array(rects), post.typing(world).adj[:7, :7])[0].tolist()[5:] == \
         ([4, 1] if scope == "unit" else [5, 5])
@@ -432,21 +439,8 @@ def test_a_short_piece_of_a_corridor_is_corridor_like_as_part_of_its_space(scope
     "space" it is a piece of the corridor (its width at most twice the corridor's): corridor-like,
     it counts the corridor's doors, and it is typed corridor. Tracker = full evaluation either
     way, also when a move makes the square wider than twice the corridor (it is a room again)."""
-    from pathlib import Path
-
-    from semmap_pp.knowledge import KnowledgeEngine
-
-    model = dataclasses.replace(MODEL, evidence=dataclasses.replace(
-        MODEL.evidence, muldoor_scope="space", colike_scope=scope, space_width_ratio=2.0))
-    frame = build_frame_from_classes(knowledge_floor(), 0.25, model, theta=0.0)
-    engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
-    post = Posterior(frame, model, engine)
-    post.knowledge_on = True
-    rooms = [(1, 1, 19, 27), (1, 25, 19, 51), (1, 49, 19, 75), (1, 73, 19, 99)]
-    rects = rooms + [(26, 1, 67, 99), (18, 1, 28, 83), (18, 81, 28, 99)]
-    world = W.empty(10)
-    for s, r in enumerate(rects):
-        world = W.add(world, s, r)
+    post, rects, world = corridor_in_pieces([(18, 1, 28, 83), (18, 81, 28, 99)], muldoor_scope="space",
+                                            colike_scope=scope, space_width_ratio=2.0)
     assert post.pair_openings(rects[5], rects[6])[1] > 0          # an open passage
     counts, pieces = post.door_counts(np.array(rects), post.typing(world).adj[:7, :7])
     assert pieces.tolist() == [False] * 6 + [scope == "space"]
