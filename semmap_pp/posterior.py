@@ -35,9 +35,9 @@ from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.derive.doors import opening_counts
-from semmap_pp.evidence import (COLIKE, PIECE_ITEM, space_colike, GEOMETRY_TYPE, FixedProvider, GeometryTable,
+from semmap_pp.evidence import (COLIKE, GEOMETRY_TYPE, PIECE_ITEM, FixedProvider, GeometryTable,
                                 build_evidence, geometry_class, geometry_class_compiled,
-                                knowledge_evidence, muldoor_counts)
+                                knowledge_evidence, muldoor_counts, space_colike)
 from semmap_pp.likelihood import (covered_free, enclosure_loglik, full_tallies,
                                   loglik_from_tallies, prepare, tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
@@ -133,7 +133,15 @@ class Posterior:
         openings = np.zeros((n, n, 2), dtype=np.int32)
         for p, q in zip(*np.nonzero(np.triu(adj, 1))):
             openings[p, q] = openings[q, p] = self.pair_openings(rects[p], rects[q])
-        classes = geometry_class(rects, self.cells.resolution, self.model.evidence)
+        return self.opening_evidence(openings, rects,
+                                     geometry_class(rects, self.cells.resolution, self.model.evidence))
+
+    def opening_evidence(self, openings: np.ndarray, rects: np.ndarray, classes: np.ndarray):
+        """``(doors, pieces)`` from the (doors, passages) ``openings`` (n, n, 2) between units with
+        rectangles ``rects`` and Table 4 ``classes`` (-1: no unit): the doors that count towards
+        MulDoor (:meth:`muldoor_counts`, corridor pieces counting as corridor-like) and the
+        corridor pieces (:meth:`corridor_pieces`). The full evaluation and the tracker both
+        derive the evidence here."""
         pieces = self.corridor_pieces(openings, rects, classes)
         return self.muldoor_counts(openings, (classes == COLIKE) | pieces), pieces
 
@@ -519,9 +527,8 @@ class Tracker:
         if not self._with_doors:
             none = np.zeros(world.capacity, dtype=bool)
             return none, none
-        classes = np.where(world.active, geometry, np.int8(-1))
-        pieces = self.post.corridor_pieces(openings, world.rects, classes)   # inactive: class -1
-        counts = self.post.muldoor_counts(openings, (geometry == COLIKE) | pieces)
+        counts, pieces = self.post.opening_evidence(openings, world.rects,
+                                                    np.where(world.active, geometry, np.int8(-1)))
         return (counts >= self.post.model.evidence.multiple_doors) & world.active, pieces
 
     def _same_evidence(self, world, adj, many, pieces, changed) -> bool:
@@ -550,8 +557,7 @@ class Tracker:
 
     def _knowledge_types(self, world, adj, geometry, changed, map_only=False):
         """Types, P(SaLe) and the knowledge patch ``(openings, evidence, MulDoor flags, corridor
-        pieces)`` of a
-        proposed world (knowledge on); ``geometry`` its geometry classes (K,).
+        pieces)`` of a proposed world (knowledge on); ``geometry`` its geometry classes (K,).
 
         With ``map_only`` (and a provider that :attr:`has_map_only`) an uncached result comes
         back with P(SaLe) ``None``: the MAP types alone, without the marginals."""
