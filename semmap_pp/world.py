@@ -108,12 +108,10 @@ def fit(world: World, capacity: int) -> World:
     if world.capacity <= capacity:
         return grow(world, capacity)
     slots = active_slots(world)
-    out = empty(capacity)
-    rects, types = out.rects.copy(), out.types.copy()
+    rects = np.zeros((capacity, 4), world.rects.dtype)
+    types = np.full(capacity, NO_TYPE, world.types.dtype)
     rects[:n], types[:n] = world.rects[slots], world.types[slots]
-    active = np.zeros(capacity, bool)
-    active[:n] = True
-    return make(rects, active, types)
+    return make(rects, np.arange(capacity) < n, types)
 
 
 def n_units(world: World) -> int:
