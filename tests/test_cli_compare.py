@@ -48,3 +48,19 @@ def test_compare_user_errors(tmp_path, capsys, rules, needle):
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_compare_says_once_that_the_outside_was_read_as_unknown(tmp_path, capsys):
+    """A map that shows its surroundings as free (tests/test_grid_outside.py's two rooms in a sea):
+    the note comes once, before the runs, on stderr."""
+    from test_grid_outside import building, grid_of
+
+    from semmap_pp.grid.write import save_grid
+
+    path = save_grid(grid_of(building()), tmp_path / "sea.yaml")
+    code = main(["compare", str(path), "--rules", str(RULES / "table3.lp"), "--rules",
+                 str(RULES / "none.lp"), "--seed", "1", *TINY])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert err.count("note: ") == 1 and "read as unknown" in err
+    assert err.index("note: ") < err.index("--- rules ")
