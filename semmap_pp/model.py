@@ -36,8 +36,8 @@ MULDOOR_SCOPES = ("unit", "space")
 #: corridor-like (semmap_pp.evidence.space_colike)
 COLIKE_SCOPES = ("unit", "space")
 N_PRIORS = ("poisson", "geometric")
-#: [outside] mode: read the free space outside the building as unknown when the map's border is
-#: mostly free ("auto"), always ("unknown") or never ("keep"; semmap_pp.grid.outside)
+#: [outside] mode: read the free space outside the building as unknown when enough of the map's
+#: border is open free space ("auto"), always ("unknown") or never ("keep"; semmap_pp.grid.outside)
 OUTSIDE_MODES = ("auto", "unknown", "keep")
 # Sanity limits (not modelling choices): a model file is a few kilobytes; unit slots are allocated
 # up front, so k_max bounds memory; a length in cells must fit the int32 arrays of the samples.

@@ -77,7 +77,8 @@ def describe(grid: OccupancyGrid) -> dict:
         "fractions": {name: counts[name] / total for name in INPUT_CLASSES},
         # at the default model's [outside] border_open_min or above, `semmap map` reads the
         # outside as unknown (semmap_pp.grid.outside)
-        "border_open": border_open_share(grid.classes, seal_radius(OutsideParams.seal_gap_m, grid.resolution)),
+        "border_open": border_open_share(grid.classes,
+                                         seal_radius(OutsideParams.seal_gap_m, grid.resolution)),
         "notes": list(grid.notes),
     }
 

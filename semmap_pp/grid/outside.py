@@ -17,9 +17,10 @@ corner of intel, whose border runs through its rooms and corridors, 0.01 with 0.
 border cells free), ``"keep"`` never.
 
 Limits: a map cropped through large rooms, so that a quarter of its border runs through open
-floor, looks like a map with its outside free (``mode = "keep"`` is the way out); an exit or a gap in an outer wall wider than ``seal_gap`` lets the sea in, and through a
-narrower one the grown border bites a little way into the room behind it; free pockets in a concave corner of
-the outer wall, farther than ``seal_gap / 2`` from the sea's core, stay free.
+floor, looks like a map with its outside free (``mode = "keep"`` is the way out); an exit or a
+gap in an outer wall wider than ``seal_gap`` lets the sea in, and through a narrower one the grown
+border bites a little way into the room behind it; free pockets in a concave corner of the outer
+wall, farther than ``seal_gap / 2`` from the sea's core, stay free.
 """
 
 from __future__ import annotations
@@ -33,7 +34,16 @@ from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.model import OUTSIDE_MODES, OutsideParams
 
 
-def border_open_share(classes: np.ndarray, seal_radius: int) -> float:
+def _wall_distance(classes: np.ndarray) -> np.ndarray:
+    """Distance of every cell to the nearest occupied cell, on ``classes`` padded by one cell of
+    open space (``inf`` everywhere without an occupied cell)."""
+    padded = np.pad(np.asarray(classes) == OCCUPIED, 1)
+    if not padded.any():
+        return np.full(padded.shape, np.inf)
+    return ndimage.distance_transform_edt(~padded)
+
+
+def border_open_share(classes: np.ndarray, seal_radius: int, wall_distance=None) -> float:
     """Share of the image's border cells (first and last row and column) that are free and farther
     than ``seal_radius`` cells from every occupied cell: open space, as around a building in a map
     that shows its outside as free. A map cropped through its rooms has free border cells too, but
@@ -42,16 +52,14 @@ def border_open_share(classes: np.ndarray, seal_radius: int) -> float:
     >>> c = np.full((4, 6), UNKNOWN, np.uint8); c[0] = FREE; c[1, 5] = OCCUPIED
     >>> border_open_share(c, 1)  # 6 of the 16 border cells are free, 5 of them far from (1, 5)
     0.3125
+
+    ``wall_distance``: :func:`_wall_distance` of ``classes`` when the caller has it.
     """
     c = np.asarray(classes)
     if _border(c == FREE).mean() == 0.0:
         return 0.0                      # the common case (no free border cell): no distance transform
-    occupied = c == OCCUPIED
-    if occupied.any():
-        far = ndimage.distance_transform_edt(~occupied) > seal_radius
-    else:
-        far = np.ones(c.shape, bool)
-    return float(_border(far & (c == FREE)).mean())
+    d = _wall_distance(c) if wall_distance is None else wall_distance
+    return float(_border((d[1:-1, 1:-1] > seal_radius) & (c == FREE)).mean())
 
 
 def _border(a: np.ndarray) -> np.ndarray:
@@ -72,7 +80,7 @@ def seal_radius(seal_gap_m: float, resolution: float) -> int:
     return int(max(1, round(cells))) if cells < 1e9 else 10 ** 9
 
 
-def outside_free(classes: np.ndarray, seal_radius: int) -> np.ndarray:
+def outside_free(classes: np.ndarray, seal_radius: int, wall_distance=None) -> np.ndarray:
     """Free cells of the space outside the building, as a bool mask of ``classes``' shape.
 
     The core is the free and unknown space farther than ``seal_radius`` cells from every occupied
@@ -88,18 +96,18 @@ def outside_free(classes: np.ndarray, seal_radius: int) -> np.ndarray:
     >>> out = outside_free(c, 3)
     >>> bool(out[0, 0]), bool(out[20, 20]), bool(out[28, 19]), int(out[11:29, 11:29].sum())
     (True, False, False, 0)
+
+    ``wall_distance``: :func:`_wall_distance` of ``classes`` when the caller has it.
     """
     c = np.asarray(classes)
     r = int(seal_radius)
     if r < 1:
         raise ValueError(f"seal_radius must be >= 1 cell, got {seal_radius}")
-    occupied = c == OCCUPIED
     # padded with open space, so that the border itself is outside and joins every border region;
     # distance transforms rather than dilations with a disc: linear in the cells at any radius
-    padded = np.pad(occupied, 1)
-    barrier = ndimage.distance_transform_edt(~padded) <= r if padded.any() else padded
-    labels, _ = ndimage.label(~barrier)
-    ring = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    d = _wall_distance(c) if wall_distance is None else wall_distance
+    labels, _ = ndimage.label(d > r)
+    ring = _border(labels)
     core = np.isin(labels, np.unique(ring[ring > 0]))
     if not core.any():
         return np.zeros(c.shape, bool)
@@ -115,9 +123,9 @@ def outside_free(classes: np.ndarray, seal_radius: int) -> np.ndarray:
 def clear_outside(grid, params: OutsideParams):
     """``(grid, note)``: the grid with :func:`outside_free`'s cells read as unknown, and a note.
 
-    ``params`` is the model's ``[outside]`` table (mode one of :data:`OUTSIDE_MODES`); the note (``None`` when nothing changed) says how
-    many free cells were read as unknown and how to keep them. The occupancy values stay as
-    they are (``semmap info`` shows the map as loaded).
+    ``params`` is the model's ``[outside]`` table (mode one of :data:`OUTSIDE_MODES`); the note
+    (``None`` when nothing changed) says how many free cells were read as unknown and how to keep
+    them. The occupancy values stay as they are (``semmap info`` shows the map as loaded).
     """
     mode, seal_gap_m = params.mode, params.seal_gap_m
     if mode not in OUTSIDE_MODES:
@@ -125,10 +133,13 @@ def clear_outside(grid, params: OutsideParams):
     if mode == "keep":
         return grid, None
     radius = seal_radius(seal_gap_m, grid.resolution)
-    share = border_open_share(grid.classes, radius)
+    if _border(grid.classes == FREE).mean() == 0.0 and mode == "auto":
+        return grid, None               # the common case, before any distance transform
+    dist = _wall_distance(grid.classes)
+    share = border_open_share(grid.classes, radius, dist)
     if mode == "auto" and share < params.border_open_min:
         return grid, None
-    mask = outside_free(grid.classes, radius)
+    mask = outside_free(grid.classes, radius, dist)
     n_free = int((grid.classes == FREE).sum())
     if not mask.any():
         return grid, None
