@@ -180,3 +180,30 @@ def test_two_fans_side_by_side_do_not_shield_each_other():
     for r0, c0, r1, c1 in (ROOM, fan_a, fan_b, ROOM2):
         count[r0:r1, c0:c1] += 1
     assert np.sort(side_shares(c, fan_a, count, 2, 0.1))[2] >= 0.3
+
+
+def test_fans_do_not_widen_the_footprint():
+    """Two fans stacked along the open side of a hall (floor 6 of the synthetic benchmark): each
+    lies mostly inside the convex hull of the hall and the *other* fan, so a footprint of every
+    unit not flagged kept both. The footprint is the enclosed units' hull: both are exterior."""
+    c = np.full((120, 160), UNKNOWN, np.uint8)
+    c[10:110, 40:150] = OCCUPIED
+    c[12:108, 42:128] = FREE
+    c[12:108, 130:148] = FREE                             # a room beside the hall
+    c[20:100, 40:42] = FREE                               # the hall's glass side
+    c[15:105, 0:40] = FREE                                # rays beyond it
+    hall, fan_a, fan_b = (10, 40, 110, 130), (20, 2, 60, 42), (60, 2, 100, 42)
+    rects = np.array([hall, fan_a, fan_b, (10, 128, 110, 150)])
+    assert find_exterior(c, rects, 2, 0.3, 0.1).tolist() == [False, True, True, False]
+    # each fan is less than half outside the hull of the hall and the other fan
+    from semmap_pp.derive.exterior import _hull, _outside_share
+    assert _outside_share(np.array(fan_a), _hull(np.array([hall, fan_b]))) < 0.5
+    assert _outside_share(np.array(fan_b), _hull(np.array([hall, fan_a]))) < 0.5
+
+
+def test_without_an_enclosed_unit_nothing_is_exterior():
+    """Free space everywhere (a map that shows its outside as free): no unit is enclosed, there
+    is no footprint to be outside of, and no unit is flagged."""
+    c = np.full((60, 90), FREE, np.uint8)
+    rects = np.array([(0, 0, 30, 30), (0, 30, 30, 60), (0, 60, 30, 90), (30, 0, 60, 90)])
+    assert not find_exterior(c, rects, 2, 0.3, 0.1).any()

@@ -11,11 +11,13 @@ through at least three of its four sides: per side, the *enclosed share* of its 
 building; a side with fewer seen cells than ``seen_min`` of its band counts as enclosed), and the
 unit is exterior when its second largest share is below ``max_share``. A unit is supported when
 it passes that test on its own walls (no cover counted): pieces of a corridor cover each other,
-but two fans side by side do not. The test is repeated until no further unit is flagged.
+but two fans side by side do not.
 Rays also leave a unit that covers the part of a room seen through its door (a room the robot
 never entered); such a unit lies within the building's footprint, so a unit is flagged only when
-more than half its area lies outside the convex hull of the other units not flagged, and at
-least two of those remain (a footprint needs them; a world is never left without units).
+more than half its area lies outside the convex hull of the *enclosed* units (supported ones
+that pass the test with cover too). Fans are never enclosed, so they neither shield each other
+nor widen the footprint; a world without an enclosed unit has no footprint and no exterior unit,
+and at least two units are always left (a world is never left without units).
 
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
@@ -114,13 +116,14 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
                   seen_min: float, outside_min: float = 0.5) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
-    share is below ``max_share`` and more than ``outside_min`` of its area lies outside the convex
-    hull of the other units not flagged (the building's footprint: a fan of rays through a door
-    into a room the robot never entered lies within it), and at least two other units are left.
-    Only supported units give cover, and a flagged unit is never supported, so the shares are
-    computed once. Units are flagged one at a time, the one most outside the footprint of the
-    units not yet flagged first (ties: the lower share, then the rectangle), so the result does
-    not depend on the order of ``rects``."""
+    share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
+    building's footprint: the convex hull of the units that are enclosed (supported, and with a
+    second largest share of at least ``max_share``); a fan of rays through a door into a room
+    the robot never entered lies within it. Fans are never supported, so they add nothing to the
+    footprint and do not shield each other; without an enclosed unit nothing is flagged. At
+    least two units are left: candidates are flagged
+    the one most outside the footprint first (ties: the lower share, then the rectangle), so the
+    result does not depend on the order of ``rects``."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
@@ -134,18 +137,15 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
         count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
     share = np.array([np.sort(side_shares(classes, r, count, wall, seen_min, own=int(sup)))[2]
                       for r, sup in zip(rects, supported)])
-    while np.count_nonzero(~exterior) > 2:
-        best = None
-        for i in np.flatnonzero(~exterior & (share < max_share)):
-            others = ~exterior
-            others[i] = False
-            out = _outside_share(rects[i], _hull(rects[others]))
-            key = (-out, share[i], tuple(int(v) for v in rects[i]))
-            if out > outside_min and (best is None or key < best[0]):
-                best = (key, i)
-        if best is None:
-            break
-        i = best[1]
+    hull = _hull(rects[supported & (share >= max_share)])
+    if hull is None:                # no unit enclosed: no footprint to be outside of
+        return exterior
+    order = []
+    for i in np.flatnonzero(share < max_share):
+        out = _outside_share(rects[i], hull)
+        if out > outside_min:
+            order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
+    for _key, i in sorted(order)[:max(n - 2, 0)]:
         exterior[i] = True
     return exterior
 
