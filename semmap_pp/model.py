@@ -254,6 +254,11 @@ class _Reader:
             return False
         return True
 
+    def optional(self, key: str, default, read, *args, **kwargs):
+        """``read(key, *args, **kwargs)`` when ``key`` is present, else ``default`` (keys added
+        after the first model files: older files keep their behaviour)."""
+        return read(key, *args, **kwargs) if self.has(key) else default
+
     def number(self, key: str, *, lo: float | None = None, hi: float | None = None,
                positive: bool = False) -> float:
         v = self.raw(key)
@@ -373,14 +378,10 @@ def load_model(path: str | Path | None = None) -> Model:
         hard_above=r.number("evidence.hard_above", lo=0.5, hi=1.0),
         soft_step=r.number("evidence.soft_step", positive=True, hi=0.5),
         multiple_doors=r.integer("evidence.multiple_doors", lo=1),
-        # optional (model files written before it: each unit its own doors)
-        muldoor_scope=(r.choice("evidence.muldoor_scope", MULDOOR_SCOPES)
-                       if r.has("evidence.muldoor_scope") else "unit"),
-        # optional too (model files written before it: each unit its own geometry class)
-        colike_scope=(r.choice("evidence.colike_scope", COLIKE_SCOPES)
-                      if r.has("evidence.colike_scope") else "unit"),
-        space_width_ratio=(r.number("evidence.space_width_ratio", lo=1.0, hi=100.0)
-                           if r.has("evidence.space_width_ratio") else 2.0))
+        # optional (model files written before them: each unit its own doors and geometry class)
+        muldoor_scope=r.optional("evidence.muldoor_scope", "unit", r.choice, MULDOOR_SCOPES),
+        colike_scope=r.optional("evidence.colike_scope", "unit", r.choice, COLIKE_SCOPES),
+        space_width_ratio=r.optional("evidence.space_width_ratio", 2.0, r.number, lo=1.0, hi=100.0))
 
     prior = PriorParams(
         n_prior=r.choice("prior.n_prior", N_PRIORS),
@@ -407,10 +408,8 @@ def load_model(path: str | Path | None = None) -> Model:
         n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
         start_factor=r.integer("sampler.start_factor", lo=1))
     r.raw("diagnostics")                   # a missing table is named as such
-    defect_tol = (r.number("diagnostics.defect_tolerance_m", lo=0.0)
-                  if r.has("diagnostics.defect_tolerance_m") else 2.0 * prior.sale_sigma_m)
-    walls_inside_max = (r.number("diagnostics.walls_inside_max", lo=0.0, hi=1.0)
-                        if r.has("diagnostics.walls_inside_max") else 0.5)
+    defect_tol = r.optional("diagnostics.defect_tolerance_m", 2.0 * prior.sale_sigma_m, r.number, lo=0.0)
+    walls_inside_max = r.optional("diagnostics.walls_inside_max", 0.5, r.number, lo=0.0, hi=1.0)
     diagnostics = DiagnosticsParams(rhat_max=r.number("diagnostics.rhat_max", lo=1.0),
                                     ess_min=r.number("diagnostics.ess_min", lo=0.0),
                                     defect_tolerance_m=defect_tol, walls_inside_max=walls_inside_max)
