@@ -27,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy import ndimage as ndi
 
@@ -38,30 +39,42 @@ def largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int, int]:
     """Largest all-True axis-aligned rectangle of a boolean array.
 
     Returns ``(area, r0, c0, r1, c1)`` (half-open); area 0 when the mask is empty. Histogram-and-stack
-    method, O(rows * cols).
+    method, O(rows * cols), compiled (:func:`_largest_rectangle`); of equal areas, the one with the
+    topmost bottom edge, then the leftmost right edge, then the tallest.
 
     >>> largest_rectangle(np.array([[0, 1, 1], [1, 1, 1], [0, 1, 1]], bool))
     (6, 0, 1, 3, 3)
     """
+    m = np.ascontiguousarray(mask, dtype=np.bool_)
+    if m.ndim != 2:
+        raise ValueError(f"mask must be 2-D, got shape {m.shape}")
+    return tuple(int(v) for v in _largest_rectangle(m))
+
+
+@numba.njit(cache=True, nogil=True)
+def _largest_rectangle(mask):  # pragma: no cover - compiled
+    """:func:`largest_rectangle` compiled: per row the column heights of True runs ending there,
+    and the largest rectangle under that histogram by a stack of increasing heights."""
     rows, cols = mask.shape
     heights = np.zeros(cols + 1, np.int64)  # sentinel column of height 0 flushes the stack
-    best = (0, 0, 0, 0, 0)
+    stack = np.empty(cols + 1, np.int64)
+    best_area, b_r0, b_c0, b_r1, b_c1 = 0, 0, 0, 0, 0
     for r in range(rows):
-        heights[:cols] = np.where(mask[r], heights[:cols] + 1, 0)
-        h = heights.tolist()
-        stack: list[int] = []
+        for c in range(cols):
+            heights[c] = heights[c] + 1 if mask[r, c] else 0
+        top_n = 0
         for c in range(cols + 1):
-            start = c
-            while stack and h[stack[-1]] >= h[c]:
-                top = stack.pop()
-                left = stack[-1] + 1 if stack else 0
-                area = h[top] * (c - left)
-                if area > best[0]:
-                    best = (area, r - h[top] + 1, left, r + 1, c)
-                start = left
-            del start
-            stack.append(c)
-    return best
+            hc = heights[c]
+            while top_n > 0 and heights[stack[top_n - 1]] >= hc:
+                top_n -= 1
+                top = stack[top_n]
+                left = stack[top_n - 1] + 1 if top_n > 0 else 0
+                area = heights[top] * (c - left)
+                if area > best_area:
+                    best_area, b_r0, b_c0, b_r1, b_c1 = area, r - heights[top] + 1, left, r + 1, c
+            stack[top_n] = c
+            top_n += 1
+    return best_area, b_r0, b_c0, b_r1, b_c1
 
 
 def _fill_small_holes(free: np.ndarray, max_hole: int) -> np.ndarray:

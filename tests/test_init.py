@@ -21,18 +21,27 @@ def corridor_with_rooms():
 
 
 def test_largest_rectangle_brute_force():
+    """Against every rectangle of small random masks (several shapes, densities, empty ones): the
+    largest area, an all-True rectangle of that area, and of equal areas the one with the topmost
+    bottom edge, then the leftmost right edge, then the tallest."""
     rng = np.random.default_rng(0)
-    for _ in range(30):
-        mask = rng.random((7, 9)) < 0.75
-        area = largest_rectangle(mask)[0]
-        best = 0
-        for r0 in range(7):
-            for r1 in range(r0 + 1, 8):
-                for c0 in range(9):
-                    for c1 in range(c0 + 1, 10):
-                        if mask[r0:r1, c0:c1].all():
-                            best = max(best, (r1 - r0) * (c1 - c0))
-        assert area == best
+    for k in range(300):
+        h, w = int(rng.integers(0, 8)), int(rng.integers(0, 10))
+        mask = rng.random((h, w)) < rng.choice([0.3, 0.75, 0.95, 1.0])
+        area, r0, c0, r1, c1 = largest_rectangle(mask)
+        best = [(0, 0, 0, 0, 0)]
+        for a0 in range(h):
+            for a1 in range(a0 + 1, h + 1):
+                for b0 in range(w):
+                    for b1 in range(b0 + 1, w + 1):
+                        if mask[a0:a1, b0:b1].all():
+                            best.append(((a1 - a0) * (b1 - b0), a0, b0, a1, b1))
+        top = max(b[0] for b in best)
+        assert area == top
+        if top:
+            assert mask[r0:r1, c0:c1].all() and (r1 - r0) * (c1 - c0) == area
+            first = min((b for b in best if b[0] == top), key=lambda b: (b[3], b[4], b[1]))
+            assert (area, r0, c0, r1, c1) == first
 
 
 def test_rooms_and_corridor_are_found_with_walls_on_the_wall_lines():
