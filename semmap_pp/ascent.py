@@ -137,8 +137,7 @@ class _Ascent:
                  * np.clip(np.minimum(o[:, 3], r[3]) - np.maximum(o[:, 1], r[1]), 0, None))
         area = (o[:, 2] - o[:, 0]) * (o[:, 3] - o[:, 1])
         thin = np.minimum(o[:, 2] - o[:, 0], o[:, 3] - o[:, 1]) < 2 * self.data.min_side
-        gone = [int(k) for k, i, a, f in zip(act, inter, area, thin)
-                if k != slot and f and i >= self.absorb_share * a]
+        gone = act[(act != slot) & thin & (inter >= self.absorb_share * area)].tolist()
         for k in gone:
             world = wm.remove(world, k)
         return world, gone
