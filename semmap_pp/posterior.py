@@ -193,15 +193,19 @@ class Posterior:
             return None
         return self._result_arrays(provider, evidence, capacity)
 
-    def _map_arrays(self, provider, evidence, capacity: int) -> np.ndarray:
+    def _map_arrays(self, provider, evidence, capacity: int, base=None) -> np.ndarray:
         """Slot-indexed MAP types (K,) alone (``provider.map_types``: no marginals computed),
-        equal to the types of :meth:`_result_arrays` (cached by the evidence)."""
+        equal to the types of :meth:`_result_arrays` (cached by the evidence); ``base``, the
+        current world's evidence, lets a provider that :attr:`updates_map` (the knowledge
+        engine) update its MAP rather than rebuild it."""
         key = (id(provider), evidence.key, capacity)
         hit = self._map_cache.get(key)
         if hit is not None and hit[0] is provider:
             self._map_cache.move_to_end(key)
             return hit[1]
-        map_types = provider.map_types(evidence)
+        map_types = (provider.map_types(evidence, base=base)
+                     if base is not None and getattr(provider, "updates_map", False)
+                     else provider.map_types(evidence))
         types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
         for s in evidence.units:
             types[s] = UNIT_TYPES.index(map_types[int(s)])
@@ -584,7 +588,8 @@ class Tracker:
         if map_only and self._map_only:
             hit = post._cached_arrays(self._provider, ev, world.capacity)
             if hit is None:
-                return post._map_arrays(self._provider, ev, world.capacity), None, patch
+                return (post._map_arrays(self._provider, ev, world.capacity, base=self._evidence),
+                        None, patch)
             return hit[0], hit[1], patch
         types, sale = post._result_arrays(self._provider, ev, world.capacity)
         return types, sale, patch

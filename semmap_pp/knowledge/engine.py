@@ -28,7 +28,8 @@ from semmap_pp.knowledge.exact import (MAX_CLIQUE_STATES, JunctionTree, TooDense
                                        calibrate_flat, decode_max, merged_potentials)
 from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
-from semmap_pp.knowledge.local import LocalModel, default_store, is_pairwise
+from semmap_pp.knowledge.local import (LocalModel, default_store, is_pairwise, map_net,
+                                       map_net_update)
 from semmap_pp.knowledge.map import map_clingo, map_pairwise_rc2, map_rc2
 from semmap_pp.knowledge.mcsat import mcsat_marginals
 from semmap_pp.knowledge.mcsat_local import LocalClauses, mcsat_local
@@ -131,6 +132,7 @@ class KnowledgeEngine:
                               else None)
         self.hits = self.misses = 0
         self._map_cache: OrderedDict = OrderedDict()   # evidence key -> (type network, MAP)
+        self._map_nets: OrderedDict = OrderedDict()    # evidence key -> MapNet or None (coupled)
         self._trees: OrderedDict = OrderedDict()       # (card, scopes) -> JunctionTree or None
 
     @classmethod
@@ -154,21 +156,51 @@ class KnowledgeEngine:
             self._cache.popitem(last=False)
         return result
 
+    #: :meth:`map_types` takes ``base=`` (an evidence to update the MAP from)
+    updates_map = True
+
     @property
     def has_map_only(self) -> bool:
         """Whether :meth:`map_types` can find the MAP types without the marginals (the fast
         path with exact or ``auto`` marginals: the MAP is decoded before them anyway)."""
         return self.local is not None and self.local_clauses is None
 
-    def map_types(self, evidence: Evidence) -> dict:
+    def map_types(self, evidence: Evidence, base: Evidence | None = None) -> dict:
         """``infer(evidence).map_types`` without computing the marginals when they are not
         cached: the same type network and the same MAP decoding as :meth:`infer` (which then
-        reuses them), so the types are identical. Needs :attr:`has_map_only`."""
+        reuses them), so the types are identical. Needs :attr:`has_map_only`.
+
+        ``base`` (optional): an evidence close to this one (the sampler's current world). When no
+        pair of the network couples its units, the MAP side is updated from ``base``'s
+        (:func:`~semmap_pp.knowledge.local.map_net_update`: the units two adjacency steps from
+        those whose evidence differs), not rebuilt over every unit; the types are the same."""
         hit = self._cache.get(evidence.key)
         if hit is not None:
             return hit.map_types
+        if base is not None and self.local is not None:
+            net = self._map_net(evidence, base)
+            if net is not None:
+                return net.map_types()
         tn, x, _best, _method = self._local_map(evidence)
         return {u: UNIT_TYPES[int(x[i]) >> tn.shift[i]] for i, u in enumerate(evidence.units)}
+
+    def _map_net(self, ev: Evidence, base: Evidence):
+        """The :class:`~semmap_pp.knowledge.local.MapNet` of ``ev``, updated from ``base``'s
+        (built first when not cached); None when a pair couples its units (small LRU)."""
+        nets = self._map_nets
+        hit = nets.get(ev.key, False)
+        if hit is not False:
+            nets.move_to_end(ev.key)
+            return hit
+        path = self.rules.path
+        prev = nets.get(base.key, False)
+        if prev is False:
+            prev = nets[base.key] = map_net(self.local, base, path)
+        net = None if prev is None else map_net_update(self.local, prev, ev, path)
+        nets[ev.key] = net
+        while len(nets) > 256:
+            nets.popitem(last=False)
+        return net
 
     def _local_map(self, ev: Evidence):
         """Type network and exact MAP of ``ev`` (cached by evidence, small LRU)."""

@@ -38,6 +38,8 @@ import clingo
 import clingo.ast as cast
 import numpy as np
 
+from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.errors import RuleError
 from semmap_pp.jitcache import cache_home
 from semmap_pp.knowledge.dialect import SOFT_PREDICATES, RuleSet, parse_text
 from semmap_pp.knowledge.evidence import Evidence, soft_weight
@@ -592,3 +594,159 @@ def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
             max_pairs.append((i, j, m_tab))
     usum, umax = _fold(usum, add_sum), _fold(umax, add_max)
     return TypeNetwork(tuple(units), shift, usum, umax, sum_pairs, max_pairs, sale)
+
+
+# ---- the MAP side by unit, updated where the evidence changed --------------------------------
+
+@dataclass
+class MapNet:
+    """The max-out side of :func:`_type_network` by unit id, for networks whose pairs are all
+    separable under the max-out (no pair couples its units: under ``rules/table3.lp`` every pair,
+    since SaLe is maximised out inside the pair template). Then each unit's MAP state is the
+    argmax of its own table, and an edit of the evidence changes the tables of the units within
+    two adjacency steps of the units whose evidence changed only (:func:`map_net_update`).
+
+    Every array is shared with the network it was updated from where the unit did not change;
+    none is modified after it is made.
+    """
+
+    ev: Evidence
+    keys: dict          # unit -> evidence pattern
+    nbrs: dict          # unit -> neighbours, ascending (the order of the pairs in ``ev.adj``)
+    cut: dict           # unit -> soft bits maximised out of its table
+    shift: dict         # unit -> soft bits kept in its variable (type = state >> shift)
+    umax: dict          # unit -> max-out table, separable pair terms folded in
+    x: dict             # unit -> MAP state
+
+    def map_types(self) -> dict:
+        """Unit -> MAP type name, in the order of ``ev.units``."""
+        x, shift = self.x, self.shift
+        return {u: UNIT_TYPES[x[u] >> shift[u]] for u in self.ev.units}
+
+
+def _unit_keys(ev: Evidence, units) -> dict:
+    """Evidence pattern (:func:`_type_network`'s key) of each of ``units``."""
+    dicts = [dict(ev.unary(name)) for name in SOFT_PREDICATES]
+    return {u: tuple([d.get(u, 0.0) for d in dicts]) for u in units}
+
+
+def _recut(model: "LocalModel", keys: dict, nbrs: dict, units, cut: dict, shift: dict) -> None:
+    """Soft bits of each of ``units`` that no incident pair reads (``_type_network``'s cuts)."""
+    flags_of = model._raw_flags
+    for u in units:
+        ku = keys[u]
+        collapse = True
+        for v in nbrs[u]:
+            kk = (ku, keys[v]) if u < v else (keys[v], ku)
+            fl = flags_of.get(kk)
+            if fl is None:
+                fl = flags_of[kk] = model.pair_flags(*kk)
+            if not fl[0 if u < v else 1]:
+                collapse = False
+                break
+        soft = model.unit(ku)[1]
+        cut[u] = soft if collapse else 0
+        shift[u] = soft - cut[u]
+
+
+def _refold(model: "LocalModel", keys: dict, nbrs: dict, cut: dict, units, umax: dict, x: dict,
+            path) -> bool:
+    """Max-out table and MAP state of each of ``units`` (the unit table plus the separable pair
+    terms in the order of the pairs, as :func:`_fold` adds them); False when a pair couples its
+    units (the caller then takes the general path)."""
+    reduced_of = model._raw_reduced
+    for u in units:
+        ku, cu = keys[u], cut[u]
+        table = np.array(model.unit_types(ku, cu)[1], dtype=np.float64)
+        for v in nbrs[u]:
+            rk = (ku, keys[v], cu, cut[v]) if u < v else (keys[v], ku, cut[v], cu)
+            red = reduced_of.get(rk)
+            if red is None:
+                red = reduced_of[rk] = model.reduced_pair(*rk)
+            m_sep = red[4]
+            if m_sep is None:
+                return False
+            table += m_sep[0] if u < v else m_sep[1]
+        if not np.isfinite(table).any():
+            raise RuleError(path, "the hard rules admit no world for this evidence")
+        table.setflags(write=False)
+        umax[u] = table
+        x[u] = int(np.argmax(table))
+    return True
+
+
+def map_net(model: "LocalModel", ev: Evidence, path=None) -> MapNet | None:
+    """The :class:`MapNet` of ``ev`` built from scratch, or None when a pair couples its units."""
+    units = ev.units
+    keys = _unit_keys(ev, units)
+    nbrs = {u: [] for u in units}
+    for p, q in ev.adj:
+        nbrs[p].append(q)
+        nbrs[q].append(p)
+    nbrs = {u: tuple(n) for u, n in nbrs.items()}
+    cut, shift, umax, x = {}, {}, {}, {}
+    _recut(model, keys, nbrs, units, cut, shift)
+    if not _refold(model, keys, nbrs, cut, units, umax, x, path):
+        return None
+    return MapNet(ev, keys, nbrs, cut, shift, umax, x)
+
+
+def map_net_update(model: "LocalModel", base: MapNet, ev: Evidence, path=None,
+                   max_share: float = 0.5) -> MapNet | None:
+    """The :class:`MapNet` of ``ev`` from ``base`` (another evidence's), recomputing only what
+    can differ: the cuts of the units whose evidence (pattern, neighbours) changed and of their
+    neighbours (a cut depends on the unit's pattern and its neighbours', through the pair
+    flags), then the tables of the units whose evidence or cut changed and of their neighbours
+    (a table depends on the unit's pattern and cut and on its neighbours' patterns and cuts). Equal to :func:`map_net` of ``ev`` (the same arithmetic in the same order).
+    None when a pair couples its units; built from scratch when more than ``max_share`` of the
+    units changed."""
+    old, units = base.ev, ev.units
+    old_set, new_set = set(old.units), set(units)
+    dirty = old_set ^ new_set
+    for name in SOFT_PREDICATES:
+        a, b = old.unary(name), ev.unary(name)
+        if a != b:
+            dirty.update(u for u, _ in set(a) ^ set(b))
+    adj_old, adj_new = old.adj, ev.adj
+    if adj_old != adj_new:
+        added, removed = set(adj_new) - set(adj_old), set(adj_old) - set(adj_new)
+        for p, q in added | removed:
+            dirty.add(p)
+            dirty.add(q)
+    else:
+        added = removed = ()
+    dirty &= new_set
+    if len(dirty) > max_share * max(len(units), 1):
+        return map_net(model, ev, path)
+    keys, nbrs = dict(base.keys), dict(base.nbrs)
+    cut, shift, umax, x = dict(base.cut), dict(base.shift), dict(base.umax), dict(base.x)
+    for u in old_set - new_set:
+        for d in (keys, nbrs, cut, shift, umax, x):
+            del d[u]
+    keys.update(_unit_keys(ev, dirty))
+    if added or removed:
+        touched = {u for pq in (added | removed) for u in pq if u in new_set}
+        change = {u: set(nbrs.get(u, ())) for u in touched}
+        for p, q in removed:
+            for a, b in ((p, q), (q, p)):
+                if a in change:
+                    change[a].discard(b)
+        for p, q in added:
+            change[p].add(q)
+            change[q].add(p)
+        for u, s in change.items():
+            nbrs[u] = tuple(sorted(s))
+    for u in new_set - old_set:
+        nbrs.setdefault(u, ())
+    ring1 = set(dirty)
+    for u in dirty:
+        ring1.update(nbrs[u])
+    _recut(model, keys, nbrs, ring1, cut, shift)
+    # a table changes with the unit's pattern, neighbours or cut, or a neighbour's pattern or cut
+    changed = dirty | {u for u in ring1 - dirty if cut[u] != base.cut[u]}
+    ring2 = set(changed)
+    for u in changed:
+        ring2.update(nbrs[u])
+    if not _refold(model, keys, nbrs, cut, ring2, umax, x, path):
+        return None
+    return MapNet(ev, keys, nbrs, cut, shift, umax, x)
