@@ -121,9 +121,9 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     second largest share of at least ``max_share``); a fan of rays through a door into a room
     the robot never entered lies within it. Fans are never supported, so they add nothing to the
     footprint and do not shield each other; without an enclosed unit nothing is flagged. At
-    least two units are left: candidates are flagged
-    the one most outside the footprint first (ties: the lower share, then the rectangle), so the
-    result does not depend on the order of ``rects``."""
+    least two units are left: candidates are flagged the one most outside the footprint first
+    (ties: the lower share, then the rectangle), so the result does not depend on the order of
+    ``rects``."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)

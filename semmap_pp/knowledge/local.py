@@ -603,8 +603,8 @@ class MapNet:
     """The max-out side of :func:`_type_network` by unit id, for networks whose pairs are all
     separable under the max-out (no pair couples its units: under ``rules/table3.lp`` every pair,
     since SaLe is maximised out inside the pair template). Then each unit's MAP state is the
-    argmax of its own table, and an edit of the evidence changes the tables of the units within
-    two adjacency steps of the units whose evidence changed only (:func:`map_net_update`).
+    argmax of its own table, and an edit of the evidence changes only the tables of the units
+    whose evidence or cut changed and of their neighbours (:func:`map_net_update`).
 
     Every array is shared with the network it was updated from where the unit did not change;
     none is modified after it is made.
