@@ -152,7 +152,7 @@ def run(args) -> int:
     previous = _install_sigint(stop)
     try:
         with Progress(settings.chains, left, budget=args.budget, mode=args.progress,
-                      every=args.progress_every) as progress:
+                      every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
                              stop=stop, budget=args.budget, resume=state)
     except SemmapError as exc:

@@ -20,6 +20,11 @@ import time
 class Progress:
     """Per-draw progress callback; use as a context manager around sampling.
 
+    The time left is the draws left times the mean time per draw of the chains that have made
+    two or more, divided by the chains that run at once: measured from each chain's first draw,
+    so the set-up before sampling (start worlds, worker processes; tens of seconds on a large
+    map) does not count as sampling time. Unknown until a chain has made two draws.
+
     Parameters
     ----------
     chains : int
@@ -31,24 +36,33 @@ class Progress:
         ``auto`` is rich on a terminal, plain otherwise.
     every : float
         Seconds between plain lines.
+    parallel : int
+        Chains sampled at once (``min(cores, chains)``).
+    clock : callable, optional
+        Seconds, monotonic (tests pass their own).
     """
 
     def __init__(self, chains: int, draws_left: int, *, budget: float | None = None, mode: str = "auto",
-                 every: float = 5.0, stream=None):
+                 every: float = 5.0, stream=None, parallel: int = 1, clock=time.monotonic):
         self.stream = stream if stream is not None else sys.stderr
         if mode == "auto":
             mode = "rich" if self.stream.isatty() else "plain"
         self.mode, self.every = mode, float(every)
         self.chains, self.draws_left, self.budget = chains, max(int(draws_left), 1), budget
+        self.parallel = max(1, min(int(parallel), int(chains)))
+        self.clock = clock
         self.latest: dict[int, dict] = {}
         self.done = 0
-        self.t0 = time.monotonic()
+        self._first: dict[int, float] = {}     # chain -> elapsed seconds at its first draw
+        self._last: dict[int, float] = {}      # chain -> elapsed seconds at its latest draw
+        self._count: dict[int, int] = {}       # chain -> draws made
+        self.t0 = self.clock()
         self._next_line = 0.0
         self._live = None
 
     # ------------------------------------------------------------------ context
     def __enter__(self):
-        self.t0 = time.monotonic()
+        self.t0 = self.clock()
         if self.mode == "rich":
             from rich.console import Console
             from rich.live import Live
@@ -67,20 +81,28 @@ class Progress:
 
     # ------------------------------------------------------------------ numbers
     def elapsed(self) -> float:
-        return time.monotonic() - self.t0
+        return self.clock() - self.t0
 
     def seconds_left(self) -> float:
-        """Estimated seconds to go: draws left at the rate so far, capped by the budget."""
-        t = self.elapsed()
-        left = (self.draws_left - self.done) * t / self.done if self.done else math.inf
+        """Estimated seconds to go (class docstring), capped by what is left of the budget
+        (counted from the first draw); ``inf`` while no chain has made two draws."""
+        per_draw = [(self._last[c] - self._first[c]) / (n - 1) for c, n in self._count.items() if n >= 2]
+        if not per_draw:
+            return math.inf
+        left = max(self.draws_left - self.done, 0) * (sum(per_draw) / len(per_draw)) / self.parallel
         if self.budget is not None:
-            left = min(left, max(self.budget - t, 0.0))
+            left = min(left, max(self.budget - (self.elapsed() - min(self._first.values())), 0.0))
         return max(left, 0.0)
 
     def __call__(self, info: dict) -> None:
+        chain = info["chain"]
         if not info["stopped"]:
             self.done += 1
-        self.latest[info["chain"]] = info
+            now = self.elapsed()
+            self._first.setdefault(chain, now)
+            self._last[chain] = now
+            self._count[chain] = self._count.get(chain, 0) + 1
+        self.latest[chain] = info
         if self.mode == "plain":
             now = self.elapsed()
             if now >= self._next_line:
