@@ -278,12 +278,18 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     kernel_settings = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
     data = data_from_frame(frame, kernel_settings)
     factory = TargetFactory(frame, model, inputs.rules)
+    head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
+            f"orientation {math.degrees(frame.theta):.1f} deg")
     if resume is None:
         rng = np.random.default_rng(settings.seed)
-        if starts is None:
+        if starts is None:   # minutes on a large map: say so before, and how long after
+            log(f"{head}; building the start worlds")
+            t_start = time.perf_counter()
             starts = start_worlds(inputs, settings.chains, rng)
+            log(f"start world: {wm.n_units(starts[0])} units ({time.perf_counter() - t_start:.1f} s)")
         else:
             starts = [starts[i % len(starts)] for i in range(settings.chains)]
+            log(f"{head}; start world: {wm.n_units(starts[0])} units (given)")
         first = starts
         pm_tune, pm_draws, schedule, chain_starts = settings.tune, settings.draws, None, None
         history = [None] * settings.chains
@@ -293,8 +299,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         chain_starts = resume.chain_starts()
         pm_tune, pm_draws = 0, max(1, resume.remaining())
         history = resume.history
-    log(f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
-        f"orientation {math.degrees(frame.theta):.1f} deg; start world: {wm.n_units(starts[0])} units")
+        log(f"{head}; chain 1 resumes from {wm.n_units(starts[0])} units")
     if resume is None:
         log(f"sampling: {settings.chains} chains on {settings.cores} core(s), {settings.tune} burn-in + "
             f"{settings.draws} draws x {settings.n_inner} kernels")
