@@ -410,3 +410,22 @@ def test_start_worlds_have_room_for_a_building_larger_than_k_max():
         found[k_max] = sorted(tuple(int(v) for v in worlds[0].rects[s]) for s in wm.active_slots(worlds[0]))
     assert found[4] == [(2, 2 + 52 * i, 64, 56 + 52 * i) for i in range(6)]
     assert len(found[64]) >= 6
+
+
+def test_the_ascents_validity_test_equals_its_definition():
+    """``_Ascent.valid``'s compiled test against ``world.is_valid`` plus the longest side, on
+    random worlds (rectangles past the lattice, inverted, too small, too long, inactive)."""
+    from semmap_pp.ascent import _all_valid
+    rng = np.random.default_rng(0)
+    seen = set()
+    for _ in range(3000):
+        k = int(rng.integers(1, 8))
+        lo, hi = int(rng.integers(1, 6)), int(rng.integers(5, 40))
+        r0, c0 = rng.integers(-3, 50, k), rng.integers(-3, 60, k)
+        rects = np.stack([r0, c0, r0 + rng.integers(-2, 45, k), c0 + rng.integers(-2, 45, k)], 1)
+        world = wm.make(rects, rng.random(k) < 0.7, np.full(k, wm.NO_TYPE))
+        r = world.rects[world.active]
+        want = wm.is_valid(world, (50, 60), lo) and bool(np.all(r[:, 2:] - r[:, :2] <= hi))
+        assert bool(_all_valid(world.rects, world.active, 50, 60, lo, hi)) == want
+        seen.add(want)
+    assert seen == {True, False}
