@@ -70,6 +70,23 @@ def _all_valid(rects, active, h, w, min_side, max_side):  # pragma: no cover - c
     return True
 
 
+@numba.njit(cache=True, nogil=True)
+def _swallowed(rects, active, slot, thin_below, share):  # pragma: no cover - compiled
+    """(K,) bool: the active units other than ``slot`` whose shorter side is below
+    ``thin_below`` and of whose area at least ``share`` lies inside unit ``slot``."""
+    out = np.zeros(rects.shape[0], np.bool_)
+    a0, b0, a1, b1 = rects[slot, 0], rects[slot, 1], rects[slot, 2], rects[slot, 3]
+    for k in range(rects.shape[0]):
+        if not active[k] or k == slot:
+            continue
+        r0, c0, r1, c1 = rects[k, 0], rects[k, 1], rects[k, 2], rects[k, 3]
+        if min(r1 - r0, c1 - c0) >= thin_below:
+            continue
+        inter = max(min(r1, a1) - max(r0, a0), 0) * max(min(c1, b1) - max(c0, b0), 0)
+        out[k] = inter >= share * ((r1 - r0) * (c1 - c0))
+    return out
+
+
 class _Ascent:
     """Greedy ascent state: a tracker of the target and the kernels' data."""
 
@@ -146,14 +163,9 @@ class _Ascent:
         A fragment is a unit whose shorter side is below ``2 * min_side``: a strip of free space
         between furniture and a wall, not a room (two rooms are never swallowed by one move).
         """
-        r = world.rects[slot]
-        act = wm.active_slots(world)
-        o = world.rects[act]
-        inter = (np.clip(np.minimum(o[:, 2], r[2]) - np.maximum(o[:, 0], r[0]), 0, None)
-                 * np.clip(np.minimum(o[:, 3], r[3]) - np.maximum(o[:, 1], r[1]), 0, None))
-        area = (o[:, 2] - o[:, 0]) * (o[:, 3] - o[:, 1])
-        thin = np.minimum(o[:, 2] - o[:, 0], o[:, 3] - o[:, 1]) < 2 * self.data.min_side
-        gone = act[(act != slot) & thin & (inter >= self.absorb_share * area)].tolist()
+        gone = np.flatnonzero(_swallowed(world.rects, world.active, int(slot),
+                                         2 * int(self.data.min_side),
+                                         float(self.absorb_share))).tolist()
         for k in gone:
             world = wm.remove(world, k)
         return world, gone

@@ -429,3 +429,27 @@ def test_the_ascents_validity_test_equals_its_definition():
         assert bool(_all_valid(world.rects, world.active, 50, 60, lo, hi)) == want
         seen.add(want)
     assert seen == {True, False}
+
+
+def test_the_fragments_a_grown_unit_swallows_equal_their_definition():
+    """``_Ascent.absorb``'s compiled selection against its definition (the thin units other than
+    the grown one with at least ``share`` of their area inside it) on random worlds."""
+    from semmap_pp.ascent import _swallowed
+    rng = np.random.default_rng(1)
+    found = 0
+    for _ in range(3000):
+        k = int(rng.integers(1, 10))
+        r0, c0 = rng.integers(0, 40, k), rng.integers(0, 40, k)
+        rects = np.stack([r0, c0, r0 + rng.integers(1, 30, k), c0 + rng.integers(1, 30, k)], 1)
+        world = wm.make(rects, rng.random(k) < 0.8, np.full(k, wm.NO_TYPE))
+        slot, min_side = int(rng.integers(0, k)), int(rng.integers(1, 8))
+        r, o = world.rects[slot], world.rects
+        inter = (np.clip(np.minimum(o[:, 2], r[2]) - np.maximum(o[:, 0], r[0]), 0, None)
+                 * np.clip(np.minimum(o[:, 3], r[3]) - np.maximum(o[:, 1], r[1]), 0, None))
+        area = (o[:, 2] - o[:, 0]) * (o[:, 3] - o[:, 1])
+        thin = np.minimum(o[:, 2] - o[:, 0], o[:, 3] - o[:, 1]) < 2 * min_side
+        want = world.active & (np.arange(k) != slot) & thin & (inter >= 0.8 * area)
+        got = _swallowed(world.rects, world.active, slot, 2 * min_side, 0.8)
+        assert np.array_equal(got, want)
+        found += int(want.any())
+    assert found > 100
