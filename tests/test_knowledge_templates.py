@@ -172,11 +172,12 @@ def _random_walk(rng, steps, n_start=6, hard=()):
 
 
 def test_the_map_side_updated_along_edits_equals_the_one_built_from_scratch(tmp_path):
-    """Random walks of edits (units and pairs added and removed, evidence changed), the two
-    pairwise-local rule sets of rules/ and one whose pair rule couples room pairs: the MAP side updated from the previous
+    """Random walks of edits (units and pairs added and removed, evidence changed) under the two
+    pairwise-local rule sets of rules/, one with pair terms that depend on a neighbour's
+    evidence, and one whose pair rule couples room pairs: the MAP side updated from the previous
     evidence equals, table for table and bit for bit, the one built from scratch; both are None
     exactly when a pair couples its units; the MAP types are those of the full inference; and
-    ``map_types(ev, base=...)`` equals ``map_types(ev)`` of a fresh engine."""
+    ``map_types(ev, base=...)`` equals the full inference's."""
     from semmap_pp.knowledge.local import map_net, map_net_update
     coupled = tmp_path / "coupled.lp"
     coupled.write_text(open(RULES).read() + "\n:~ room(P), room(Q), adj(P,Q). [300@0, rr, P, Q]\n")
@@ -185,7 +186,8 @@ def test_the_map_side_updated_along_edits_equals_the_one_built_from_scratch(tmp_
     # unit's cut); Table 3's pair rules all involve SaLe, which the MAP side maximises out, so
     # no pair term survives there
     neighbourly = tmp_path / "neighbourly.lp"
-    neighbourly.write_text(open(RULES).read() + "\n:~ room(P), adj(P,Q), halike(Q). [300@0, rh, P, Q]"
+    neighbourly.write_text(open(RULES).read()
+                           + "\n:~ room(P), adj(P,Q), halike(Q). [300@0, rh, P, Q]"
                            "\n:~ corr(P), adj(P,Q). [200@0, ca, P, Q]"
                            "\n:~ adj(P,Q), muldoor(P), colike(Q). [100@0, mq, P, Q]\n")
     for path in (RULES, "rules/none.lp", str(neighbourly), str(coupled)):

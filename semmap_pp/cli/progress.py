@@ -86,7 +86,8 @@ class Progress:
     def seconds_left(self) -> float:
         """Estimated seconds to go (class docstring), capped by what is left of the budget
         (counted from the first draw); ``inf`` while no chain has made two draws."""
-        per_draw = [(self._last[c] - self._first[c]) / (n - 1) for c, n in self._count.items() if n >= 2]
+        per_draw = [(self._last[c] - self._first[c]) / (n - 1)
+                    for c, n in self._count.items() if n >= 2]
         if not per_draw:
             return math.inf
         left = max(self.draws_left - self.done, 0) * (sum(per_draw) / len(per_draw)) / self.parallel

@@ -697,9 +697,10 @@ def map_net_update(model: "LocalModel", base: MapNet, ev: Evidence, path=None,
     can differ: the cuts of the units whose evidence (pattern, neighbours) changed and of their
     neighbours (a cut depends on the unit's pattern and its neighbours', through the pair
     flags), then the tables of the units whose evidence or cut changed and of their neighbours
-    (a table depends on the unit's pattern and cut and on its neighbours' patterns and cuts). Equal to :func:`map_net` of ``ev`` (the same arithmetic in the same order).
-    None when a pair couples its units; built from scratch when more than ``max_share`` of the
-    units changed."""
+    (a table depends on the unit's pattern and cut and on its neighbours' patterns and cuts).
+    Equal to :func:`map_net` of ``ev`` (the same arithmetic in the same order). None when a
+    pair couples its units; built from scratch when more than ``max_share`` of the units
+    changed."""
     old, units = base.ev, ev.units
     old_set, new_set = set(old.units), set(units)
     dirty = old_set ^ new_set
