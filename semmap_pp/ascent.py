@@ -33,6 +33,7 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.model import MAX_K
+from semmap_pp.prior import all_valid
 
 #: The ascent grows a full world's capacity up to this many slots (the model's bound on k_max).
 MAX_CAPACITY = MAX_K
@@ -54,20 +55,6 @@ def _strongest_line(cum: np.ndarray, i0: int, i1: int, s0: int, s1: int) -> floa
     """The largest share of wall or door cells on lines ``i0..i1`` over the span ``s0..s1``
     (``cum``: the lines' cumulative counts along the span)."""
     return float(((cum[i0:i1, s1] - cum[i0:i1, s0]) / float(s1 - s0)).max())
-
-
-@numba.njit(cache=True, nogil=True)
-def _all_valid(rects, active, h, w, min_side, max_side):  # pragma: no cover - compiled
-    """Every active rectangle inside ``h x w`` with both sides in ``[min_side, max_side]``."""
-    for k in range(rects.shape[0]):
-        if not active[k]:
-            continue
-        r0, c0, r1, c1 = rects[k, 0], rects[k, 1], rects[k, 2], rects[k, 3]
-        if r0 < 0 or c0 < 0 or r1 > h or c1 > w:
-            return False
-        if not (min_side <= r1 - r0 <= max_side and min_side <= c1 - c0 <= max_side):
-            return False
-    return True
 
 
 @numba.njit(cache=True, nogil=True)
@@ -115,11 +102,10 @@ class _Ascent:
         return free
 
     def valid(self, world: wm.World) -> bool:
-        """Inside the lattice, every side within ``[min_side, max_side]`` (compiled: the ascent
-        asks it of every candidate)."""
-        h, w = self.data.shape
-        return bool(_all_valid(world.rects, world.active, int(h), int(w), int(self.data.min_side),
-                               int(self.data.max_side)))
+        """Inside the lattice, every side within ``[min_side, max_side]`` (the prior's compiled
+        test: the ascent asks it of every candidate)."""
+        return all_valid(world.rects, world.active, self.data.shape, self.data.min_side,
+                         self.data.max_side)
 
     def propose_above(self, new: wm.World, changed, floor: float):
         """``new``'s proposal, for a caller that takes it only when its log p exceeds ``floor``.

@@ -413,9 +413,10 @@ def test_start_worlds_have_room_for_a_building_larger_than_k_max():
 
 
 def test_the_ascents_validity_test_equals_its_definition():
-    """``_Ascent.valid``'s compiled test against ``world.is_valid`` plus the longest side, on
-    random worlds (rectangles past the lattice, inverted, too small, too long, inactive)."""
-    from semmap_pp.ascent import _all_valid
+    """``_Ascent.valid``'s test (the prior's compiled ``all_valid``) against ``world.is_valid``
+    plus the longest side, on random worlds (rectangles past the lattice, inverted, too small,
+    too long, inactive)."""
+    from semmap_pp.prior import all_valid
     rng = np.random.default_rng(0)
     seen = set()
     for _ in range(3000):
@@ -426,7 +427,7 @@ def test_the_ascents_validity_test_equals_its_definition():
         world = wm.make(rects, rng.random(k) < 0.7, np.full(k, wm.NO_TYPE))
         r = world.rects[world.active]
         want = wm.is_valid(world, (50, 60), lo) and bool(np.all(r[:, 2:] - r[:, :2] <= hi))
-        assert bool(_all_valid(world.rects, world.active, 50, 60, lo, hi)) == want
+        assert all_valid(world.rects, world.active, (50, 60), lo, hi) == want
         seen.add(want)
     assert seen == {True, False}
 

@@ -96,16 +96,14 @@ class Progress:
         return max(left, 0.0)
 
     def __call__(self, info: dict) -> None:
-        chain = info["chain"]
+        chain, now = info["chain"], self.elapsed()
         if not info["stopped"]:
             self.done += 1
-            now = self.elapsed()
             self._first.setdefault(chain, now)
             self._last[chain] = now
             self._count[chain] = self._count.get(chain, 0) + 1
         self.latest[chain] = info
         if self.mode == "plain":
-            now = self.elapsed()
             if now >= self._next_line:
                 first = self._next_line == 0.0
                 self._next_line = now + self.every

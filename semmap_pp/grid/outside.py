@@ -56,10 +56,11 @@ def border_open_share(classes: np.ndarray, seal_radius: int, wall_distance=None)
     ``wall_distance``: :func:`_wall_distance` of ``classes`` when the caller has it.
     """
     c = np.asarray(classes)
-    if _border(c == FREE).mean() == 0.0:
+    free = _border(c) == FREE
+    if not free.any():
         return 0.0                      # the common case (no free border cell): no distance transform
     d = _wall_distance(c) if wall_distance is None else wall_distance
-    return float(_border((d[1:-1, 1:-1] > seal_radius) & (c == FREE)).mean())
+    return float(((_border(d[1:-1, 1:-1]) > seal_radius) & free).mean())
 
 
 def _border(a: np.ndarray) -> np.ndarray:
@@ -133,7 +134,7 @@ def clear_outside(grid, params: OutsideParams):
     if mode == "keep":
         return grid, None
     radius = seal_radius(seal_gap_m, grid.resolution)
-    if _border(grid.classes == FREE).mean() == 0.0 and mode == "auto":
+    if mode == "auto" and not (_border(grid.classes) == FREE).any():
         return grid, None               # the common case, before any distance transform
     dist = _wall_distance(grid.classes)
     share = border_open_share(grid.classes, radius, dist)

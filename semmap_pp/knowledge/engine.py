@@ -132,7 +132,7 @@ class KnowledgeEngine:
                               else None)
         self.hits = self.misses = 0
         self._map_cache: OrderedDict = OrderedDict()   # evidence key -> (type network, MAP)
-        self._map_nets: OrderedDict = OrderedDict()    # evidence key -> MapNet or None (coupled)
+        self._map_nets: OrderedDict = OrderedDict()    # evidence key -> MapNet, None: general path
         self._trees: OrderedDict = OrderedDict()       # (card, scopes) -> JunctionTree or None
 
     @classmethod
@@ -172,8 +172,8 @@ class KnowledgeEngine:
 
         ``base`` (optional): an evidence close to this one (the sampler's current world). When no
         pair of the network couples its units, the MAP side is updated from ``base``'s
-        (:func:`~semmap_pp.knowledge.local.map_net_update`: the units two adjacency steps from
-        those whose evidence differs), not rebuilt over every unit; the types are the same."""
+        (:func:`~semmap_pp.knowledge.local.map_net_update`: the units whose evidence or cut
+        differs and their neighbours), not rebuilt over every unit; the types are the same."""
         hit = self._cache.get(evidence.key)
         if hit is not None:
             return hit.map_types
@@ -186,7 +186,8 @@ class KnowledgeEngine:
 
     def _map_net(self, ev: Evidence, base: Evidence):
         """The :class:`~semmap_pp.knowledge.local.MapNet` of ``ev``, updated from ``base``'s
-        (built first when not cached); None when a pair couples its units (small LRU)."""
+        (built first when not cached); None when a pair of either couples its units: the
+        general path (small LRU)."""
         nets = self._map_nets
         hit = nets.get(ev.key, False)
         if hit is not False:
