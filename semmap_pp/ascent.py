@@ -11,7 +11,9 @@ moves, each taken only when it raises log p: remove a unit, move one wall to a n
 a line of wall evidence (SHRINK/DILATE), merge two units that share a wall (MERGE), add a unit from
 the birth table where free space is left uncovered (ADD), split a unit at a wall line (SPLIT); and
 one compound move no single kernel makes, *bridging* two collinear pieces of a corridor across the
-unit between them (:meth:`_Ascent.bridges`).
+unit between them (:meth:`_Ascent.bridges`); in W*'s polish also two more, recutting an L-shaped
+pair the other way (:meth:`_Ascent.recuts`) and moving every edge on one wall together
+(:meth:`_Ascent.shared_wall_moves`).
 
 After sampling, the same ascent under the full target (knowledge on) polishes W*, the best sampled
 world: a short chain at T = 1 leaves it a few wall moves or one merge short of the nearest local
@@ -193,6 +195,66 @@ class _Ascent:
         changed = False
         for s in wm.active_slots(self.world).tolist():
             changed |= self.wall_moves(s)
+        return changed
+
+    def wall_group(self, slot: int, side: int) -> list[tuple[int, int]]:
+        """The edges ``(slot, side)`` that lie on the same wall as ``side`` of ``slot``.
+
+        Edges across the same axis within two wall bands of it whose spans overlap or touch the
+        group's (closed under that relation): the facing edges of the units on the other side of a
+        wall and the collinear edges of the units beside it. One wall moved edge by edge cannot
+        move: each edge alone opens a gap or an overlap at the others.
+        """
+        rects, act = self.world.rects, self.world.active
+        axis, tol = side % 2, 2 * int(self.data.wall_cells)
+        x = int(rects[slot][side])
+        edges = [(int(s), k) for s in np.flatnonzero(act) for k in (axis, axis + 2)
+                 if abs(int(rects[s][k]) - x) <= tol]
+        group, span = [(slot, side)], [int(rects[slot][1 - axis]), int(rects[slot][3 - axis])]
+        grew = True
+        while grew:
+            grew = False
+            for s, k in edges:
+                if (s, k) in group:
+                    continue
+                a, b = int(rects[s][1 - axis]), int(rects[s][3 - axis])
+                if a <= span[1] + tol and b >= span[0] - tol:
+                    group.append((s, k))
+                    span = [min(span[0], a), max(span[1], b)]
+                    grew = True
+        return group
+
+    def shared_wall_moves(self) -> bool:
+        """Move every edge of a wall together (:meth:`wall_group` of two or more edges).
+
+        Candidates as :meth:`wall_moves` (local steps, line-evidence peaks of the first edge),
+        each shifting all the group's edges by the same amount; the best is taken when it raises
+        log p. Each group is tried once per call.
+        """
+        from semmap_pp.kernels.shrink_dilate import wall_range
+        changed, seen = False, set()
+        for slot in wm.active_slots(self.world).tolist():
+            for side in range(4):
+                if not self.world.active[slot] or (slot, side) in seen:
+                    continue
+                group = self.wall_group(slot, side)
+                seen.update(group)
+                if len(group) < 2:
+                    continue
+                rect = [int(v) for v in self.world.rects[slot]]
+                _, lo, hi, w = wall_range(rect, side, self.data)
+                x = rect[side]
+                shifts = {d for d in range(-self.local, self.local + 1)}
+                shifts |= {int(c) - x for c in _line_peaks(w, lo, self.peaks) if lo <= c <= hi}
+                shifts.discard(0)
+                slots = tuple(sorted({s for s, _ in group}))
+                worlds = []
+                for d in sorted(shifts):
+                    rects = np.array(self.world.rects)
+                    for s, k in group:
+                        rects[s, k] += d
+                    worlds.append(wm.make(rects, self.world.active, self.world.types))
+                changed |= self.best_of(worlds, slots)
         return changed
 
     def untyped(self) -> wm.World:
@@ -490,10 +552,11 @@ class _Ascent:
 
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
-                 merges: bool = True, recuts: bool = False) -> wm.World:
+                 merges: bool = True, recuts: bool = False, shared_walls: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
-    L-shaped pairs (:meth:`_Ascent.recuts`; W*'s polish uses them).
+    L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
+    (:meth:`_Ascent.shared_wall_moves`); W*'s polish uses both.
 
     Parameters
     ----------
@@ -517,7 +580,8 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     asc = _Ascent(posterior, world, data)
     if not np.isfinite(asc.tr.logp):
         return world
-    for _ in range(rounds):
+
+    def one_round() -> bool:
         changed = asc.removals()
         changed |= asc.all_wall_moves()
         changed |= asc.removals()
@@ -529,8 +593,16 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         changed |= asc.splits()
         if births:
             changed |= asc.births()
-        if not changed:
+        return changed
+
+    for _ in range(rounds):
+        if not one_round():
             break
+    if shared_walls:    # from where the other moves stop: the same world or a better one
+        for _ in range(rounds):
+            if not asc.shared_wall_moves():
+                break
+            one_round()
     out = asc.untyped()
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
         out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots

@@ -341,7 +341,8 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
         log(f"polishing W* ({wm.n_units(best)} units) by greedy ascent of the full target")
         t_polish, before = time.perf_counter(), post.evaluate(best).total
-        best = refine_world(post, best, data, rounds=kernel_settings.polish_rounds, recuts=True)
+        best = refine_world(post, best, data, rounds=kernel_settings.polish_rounds, recuts=True,
+                            shared_walls=True)
         polished = (before, time.perf_counter() - t_polish)
     sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
     if polished is not None:            # sm.log_posterior is W*'s, evaluated once

@@ -454,3 +454,25 @@ def test_the_fragments_a_grown_unit_swallows_equal_their_definition():
         assert np.array_equal(got, want)
         found += int(want.any())
     assert found > 100
+
+
+def test_a_wall_off_its_line_moves_with_both_its_edges():
+    """Both rooms' edges on the shared wall 8 cells right of it: each edge alone cannot move (it
+    opens a gap of free space or runs into the other room), the wall moved as a whole can, and
+    W*'s polish (``shared_walls=True``) takes it."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(two_rooms())
+    right = [(2, 2, 82, 72), (2, 70, 82, 142)]
+    wrong = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 80)), 1, (2, 78, 82, 142))
+    rects = lambda w: sorted(tuple(int(v) for v in w.rects[s]) for s in wm.active_slots(w))  # noqa: E731
+    stuck = ascent._Ascent(post, wrong, data)
+    assert not stuck.all_wall_moves()                        # one edge at a time: stuck
+    asc = ascent._Ascent(post, wrong, data)
+    assert sorted(asc.wall_group(0, 3)) == [(0, 3), (1, 1)]  # the two edges on the shared wall
+    assert sorted(asc.wall_group(0, 0)) == [(0, 0), (1, 0)]  # the two top edges, collinear
+    assert asc.shared_wall_moves()
+    assert rects(asc.world) == right
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+    assert not ascent._Ascent(post, asc.world, data).shared_wall_moves()   # a local maximum
+    assert rects(refine_world(post, wrong, data, rounds=1, recuts=True, shared_walls=True)) == right
