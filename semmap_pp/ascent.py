@@ -88,6 +88,7 @@ class _Ascent:
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
         self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
         self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
+        self.focus = None   # a set of slots: passes visit only these units (and pairs with one)
 
     @property
     def world(self) -> wm.World:
@@ -193,7 +194,7 @@ class _Ascent:
     def all_wall_moves(self) -> bool:
         """:meth:`wall_moves` for every unit active now, in slot order."""
         changed = False
-        for s in wm.active_slots(self.world).tolist():
+        for s in self.units():
             changed |= self.wall_moves(s)
         return changed
 
@@ -224,16 +225,17 @@ class _Ascent:
                     grew = True
         return group
 
-    def shared_wall_moves(self) -> bool:
+    def shared_wall_moves(self) -> set:
         """Move every edge of a wall together (:meth:`wall_group` of two or more edges).
 
         Candidates as :meth:`wall_moves` (local steps, line-evidence peaks of the first edge),
         each shifting all the group's edges by the same amount; the best is taken when it raises
-        log p. Each group is tried once per call.
+        log p. Each group is tried once per call. Returns the slots of the units moved (empty:
+        nothing moved).
         """
         from semmap_pp.kernels.shrink_dilate import wall_range
-        changed, seen = False, set()
-        for slot in wm.active_slots(self.world).tolist():
+        moved, seen = set(), set()
+        for slot in self.units():
             for side in range(4):
                 if not self.world.active[slot] or (slot, side) in seen:
                     continue
@@ -254,8 +256,29 @@ class _Ascent:
                     for s, k in group:
                         rects[s, k] += d
                     worlds.append(wm.make(rects, self.world.active, self.world.types))
-                changed |= self.best_of(worlds, slots)
-        return changed
+                if self.best_of(worlds, slots):
+                    moved.update(slots)
+        return moved
+
+    def near(self, slots) -> set:
+        """``slots`` and the active units within two wall bands of any of them."""
+        act = self.world.active
+        return set(np.flatnonzero(act & self.near_mask(self.world.rects, slots)).tolist())
+
+    def near_mask(self, boxes: np.ndarray, slots) -> np.ndarray:
+        """Which of ``boxes`` (n, 4) lie within two wall bands of an active unit in ``slots``."""
+        t, out = 2 * int(self.data.wall_cells), np.zeros(len(boxes), bool)
+        for s in slots:
+            if self.world.active[s]:
+                r = self.world.rects[s]
+                out |= ((boxes[:, 0] <= r[2] + t) & (boxes[:, 2] >= r[0] - t)
+                        & (boxes[:, 1] <= r[3] + t) & (boxes[:, 3] >= r[1] - t))
+        return out
+
+    def units(self) -> list:
+        """The active slots a pass visits, in slot order: all, or those in :attr:`focus`."""
+        act = wm.active_slots(self.world).tolist()
+        return act if self.focus is None else [s for s in act if s in self.focus]
 
     def untyped(self) -> wm.World:
         """The current world with its types left undecided (what the ascent returns)."""
@@ -263,7 +286,7 @@ class _Ascent:
 
     def removals(self) -> bool:
         changed = False
-        for s in wm.active_slots(self.world).tolist():
+        for s in self.units():
             changed |= self.try_world(wm.remove(self.world, s), (s,))
         return changed
 
@@ -344,11 +367,15 @@ class _Ascent:
         return changed
 
     def _pairs(self):
-        """``(a, b, rect a, rect b)`` for each pair of the units active now, skipping a pair once
-        an accepted move has removed either (the rectangles are read when the pair comes up)."""
+        """``(a, b, rect a, rect b)`` for each pair of the units active now (with :attr:`focus`
+        set, the pairs with a unit in it), skipping a pair once an accepted move has removed either
+        (the rectangles are read when the pair comes up)."""
         act = wm.active_slots(self.world).tolist()
+        focus = self.focus
         for i, a in enumerate(act):
             for b in act[i + 1:]:
+                if focus is not None and a not in focus and b not in focus:
+                    continue
                 if self.world.active[a] and self.world.active[b]:
                     yield (a, b, [int(v) for v in self.world.rects[a]],
                            [int(v) for v in self.world.rects[b]])
@@ -497,7 +524,7 @@ class _Ascent:
         wall); when no single cut helps, cut one of the two pieces again (a room inside an L of
         walls needs both cuts: each alone leaves a wall-less band across open floor)."""
         changed = False
-        for s in wm.active_slots(self.world).tolist():
+        for s in self.units():
             free = self.free(2)
             if free.size == 0:
                 break
@@ -522,10 +549,14 @@ class _Ascent:
         return changed
 
     def births(self, covered_frac: float = 0.5) -> bool:
-        """Add birth-table boxes over free space that no unit covers, each polished, when that helps."""
+        """Add birth-table boxes over free space that no unit covers, each polished, when that
+        helps (with :attr:`focus` set, the boxes within two wall bands of a unit in it)."""
         d = self.data
         changed = False
-        for box in d.birth_rects.tolist():
+        boxes = d.birth_rects
+        if self.focus is not None:
+            boxes = boxes[self.near_mask(boxes, self.focus)]
+        for box in boxes.tolist():
             free = self.free(1)
             if free.size == 0:
                 break
@@ -535,19 +566,8 @@ class _Ascent:
                   * np.clip(np.minimum(rects[:, 3], c1) - np.maximum(rects[:, 1], c0), 0, None))
             if ov.sum() > covered_frac * (r1 - r0) * (c1 - c0):
                 continue
-            slot = int(free[0])
-            before = self.tr.logp
-            new = wm.add(self.world, slot, box)
-            if not self.valid(new):
-                continue
-            prop = self.tr.propose(new, (slot,))
-            self.tr.accept(prop)          # tentatively, then polish and keep only a net gain
-            self.wall_moves(slot)
-            if self.tr.logp > before + 1e-9:
-                changed = True
-            else:
-                undo = self.tr.propose(wm.remove(self.world, slot), (slot,))
-                self.tr.accept(undo)
+            slot = int(free[0])   # polished by wall moves, kept only for a net gain
+            changed |= self.tentative(wm.add(self.world, slot, box), (slot,), [slot])
         return changed
 
 
@@ -600,9 +620,12 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             break
     if shared_walls:    # from where the other moves stop: the same world or a better one
         for _ in range(rounds):
-            if not asc.shared_wall_moves():
+            moved = asc.shared_wall_moves()
+            if not moved:
                 break
-            one_round()
+            asc.focus = asc.near(moved)     # the walls the moved ones may have unblocked
+            asc.all_wall_moves()
+            asc.focus = None
     out = asc.untyped()
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
         out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots

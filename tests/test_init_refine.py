@@ -476,3 +476,50 @@ def test_a_wall_off_its_line_moves_with_both_its_edges():
     assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
     assert not ascent._Ascent(post, asc.world, data).shared_wall_moves()   # a local maximum
     assert rects(refine_world(post, wrong, data, rounds=1, recuts=True, shared_walls=True)) == right
+
+
+def test_a_birth_that_does_not_pay_leaves_the_world_as_it_was(monkeypatch):
+    """A tentative birth is polished by wall moves, which may swallow units; when the whole does
+    not raise log p the world before the birth comes back, swallowed units included (the undo
+    used to remove the new unit only, so a failed birth could lower log p)."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(two_rooms())
+    start = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 72)), 1, (2, 70, 82, 142))
+    asc = ascent._Ascent(post, start, data)
+    asc.data = data._replace(birth_rects=np.array([[10, 20, 40, 50]]))   # a box inside room 0
+    before = asc.tr.logp
+    born = []
+
+    def swallow_right_room(self, slot):      # the polish of the new unit drops the right room
+        born.append(slot)
+        self.tr.accept(self.tr.propose(wm.remove(self.world, 1), (1,)))
+        return True
+
+    monkeypatch.setattr(ascent._Ascent, "wall_moves", swallow_right_room)
+    assert not asc.births(covered_frac=1.0)  # every box counts as uncovered
+    assert born == [2]                       # the box was born in the first free slot
+    assert asc.tr.logp == before
+    assert sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world)) \
+        == [(2, 2, 82, 72), (2, 70, 82, 142)]
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(before)
+
+
+def test_a_focused_pass_visits_the_focus_only():
+    """With ``focus`` set the passes visit only those units (pairs: those with one in it; births:
+    the boxes near one); ``near`` adds the units within two wall bands."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(two_rooms())
+    off = wm.add(wm.add(wm.empty(8), 0, (2, 5, 82, 72)), 1, (2, 70, 82, 139))   # outer walls 3 cells in
+    asc = ascent._Ascent(post, off, data)
+    assert asc.near({0}) == {0, 1} and asc.near({1}) == {0, 1}
+    asc.focus = {1}
+    assert asc.units() == [1] and [p[:2] for p in asc._pairs()] == [(0, 1)]
+    assert asc.all_wall_moves()
+    assert tuple(int(v) for v in asc.world.rects[0]) == (2, 5, 82, 72)       # not visited
+    assert tuple(int(v) for v in asc.world.rects[1]) == (2, 70, 82, 142)     # onto its wall
+    assert asc.near_mask(np.array([[2, 100, 20, 120], [200, 200, 210, 210]]), {1}).tolist() == [True, False]
+    asc.focus = None
+    assert asc.units() == [0, 1] and asc.all_wall_moves()
+    assert tuple(int(v) for v in asc.world.rects[0]) == (2, 2, 82, 72)
