@@ -88,7 +88,7 @@ class _Ascent:
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
         self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
         self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
-        self.focus = None   # a set of slots: passes visit only these units (and pairs with one)
+        self.focus = None   # a set of slots: the per-unit passes visit only these (:meth:`units`)
 
     @property
     def world(self) -> wm.World:
@@ -262,18 +262,14 @@ class _Ascent:
 
     def near(self, slots) -> set:
         """``slots`` and the active units within two wall bands of any of them."""
-        act = self.world.active
-        return set(np.flatnonzero(act & self.near_mask(self.world.rects, slots)).tolist())
-
-    def near_mask(self, boxes: np.ndarray, slots) -> np.ndarray:
-        """Which of ``boxes`` (n, 4) lie within two wall bands of an active unit in ``slots``."""
-        t, out = 2 * int(self.data.wall_cells), np.zeros(len(boxes), bool)
+        rects, act, t = self.world.rects, self.world.active, 2 * int(self.data.wall_cells)
+        out = np.zeros(len(act), bool)
         for s in slots:
-            if self.world.active[s]:
-                r = self.world.rects[s]
-                out |= ((boxes[:, 0] <= r[2] + t) & (boxes[:, 2] >= r[0] - t)
-                        & (boxes[:, 1] <= r[3] + t) & (boxes[:, 3] >= r[1] - t))
-        return out
+            if act[s]:
+                r = rects[s]
+                out |= ((rects[:, 0] <= r[2] + t) & (rects[:, 2] >= r[0] - t)
+                        & (rects[:, 1] <= r[3] + t) & (rects[:, 3] >= r[1] - t))
+        return set(np.flatnonzero(act & out).tolist())
 
     def units(self) -> list:
         """The active slots a pass visits, in slot order: all, or those in :attr:`focus`."""
@@ -367,15 +363,11 @@ class _Ascent:
         return changed
 
     def _pairs(self):
-        """``(a, b, rect a, rect b)`` for each pair of the units active now (with :attr:`focus`
-        set, the pairs with a unit in it), skipping a pair once an accepted move has removed either
-        (the rectangles are read when the pair comes up)."""
+        """``(a, b, rect a, rect b)`` for each pair of the units active now, skipping a pair once
+        an accepted move has removed either (the rectangles are read when the pair comes up)."""
         act = wm.active_slots(self.world).tolist()
-        focus = self.focus
         for i, a in enumerate(act):
             for b in act[i + 1:]:
-                if focus is not None and a not in focus and b not in focus:
-                    continue
                 if self.world.active[a] and self.world.active[b]:
                     yield (a, b, [int(v) for v in self.world.rects[a]],
                            [int(v) for v in self.world.rects[b]])
@@ -549,14 +541,10 @@ class _Ascent:
         return changed
 
     def births(self, covered_frac: float = 0.5) -> bool:
-        """Add birth-table boxes over free space that no unit covers, each polished, when that
-        helps (with :attr:`focus` set, the boxes within two wall bands of a unit in it)."""
+        """Add birth-table boxes over free space that no unit covers, each polished, when that helps."""
         d = self.data
         changed = False
-        boxes = d.birth_rects
-        if self.focus is not None:
-            boxes = boxes[self.near_mask(boxes, self.focus)]
-        for box in boxes.tolist():
+        for box in d.birth_rects.tolist():
             free = self.free(1)
             if free.size == 0:
                 break
