@@ -230,8 +230,8 @@ class _Ascent:
 
         Candidates as :meth:`wall_moves` (local steps, line-evidence peaks of the first edge),
         each shifting all the group's edges by the same amount; the best is taken when it raises
-        log p (INTERCHANGE's move, for every unit on the wall rather than one pair). Each group is tried once per call. Returns the slots of the units moved (empty:
-        nothing moved).
+        log p (INTERCHANGE's move, for every unit on the wall rather than one pair). Each group
+        is tried once per call. Returns the slots of the units moved (empty: nothing moved).
         """
         from semmap_pp.kernels.shrink_dilate import wall_range
         moved, seen = set(), set()

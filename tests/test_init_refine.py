@@ -514,7 +514,8 @@ def test_a_focused_pass_visits_the_focus_only():
     off = wm.add(wm.add(wm.empty(8), 0, (2, 5, 82, 72)), 1, (2, 70, 82, 139))   # outer walls 3 cells in
     asc = ascent._Ascent(post, off, data)
     assert asc.near({0}) == {0, 1} and asc.near({1}) == {0, 1}
-    far = ascent._Ascent(post, wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 40)), 1, (2, 100, 82, 142)), data)
+    apart = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 40)), 1, (2, 100, 82, 142))
+    far = ascent._Ascent(post, apart, data)
     assert far.near({0}) == {0}
     asc.focus = {1}
     assert asc.units() == [1]
