@@ -207,3 +207,26 @@ def test_without_an_enclosed_unit_nothing_is_exterior():
     c = np.full((60, 90), FREE, np.uint8)
     rects = np.array([(0, 0, 30, 30), (0, 30, 30, 60), (0, 60, 30, 90), (30, 0, 60, 90)])
     assert not find_exterior(c, rects, 2, 0.3, 0.1).any()
+
+
+def test_a_strip_closed_only_at_its_short_ends_does_not_shield_a_fan():
+    """A thin unit inside the fan beyond the window, closed by obstacles at its two short ends and
+    open along both long sides, passes the two-sides test on its own walls but encloses a fifth of
+    its perimeter: it gives no cover and does not widen the footprint, so the fan is still
+    flagged (it was not when such a strip counted as supported)."""
+    from semmap_pp.derive.exterior import perimeter_share
+
+    cls = np.ones((30, 30), np.uint8)
+    cls[2:28, 2:14] = OCCUPIED
+    cls[3:15, 3:13] = FREE
+    cls[16:27, 3:13] = FREE
+    cls[6:10, 13] = FREE
+    cls[1:20, 14:28] = FREE
+    cls[3, 20:22] = OCCUPIED
+    cls[18, 20:22] = OCCUPIED
+    strip = (3, 20, 19, 22)
+    own = side_shares(cls, strip, None, 1, 0.1, own=0)
+    assert np.sort(own)[2] >= 0.3 and perimeter_share(own, strip) < 0.3
+    rects = np.array([[2, 2, 16, 14], [2, 13, 18, 28], [15, 2, 28, 14], strip])
+    assert find_exterior(cls, rects, wall=1, max_share=0.3, seen_min=0.1).tolist() == \
+        [False, True, False, False]

@@ -10,8 +10,10 @@ through at least three of its four sides: per side, the *enclosed share* of its 
 (free cells that continue into a neighbouring unit are a shared boundary, not a ray leaving the
 building; a side with fewer seen cells than ``seen_min`` of its band counts as enclosed), and the
 unit is exterior when its second largest share is below ``max_share``. A unit is supported when
-it passes that test on its own walls (no cover counted): pieces of a corridor cover each other,
-but two fans side by side do not.
+it passes that test on its own walls (no cover counted) and its own walls enclose at least
+``max_share`` of its perimeter (the sides' shares weighted by their lengths): pieces of a corridor
+cover each other, but two fans side by side do not, nor does a strip inside a fan that is closed
+only at its two short ends.
 Rays also leave a unit that covers the part of a room seen through its door (a room the robot
 never entered); such a unit lies within the building's footprint, so a unit is flagged only when
 more than half its area lies outside the convex hull of the *enclosed* units (supported ones
@@ -72,6 +74,18 @@ def side_shares(classes: np.ndarray, rect, count: np.ndarray | None, wall: int, 
     return out
 
 
+def perimeter_share(shares: np.ndarray, rect) -> float:
+    """The enclosed share of ``rect``'s whole perimeter: its sides' ``shares`` (top, bottom, left,
+    right, as :func:`side_shares`) weighted by the sides' lengths.
+
+    >>> perimeter_share(np.array([1.0, 1.0, 0.0, 0.0]), (0, 0, 12, 3))   # closed at its short ends
+    0.2
+    """
+    h, w = float(rect[2] - rect[0]), float(rect[3] - rect[1])
+    lens = np.array([w, w, h, h])
+    return float(np.dot(shares, lens) / lens.sum()) if lens.sum() > 0 else 0.0
+
+
 def _outside_share(rect, hull) -> float:
     """The share of ``rect``'s area outside the convex polygon ``hull`` ((k, 2) lattice points in
     order), on a grid of 10 x 10 sample points; 1.0 without a hull (fewer than 3 points)."""
@@ -130,8 +144,9 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     exterior = np.zeros(n, dtype=bool)
     if max_share <= 0.0 or n < 3:
         return exterior
-    supported = np.array([np.sort(side_shares(classes, r, None, wall, seen_min, own=0))[2]
-                          >= max_share for r in rects])
+    own = [side_shares(classes, r, None, wall, seen_min, own=0) for r in rects]
+    supported = np.array([np.sort(sh)[2] >= max_share and perimeter_share(sh, r) >= max_share
+                          for sh, r in zip(own, rects)])
     count = np.zeros(classes.shape, dtype=np.int32)
     for r0, c0, r1, c1 in rects[supported]:
         count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
@@ -150,4 +165,4 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     return exterior
 
 
-__all__ = ["find_exterior", "side_shares"]
+__all__ = ["find_exterior", "perimeter_share", "side_shares"]
