@@ -88,7 +88,6 @@ class _Ascent:
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
         self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
         self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
-        self.focus = None   # a set of slots: the per-unit passes visit only these (:meth:`units`)
 
     @property
     def world(self) -> wm.World:
@@ -166,18 +165,13 @@ class _Ascent:
         leaves strips of free space between furniture and walls as units of their own): the
         candidate world drops them, so the move is judged against the world without them.
         """
-        from semmap_pp.kernels.shrink_dilate import wall_range
         moved = False
         for side in range(4):
             if not self.world.active[slot]:
                 break
             rect = [int(v) for v in self.world.rects[slot]]
-            _, lo, hi, w = wall_range(rect, side, self.data)
-            x = rect[side]
-            cand = {x + d for d in range(-self.local, self.local + 1)} | set(_line_peaks(w, lo, self.peaks))
-            cand = sorted(c for c in cand if lo <= c <= hi and c != x)
             best, best_lp = None, self.tr.logp + 1e-9
-            for c in cand:
+            for c in self.positions(rect, side):
                 r = list(rect)
                 r[side] = c
                 new, gone = self.absorb(wm.replace(self.world, slot, r), slot)
@@ -191,10 +185,19 @@ class _Ascent:
                 moved = True
         return moved
 
-    def all_wall_moves(self) -> bool:
-        """:meth:`wall_moves` for every unit active now, in slot order."""
+    def positions(self, rect, side: int) -> list:
+        """The candidate positions of wall ``side`` of ``rect``, ascending, its own left out:
+        local steps and line-evidence peaks within the range that keeps the unit valid."""
+        from semmap_pp.kernels.shrink_dilate import wall_range
+        _, lo, hi, w = wall_range(rect, side, self.data)
+        x = int(rect[side])
+        cand = {x + d for d in range(-self.local, self.local + 1)} | set(_line_peaks(w, lo, self.peaks))
+        return sorted(c for c in cand if lo <= c <= hi and c != x)
+
+    def all_wall_moves(self, within=None) -> bool:
+        """:meth:`wall_moves` for every unit active now (of ``within``, when given), in slot order."""
         changed = False
-        for s in self.units():
+        for s in self.units(within):
             changed |= self.wall_moves(s)
         return changed
 
@@ -228,12 +231,11 @@ class _Ascent:
     def shared_wall_moves(self) -> set:
         """Move every edge of a wall together (:meth:`wall_group` of two or more edges).
 
-        Candidates as :meth:`wall_moves` (local steps, line-evidence peaks of the first edge),
-        each shifting all the group's edges by the same amount; the best is taken when it raises
-        log p (INTERCHANGE's move, for every unit on the wall rather than one pair). Each group
-        is tried once per call. Returns the slots of the units moved (empty: nothing moved).
+        Candidates as :meth:`wall_moves` (:meth:`positions` of the first edge), each shifting
+        all the group's edges by the same amount; the best is taken when it raises log p
+        (INTERCHANGE's move, for every unit on the wall rather than one pair). Each group is
+        tried once per call. Returns the slots of the units moved (empty: nothing moved).
         """
-        from semmap_pp.kernels.shrink_dilate import wall_range
         moved, seen = set(), set()
         for slot in self.units():
             for side in range(4):
@@ -244,15 +246,10 @@ class _Ascent:
                 if len(group) < 2:
                     continue
                 rect = [int(v) for v in self.world.rects[slot]]
-                _, lo, hi, w = wall_range(rect, side, self.data)
-                x = rect[side]
-                shifts = {d for d in range(-self.local, self.local + 1)}
-                shifts |= {int(c) - x for c in _line_peaks(w, lo, self.peaks) if lo <= c <= hi}
-                shifts.discard(0)
                 slots = tuple(sorted({s for s, _ in group}))
                 worlds = []
-                for d in sorted(shifts):
-                    rects = np.array(self.world.rects)
+                for c in self.positions(rect, side):
+                    d, rects = c - rect[side], np.array(self.world.rects)
                     for s, k in group:
                         rects[s, k] += d
                     worlds.append(wm.make(rects, self.world.active, self.world.types))
@@ -271,10 +268,10 @@ class _Ascent:
                         & (rects[:, 1] <= r[3] + t) & (rects[:, 3] >= r[1] - t))
         return set(np.flatnonzero(act & out).tolist())
 
-    def units(self) -> list:
-        """The active slots a pass visits, in slot order: all, or those in :attr:`focus`."""
+    def units(self, within=None) -> list:
+        """The active slots, in slot order: all, or those in the set ``within``."""
         act = wm.active_slots(self.world).tolist()
-        return act if self.focus is None else [s for s in act if s in self.focus]
+        return act if within is None else [s for s in act if s in within]
 
     def untyped(self) -> wm.World:
         """The current world with its types left undecided (what the ascent returns)."""
@@ -611,9 +608,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             moved = asc.shared_wall_moves()
             if not moved:
                 break
-            asc.focus = asc.near(moved)     # the walls the moved ones may have unblocked
-            asc.all_wall_moves()
-            asc.focus = None
+            asc.all_wall_moves(asc.near(moved))   # the walls the moved ones may have unblocked
     out = asc.untyped()
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
         out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots

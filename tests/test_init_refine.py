@@ -506,8 +506,8 @@ def test_a_birth_that_does_not_pay_leaves_the_world_as_it_was(monkeypatch):
 
 
 def test_a_focused_pass_visits_the_focus_only():
-    """With ``focus`` set the per-unit passes (wall moves, removals, splits, whole walls) visit
-    only those units; ``near`` adds the units within two wall bands."""
+    """Wall moves ``within`` a set of slots visit only those units; ``near`` adds the units
+    within two wall bands."""
     from semmap_pp import ascent
 
     post, data = knowledge_free(two_rooms())
@@ -517,11 +517,9 @@ def test_a_focused_pass_visits_the_focus_only():
     apart = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 40)), 1, (2, 100, 82, 142))
     far = ascent._Ascent(post, apart, data)
     assert far.near({0}) == {0}
-    asc.focus = {1}
-    assert asc.units() == [1]
-    assert asc.all_wall_moves()
+    assert asc.units({1}) == [1]
+    assert asc.all_wall_moves({1})
     assert tuple(int(v) for v in asc.world.rects[0]) == (2, 5, 82, 72)       # not visited
     assert tuple(int(v) for v in asc.world.rects[1]) == (2, 70, 82, 142)     # onto its wall
-    asc.focus = None
     assert asc.units() == [0, 1] and asc.all_wall_moves()
     assert tuple(int(v) for v in asc.world.rects[0]) == (2, 2, 82, 72)
