@@ -13,7 +13,9 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   (:func:`building_roi`). Exterior units (world.json ``exterior``: free space seen outside the
   building) are not predictions of the building's units; ``unit_f1_with_exterior`` scores them as
   if they were. ``*_observed`` scores against the units the simulated robot saw
-  (:func:`observed_truth`); ``errors`` is :func:`error_breakdown`.
+  (:func:`observed_truth`); ``*_either_l`` with each of the truth's L-shaped spaces cut whichever
+  way W* cut it (:func:`semmap_pp.evaluate.score_world_either_l`; ``l_shapes_recut`` counts them);
+  ``errors`` is :func:`error_breakdown`.
 * **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
   world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
   scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
@@ -296,14 +298,19 @@ def _floor(seed: int, model, rules):
 def _floor_scores(floor, sm, pred: dict):
     """The scores W* and the truth ceiling share: ``(row fields, score against the truth, score
     against the seen truth)``."""
-    from semmap_pp.evaluate import cpr, score_world
+    from semmap_pp.evaluate import cpr, score_world, score_world_either_l
     sc = score_world(pred, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
     so = score_world(pred, observed_truth(floor.truth), shape=floor.classes.shape,
                      resolution=floor.resolution)
+    se, _, recut = score_world_either_l(pred, floor.truth, shape=floor.classes.shape,
+                                        resolution=floor.resolution)
     cpr_building = cpr(floor.classes, sm.states_image, building_roi(floor.truth, floor.classes.shape,
                                                                    sm.roi, floor.resolution))[0]
     fields = {"cpr": round(sm.cpr, 4), "cpr_building": _r4(cpr_building), "unit_f1": round(sc.unit_f1, 4),
-              "unit_f1_observed": round(so.unit_f1, 4), "door_f1_observed": _r4(_door_f1(so))}
+              "unit_f1_observed": round(so.unit_f1, 4), "door_f1_observed": _r4(_door_f1(so)),
+              "unit_f1_either_l": round(se.unit_f1, 4), "type_accuracy_either_l": _r4(se.type_accuracy),
+              "door_f1_either_l": _r4(_door_f1(se)), "l_shapes": len(floor.truth.get("l_shapes", [])),
+              "l_shapes_recut": len(recut)}
     return fields, sc, so
 
 
@@ -336,25 +343,25 @@ def bench_synthetic(args, model, rules) -> dict:
                "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
                "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
                "log_posterior": round(float(sm.log_posterior), 1),
-               "cpr": shared["cpr"], "cpr_building": shared["cpr_building"], "unit_f1": shared["unit_f1"],
+               **shared,
                "type_accuracy": round(sc.type_accuracy, 4) if sc.type_accuracy == sc.type_accuracy else None,
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "unit_f1_with_exterior": round(sx.unit_f1, 4),
                "observed_units": len(observed_truth(floor.truth)["units"]),
-               "unit_f1_observed": shared["unit_f1_observed"],
-               "type_accuracy_observed": _r4(so.type_accuracy), "door_f1_observed": shared["door_f1_observed"],
+               "type_accuracy_observed": _r4(so.type_accuracy),
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, f"synth-{seed}", sm)
         _log(args, f"synth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} (building {row['cpr_building']})  "
-                   f"F1 {row['unit_f1']:.3f} (seen {row['unit_f1_observed']:.3f})  types {row['type_accuracy']}  "
+                   f"F1 {row['unit_f1']:.3f} (seen {row['unit_f1_observed']:.3f}, either L {row['unit_f1_either_l']:.3f})  types {row['type_accuracy']}  "
                    f"doors {row['door_f1']} (seen {row['door_f1_observed']})  "
                    f"{row['seconds']} s")
     means = {k: _mean(rows, k) for k in ("cpr", "cpr_building", "unit_f1", "unit_f1_with_exterior",
                                          "type_accuracy", "door_f1", "unit_f1_observed",
-                                         "type_accuracy_observed", "door_f1_observed", "seconds")}
+                                         "type_accuracy_observed", "door_f1_observed", "unit_f1_either_l",
+                                         "type_accuracy_either_l", "door_f1_either_l", "seconds")}
     errors = {k: sum(r["errors"][k] for r in rows if "errors" in r)
               for k in ("pred_unmatched", "pred_outside_building", "true_missed", "true_missed_unseen",
                         "true_missed_cut")}
@@ -451,7 +458,7 @@ def bench_truth(args, model, rules) -> dict:
                    f"types {row['type_accuracy']}  doors {row['door_f1']} (seen {row['door_f1_observed']})  "
                    f"log p {row['log_posterior']}")
     keys = ("cpr", "cpr_building", "unit_f1", "unit_f1_observed", "type_accuracy", "door_f1",
-            "door_f1_observed", "seconds")
+            "door_f1_observed", "unit_f1_either_l", "type_accuracy_either_l", "door_f1_either_l", "seconds")
     out = {"rows": rows, "means": {k: _mean(rows, k) for k in keys}}
     if args.outside_from:
         diff = [r["log_posterior"] - r["wstar_log_posterior"] for r in rows if "wstar_log_posterior" in r]

@@ -100,3 +100,16 @@ def test_truth_of_another_map_is_a_user_error(floor, tmp_path, capsys):
     assert main(["eval", str(run), "--truth", str(IPA / "training_Fr52.png")]) == 2
     err = capsys.readouterr().err
     assert "not the same map" in err and err.count("\n") == 1
+
+
+def test_an_l_cut_the_other_way_is_scored_both_ways(tmp_path, capsys):
+    from tests.test_evaluate_lshape import A2, B2, prediction, truth
+    t = dict(truth(), height=75, width=75, resolution=0.05)
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "truth.json").write_text(json.dumps(t))
+    pred = prediction(A2, B2)
+    run = fake_run(tmp_path / "run", pred["units"], np.zeros((75, 75)), doors=pred["doors"])
+    s = scores(capsys, run, "--truth", tmp_path / "t")["scores"]
+    assert s["l_shapes"] == 1 and s["l_shapes_recut"] == 1
+    assert s["unit_f1"] == pytest.approx(0.8) and s["unit_f1_either_l"] == 1.0
+    assert s["door_recall"] == pytest.approx(1 / 3) and s["door_recall_either_l"] == 1.0

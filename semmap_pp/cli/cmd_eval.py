@@ -4,7 +4,9 @@
 
 * a synthetic floor (``semmap synth``): its folder, or its ``truth.json`` — units matched by polygon
   IoU (unit precision / recall / F1), type accuracy over matched units, adjacency and door
-  precision / recall (:func:`semmap_pp.evaluate.score_world`), the CPR of W* from world.json, and,
+  precision / recall (:func:`semmap_pp.evaluate.score_world`), the same with each L-shaped space
+  cut whichever way the prediction cut it (``*_either_l``, when the truth has L-shapes;
+  :func:`semmap_pp.evaluate.score_world_either_l`), the CPR of W* from world.json, and,
   when ``truth_labels.png`` sits beside it, room segmentation of labels.png against it;
 * an ipa ground-truth segmentation (``*_gt_segmentation.png``, white rooms): precision / recall
   ("micro" and "macro") and mean IoU of ``labels.png``, and of ``regions.png`` when the run wrote
@@ -102,7 +104,8 @@ def _seg(prefix: str, s) -> dict:
 def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, published: bool = False) -> dict:
     """Scores of the run in ``run_dir`` against ``truth``: ``{"kind", "scores": {name: value}}``."""
     from semmap_pp.evaluate import (read_ipa_gt, read_ipa_types, read_json, read_label_image, score_world,
-                                    segmentation_scores, type_accuracy, type_map_from_labels)
+                                    score_world_either_l, segmentation_scores, type_accuracy,
+                                    type_map_from_labels)
 
     kind = kind or detect_kind(truth)
     world, labels = _read_run(run_dir)
@@ -116,6 +119,13 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
                        "unit_recall": s.unit_recall, "unit_f1": s.unit_f1, "type_accuracy": s.type_accuracy,
                        "adjacency_precision": s.adjacency_precision, "adjacency_recall": s.adjacency_recall,
                        "door_precision": s.door_precision, "door_recall": s.door_recall})
+        if t.get("l_shapes"):
+            e, _, recut = score_world_either_l(world, t, pred_source=str(run_dir / "world.json"),
+                                               truth_source=str(truth_json))
+            scores.update({"l_shapes": len(t["l_shapes"]), "l_shapes_recut": len(recut),
+                           "unit_f1_either_l": e.unit_f1, "type_accuracy_either_l": e.type_accuracy,
+                           "door_precision_either_l": e.door_precision,
+                           "door_recall_either_l": e.door_recall})
         truth_labels = truth_json.parent / "truth_labels.png"
         if truth_labels.is_file():
             gt = read_label_image(truth_labels)
