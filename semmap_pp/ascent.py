@@ -330,9 +330,11 @@ class _Ascent:
         or a corridor in pieces. A wall between two rooms is a line along most of its length (door
         gaps included as door candidates), so rooms are not merged here even where the
         knowledge-free target would take it. A unit overlapping the box is trimmed to its largest
-        part beside it (:meth:`cut_back`) when that part keeps at least ``merge_keep`` of its area
-        and a wall line (:meth:`boundary_lines` at least ``trim_line_min``) stands along the new
-        boundary; otherwise the pair is skipped. A unit with no part of a unit side left beside the
+        part beside it (:meth:`cut_back`). A trim deeper than a wall band is kept only when that
+        part keeps at least ``merge_keep`` of its area and a wall line (:meth:`boundary_lines` at
+        least ``trim_line_min``) stands along the new boundary, otherwise the pair is skipped; a
+        trim of at most a wall band only sets two bands on one line (a corridor piece a cell lower
+        than the other reaches that far into the rooms beside it) and is not tested. A unit with no part of a unit side left beside the
         box is dropped (a third piece of the same space: a strip along a hall's wall in three
         pieces joins the hall two at a time only so; the slack bounds what the box can swallow).
         The box and the trimmed units are then wall-moved, and the whole kept only if log p rose.
@@ -352,8 +354,9 @@ class _Ascent:
             if self.boundary_lines(ra, rb) >= self.merge_line_max:
                 continue
             new, cut = self.cut_back(wm.replace(wm.remove(self.world, b), a, box), a, box)
-            if any(new.active[u] and (area(new.rects[u]) < self.merge_keep * area(self.world.rects[u])
-                   or self.boundary_lines(box, [int(v) for v in new.rects[u]]) < self.trim_line_min)
+            if any(new.active[u] and self.trimmed_by(new, u) > t
+                   and (area(new.rects[u]) < self.merge_keep * area(self.world.rects[u])
+                        or self.boundary_lines(box, [int(v) for v in new.rects[u]]) < self.trim_line_min)
                    for u in cut):
                 continue      # the box would trim a unit to a sliver, or where no wall stands
             changed |= self.tentative(new, (a, b, *cut), [a, *cut])
@@ -449,6 +452,11 @@ class _Ascent:
                     changed |= self.tentative(new, (n, w), [n, w])
                 break
         return changed
+
+    def trimmed_by(self, new: wm.World, u: int) -> int:
+        """How many cells :meth:`cut_back` took off unit ``u`` (the largest move of a side of its
+        rectangle from the current world to ``new``)."""
+        return int(np.abs(new.rects[u].astype(np.int64) - self.world.rects[u].astype(np.int64)).max())
 
     def cut_back(self, world: wm.World, a: int, box) -> tuple[wm.World, list]:
         """``world`` with every unit but ``a`` that overlaps ``box`` (by more than the wall band)

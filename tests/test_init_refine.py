@@ -146,6 +146,42 @@ def test_a_merge_trims_a_unit_only_along_a_wall_line():
     assert loose.merges()                                     # without both guards the merge is taken
 
 
+def corridor_over_room() -> np.ndarray:
+    """A 0.9 m x 9.8 m corridor (2-cell walls) and a 3 m x 3 m room below its middle, joined by a
+    0.8 m door."""
+    m = np.full((126, 206), UNKNOWN, np.uint8)
+    m[38:122, 2:202] = OCCUPIED
+    m[40:58, 4:200] = FREE
+    m[60:120, 100:160] = FREE
+    m[58:60, 120:136] = FREE
+    return m
+
+
+def test_a_merge_trims_a_unit_by_a_wall_band_without_asking_for_a_wall_line():
+    """The corridor in two pieces, the right one a row lower, so the pair's box reaches a row
+    into the room's top band: trimming the room by that row only sets the two bands on one line,
+    and the merge needs no wall line there (synthetic floor 4's corridor stayed in two pieces,
+    its door into a room leaving less than half the wall a line; docs/quality.md). A box that
+    would trim the room deeper still needs the line."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(corridor_over_room())
+    room = (58, 98, 122, 162)
+    for lower, merged in ((1, True), (4, False)):
+        start = wm.add(wm.add(wm.add(wm.empty(8), 0, (38, 2, 60, 100)),
+                              1, (38 + lower, 98, 60 + lower, 202)), 2, room)
+        asc = ascent._Ascent(post, start, data, trim_line_min=1.01)   # no line is ever enough
+        box = (38, 2, 60 + lower, 202)
+        trimmed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
+        assert cut == [2] and asc.trimmed_by(trimmed, 2) == lower      # rows taken off its top
+        assert asc.merges() == merged
+        n = wm.n_units(asc.world)
+        assert n == (2 if merged else 3)
+        if merged:
+            assert asc.tr.logp > post.evaluate(start).total
+            assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+
+
 def room_and_alcove_room() -> np.ndarray:
     """A tall room (rows 2..92, columns 62..122) and a shorter room beside its lower part (rows
     22..92, columns 2..60), 2-cell walls, a 0.8 m door between them."""
