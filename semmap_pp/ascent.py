@@ -334,9 +334,10 @@ class _Ascent:
         part keeps at least ``merge_keep`` of its area and a wall line (:meth:`boundary_lines` at
         least ``trim_line_min``) stands along the new boundary, otherwise the pair is skipped; a
         trim of at most a wall band only sets two bands on one line (a corridor piece a cell lower
-        than the other reaches that far into the rooms beside it) and is not tested. A unit with no part of a unit side left beside the
-        box is dropped (a third piece of the same space: a strip along a hall's wall in three
-        pieces joins the hall two at a time only so; the slack bounds what the box can swallow).
+        than the other reaches that far into the rooms beside it) and is not tested. A unit with
+        no part of a unit side left beside the box is dropped (a third piece of the same space: a
+        strip along a hall's wall in three pieces joins the hall two at a time only so; the slack
+        bounds what the box can swallow).
         The box and the trimmed units are then wall-moved, and the whole kept only if log p rose.
         """
         t = self.data.wall_cells
