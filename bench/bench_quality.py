@@ -245,9 +245,9 @@ def observed_truth(truth: dict) -> dict:
 
 def visible_truth(truth: dict) -> dict:
     """What the map shows of the truth: :func:`observed_truth` without the closed doors (the
-    generator draws a closed door as wall, so the map holds nothing to find: 47 of the 412 doors of
-    floors 0..29, 7 of them between seen units). Scored with either cut of each L (:func:`semmap_pp.evaluate.score_world_either_l`)
-    as ``*_visible``."""
+    generator draws a closed door as wall, so the map holds nothing to find: 47 of the 412 doors
+    of floors 0..29, 7 of them between seen units). Scored with either cut of each L
+    (:func:`semmap_pp.evaluate.score_world_either_l`) as ``*_visible``."""
     out = observed_truth(truth)
     out["doors"] = [d for d in out["doors"] if d.get("open", True)]
     return out
@@ -310,11 +310,10 @@ def _floor_scores(floor, sm, pred: dict):
     """The scores W* and the truth ceiling share: ``(row fields, score against the truth, score
     against the seen truth)``."""
     from semmap_pp.evaluate import cpr, score_world, score_world_either_l
-    sc = score_world(pred, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
+    se, sc, recut = score_world_either_l(pred, floor.truth, shape=floor.classes.shape,
+                                         resolution=floor.resolution)      # sc: the strict score
     so = score_world(pred, observed_truth(floor.truth), shape=floor.classes.shape,
                      resolution=floor.resolution)
-    se, _, recut = score_world_either_l(pred, floor.truth, shape=floor.classes.shape,
-                                        resolution=floor.resolution)
     sv = score_world_either_l(pred, visible_truth(floor.truth), shape=floor.classes.shape,
                               resolution=floor.resolution)[0]
     cpr_building = cpr(floor.classes, sm.states_image, building_roi(floor.truth, floor.classes.shape,

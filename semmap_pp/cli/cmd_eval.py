@@ -114,14 +114,16 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
     if kind == "synthetic":
         truth_json = truth / "truth.json" if truth.is_dir() else truth
         t = read_json(truth_json)
-        s = score_world(world, t, pred_source=str(run_dir / "world.json"), truth_source=str(truth_json))
+        names = dict(pred_source=str(run_dir / "world.json"), truth_source=str(truth_json))
+        if t.get("l_shapes"):
+            e, s, recut = score_world_either_l(world, t, **names)     # s: the strict score
+        else:
+            s = score_world(world, t, **names)
         scores.update({"units_true": s.n_true_units, "unit_precision": s.unit_precision,
                        "unit_recall": s.unit_recall, "unit_f1": s.unit_f1, "type_accuracy": s.type_accuracy,
                        "adjacency_precision": s.adjacency_precision, "adjacency_recall": s.adjacency_recall,
                        "door_precision": s.door_precision, "door_recall": s.door_recall})
         if t.get("l_shapes"):
-            e, _, recut = score_world_either_l(world, t, pred_source=str(run_dir / "world.json"),
-                                               truth_source=str(truth_json))
             scores.update({"l_shapes": len(t["l_shapes"]), "l_shapes_recut": len(recut),
                            "unit_f1_either_l": e.unit_f1, "type_accuracy_either_l": e.type_accuracy,
                            "door_precision_either_l": e.door_precision,
