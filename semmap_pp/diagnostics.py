@@ -54,6 +54,7 @@ class QuantityDiagnostics:
     ess_tail: float
     ok: bool
     reason: str  # "" when ok, else why it failed
+    chain_means: tuple = ()  # the summary's mean in each chain (chains stuck in different modes differ)
 
 
 @dataclass(frozen=True)
@@ -79,7 +80,9 @@ class ConvergenceReport:
             "rhat_max": self.rhat_max, "ess_min": self.ess_min,
             "quantities": {q.name: {"mean": clean(q.mean), "sd": clean(q.sd), "rhat": clean(q.rhat),
                                     "ess_bulk": clean(q.ess_bulk), "ess_tail": clean(q.ess_tail),
-                                    "ok": q.ok, "reason": q.reason} for q in self.quantities},
+                                    "ok": q.ok, "reason": q.reason,
+                                    "chain_means": [clean(m) for m in q.chain_means]}
+                           for q in self.quantities},
         }
 
     def to_text(self) -> str:
@@ -91,6 +94,11 @@ class ConvergenceReport:
             lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
                          f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
         lines.append("converged" if self.ok else "NOT converged")
+        if self.n_chains > 1:
+            lines += ["", "mean per chain (chains that settled in different modes differ here)",
+                      f"{'quantity':<16}" + "".join(f"{'chain ' + str(c + 1):>12}" for c in range(self.n_chains))]
+            for q in self.quantities:
+                lines.append(f"{q.name:<16}" + "".join(f"{m:>12.4g}" for m in q.chain_means))
         return "\n".join(lines)
 
 
@@ -113,6 +121,7 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
             ess_b = float(az.ess(a, method="bulk"))
             ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
+        chain_means = tuple(float(v) for v in np.nanmean(a, axis=1))
     reasons = []
     if math.isinf(rhat):
         reasons.append("R-hat is infinite (each chain stuck at its own value)")
@@ -125,7 +134,8 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
         reasons.append("ESS is NaN")
     elif math.isfinite(ess_b) and min(ess_b, ess_t) < ess_min:
         reasons.append(f"ESS {min(ess_b, ess_t):.0f} < {ess_min}")
-    return QuantityDiagnostics(name, mean, sd, rhat, ess_b, ess_t, not reasons, "; ".join(reasons))
+    return QuantityDiagnostics(name, mean, sd, rhat, ess_b, ess_t, not reasons, "; ".join(reasons),
+                               chain_means)
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,

@@ -87,3 +87,22 @@ def test_spread_accumulator_counts_types():
     assert acc.p_type()[2].tolist() == [[0.0, 0.5], [0.0, 0.0]]
     # cells ever wall: (0,0) with p=1 (variance 0) and (1,1) with p=0.5 (variance 0.25)
     assert acc.wall_spread() == pytest.approx(0.125)
+
+
+def test_the_report_gives_each_chains_mean():
+    """Two chains settled in different modes: the per-chain means say which is where (the text
+    table and the JSON), while the pooled mean hides it."""
+    rng = np.random.default_rng(5)
+    a = mixing_chains(rng, chains=2, draws=50)
+    a[1] -= 100.0
+    units = np.repeat(np.array([[20.0], [15.0]]), 50, axis=1)
+    rep = dg.convergence({"log_posterior": a, "n_units": units}, rhat_max=1.05, ess_min=10)
+    lp, n = rep.quantities
+    assert lp.chain_means == pytest.approx((a[0].mean(), a[1].mean()))
+    assert n.chain_means == (20.0, 15.0) and n.mean == 17.5
+    assert rep.to_dict()["quantities"]["n_units"]["chain_means"] == [20.0, 15.0]
+    text = rep.to_text()
+    assert "mean per chain" in text
+    assert text.splitlines()[-1].split() == ["n_units", "20", "15"]
+    single = dg.convergence({"n_units": units[:1]}, rhat_max=1.05, ess_min=10)
+    assert "mean per chain" not in single.to_text()      # one chain: nothing to compare

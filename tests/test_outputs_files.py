@@ -269,4 +269,5 @@ def test_report_is_self_contained_and_escapes_inputs(hostile_run):
         assert f'href="{p.name}"' in text
     for q in run.report.quantities:
         assert f"<td>{q.name}</td>" in text
+    assert "<th>mean per chain</th>" in text
     assert "default" in text and "CPR" in text
