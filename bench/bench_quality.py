@@ -327,10 +327,26 @@ def _floor_scores(floor, sm, pred: dict):
     return fields, sc, so
 
 
+def seen_by_class(pred: dict, truth: dict, matches: dict) -> dict:
+    """``(seen_share, walls_seen_share)`` of W*'s units (world.json) by what they match: a true
+    room the robot drove into or only glimpsed ("entered room", "glimpsed room", likewise for the
+    other types), "unmatched", and "exterior" for the exterior units."""
+    true = {u["id"]: u for u in truth["units"]}
+    out: dict = {}
+    for u in pred["units"]:
+        t = true.get(matches.get(u["id"]))
+        key = "unmatched" if t is None else f"{'entered' if t.get('entered') else 'glimpsed'} {t['type']}"
+        out.setdefault(key, []).append((u["seen_share"], u["walls_seen_share"]))
+    for e in pred.get("exterior", []):
+        out.setdefault("exterior", []).append((e["seen_share"], e["walls_seen_share"]))
+    return out
+
+
 def bench_synthetic(args, model, rules) -> dict:
     from semmap_pp.evaluate import score_world
     from semmap_pp.outputs import world_dict
     rows = []
+    seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules)
@@ -366,6 +382,8 @@ def bench_synthetic(args, model, rules) -> dict:
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
+        for k, v in seen_by_class(pred, floor.truth, sc.matches).items():
+            seen.setdefault(k, []).extend(v)
         _save(args, f"synth-{seed}", sm)
         _log(args, f"synth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} (building {row['cpr_building']})  "
                    f"F1 {row['unit_f1']:.3f} (seen {row['unit_f1_observed']:.3f}, either L {row['unit_f1_either_l']:.3f}, visible {row['unit_f1_visible']:.3f})  types {row['type_accuracy']}  "
@@ -382,7 +400,10 @@ def bench_synthetic(args, model, rules) -> dict:
     errors |= {"pred_units": sum(r["units"] for r in rows if "units" in r),
                "pred_exterior": sum(r.get("exterior", 0) for r in rows),
                "true_units": sum(r["true_units"] for r in rows if "true_units" in r)}
-    return {"rows": rows, "means": means, "errors": errors,
+    seen_shares = {k: {"units": len(v), "interior_median": round(float(np.median([a for a, _ in v])), 2),
+                       "walls_median": round(float(np.median([b for _, b in v])), 2)}
+                   for k, v in sorted(seen.items())}
+    return {"rows": rows, "means": means, "errors": errors, "seen_shares": seen_shares,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}
 
@@ -447,6 +468,7 @@ def bench_truth(args, model, rules) -> dict:
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.pipeline import run_target
     rows = []
+    seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules)

@@ -38,6 +38,10 @@ from semmap_pp.atomic import atomic_path
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import SemmapError
 
+#: A chain whose mean log posterior lies more than this many within-chain standard deviations below
+#: the best chain's sits in another mode (:meth:`ConvergenceReport.separated_chains`).
+SEPARATION_SDS = 4.0
+
 #: Label-invariant summaries recorded for every draw, in report order.
 SUMMARIES = ("log_posterior", "n_units", "wall_length", "cpr") + tuple(f"n_{t}" for t in UNIT_TYPES)
 
@@ -55,6 +59,7 @@ class QuantityDiagnostics:
     ok: bool
     reason: str  # "" when ok, else why it failed
     chain_means: tuple = ()  # the summary's mean in each chain (chains stuck in different modes differ)
+    chain_sds: tuple = ()    # its standard deviation within each chain
 
 
 @dataclass(frozen=True)
@@ -71,6 +76,40 @@ class ConvergenceReport:
     def ok(self) -> bool:
         return all(q.ok for q in self.quantities)
 
+    def separated_chains(self, name: str = "log_posterior") -> list[tuple[int, float]]:
+        """Chains whose mean of ``name`` lies apart from the best chain's: ``(chain, gap)`` pairs
+        (chain numbered from 1; gap = best chain's mean - this chain's mean) for every chain whose
+        gap exceeds ``SEPARATION_SDS`` times the larger of the two chains' own standard deviations
+        (and 1). Such a chain sits in another mode of the posterior, or is still climbing towards
+        the best chain's. Empty with one chain or without the summary.
+
+        >>> import numpy as np
+        >>> lp = np.tile(np.arange(50.0) % 5, (3, 1)); lp[2] -= 100.0   # chain 3 far below
+        >>> convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10).separated_chains()
+        [(3, 100.0)]
+        """
+        q = next((q for q in self.quantities if q.name == name), None)
+        if q is None or len(q.chain_means) < 2:
+            return []
+        means, sds = np.asarray(q.chain_means, float), np.asarray(q.chain_sds or [0.0] * len(q.chain_means))
+        if not np.isfinite(means).any():
+            return []
+        best = int(np.nanargmax(means))
+        out = []
+        for c, (m, sd) in enumerate(zip(means, sds)):
+            gap = float(means[best] - m)
+            if c != best and np.isfinite(gap) and gap > SEPARATION_SDS * max(float(sd), float(sds[best]), 1.0):
+                out.append((c + 1, round(gap, 1)))
+        return out
+
+    def separation_note(self) -> str:
+        """One line naming the chains in separate modes (:meth:`separated_chains`), "" if none."""
+        sep = self.separated_chains()
+        if not sep:
+            return ""
+        lp = next(q for q in self.quantities if q.name == "log_posterior")
+        return _separation_text(sep, 1 + int(np.nanargmax(lp.chain_means)))
+
     def to_dict(self) -> dict:
         def clean(v):
             return None if isinstance(v, float) and not math.isfinite(v) else v
@@ -81,8 +120,11 @@ class ConvergenceReport:
             "quantities": {q.name: {"mean": clean(q.mean), "sd": clean(q.sd), "rhat": clean(q.rhat),
                                     "ess_bulk": clean(q.ess_bulk), "ess_tail": clean(q.ess_tail),
                                     "ok": q.ok, "reason": q.reason,
-                                    "chain_means": [clean(m) for m in q.chain_means]}
+                                    "chain_means": [clean(m) for m in q.chain_means],
+                                    "chain_sds": [clean(m) for m in q.chain_sds]}
                            for q in self.quantities},
+            "separated_chains": [{"chain": c, "log_posterior_below_best": g}
+                                 for c, g in self.separated_chains()],
         }
 
     def to_text(self) -> str:
@@ -94,6 +136,8 @@ class ConvergenceReport:
             lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
                          f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
         lines.append("converged" if self.ok else "NOT converged")
+        if self.separation_note():
+            lines.append(self.separation_note())
         if self.n_chains > 1:
             lines += ["", "mean per chain (chains that settled in different modes differ here)",
                       f"{'quantity':<16}" + "".join(f"{'chain ' + str(c + 1):>12}" for c in range(self.n_chains))]
@@ -122,6 +166,7 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
             ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
         chain_means = tuple(float(v) for v in np.nanmean(a, axis=1))
+        chain_sds = tuple(float(v) for v in np.nanstd(a, axis=1))
     reasons = []
     if math.isinf(rhat):
         reasons.append("R-hat is infinite (each chain stuck at its own value)")
@@ -135,7 +180,19 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
     elif math.isfinite(ess_b) and min(ess_b, ess_t) < ess_min:
         reasons.append(f"ESS {min(ess_b, ess_t):.0f} < {ess_min}")
     return QuantityDiagnostics(name, mean, sd, rhat, ess_b, ess_t, not reasons, "; ".join(reasons),
-                               chain_means)
+                               chain_means, chain_sds)
+
+
+def _separation_text(separated: list[tuple[int, float]], best: int) -> str:
+    if len(separated) == 1:
+        (c, g), = separated
+        what = f"chain {c}'s mean log posterior lies {g:,.1f} nats below chain {best}'s"
+    else:
+        what = (f"the mean log posteriors of chains {', '.join(str(c) for c, _ in separated)} lie "
+                f"{', '.join(f'{g:,.1f}' for _, g in separated)} nats below chain {best}'s")
+    return (f"chains in separate modes: {what}, more than {SEPARATION_SDS:g} of the chains' own "
+            f"standard deviations (another mode, or still climbing: docs/sampler.md, \"Chains in "
+            f"separate modes\"); W* comes from the best world of any chain")
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,

@@ -106,3 +106,40 @@ def test_the_report_gives_each_chains_mean():
     assert text.splitlines()[-1].split() == ["n_units", "20", "15"]
     single = dg.convergence({"n_units": units[:1]}, rhat_max=1.05, ess_min=10)
     assert "mean per chain" not in single.to_text()      # one chain: nothing to compare
+
+
+def test_chains_in_separate_modes_are_named():
+    """A chain whose mean log posterior lies far below the best chain's, measured in the chains' own
+    standard deviations, is named (text line and JSON); chains that mix, or differ by less than
+    SEPARATION_SDS of their spread, are not."""
+    rng = np.random.default_rng(7)
+    a = mixing_chains(rng, chains=3, draws=200)          # unit-scale chains that mix
+    rep = dg.convergence({"log_posterior": a}, rhat_max=1.05, ess_min=10)
+    assert rep.separated_chains() == [] and rep.separation_note() == ""
+    assert rep.to_dict()["separated_chains"] == []
+    far = a.copy()
+    far[0] -= 50.0                                        # chain 1 far below chains 2 and 3
+    far[2] -= 2.0 * far[2].std()                          # chain 3 a little below: not separated
+    rep = dg.convergence({"log_posterior": far}, rhat_max=1.05, ess_min=10)
+    best = 1 + int(np.argmax(far.mean(axis=1)))
+    assert best == 2
+    (c, gap), = rep.separated_chains()
+    assert c == 1 and gap == pytest.approx(far[1].mean() - far[0].mean(), abs=0.05)
+    note = rep.separation_note()
+    assert note.startswith("chains in separate modes: chain 1's mean log posterior lies") and "chain 2's" in note
+    assert note in rep.to_text().splitlines()
+    assert rep.to_dict()["separated_chains"] == [{"chain": 1, "log_posterior_below_best": round(gap, 1)}]
+    # the threshold scales with the chains' own spread: a gap of 30 separates chains of sd 1, not
+    # chains of sd 10
+    for scale, separated in ((1.0, [1]), (10.0, [])):
+        b = a * scale
+        b[0] -= 30.0
+        rep = dg.convergence({"log_posterior": b}, rhat_max=1.05, ess_min=10)
+        assert [c for c, _ in rep.separated_chains()] == separated
+    # chains stuck at constant values: separated when the means differ by more than 4 nats
+    stuck = np.repeat(np.array([[-100.0], [-103.0], [-110.0]]), 20, axis=1)
+    rep = dg.convergence({"log_posterior": stuck}, rhat_max=1.05, ess_min=10)
+    assert rep.separated_chains() == [(3, 10.0)]
+    # without a log posterior summary, or with one chain, nothing to say
+    assert dg.convergence({"n_units": stuck}, rhat_max=1.05, ess_min=10).separated_chains() == []
+    assert dg.convergence({"log_posterior": stuck[:1]}, rhat_max=1.05, ess_min=10).separated_chains() == []

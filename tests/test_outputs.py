@@ -17,13 +17,16 @@ SCHEMA = json.loads((Path(__file__).parents[1] / "docs" / "world.schema.json").r
 MODEL = load_model()
 
 
-def two_rooms_grid():
-    """Two 2 m x 3 m rooms side by side (walls 2 cells), a 1 m door in the shared wall."""
+def two_rooms_grid(unseen_from=None):
+    """Two 2 m x 3 m rooms side by side (walls 2 cells), a 1 m door in the shared wall; with
+    ``unseen_from``, every column from there on unknown."""
     c = np.full((50, 110), UNKNOWN, np.uint8)
     c[4:46, 4:106] = OCCUPIED
     c[6:44, 6:54] = FREE
     c[6:44, 56:104] = FREE
     c[15:35, 54:56] = FREE          # door: 20 cells = 1.0 m
+    if unseen_from is not None:
+        c[:, unseen_from:] = UNKNOWN
     return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
                          origin=(1.0, 2.0, 0.0), source=None, image_path=None)
 
@@ -87,3 +90,36 @@ def test_empty_world_is_a_valid_document():
     doc = world_dict(sm)
     jsonschema.validate(doc, SCHEMA)
     assert doc["units"] == [] and doc["adjacency"] == [] and doc["cpr"] < 0.5
+
+
+def test_each_unit_says_how_much_of_it_the_map_shows():
+    # both rooms fully seen: interior free, wall band occupied (the door free)
+    g, f, sm = build(two_rooms_world())
+    doc = world_dict(sm)
+    assert [(u["seen_share"], u["walls_seen_share"]) for u in doc["units"]] == [(1.0, 1.0), (1.0, 1.0)]
+    # the right room's far half unseen: its floor and walls there are inferred, not observed
+    g = two_rooms_grid(unseen_from=80)
+    f = build_frame(g, MODEL)
+    sm = semantic_map(g, f, Posterior(f, MODEL), two_rooms_world())
+    doc = world_dict(sm)
+    jsonschema.validate(doc, SCHEMA)
+    right = doc["units"][1]
+    # interior: rows 6..43, columns 56..103 (38 x 48 cells), columns 56..79 seen
+    assert right["seen_share"] == round(24 / 48, 4)
+    # band: the 42 x 52 rectangle less the interior; seen are columns 54..79 of its top and
+    # bottom bands (2 x 2 x 26) and the left band (38 x 2)
+    assert right["walls_seen_share"] == round((2 * 2 * 26 + 38 * 2) / (42 * 52 - 38 * 48), 4)
+    assert doc["units"][0]["seen_share"] == 1.0
+
+
+def test_the_overlay_tells_inferred_walls_from_walls_the_map_shows():
+    from semmap_pp.outputs.figures import RGB, overlay_rgb
+
+    g = two_rooms_grid(unseen_from=80)
+    f = build_frame(g, MODEL)
+    sm = semantic_map(g, f, Posterior(f, MODEL), two_rooms_world())
+    rgb = overlay_rgb(sm)
+    assert tuple(rgb[4, 60]) == RGB["wall"]             # the top wall where the map shows it
+    assert tuple(rgb[4, 90]) == RGB["inferred wall"]    # and where it is unknown
+    assert tuple(rgb[20, 105]) == RGB["inferred wall"]  # the right wall: never seen
+    assert tuple(rgb[20, 90]) == RGB["object"]          # unknown inside a unit: object (the paper)

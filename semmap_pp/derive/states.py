@@ -86,6 +86,34 @@ def unit_objects(classes: np.ndarray, rect, wall: int, object_max_extent: int,
     return objects, small[labels] & (sub == OCCUPIED)
 
 
+def seen_shares(classes: np.ndarray, rect, wall: int) -> tuple[float, float]:
+    """``(interior, wall band)``: the share of each part of the unit ``rect`` that the map shows
+    (free or occupied input cells; unknown cells and cells beyond the lattice are not shown).
+
+    Near 1 for a room the robot drove through. A room glimpsed through its door has its outline
+    partly unseen: the part of its wall band the map does not show is inferred, not observed (W*
+    puts a wall there because the target does, not because the map shows one).
+
+    >>> cls = np.full((10, 10), UNKNOWN, np.uint8); cls[0:10, 0:5] = OCCUPIED; cls[1:9, 1:5] = FREE
+    >>> seen_shares(cls, (0, 0, 10, 10), wall=1)   # the left half seen: 32 of 64 inside, 18 of 36 band
+    (0.5, 0.5)
+    """
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    seen = classes != UNKNOWN
+
+    def count(box):
+        a0, b0, a1, b1 = _clip(box, classes.shape)
+        return int(np.count_nonzero(seen[a0:a1, b0:b1])) if a0 < a1 and b0 < b1 else 0
+
+    i0, j0, i1, j1 = interior(rect, wall)
+    n_all = max(r1 - r0, 0) * max(c1 - c0, 0)
+    n_in = max(i1 - i0, 0) * max(j1 - j0, 0)
+    s_all = count((r0, c0, r1, c1))
+    s_in = count((i0, j0, i1, j1)) if n_in else 0
+    band = n_all - n_in
+    return (s_in / n_in if n_in else 0.0, (s_all - s_in) / band if band else 0.0)
+
+
 def find_objects(classes: np.ndarray, rects: np.ndarray, wall: int, object_max_extent: int,
                  slots=None) -> list[Object]:
     """Objects of every unit (``rects`` (n, 4); ``slots`` their ids, default 0..n-1)."""

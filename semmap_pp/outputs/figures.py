@@ -28,7 +28,8 @@ from semmap_pp.outputs.graphml import TYPE_LETTER  # noqa: E402
 
 # Colours of the paper's Fig. 5 (classified map: black occupied, gray unknown, white free).
 RGB = {"free": (255, 255, 255), "unknown": (160, 160, 160), "occupied": (0, 0, 0),
-       "wall": (0, 0, 255), "door": (0, 230, 230), "object": (0, 170, 0)}
+       "wall": (0, 0, 255), "door": (0, 230, 230), "object": (0, 170, 0),
+       "inferred wall": (150, 175, 255)}
 MAGENTA = "#e000e0"
 EXTERIOR = "#d35400"   # exterior units (free space seen outside the building): dashed orange
 TYPE_FACE = {"room": "#fff3b0", "corridor": "#bde0ff", "hall": "#ffd1a6", "other": "#e4e4e4"}
@@ -64,9 +65,13 @@ def door_mask_image(sm) -> np.ndarray:
 
 
 def overlay_rgb(sm) -> np.ndarray:
-    """(H, W, 3) uint8: the classified map with W*'s walls (blue), doors (cyan) and objects (green)."""
+    """(H, W, 3) uint8: the classified map with W*'s walls (blue; light blue where the map shows
+    nothing there: an inferred wall, e.g. the far side of a room glimpsed through its door), doors
+    (cyan) and objects (green)."""
     rgb = classified_rgb(sm.grid.classes)
-    rgb[sm.states_image == W_WALL] = RGB["wall"]
+    wall = sm.states_image == W_WALL
+    rgb[wall] = RGB["wall"]
+    rgb[wall & (sm.grid.classes == UNKNOWN)] = RGB["inferred wall"]
     rgb[sm.states_image == W_OBJECT] = RGB["object"]
     rgb[door_mask_image(sm)] = RGB["door"]
     return rgb
@@ -126,9 +131,10 @@ def _legend(fig, handles, ncol=None):
 
 
 def overlay_png(sm, doc: dict) -> bytes:
-    """overlay.png (paper Fig. 5c): W* on the classified map, type letter and id at each unit's
-    centre (R room, C corridor, H hall, E other), magenta N at unexplored areas, exterior units
-    (free space seen outside the building) dashed with X and their id."""
+    """overlay.png (paper Fig. 5c): W* on the classified map (walls the map does not show in light
+    blue), type letter and id at each unit's centre (R room, C corridor, H hall, E other), magenta
+    N at unexplored areas, exterior units (free space seen outside the building) dashed with X and
+    their id."""
     box = crop_box(sm)
     fig, (ax,) = _axes(box, extra_h=0.4)
     _show(ax, overlay_rgb(sm), box)
@@ -144,7 +150,7 @@ def overlay_png(sm, doc: dict) -> bytes:
         ax.text(*v.mean(axis=0), f"X{e['id']}", ha="center", va="center", color=EXTERIOR, fontsize=11,
                 fontweight="bold", bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
     handles = [Patch(fc=np.array(RGB[k]) / 255, ec="0.5", label=k) for k in
-               ("occupied", "unknown", "free", "wall", "door", "object")]
+               ("occupied", "unknown", "free", "wall", "inferred wall", "door", "object")]
     if doc.get("exterior"):
         handles.append(Patch(fc="none", ec=EXTERIOR, ls="--", lw=2.0, label="exterior (X)"))
     _legend(fig, handles)

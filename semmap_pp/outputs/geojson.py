@@ -10,7 +10,8 @@ Features (``properties.kind`` says which; ``properties.id`` is the id of world.j
 
 - ``unit``: Polygon, one closed counter-clockwise ring (first vertex repeated last); ``type``, the
   type marginals ``p_room`` ... ``p_other``, ``length_m``, ``width_m``, ``area_m2``, ``region``
-  (regions.png id), ``doors`` and ``objects`` (id lists).
+  (regions.png id), ``seen_share`` and ``walls_seen_share`` (as world.json), ``doors`` and
+  ``objects`` (id lists).
 - ``door``: LineString across the opening, from one end to the other; ``units``, ``width_m``.
 - ``object``: Point at its centre; ``unit``, ``extent_m``, ``cells``.
 - ``unexplored``: Point at its centre; ``area_m2``.
@@ -84,6 +85,7 @@ def geojson_dict(sm, doc: dict | None = None, regions: dict[int, int] | None = N
                  **{f"p_{t}": u["type_marginals"][t] for t in UNIT_TYPES},
                  "length_m": length, "width_m": width, "area_m2": round(length * width, 4),
                  "center": u["center_m"], "region": regions.get(u["id"]),
+                 "seen_share": u["seen_share"], "walls_seen_share": u["walls_seen_share"],
                  "doors": u["doors"], "objects": u["objects"]}
         geom = {"type": "Polygon", "coordinates": [closed_ccw(u["vertices_m"])]}
         features.append(_feature("unit", u["id"], geom, props))

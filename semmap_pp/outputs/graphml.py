@@ -3,7 +3,8 @@
 Nodes (``kind`` says which; ``id`` is the id of world.json):
 
 - ``u<id>`` unit: ``type``, ``label`` (R/C/H/E + id), ``p_room`` ... ``p_other``, ``length_m``,
-  ``width_m``, ``area_m2``, ``region``, centre ``x_m, y_m`` (map frame) and ``x_px, y_px`` (image).
+  ``width_m``, ``area_m2``, ``region``, ``seen_share`` and ``walls_seen_share`` (as world.json),
+  centre ``x_m, y_m`` (map frame) and ``x_px, y_px`` (image).
 - ``o<id>`` object: ``unit``, ``extent_m``, ``cells``, centre.
 - ``n<id>`` unexplored area: ``area_m2``, centre.
 - ``x<id>`` exterior unit (free space seen outside the building, docs/model.md): ``label`` (X +
@@ -88,7 +89,8 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
                    label=f"{TYPE_LETTER[u['type']]}{u['id']}",
                    **{f"p_{t}": float(u["type_marginals"][t]) for t in UNIT_TYPES},
                    length_m=float(length), width_m=float(width), area_m2=round(length * width, 4),
-                   region=int(regions.get(u["id"], 0)), x_m=float(u["center_m"][0]),
+                   region=int(regions.get(u["id"], 0)), seen_share=float(u["seen_share"]),
+                   walls_seen_share=float(u["walls_seen_share"]), x_m=float(u["center_m"][0]),
                    y_m=float(u["center_m"][1]), x_px=x, y_px=y)
     for o in doc["objects"]:
         g.add_node(f"o{o['id']}", kind="object", id=o["id"], unit=o["unit"], extent_m=float(o["extent_m"]),

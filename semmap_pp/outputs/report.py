@@ -103,9 +103,12 @@ def units_table(doc: dict, regions: dict[int, int]) -> str:
         to = [f"{k} (×{c})" if c > 1 else str(k) for k, c in sorted(n.items())]
         rows.append([_td(u["id"], True), _td(u["type"])] + [_td(f"{m[t]:.2f}", True) for t in UNIT_TYPES] +
                     [_td(f"{u['size_m'][0]:.2f} × {u['size_m'][1]:.2f}", True),
-                     _td(f"{u['size_m'][0] * u['size_m'][1]:.1f}", True), _td(regions.get(u["id"], ""), True),
+                     _td(f"{u['size_m'][0] * u['size_m'][1]:.1f}", True),
+                     _td(f"{u['seen_share']:.2f} / {u['walls_seen_share']:.2f}", True),
+                     _td(regions.get(u["id"], ""), True),
                      _td(", ".join(to) if to else "–"), _td(len(u["objects"]), True)])
-    header = ["id", "type"] + [f"p({t})" for t in UNIT_TYPES] + ["size (m)", "area (m²)", "region",
+    header = ["id", "type"] + [f"p({t})" for t in UNIT_TYPES] + ["size (m)", "area (m²)",
+                                                                  "seen (inside / walls)", "region",
                                                                   "doors to units", "objects"]
     return _table(header, rows)
 
@@ -181,7 +184,8 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         '<div class="cols"><div><h2 id="run">Run</h2>', summary, '</div>',
         '<div><h2 id="world">The most probable world W*</h2>', world, "</div></div>",
         _figure(f("overlay"), "W* on the classified map (overlay.png)",
-                "Black occupied, gray unknown, white free; blue wall, cyan door, green object. Unit type and "
+                "Black occupied, gray unknown, white free; blue wall (light blue where the map shows none: "
+                "inferred), cyan door, green object. Unit type and "
                 "id at each centre: R room, C corridor, H hall, E other; magenta N: unexplored area "
                 "(paper Fig. 5c)."),
         "<h3>Units</h3>", units_table(doc, regions),
@@ -201,6 +205,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         f"<p>{verdict} — {rep.n_chains} chains × {rep.n_draws} draws; a label-invariant summary passes when "
         f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (NaN fails).</p>",
         convergence_table(rep),
+        f"<p>{e(rep.separation_note())}.</p>" if rep.separation_note() else "",
         '<h2 id="cpr">Cell prediction rate</h2>',
         f"<p>CPR = <b>{e(cpr)}</b>: the share of cells in the region of interest "
         f"(<code>{e(inputs.roi_name)}</code>) that W* explains correctly (free as free, occupied as wall "

@@ -21,6 +21,7 @@ from PIL import Image
 from semmap_pp import __version__
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.derive.states import seen_shares
 
 FORMAT = "semmap_pp.world/1"
 
@@ -53,6 +54,13 @@ def _rect_geometry(frame, rect, res: float) -> dict:
     return {"vertices_px": [_r(v, 3) for v in vpx], "vertices_m": [_r(v, 4) for v in vm],
             "center_m": _r(vm.mean(axis=0), 4),
             "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)], reverse=True)}
+
+
+def _seen(frame, rect) -> dict:
+    """``seen_share`` and ``walls_seen_share``: how much of a unit's interior and of its wall band
+    the map shows (:func:`semmap_pp.derive.states.seen_shares`)."""
+    inside, band = seen_shares(frame.classes, rect, frame.cells.wall)
+    return {"seen_share": round(inside, 4), "walls_seen_share": round(band, 4)}
 
 
 def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: int | None = None,
@@ -96,7 +104,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         un["id"] = i
 
     exterior = [{"id": sm.exterior_ids[e.slot], **_rect_geometry(frame, world.rects[e.slot], res),
-                 "units": sorted(ids[s] for s in e.neighbours)}
+                 **_seen(frame, world.rects[e.slot]), "units": sorted(ids[s] for s in e.neighbours)}
                 for e in sorted(d.exterior, key=lambda o: sm.exterior_ids[o.slot])]
 
     adjacency = sorted({tuple(sorted((ids[int(d.slots[i])], ids[int(d.slots[j])])))
@@ -110,6 +118,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
             "type": UNIT_TYPES[int(world.types[s])],
             "type_marginals": {t: round(float(marg[k]), 6) for k, t in enumerate(UNIT_TYPES)},
             **_rect_geometry(frame, world.rects[s], res),
+            **_seen(frame, world.rects[s]),
             "doors": [o["id"] for o in doors if uid in o["units"]],
             "objects": [o["id"] for o in objects if o["unit"] == uid],
         })
