@@ -16,7 +16,9 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   (:func:`observed_truth`); ``*_either_l`` with each of the truth's L-shaped spaces cut whichever
   way W* cut it (:func:`semmap_pp.evaluate.score_world_either_l`; ``l_shapes_recut`` counts them);
   ``*_visible`` against what the map shows (:func:`visible_truth`: seen units, open doors, either
-  cut of each L); ``errors`` is :func:`error_breakdown`.
+  cut of each L); ``errors`` is :func:`error_breakdown`; ``seen_shares`` the medians of world.json's
+  ``seen_share`` and ``walls_seen_share`` by what the units match (:func:`seen_by_class`).
+  ``--pool K`` runs the floors as maps of K times coarser cells (:func:`pooled_floor`).
 * **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
   world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
   scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
@@ -83,6 +85,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all", choices=["synthetic", "truth", "real", "ipa", "types", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
+    parser.add_argument("--pool", type=int, default=1,
+                        help="synthetic floors as maps of K times coarser cells (pooled_floor)")
     parser.add_argument("--budget", default="model", type=_budget,
                         help="run lengths: 'model' ([sampler]), 'quick', or seconds of sampling per map")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed")
@@ -296,11 +300,51 @@ def building_roi(truth: dict, shape, default: np.ndarray, resolution: float, mar
 
 # ------------------------------------------------------------------ subsets
 
-def _floor(seed: int, model, rules):
-    """Synthetic floor ``seed``, its grid and the pipeline's inputs for it (default ROI)."""
+def _scaled_px(value, k: int):
+    """``value`` (a truth document or part of it) with every ``*_px`` coordinate divided by ``k``."""
+    if isinstance(value, dict):
+        return {key: (np.divide(v, k).tolist() if key.endswith("_px") else _scaled_px(v, k))
+                for key, v in value.items()}
+    if isinstance(value, list):
+        return [_scaled_px(v, k) for v in value]
+    return value
+
+
+def pooled_floor(floor, k: int):
+    """``floor`` as a map of ``k`` times coarser cells: each k x k block of its classes is one cell,
+    occupied when any of the block is, free when at least half of it is, else unknown (a coarser
+    occupancy grid of the same scans); its truth's pixel coordinates divided by ``k``, its width,
+    height and resolution changed to match. ``k = 1`` returns ``floor``.
+
+    >>> import numpy as np, dataclasses
+    >>> from semmap_pp.synth import Floor
+    >>> c = np.array([[0, 0, 2, 1], [0, 1, 1, 1]], np.uint8)
+    >>> f = Floor(image=c, classes=c, resolution=0.05, truth={"units": [{"corners_px": [[2, 0]]}]},
+    ...           truth_labels=c.astype(np.uint16), origin=(0, 0, 0), poses_px=np.zeros((0, 2)))
+    >>> g = pooled_floor(f, 2)
+    >>> g.classes.tolist(), g.resolution, g.truth["units"][0]["corners_px"]
+    ([[0, 2]], 0.1, [[1.0, 0.0]])
+    """
+    if k == 1:
+        return floor
+    from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+    h, w = (n // k for n in floor.classes.shape)
+    blocks = floor.classes[:h * k, :w * k].reshape(h, k, w, k).transpose(0, 2, 1, 3).reshape(h, w, k * k)
+    classes = np.full((h, w), UNKNOWN, np.uint8)
+    classes[(blocks == FREE).sum(axis=-1) * 2 >= k * k] = FREE
+    classes[(blocks == OCCUPIED).any(axis=-1)] = OCCUPIED
+    truth = _scaled_px(floor.truth, k) | {"resolution": floor.resolution * k, "width": w, "height": h}
+    return dataclasses.replace(floor, classes=classes, image=floor.image[:h * k:k, :w * k:k],
+                               truth_labels=floor.truth_labels[:h * k:k, :w * k:k],
+                               resolution=floor.resolution * k, truth=truth, poses_px=floor.poses_px / k)
+
+
+def _floor(seed: int, model, rules, pool: int = 1):
+    """Synthetic floor ``seed`` (pooled ``pool`` x ``pool``), its grid and the pipeline's inputs for
+    it (default ROI)."""
     from semmap_pp.grid import OccupancyGrid
     from semmap_pp.synth import generate_floor
-    floor = generate_floor(seed)
+    floor = pooled_floor(generate_floor(seed), pool)
     grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
                          source=Path(f"synth-{seed}"))
     return floor, grid, _inputs_from_grid(grid, model, rules)
@@ -349,7 +393,7 @@ def bench_synthetic(args, model, rules) -> dict:
     seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
-        floor, grid, inputs = _floor(seed, model, rules)
+        floor, grid, inputs = _floor(seed, model, rules, args.pool)
         settings = _settings(model, args)
         try:
             run, clock = _run(inputs, settings, args.quiet)
@@ -631,8 +675,10 @@ def run(args) -> dict:
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
     s = _settings(model, args)
     out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal")}
-           | {"budget": args.budget},
+           | {"budget": args.budget, "pool": args.pool},
            "published": PUBLISHED, "targets": TARGETS}
+    if args.pool < 1 or (args.pool > 1 and args.subset != "synthetic"):
+        raise SystemExit("--pool K (K >= 1) applies to --subset synthetic only")
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "real": bench_real, "ipa": bench_ipa,
            "types": bench_types}

@@ -67,6 +67,7 @@ class WorldParams:
     unexplored_min_area_m2: float
     exterior_max_share: float = 0.0
     exterior_seen_min: float = 0.1
+    wall_min_cells: int = 1
 
 
 @dataclass(frozen=True)
@@ -216,7 +217,7 @@ class Model:
                                  f"-> {cells:.3g} cells); is the map's resolution right?")
             return int(round(cells))
 
-        wall = max(1, n(w.wall_thickness_m))
+        wall = max(w.wall_min_cells, n(w.wall_thickness_m))
         min_side = max(2 * wall + 1, n(w.min_unit_side_m))
         return CellParams(
             resolution=float(resolution), wall=wall,
@@ -350,7 +351,9 @@ def load_model(path: str | Path | None = None) -> Model:
     world = WorldParams(**{k: r.number(f"world.{k}", positive=True) for k in (
         "wall_thickness_m", "object_max_extent_m", "door_min_m", "door_max_m", "min_unit_side_m",
         "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2",
-        "wall_line_tolerance_m", "wall_line_gap_m")}, **exterior)
+        "wall_line_tolerance_m", "wall_line_gap_m")}, **exterior,
+        # optional too: model files written before it keep the one-cell minimum
+        wall_min_cells=r.optional("world.wall_min_cells", 1, r.integer, lo=1, hi=64))
     if world.door_max_m < world.door_min_m:
         raise r.error("world.door_max_m", "must be >= world.door_min_m")
     if world.max_unit_side_m < world.min_unit_side_m:

@@ -113,6 +113,7 @@ def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
     ("seal_gap_m = 0", "outside.seal_gap_m: must be > 0, got 0.0"),
     ('colike_scope = "corridor"', "evidence.colike_scope: must be one of unit, space, got 'corridor'"),
     ("space_width_ratio = 0.5", "evidence.space_width_ratio: must be >= 1.0, got 0.5"),
+    ("wall_min_cells = 0", "world.wall_min_cells: must be >= 1, got 0"),
 ])
 def test_a_bad_value_of_an_optional_key_is_one_line_naming_file_and_key(tmp_path, line, message):
     """The default model with one line replaced ([outside], [evidence] colike keys)."""
@@ -123,3 +124,13 @@ def test_a_bad_value_of_an_optional_key_is_one_line_naming_file_and_key(tmp_path
     with pytest.raises(ModelError) as info:
         load_model(p)
     assert str(info.value) == f"{p}: {message}"
+
+
+def test_the_wall_band_is_at_least_wall_min_cells_thick(tmp_path):
+    """0.10 m is two cells at 0.05 m and one at 0.1 m; wall_min_cells = 2 keeps two there, and
+    model files written before the key keep the one-cell minimum."""
+    m = load_model()
+    assert [m.cells(r).wall for r in (0.025, 0.05, 0.1, 0.2)] == [4, 2, 2, 2]
+    assert m.cells(0.2).min_side >= 2 * 2 + 1
+    old = without_lines(tmp_path, "wall_min_cells", n=1)
+    assert [old.cells(r).wall for r in (0.025, 0.05, 0.1, 0.2)] == [4, 2, 1, 1]

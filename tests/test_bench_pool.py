@@ -1,0 +1,42 @@
+"""bench_quality.pooled_floor: the synthetic floors as maps of coarser cells (the 0.1 m rows of
+docs/quality.md come from it)."""
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.evaluate import polygon_mask
+from semmap_pp.synth import generate_floor
+
+_spec = importlib.util.spec_from_file_location(
+    "bench_quality", Path(__file__).parents[1] / "bench" / "bench_quality.py")
+bq = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bq)
+
+
+def test_a_pooled_floor_is_the_same_floor_in_coarser_cells():
+    f = generate_floor(3)
+    g = bq.pooled_floor(f, 2)
+    h, w = f.classes.shape[0] // 2, f.classes.shape[1] // 2
+    assert g.classes.shape == (h, w) and g.resolution == 2 * f.resolution
+    assert g.truth["resolution"] == g.resolution and (g.truth["height"], g.truth["width"]) == (h, w)
+    blocks = [f.classes[i:2 * h:2, j:2 * w:2] for i in (0, 1) for j in (0, 1)]
+    occ = np.any([b == OCCUPIED for b in blocks], axis=0)
+    n_free = np.sum([b == FREE for b in blocks], axis=0)
+    np.testing.assert_array_equal(g.classes == OCCUPIED, occ)
+    np.testing.assert_array_equal(g.classes == FREE, ~occ & (n_free >= 2))
+    np.testing.assert_array_equal(g.classes == UNKNOWN, ~occ & (n_free < 2))
+    # the truth's pixel coordinates halve: each unit covers the same part of the floor
+    for u, v in zip(f.truth["units"], g.truth["units"]):
+        assert np.allclose(np.asarray(v["corners_px"]) * 2, u["corners_px"])
+        assert v["size_m"] == u["size_m"] and v["explored"] == u["explored"]
+        fine = polygon_mask(u["corners_px"], f.classes.shape)[:2 * h, :2 * w]
+        coarse = polygon_mask(v["corners_px"], (h, w))
+        corners = np.asarray(u["corners_px"], float)
+        perimeter = np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1).sum()
+        assert abs(int(coarse.sum()) * 4 - int(fine.sum())) <= 2 * perimeter   # cells along the edges
+    for d, e in zip(f.truth["doors"], g.truth["doors"]):
+        assert np.allclose(np.asarray(e["center_px"]) * 2, d["center_px"]) and e["width_m"] == d["width_m"]
+    assert f.truth["units"][0]["corners_px"] != g.truth["units"][0]["corners_px"]   # f untouched
+    assert bq.pooled_floor(f, 1) is f
