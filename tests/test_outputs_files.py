@@ -12,6 +12,7 @@ One literal floor explains every case (0.05 m cells, walls 2 cells, doors 10..50
 Ids follow reading order of the unit centres: A = 1, B = 2, C = 3, D = 4.
 """
 
+import html
 import io
 import json
 import re
@@ -271,3 +272,26 @@ def test_report_is_self_contained_and_escapes_inputs(hostile_run):
         assert f"<td>{q.name}</td>" in text
     assert "<th>mean per chain</th>" in text
     assert "default" in text and "CPR" in text
+
+
+def test_report_and_diagnostics_name_chains_in_separate_modes(floor, hostile_run, tmp_path):
+    """A second chain 1000 nats below the first: report.html and diagnostics.txt say so in one
+    line; the hostile run's chains (the same normal draws) get no such line."""
+    import dataclasses
+
+    sm, _ = floor
+    run = make_run(sm)
+    summaries = dict(run.summaries)
+    summaries["log_posterior"] = summaries["log_posterior"] - np.array([[0.0], [1000.0]])
+    report = convergence(summaries, rhat_max=1.05, ess_min=100)
+    (c, gap), = report.separated_chains()
+    assert c == 2 and 990 < gap < 1010
+    write_all(tmp_path, dataclasses.replace(run, summaries=summaries, report=report), rules_name="r.lp")
+    note = report.separation_note()
+    assert note.startswith("chains in separate modes: chain 2's mean log posterior lies")
+    assert note in (tmp_path / "diagnostics.txt").read_text().splitlines()
+    assert html.escape(note) in (tmp_path / "report.html").read_text()
+    assert run.report.separation_note() == ""
+    out, _, _ = hostile_run
+    for name in ("diagnostics.txt", "report.html"):
+        assert "chains in separate modes" not in (out / name).read_text()
