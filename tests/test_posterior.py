@@ -168,9 +168,10 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels():
 
     engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
     # fewer soft units than the default model (each new soft probability costs the engine a
-    # grounding), so that 20,000 kernels run in seconds; soft evidence still occurs
-    model = dataclasses.replace(MODEL, evidence=dataclasses.replace(MODEL.evidence,
-                                                                    hard_above=0.75))
+    # grounding), so that 20,000 kernels run in seconds; soft evidence still occurs. A one-cell
+    # wall band at 0.25 m a cell, as the floor was drawn for (the default's minimum is two cells)
+    model = dataclasses.replace(MODEL, evidence=dataclasses.replace(MODEL.evidence, hard_above=0.75),
+                                world=dataclasses.replace(MODEL.world, wall_min_cells=1))
     post = Posterior(build_frame_from_classes(knowledge_floor(), 0.25, model, theta=0.0), model,
                      engine)
     post.knowledge_on = True
