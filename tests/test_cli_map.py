@@ -48,6 +48,11 @@ def test_map_writes_every_file(first_run):
     assert f"W*: {len(types)} units (" in line
     assert all(f"{types.count(t)} {t}" in line for t in set(types))
     assert line[line.index("W*:"):line.index(", log posterior")] in text
+    # the verdict of the chains, as diagnostics.txt gives it, and where to read more
+    verdict = "converged" if "\nconverged\n" in text else "NOT converged"
+    assert f"chains: {verdict} (2 x 4 draws; R-hat and ESS: `semmap diagnose {out}`)" in r.stderr
+    note = [x for x in text.splitlines() if x.startswith("chains in separate modes")]
+    assert note == [x for x in r.stderr.splitlines() if x.startswith("chains in separate modes")]
     # the report links every file of the folder, resume.npz (written after it) included
     report = (out / "report.html").read_text()
     for name in names:

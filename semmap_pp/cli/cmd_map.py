@@ -175,6 +175,11 @@ def run(args) -> int:
     written.append(write_resume(out, result, meta))
     for path in written:
         print(path)
+    rep = result.report
+    log(f"chains: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x {rep.n_draws} draws; "
+        f"R-hat and ESS: `semmap diagnose {out}`)")
+    if rep.separation_note():
+        log(rep.separation_note())
     kept_chains, kept_draws = result.kept
     if result.stopped == "interrupted":
         log(f"semmap: interrupted: wrote partial results ({len(kept_chains)} chain(s) x {kept_draws} draws) "
