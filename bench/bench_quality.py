@@ -25,7 +25,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   of the W*s a synthetic run saved in DIR, to compare log posteriors inside the building.
 * **real**: ``data/maps/*.yaml`` of the repository (cartesium, intel), CPR with the default ROI, and
   the time to W*.
-* **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation``, loaded with the benchmark's own
+* **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation`` (with ``--furniture`` their
+  ``NAME_furnitures`` versions, furniture drawn in, scored against the same truth), loaded with the benchmark's own
   pixel rule (grey >= 250 free, anything else obstacle: ``free_thresh=0.0197``,
   ``occupied_thresh=0.0198``; the YAML's 0.65 / 0.03 would make grey obstacles unknown). Segments are
   *regions*: regions.png's, units joined where their connecting wall holds an open passage (one
@@ -85,6 +86,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all", choices=["synthetic", "truth", "real", "ipa", "types", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
+    parser.add_argument("--furniture", action="store_true",
+                        help="ipa: the plans with furniture drawn in (NAME_furnitures.png), same truth")
     parser.add_argument("--pool", type=int, default=1,
                         help="synthetic floors as maps of K times coarser cells (pooled_floor)")
     parser.add_argument("--budget", default="model", type=_budget,
@@ -592,7 +595,11 @@ def bench_ipa(args, model, rules) -> dict:
         name = gt_path.name[:-len("_gt_segmentation.png")]
         if not _keep(name, args):
             continue
-        grid = load_map(base / f"{name}.yaml", **IPA_FREE)
+        map_path = base / (f"{name}_furnitures.yaml" if args.furniture else f"{name}.yaml")
+        if not map_path.exists():
+            rows.append({"map": name, "error": f"{map_path.name} not found"})
+            continue
+        grid = load_map(map_path, **IPA_FREE)
         inputs = _inputs_from_grid(grid, model, rules)
         try:
             run, clock = _run(inputs, _settings(model, args), args.quiet)
@@ -675,7 +682,7 @@ def run(args) -> dict:
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
     s = _settings(model, args)
     out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal")}
-           | {"budget": args.budget, "pool": args.pool},
+           | {"budget": args.budget, "pool": args.pool, "furniture": args.furniture},
            "published": PUBLISHED, "targets": TARGETS}
     if args.pool < 1 or (args.pool > 1 and args.subset != "synthetic"):
         raise SystemExit("--pool K (K >= 1) applies to --subset synthetic only")
