@@ -18,7 +18,9 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   ``*_visible`` against what the map shows (:func:`visible_truth`: seen units, open doors, either
   cut of each L); ``errors`` is :func:`error_breakdown`; ``seen_shares`` the medians of world.json's
   ``seen_share`` and ``walls_seen_share`` by what the units match (:func:`seen_by_class`).
-  ``--pool K`` runs the floors as maps of K times coarser cells (:func:`pooled_floor`).
+  ``--pool K`` runs the floors as maps of K times coarser cells (:func:`pooled_floor`);
+  ``--resolution R`` has the generator render them at R metres per cell (the same seeds and
+  buildings, scanned onto coarser or finer cells).
 * **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
   world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
   scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
@@ -88,6 +90,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
     parser.add_argument("--furniture", action="store_true",
                         help="ipa: the plans with furniture drawn in (NAME_furnitures.png), same truth")
+    parser.add_argument("--resolution", type=float, default=0.05,
+                        help="synthetic floors rendered at this many metres per cell (generate_floor)")
     parser.add_argument("--pool", type=int, default=1,
                         help="synthetic floors as maps of K times coarser cells (pooled_floor)")
     parser.add_argument("--budget", default="model", type=_budget,
@@ -342,12 +346,12 @@ def pooled_floor(floor, k: int):
                                resolution=floor.resolution * k, truth=truth, poses_px=floor.poses_px / k)
 
 
-def _floor(seed: int, model, rules, pool: int = 1):
-    """Synthetic floor ``seed`` (pooled ``pool`` x ``pool``), its grid and the pipeline's inputs for
-    it (default ROI)."""
+def _floor(seed: int, model, rules, pool: int = 1, resolution: float = 0.05):
+    """Synthetic floor ``seed`` rendered at ``resolution`` (then pooled ``pool`` x ``pool``), its
+    grid and the pipeline's inputs for it (default ROI)."""
     from semmap_pp.grid import OccupancyGrid
     from semmap_pp.synth import generate_floor
-    floor = pooled_floor(generate_floor(seed), pool)
+    floor = pooled_floor(generate_floor(seed, resolution=resolution), pool)
     grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
                          source=Path(f"synth-{seed}"))
     return floor, grid, _inputs_from_grid(grid, model, rules)
@@ -396,7 +400,7 @@ def bench_synthetic(args, model, rules) -> dict:
     seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
-        floor, grid, inputs = _floor(seed, model, rules, args.pool)
+        floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
         settings = _settings(model, args)
         try:
             run, clock = _run(inputs, settings, args.quiet)
@@ -682,10 +686,11 @@ def run(args) -> dict:
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
     s = _settings(model, args)
     out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal")}
-           | {"budget": args.budget, "pool": args.pool, "furniture": args.furniture},
+           | {"budget": args.budget, "pool": args.pool, "resolution": args.resolution,
+              "furniture": args.furniture},
            "published": PUBLISHED, "targets": TARGETS}
-    if args.pool < 1 or (args.pool > 1 and args.subset != "synthetic"):
-        raise SystemExit("--pool K (K >= 1) applies to --subset synthetic only")
+    if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05) and args.subset != "synthetic"):
+        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic only")
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "real": bench_real, "ipa": bench_ipa,
            "types": bench_types}
