@@ -40,3 +40,17 @@ def test_a_pooled_floor_is_the_same_floor_in_coarser_cells():
         assert np.allclose(np.asarray(e["center_px"]) * 2, d["center_px"]) and e["width_m"] == d["width_m"]
     assert f.truth["units"][0]["corners_px"] != g.truth["units"][0]["corners_px"]   # f untouched
     assert bq.pooled_floor(f, 1) is f
+
+
+def test_a_floor_scanned_at_another_resolution_is_the_same_building():
+    """``--resolution 0.1``: the generator scans the same seed's building onto 0.1 m cells."""
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.model import load_model
+    from semmap_pp.pipeline import DEFAULT_RULES
+
+    floor, grid, inputs = bq._floor(3, load_model(), load_rules(DEFAULT_RULES), resolution=0.1)
+    fine = generate_floor(3)
+    assert floor.resolution == grid.resolution == 0.1 and inputs.frame.cells.wall == 2
+    assert len(floor.truth["units"]) == len(fine.truth["units"])
+    for u, v in zip(fine.truth["units"], floor.truth["units"]):
+        assert u["type"] == v["type"] and np.allclose(u["size_m"], v["size_m"], atol=0.1)
