@@ -519,7 +519,6 @@ def bench_truth(args, model, rules) -> dict:
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.pipeline import run_target
     rows = []
-    seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules)
@@ -681,6 +680,8 @@ def run(args) -> dict:
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
     from semmap_pp.pipeline import DEFAULT_RULES
+    if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05) and args.subset != "synthetic"):
+        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic only")
     model = load_model(args.model)
     rules = load_rules(args.rules or DEFAULT_RULES)
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
@@ -689,8 +690,6 @@ def run(args) -> dict:
            | {"budget": args.budget, "pool": args.pool, "resolution": args.resolution,
               "furniture": args.furniture},
            "published": PUBLISHED, "targets": TARGETS}
-    if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05) and args.subset != "synthetic"):
-        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic only")
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "real": bench_real, "ipa": bench_ipa,
            "types": bench_types}

@@ -88,27 +88,28 @@ class ConvergenceReport:
         >>> convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10).separated_chains()
         [(3, 100.0)]
         """
+        return self._separation(name)[1]
+
+    def _separation(self, name: str) -> tuple[int, list[tuple[int, float]]]:
+        """``(best chain, numbered from 1, or 0 when there is none; separated_chains(name))``."""
         q = next((q for q in self.quantities if q.name == name), None)
         if q is None or len(q.chain_means) < 2:
-            return []
+            return 0, []
         means, sds = np.asarray(q.chain_means, float), np.asarray(q.chain_sds or [0.0] * len(q.chain_means))
         if not np.isfinite(means).any():
-            return []
+            return 0, []
         best = int(np.nanargmax(means))
         out = []
         for c, (m, sd) in enumerate(zip(means, sds)):
             gap = float(means[best] - m)
             if c != best and np.isfinite(gap) and gap > SEPARATION_SDS * max(float(sd), float(sds[best]), 1.0):
                 out.append((c + 1, round(gap, 1)))
-        return out
+        return best + 1, out
 
     def separation_note(self) -> str:
         """One line naming the chains in separate modes (:meth:`separated_chains`), "" if none."""
-        sep = self.separated_chains()
-        if not sep:
-            return ""
-        lp = next(q for q in self.quantities if q.name == "log_posterior")
-        return _separation_text(sep, 1 + int(np.nanargmax(lp.chain_means)))
+        best, sep = self._separation("log_posterior")
+        return _separation_text(sep, best) if sep else ""
 
     def to_dict(self) -> dict:
         def clean(v):
@@ -136,8 +137,9 @@ class ConvergenceReport:
             lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
                          f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
         lines.append("converged" if self.ok else "NOT converged")
-        if self.separation_note():
-            lines.append(self.separation_note())
+        note = self.separation_note()
+        if note:
+            lines.append(note)
         if self.n_chains > 1:
             lines += ["", "mean per chain (chains that settled in different modes differ here)",
                       f"{'quantity':<16}" + "".join(f"{'chain ' + str(c + 1):>12}" for c in range(self.n_chains))]

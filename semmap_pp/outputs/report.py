@@ -205,7 +205,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         f"<p>{verdict} — {rep.n_chains} chains × {rep.n_draws} draws; a label-invariant summary passes when "
         f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (NaN fails).</p>",
         convergence_table(rep),
-        f"<p>{e(rep.separation_note())}.</p>" if rep.separation_note() else "",
+        f"<p>{e(note)}.</p>" if (note := rep.separation_note()) else "",
         '<h2 id="cpr">Cell prediction rate</h2>',
         f"<p>CPR = <b>{e(cpr)}</b>: the share of cells in the region of interest "
         f"(<code>{e(inputs.roi_name)}</code>) that W* explains correctly (free as free, occupied as wall "
