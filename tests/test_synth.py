@@ -349,3 +349,21 @@ def test_cli_writes_files_and_refuses_a_non_empty_dir(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert main(["synth", "--seed", "1", "--out", str(tmp_path / "file")]) == 2
     assert "not a directory" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed,resolution", [(9, 0.1), (5, 0.025)])
+def test_a_seed_gives_the_same_building_at_every_resolution(seed, resolution):
+    """The plan is drawn in 0.05 m cells and scaled: units, types, sizes, doors and what the robot
+    explored are the same at another resolution, to within one cell's rounding. Seeds 9 and 5 drew
+    other buildings at 0.1 m and 0.025 m while the plan was drawn in the map's own cells."""
+    a, b = generate_floor(seed), generate_floor(seed, resolution=resolution)
+    ua, ub = a.truth["units"], b.truth["units"]
+    assert len(ua) == len(ub) and b.truth["layout"] == a.truth["layout"]
+    tol = 2 * max(resolution, 0.05) + 1e-9
+    for u, v in zip(ua, ub):
+        assert (u["type"], u["explored"], u["entered"]) == (v["type"], v["explored"], v["entered"])
+        assert np.allclose(u["size_m"], v["size_m"], atol=tol)
+    assert [(d["units"], d["open"]) for d in a.truth["doors"]] == \
+        [(d["units"], d["open"]) for d in b.truth["doors"]]
+    assert np.allclose([d["width_m"] for d in a.truth["doors"]],
+                       [d["width_m"] for d in b.truth["doors"]], atol=tol)

@@ -60,7 +60,8 @@ def register(subparsers) -> None:
                         help="counter-clockwise rotation of the building as displayed "
                              "(default: drawn from the seed)")
     parser.add_argument("--resolution", type=_resolution, default=0.05, metavar="M",
-                        help="metres per cell (default 0.05)")
+                        help="metres per cell (default 0.05; the same seed is the same "
+                             "building at every resolution)")
     parser.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     parser.set_defaults(func=run)
 

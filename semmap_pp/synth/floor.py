@@ -17,6 +17,10 @@ from semmap_pp.synth.truth import build_truth, write_truth
 
 MAX_UNITS = 400
 ATTEMPTS = 40
+# The plan (rooms, walls, doors, windows, exits) is drawn in cells of this size and scaled to the
+# map's resolution, so a seed gives the same building at every resolution; the furniture, the
+# robot's path and the scans are drawn at the map's resolution.
+PLAN_RESOLUTION = 0.05
 
 
 @dataclass
@@ -119,7 +123,8 @@ def generate_floor(seed: int, *, units: int | None = None, rotation_deg: float |
         rng_units.integers(p.units_min_default, p.units_max_default + 1))
     rot = _rotation(rng_rot, p) if rotation_deg is None else float(rotation_deg) % 360.0
 
-    plan = _plan(rng_layout, n_units, p, res)
+    plan = _plan(rng_layout, n_units, p, PLAN_RESOLUTION)
+    plan = topology.rescale_plan(plan, PLAN_RESOLUTION / res)
     br = draw_plan(plan, p, res)
     solid_b = furnish(rng_furn, plan, br, p, res)
     poses_b = trajectory.scan_poses(rng_path, plan, br, solid_b, p, res)

@@ -329,3 +329,44 @@ def build_plan(rng: np.random.Generator, draft: Draft, keep: np.ndarray, p: Synt
     explored, entered = _explore(rng, len(rects), types, doors, open_pairs, root, p)
     return Plan(rects, types, draft.layout, open_pairs, l_pairs, shared, doors, walls, windows,
                 exits, explored, entered)
+
+
+def rescale_plan(plan: Plan, factor: float) -> Plan:
+    """``plan`` with every length multiplied by ``factor`` and rounded to whole cells.
+
+    The generator draws every plan in cells of :data:`semmap_pp.synth.floor.PLAN_RESOLUTION` and
+    scales it to the map's resolution, so one seed gives one building at every resolution (rounding
+    each length on its own would flip the draft's fit tests and draw another building). Edges that
+    coincide before coincide after (each coordinate is rounded by itself); thicknesses and widths
+    keep at least one cell.
+
+    Examples
+    --------
+    >>> d = Door(0, 1, "v", 10, 5.0, 3, False)
+    >>> p = Plan(np.array([[0, 0, 10, 8], [10, 0, 21, 8]]), ["room", "room"], "row", [], [],
+    ...          {(0, 1): ("v", 10, 0, 8)}, [d], [("v", 10, 0, 8, 1)], [], [],
+    ...          np.ones(2, bool), np.ones(2, bool))
+    >>> q = rescale_plan(p, 2.0)
+    >>> q.rects.tolist(), q.shared[(0, 1)], q.doors[0].width, q.walls[0]
+    ([[0, 0, 20, 16], [20, 0, 42, 16]], ('v', 20, 0, 16), 6, ('v', 20, 0, 16, 2))
+    """
+    if factor == 1.0:
+        return plan
+
+    def c(v) -> int:
+        return int(round(v * factor))
+
+    def t(v) -> int:
+        return max(1, int(round(v * factor)))
+
+    return Plan(rects=np.array([[c(v) for v in r] for r in plan.rects.tolist()],
+                               dtype=np.int64).reshape(-1, 4),
+                types=list(plan.types), layout=plan.layout, open_pairs=list(plan.open_pairs),
+                l_pairs=list(plan.l_pairs),
+                shared={k: (o, c(v), c(s0), c(s1)) for k, (o, v, s0, s1) in plan.shared.items()},
+                doors=[Door(d.a, d.b, d.orient, c(d.coord), d.centre * factor, t(d.width), d.is_open)
+                       for d in plan.doors],
+                walls=[(o, c(v), c(s0), c(s1), t(th)) for o, v, s0, s1, th in plan.walls],
+                windows=[(o, c(v), c(s0), c(s1)) for o, v, s0, s1 in plan.windows],
+                exits=[(i, o, c(v), c(s0), c(s1)) for i, o, v, s0, s1 in plan.exits],
+                explored=plan.explored.copy(), entered=plan.entered.copy())
