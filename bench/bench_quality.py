@@ -521,7 +521,7 @@ def bench_truth(args, model, rules) -> dict:
     rows = []
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
-        floor, grid, inputs = _floor(seed, model, rules)
+        floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
         post = run_target(inputs)
         data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
         wstar = (json.loads((args.outside_from / f"synth-{seed}" / "world.json").read_text())
@@ -680,8 +680,9 @@ def run(args) -> dict:
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
     from semmap_pp.pipeline import DEFAULT_RULES
-    if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05) and args.subset != "synthetic"):
-        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic only")
+    if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05)
+                         and args.subset not in ("synthetic", "truth")):
+        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic and truth only")
     model = load_model(args.model)
     rules = load_rules(args.rules or DEFAULT_RULES)
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
