@@ -41,6 +41,24 @@ from semmap_pp.prior import all_valid
 MAX_CAPACITY = MAX_K
 
 
+# The resolution at which ``[kernels] ascent_peaks`` is given (the maps the model was measured on).
+PEAKS_RESOLUTION = 0.05
+
+
+def ascent_peaks(n: int, resolution: float) -> int:
+    """How many line-evidence peaks a wall move tries at ``resolution`` metres per cell: ``n`` at
+    0.05 m and coarser, ``n`` times 0.05 m / ``resolution`` on finer maps. A finer map draws a
+    wall in more lines of cells, each a peak of its own (at 0.025 m a 0.15 m wall is two lines
+    with an unknown core), so ``n`` peaks reach fewer walls there (docs/quality.md, What changed
+    30). Coarser maps keep ``n``: fewer peaks at 0.1 m helped the floors scanned at 0.1 m and hurt
+    the floors pooled to 0.1 m.
+
+    >>> [ascent_peaks(8, r) for r in (0.0125, 0.025, 0.04, 0.05, 0.1)], ascent_peaks(0, 0.025)
+    ([32, 16, 10, 8, 8], 0)
+    """
+    return max(n, round(n * PEAKS_RESOLUTION / resolution))
+
+
 def _line_peaks(w: np.ndarray, lo: int, k: int) -> list[int]:
     """Positions (``lo`` + index) of the ``k`` largest local maxima of ``w`` above its floor."""
     if w.size == 0:
@@ -79,7 +97,7 @@ def _swallowed(rects, active, slot, thin_below, share):  # pragma: no cover - co
 class _Ascent:
     """Greedy ascent state: a tracker of the target and the kernels' data."""
 
-    def __init__(self, posterior, world: wm.World, data, *, peaks: int = 8, local: int = 3,
+    def __init__(self, posterior, world: wm.World, data, *, peaks: int | None = None, local: int = 3,
                  absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5,
                  merge_keep: float = 0.5, trim_line_min: float = 0.5):
         self.posterior = posterior
@@ -88,6 +106,8 @@ class _Ascent:
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
         self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
         self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
+        if peaks is None:
+            self.peaks = ascent_peaks(data.settings.ascent_peaks, self.resolution)
 
     @property
     def world(self) -> wm.World:

@@ -559,3 +559,31 @@ def test_a_focused_pass_visits_the_focus_only():
     assert tuple(int(v) for v in asc.world.rects[1]) == (2, 70, 82, 142)     # onto its wall
     assert asc.units() == [0, 1] and asc.all_wall_moves()
     assert tuple(int(v) for v in asc.world.rects[0]) == (2, 2, 82, 72)
+
+
+def test_a_wall_move_reaches_as_many_walls_on_a_finer_map():
+    """At 0.025 m a thick wall is drawn as two lines of cells, each line a plateau of the line
+    evidence as wide as the wall band (4 cells), so a wall fills 8 of the peaks: the 8 peaks of
+    0.05 m reach 1 wall of the row, the 16 of ``ascent_peaks(8, 0.025)`` reach 2 (docs/quality.md,
+    What changed 30)."""
+    from semmap_pp.ascent import _Ascent, ascent_peaks
+    from semmap_pp.frame import build_frame_from_classes
+
+    model = load_model()
+    m = np.full((60, 760), FREE, np.uint8)
+    walls = [60 + 80 * k for k in range(8)]
+    for x in walls:
+        m[:, x] = m[:, x + 5] = OCCUPIED        # a 0.15 m wall: two lines, its core unknown
+        m[:, x + 1:x + 5] = UNKNOWN
+    frame = build_frame_from_classes(m, 0.025, model)
+    post, data = Posterior(frame, model, None), data_from_frame(frame)
+    world = wm.add(wm.empty(4), 0, (0, 0, 60, 50))
+
+    def walls_reached(asc) -> int:
+        cand = asc.positions([0, 0, 60, 50], 3)     # the unit's right wall
+        return sum(any(x + 1 <= c <= x + 9 for c in cand) for x in walls)
+
+    fine = _Ascent(post, world, data)
+    assert ascent_peaks(8, 0.025) == fine.peaks == 16 and ascent_peaks(8, 0.05) == 8
+    assert walls_reached(fine) == 2
+    assert walls_reached(_Ascent(post, world, data, peaks=8)) == 1

@@ -70,6 +70,10 @@ class KernelSettings(NamedTuple):
     polish_rounds : int
         Rounds of the greedy ascent of the full target that polishes W* after sampling (0 = W* as
         sampled).
+    ascent_peaks : int
+        The ascent's wall moves try a few local steps and the strongest peaks of the wall-line
+        evidence along the wall's range: this many at 0.05 m cells and coarser, more on finer maps
+        (:func:`semmap_pp.ascent.ascent_peaks`).
     """
 
     line_floor: float = 0.05
@@ -86,6 +90,7 @@ class KernelSettings(NamedTuple):
                       ("allocate_delete", 1.0), ("interchange", 2.0))
     start_rounds: int = 6
     polish_rounds: int = 3
+    ascent_peaks: int = 8
 
 
 def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelSettings:
