@@ -102,12 +102,11 @@ class _Ascent:
                  merge_keep: float = 0.5, trim_line_min: float = 0.5):
         self.posterior = posterior
         self.tr = posterior.start(world)
-        self.data, self.peaks, self.local = data, peaks, local
+        self.data, self.local = data, local
         self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
         self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
         self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
-        if peaks is None:
-            self.peaks = ascent_peaks(data.settings.ascent_peaks, self.resolution)
+        self.peaks = ascent_peaks(data.settings.ascent_peaks, self.resolution) if peaks is None else peaks
 
     @property
     def world(self) -> wm.World:

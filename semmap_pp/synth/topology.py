@@ -10,7 +10,7 @@ unit index), so one seed gives one plan.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -359,14 +359,12 @@ def rescale_plan(plan: Plan, factor: float) -> Plan:
     def t(v) -> int:
         return max(1, int(round(v * factor)))
 
-    return Plan(rects=np.array([[c(v) for v in r] for r in plan.rects.tolist()],
-                               dtype=np.int64).reshape(-1, 4),
-                types=list(plan.types), layout=plan.layout, open_pairs=list(plan.open_pairs),
-                l_pairs=list(plan.l_pairs),
-                shared={k: (o, c(v), c(s0), c(s1)) for k, (o, v, s0, s1) in plan.shared.items()},
-                doors=[Door(d.a, d.b, d.orient, c(d.coord), d.centre * factor, t(d.width), d.is_open)
-                       for d in plan.doors],
-                walls=[(o, c(v), c(s0), c(s1), t(th)) for o, v, s0, s1, th in plan.walls],
-                windows=[(o, c(v), c(s0), c(s1)) for o, v, s0, s1 in plan.windows],
-                exits=[(i, o, c(v), c(s0), c(s1)) for i, o, v, s0, s1 in plan.exits],
-                explored=plan.explored.copy(), entered=plan.entered.copy())
+    return replace(plan,
+                   rects=np.array([[c(v) for v in r] for r in plan.rects.tolist()],
+                                  dtype=np.int64).reshape(-1, 4),
+                   shared={k: (o, c(v), c(s0), c(s1)) for k, (o, v, s0, s1) in plan.shared.items()},
+                   doors=[replace(d, coord=c(d.coord), centre=d.centre * factor, width=t(d.width))
+                          for d in plan.doors],
+                   walls=[(o, c(v), c(s0), c(s1), t(th)) for o, v, s0, s1, th in plan.walls],
+                   windows=[(o, c(v), c(s0), c(s1)) for o, v, s0, s1 in plan.windows],
+                   exits=[(i, o, c(v), c(s0), c(s1)) for i, o, v, s0, s1 in plan.exits])
