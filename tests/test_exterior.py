@@ -230,3 +230,65 @@ def test_a_strip_closed_only_at_its_short_ends_does_not_shield_a_fan():
     rects = np.array([[2, 2, 16, 14], [2, 13, 18, 28], [15, 2, 28, 14], strip])
     assert find_exterior(cls, rects, wall=1, max_share=0.3, seen_min=0.1).tolist() == \
         [False, True, False, False]
+
+
+def l_building_with_corner_fan():
+    """An L-shaped building: room A (upper left) with a 1 m window in its right wall, and a long
+    room B below A reaching further right. The rays through the window fill the concave corner
+    beyond A's right wall and above B's top wall, and leave it upwards and to the right."""
+    c = np.full((100, 140), UNKNOWN, np.uint8)
+    c[20:62, 10:52] = OCCUPIED                            # A and its walls
+    c[22:60, 12:50] = FREE
+    c[60:92, 10:130] = OCCUPIED                           # B and its walls
+    c[62:90, 12:128] = FREE
+    c[34:54, 50:52] = FREE                                # the window in A's right wall
+    for row in range(-60, 60, 3):                         # rays beyond it, over B's roof line
+        r = np.linspace(44, row, 90).round().astype(int)
+        cols = np.arange(52, 142)
+        ok = (r >= 0) & (r < 60) & (cols < 140)
+        c[r[ok], cols[ok]] = FREE
+        c[r[ok] + 1, cols[ok]] = FREE
+    return c
+
+
+A, B, CORNER = (20, 10, 62, 52), (60, 10, 92, 130), (16, 50, 62, 130)
+
+
+def test_a_fan_in_the_concave_corner_of_the_building_is_exterior():
+    """The corner fan has two enclosed sides (A's right wall and B's top wall, both drawn, with A
+    and B across them) and lies inside the convex hull of A and B, so the three-open-sides test
+    misses it; it lies outside their orthogonal hull (the L itself) and is flagged."""
+    from semmap_pp.derive.exterior import ortho_hull
+
+    c = l_building_with_corner_fan()
+    shares = np.sort(side_shares(c, CORNER, None, 2, 0.1))
+    assert shares[2] >= 0.3 > shares[1]                  # two enclosed sides, two open ones
+    hull = ortho_hull(np.array([A, B]), c.shape)
+    assert not hull[30, 100] and hull[30, 30] and hull[80, 120]
+    flags = find_exterior(c, np.array([A, B, CORNER]), wall=2, max_share=0.3, seen_min=0.1)
+    assert flags.tolist() == [False, False, True]
+
+
+def test_a_room_glimpsed_through_its_door_with_one_wall_drawn_is_not_exterior():
+    """Beyond a corridor's door, a room whose back and right walls the laser never hit: rays leave
+    it through those two sides, but its drawn left wall has no building unit across it (the
+    space beyond is unknown), so it is not a fan between two building walls."""
+    c = np.full((100, 140), UNKNOWN, np.uint8)
+    c[60:80, 0:140] = OCCUPIED                            # a corridor and its walls
+    c[62:78, 0:140] = FREE
+    c[20:62, 40:42] = OCCUPIED                            # the room's drawn left wall
+    c[60:62, 60:80] = FREE                                # the door in the corridor's top wall
+    for col in range(20, 160, 3):                         # rays through the door, into the room
+        r = np.linspace(61, 10, 60).round().astype(int)
+        cc = np.linspace(70, col, 60).round().astype(int)
+        ok = (cc >= 42) & (cc < 140)
+        c[r[ok], cc[ok]] = FREE
+    corridor, room = (60, 0, 80, 140), (18, 40, 62, 110)
+    shares = np.sort(side_shares(c, room, None, 2, 0.1))
+    assert shares[2] >= 0.3 > shares[1]
+    corridor2 = (80, 0, 100, 140)                         # a room below, enclosed too
+    c[80:100, 0:140] = OCCUPIED
+    c[82:98, 2:138] = FREE
+    flags = find_exterior(c, np.array([corridor, room, corridor2]), wall=2, max_share=0.3,
+                          seen_min=0.1)
+    assert not flags[1]

@@ -21,6 +21,17 @@ that pass the test with cover too). Fans are never enclosed, so they neither shi
 nor widen the footprint; a world without an enclosed unit has no footprint and no exterior unit,
 and at least two units are always left (a world is never left without units).
 
+A fan in a concave corner of the building (beyond a window in one wing, against the outer wall
+of the other) or in a notch between two wings has two enclosed sides, the two outer walls, and
+lies within the convex hull. It is exterior too when (a) rays leave it through its other two
+sides (third largest share below ``max_share``), (b) each of its two enclosed sides is a wall
+drawn in the map (seen, and its own occupied share at least ``max_share``, no cover counted) with an
+enclosed unit right across it (at least ``max_share`` of a strip ``across`` cells deep beyond the
+band), and (c) more than half of it lies outside the *orthogonal hull* of the units enclosed on
+three sides (:func:`ortho_hull`; an L-shaped building is its own orthogonal hull). A room
+glimpsed through its door, whose walls the laser did not draw, fails (b): its one enclosed side
+with a unit across is the wall with the door.
+
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
 labels.png, doors, adjacency and objects hold the building's units only (docs/model.md,
@@ -46,7 +57,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semmap_pp.cells import FREE, OCCUPIED
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 
 
 def side_shares(classes: np.ndarray, rect, count: np.ndarray | None, wall: int, seen_min: float,
@@ -102,6 +113,65 @@ def _outside_share(rect, hull) -> float:
     return float(1.0 - inside.mean())
 
 
+def ortho_hull(rects: np.ndarray, shape) -> np.ndarray:
+    """(H, W) bool: the orthogonal hull of the union of ``rects`` (clipped to ``shape``): the
+    smallest set holding them whose every lattice row and column is one run, filled until stable.
+
+    >>> L = np.array([[0, 0, 4, 2], [2, 0, 4, 6]])     # an L: its own orthogonal hull
+    >>> int(ortho_hull(L, (6, 6)).sum()), int(ortho_hull(L, (6, 6))[0, 5])   # 8 + 12 - 4 cells
+    (16, 0)
+    >>> U = np.array([[0, 0, 4, 2], [2, 0, 4, 6], [0, 4, 4, 6]])   # a U: the notch is filled
+    >>> int(ortho_hull(U, (6, 6))[0, 3])
+    1
+    """
+    m = np.zeros(shape, dtype=bool)
+    for r0, c0, r1, c1 in np.asarray(rects, dtype=np.int64).reshape(-1, 4):
+        m[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    while True:
+        new = m
+        for axis in (0, 1):
+            fwd = np.maximum.accumulate(new, axis=axis)
+            back = np.flip(np.maximum.accumulate(np.flip(new, axis=axis), axis=axis), axis=axis)
+            new = fwd & back
+        if np.array_equal(new, m):
+            return m
+        m = new
+
+
+def _mask_outside_share(rect, mask: np.ndarray) -> float:
+    """The share of ``rect``'s area outside ``mask`` (cells beyond the lattice count outside)."""
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    area = max(r1 - r0, 0) * max(c1 - c0, 0)
+    if area == 0:
+        return 0.0
+    inside = int(np.count_nonzero(mask[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)]))
+    return 1.0 - inside / area
+
+
+def _between_building_walls(classes, rect, shares, wall, seen_min, max_share, enclosed_mask,
+                            across) -> bool:
+    """Condition (b) of the module docstring for the two sides of ``rect`` with the largest
+    ``shares`` (top, bottom, left, right)."""
+    own = side_shares(classes, rect, None, wall, seen_min, own=0)
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    h, w = classes.shape
+    b = max(1, min(wall, r1 - r0, c1 - c0))
+    d = b + int(across)
+    beyond = ((r0 - d, c0, r0, c1), (r1, c0, r1 + d, c1), (r0, c0 - d, r1, c0), (r0, c1, r1, c1 + d))
+    bands = ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1), (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
+    for side in np.argsort(shares, kind="stable")[2:]:
+        ra, ca, rb, cb = bands[side]
+        band = classes[max(ra, 0):max(rb, 0), max(ca, 0):max(cb, 0)]
+        seen = np.count_nonzero(band != UNKNOWN)
+        if seen < seen_min * max(band.size, 1) or own[side] < max_share:   # not a drawn wall
+            return False
+        ya, xa, yb, xb = beyond[side]
+        strip = enclosed_mask[max(ya, 0):min(yb, h), max(xa, 0):min(xb, w)]
+        if strip.size == 0 or strip.mean() < max_share:
+            return False
+    return True
+
+
 def _hull(rects: np.ndarray):
     """Convex hull (counter-clockwise points) of the corners of ``rects``, or None if degenerate."""
     if len(rects) == 0:
@@ -127,14 +197,17 @@ def _hull(rects: np.ndarray):
 
 
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
-                  seen_min: float, outside_min: float = 0.5) -> np.ndarray:
+                  seen_min: float, outside_min: float = 0.5, across: int = 3) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
     building's footprint: the convex hull of the units that are enclosed (supported, and with a
     second largest share of at least ``max_share``); a fan of rays through a door into a room
     the robot never entered lies within it. Fans are never supported, so they add nothing to the
-    footprint and do not shield each other; without an enclosed unit nothing is flagged. At
+    footprint and do not shield each other; without an enclosed unit nothing is flagged. A unit
+    with two open sides is flagged when it lies between two drawn building walls and outside the
+    orthogonal hull of the units enclosed on three sides (module docstring; ``across``: cells
+    beyond a side's band in which the enclosed unit across it is looked for). At
     least two units are left: candidates are flagged the one most outside the footprint first
     (ties: the lower share, then the rectangle), so the result does not depend on the order of
     ``rects``."""
@@ -150,14 +223,25 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     count = np.zeros(classes.shape, dtype=np.int32)
     for r0, c0, r1, c1 in rects[supported]:
         count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
-    share = np.array([np.sort(side_shares(classes, r, count, wall, seen_min, own=int(sup)))[2]
-                      for r, sup in zip(rects, supported)])
-    hull = _hull(rects[supported & (share >= max_share)])
+    shares = np.array([side_shares(classes, r, count, wall, seen_min, own=int(sup))
+                       for r, sup in zip(rects, supported)])
+    ranked = np.sort(shares, axis=1)
+    share = ranked[:, 2]                                   # the second largest share
+    enclosed = supported & (share >= max_share)
+    hull = _hull(rects[enclosed])
     if hull is None:                # no unit enclosed: no footprint to be outside of
         return exterior
+    enclosed_mask = np.zeros(classes.shape, dtype=bool)
+    for r0, c0, r1, c1 in rects[enclosed]:
+        enclosed_mask[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    ortho = ortho_hull(rects[supported & (ranked[:, 1] >= max_share)], classes.shape)
     order = []
-    for i in np.flatnonzero(share < max_share):
-        out = _outside_share(rects[i], hull)
+    for i in range(n):
+        out = _outside_share(rects[i], hull) if share[i] < max_share else 0.0
+        if (out <= outside_min and ranked[i, 1] < max_share and ortho.any()
+                and _between_building_walls(classes, rects[i], shares[i], wall, seen_min,
+                                            max_share, enclosed_mask, across)):
+            out = _mask_outside_share(rects[i], ortho)
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
     for _key, i in sorted(order)[:max(n - 2, 0)]:
@@ -165,4 +249,4 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     return exterior
 
 
-__all__ = ["find_exterior", "perimeter_share", "side_shares"]
+__all__ = ["find_exterior", "ortho_hull", "perimeter_share", "side_shares"]
