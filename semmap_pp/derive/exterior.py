@@ -60,17 +60,26 @@ import numpy as np
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 
 
+def _side_bands(rect, wall: int, depth: int | None = None) -> tuple:
+    """The (top, bottom, left, right) wall bands of ``rect`` as (r0, c0, r1, c1) boxes; with
+    ``depth``, the strips that deep just beyond each side instead."""
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    b = max(1, min(wall, r1 - r0, c1 - c0))
+    if depth is None:
+        return ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1),
+                (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
+    d = int(depth)
+    return ((r0 - d, c0, r0, c1), (r1, c0, r1 + d, c1), (r0, c0 - d, r1, c0), (r0, c1, r1, c1 + d))
+
+
 def side_shares(classes: np.ndarray, rect, count: np.ndarray | None, wall: int, seen_min: float,
                 own: int = 1) -> np.ndarray:
     """The enclosed share of each side band of ``rect`` (top, bottom, left, right).
 
     ``count`` is the number of units giving cover at each cell, ``own`` of them this unit itself
     (1 when it is counted in ``count``, else 0); None: no cover at all."""
-    r0, c0, r1, c1 = (int(v) for v in rect)
-    b = max(1, min(wall, r1 - r0, c1 - c0))
-    bands = ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1), (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
     out = np.ones(4)
-    for k, (ra, ca, rb, cb) in enumerate(bands):
+    for k, (ra, ca, rb, cb) in enumerate(_side_bands(rect, wall)):
         ra, ca = max(ra, 0), max(ca, 0)
         cls = classes[ra:rb, ca:cb]
         if cls.size == 0:
@@ -124,9 +133,7 @@ def ortho_hull(rects: np.ndarray, shape) -> np.ndarray:
     >>> int(ortho_hull(U, (6, 6))[0, 3])
     1
     """
-    m = np.zeros(shape, dtype=bool)
-    for r0, c0, r1, c1 in np.asarray(rects, dtype=np.int64).reshape(-1, 4):
-        m[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    m = _union(rects, shape)
     while True:
         new = m
         for axis in (0, 1):
@@ -136,6 +143,14 @@ def ortho_hull(rects: np.ndarray, shape) -> np.ndarray:
         if np.array_equal(new, m):
             return m
         m = new
+
+
+def _union(rects: np.ndarray, shape) -> np.ndarray:
+    """(H, W) bool: the cells of ``rects`` (n, 4) on a lattice of ``shape``."""
+    m = np.zeros(shape, dtype=bool)
+    for r0, c0, r1, c1 in np.asarray(rects, dtype=np.int64).reshape(-1, 4):
+        m[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    return m
 
 
 def _mask_outside_share(rect, mask: np.ndarray) -> float:
@@ -155,10 +170,8 @@ def _between_building_walls(classes, rect, shares, wall, seen_min, max_share, en
     own = side_shares(classes, rect, None, wall, seen_min, own=0)
     r0, c0, r1, c1 = (int(v) for v in rect)
     h, w = classes.shape
-    b = max(1, min(wall, r1 - r0, c1 - c0))
-    d = b + int(across)
-    beyond = ((r0 - d, c0, r0, c1), (r1, c0, r1 + d, c1), (r0, c0 - d, r1, c0), (r0, c1, r1, c1 + d))
-    bands = ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1), (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
+    bands = _side_bands(rect, wall)
+    beyond = _side_bands(rect, wall, max(1, min(wall, r1 - r0, c1 - c0)) + int(across))
     for side in np.argsort(shares, kind="stable")[2:]:
         ra, ca, rb, cb = bands[side]
         band = classes[max(ra, 0):max(rb, 0), max(ca, 0):max(cb, 0)]
@@ -231,16 +244,17 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     hull = _hull(rects[enclosed])
     if hull is None:                # no unit enclosed: no footprint to be outside of
         return exterior
-    enclosed_mask = np.zeros(classes.shape, dtype=bool)
-    for r0, c0, r1, c1 in rects[enclosed]:
-        enclosed_mask[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
-    ortho = ortho_hull(rects[supported & (ranked[:, 1] >= max_share)], classes.shape)
+    enclosed_mask = _union(rects[enclosed], classes.shape)
+    three_sides = rects[supported & (ranked[:, 1] >= max_share)]
+    ortho = None                    # built when a unit first needs it
     order = []
     for i in range(n):
         out = _outside_share(rects[i], hull) if share[i] < max_share else 0.0
-        if (out <= outside_min and ranked[i, 1] < max_share and ortho.any()
+        if (out <= outside_min and ranked[i, 1] < max_share and len(three_sides)
                 and _between_building_walls(classes, rects[i], shares[i], wall, seen_min,
                                             max_share, enclosed_mask, across)):
+            if ortho is None:
+                ortho = ortho_hull(three_sides, classes.shape)
             out = _mask_outside_share(rects[i], ortho)
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
