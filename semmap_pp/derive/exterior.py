@@ -22,15 +22,16 @@ nor widen the footprint; a world without an enclosed unit has no footprint and n
 and at least two units are always left (a world is never left without units).
 
 A fan in a concave corner of the building (beyond a window in one wing, against the outer wall
-of the other) or in a notch between two wings has two enclosed sides, the two outer walls, and
-lies within the convex hull. It is exterior too when (a) rays leave it through its other two
+of the other) has two enclosed sides, the two outer walls, and lies within the convex hull. It
+is exterior too when (a) rays leave it through its other two
 sides (third largest share below ``max_share``), (b) each of its two enclosed sides is a wall
 drawn in the map (seen, and its own occupied share at least ``max_share``, no cover counted) with an
 enclosed unit right across it (at least ``max_share`` of a strip ``across`` cells deep beyond the
 band), and (c) more than half of it lies outside the *orthogonal hull* of the units enclosed on
 three sides (:func:`ortho_hull`; an L-shaped building is its own orthogonal hull). A room
 glimpsed through its door, whose walls the laser did not draw, fails (b): its one enclosed side
-with a unit across is the wall with the door.
+with a unit across is the wall with the door. A fan in a notch between two enclosed wings (a U)
+fails (c), since the orthogonal hull fills the notch, and stays a building unit.
 
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
