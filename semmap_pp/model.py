@@ -67,6 +67,7 @@ class WorldParams:
     unexplored_min_area_m2: float
     exterior_max_share: float = 0.0
     exterior_seen_min: float = 0.1
+    exterior_fan_seen_max: float = 0.0
     wall_min_cells: int = 1
 
 
@@ -144,6 +145,7 @@ class CellParams:
     wall_line_gap: int = 1
     exterior_max_share: float = 0.0
     exterior_seen_min: float = 0.1
+    exterior_fan_seen_max: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -228,7 +230,8 @@ class Model:
             unexplored_min_area=max(1, n(w.unexplored_min_area_m2, dims=2)),
             wall_line_tolerance=max(1, n(w.wall_line_tolerance_m)),
             wall_line_gap=max(1, n(w.wall_line_gap_m)),
-            exterior_max_share=w.exterior_max_share, exterior_seen_min=w.exterior_seen_min)
+            exterior_max_share=w.exterior_max_share, exterior_seen_min=w.exterior_seen_min,
+            exterior_fan_seen_max=w.exterior_fan_seen_max)
 
 
 class _Reader:
@@ -347,7 +350,8 @@ def load_model(path: str | Path | None = None) -> Model:
         refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0))
     # the exterior test is optional (off when its keys are absent: model files written before it)
     exterior = {k: r.number(f"world.{k}", lo=0.0, hi=1.0) for k in
-                ("exterior_max_share", "exterior_seen_min") if r.has(f"world.{k}")}
+                ("exterior_max_share", "exterior_seen_min", "exterior_fan_seen_max")
+                if r.has(f"world.{k}")}
     world = WorldParams(**{k: r.number(f"world.{k}", positive=True) for k in (
         "wall_thickness_m", "object_max_extent_m", "door_min_m", "door_max_m", "min_unit_side_m",
         "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2",

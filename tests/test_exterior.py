@@ -292,3 +292,47 @@ def test_a_room_glimpsed_through_its_door_with_one_wall_drawn_is_not_exterior():
     flags = find_exterior(c, np.array([corridor, room, corridor2]), wall=2, max_share=0.3,
                           seen_min=0.1)
     assert not flags[1]
+
+
+def u_building(notch: str):
+    """A U-shaped building: wings L and R (rooms enclosed by walls) and a base B below them. The
+    notch between the wings holds either a fan of rays through a window in L's right wall
+    (``"fan"``: rays stop at R's wall or leave the notch up and down, unknown between them) or a
+    corridor seen whole, open at both ends (``"corridor"``)."""
+    c = np.full((130, 120), UNKNOWN, np.uint8)
+    for r0, c0, r1, c1 in ((10, 10, 90, 40), (10, 80, 90, 110), (88, 10, 120, 110)):
+        c[r0:r1, c0:c1] = OCCUPIED
+        c[r0 + 2:r1 - 2, c0 + 2:c1 - 2] = FREE
+    if notch == "fan":
+        c[40:50, 38:40] = FREE                            # the window
+        for angle in np.linspace(-1.3, 1.3, 27):          # rays from it, stopped by R's wall
+            for t in np.arange(0.0, 120.0, 0.5):
+                r, col = int(round(45 + t * np.sin(angle))), int(round(40 + t * np.cos(angle)))
+                if not (0 <= r < 88 and 40 <= col < 120) or c[r, col] == OCCUPIED:
+                    break
+                c[r, col] = FREE
+    else:
+        c[0:88, 40:80] = FREE
+    return c
+
+
+UL, UR, UB, NOTCH = (10, 10, 90, 40), (10, 80, 90, 110), (88, 10, 120, 110), (20, 38, 70, 82)
+
+
+def test_a_fan_in_the_notch_of_a_u_is_exterior_but_a_corridor_there_is_not():
+    """Both units lie inside the orthogonal hull (it fills the notch), both have two open sides
+    and two drawn walls with a wing across each; the fan shows little of its interior, the
+    corridor all of it."""
+    from semmap_pp.derive.exterior import _seen_inside, ortho_hull
+
+    rects = np.array([UL, UR, UB, NOTCH])
+    assert ortho_hull(rects[:3], (130, 120))[30, 60]
+    for notch, flagged in (("fan", True), ("corridor", False)):
+        c = u_building(notch)
+        shares = np.sort(side_shares(c, NOTCH, None, 2, 0.1))
+        assert shares[2] >= 0.3 > shares[1], notch
+        assert (_seen_inside(c, NOTCH, 2) < 0.7) == flagged
+        flags = find_exterior(c, rects, wall=2, max_share=0.3, seen_min=0.1, fan_seen_max=0.7)
+        assert flags.tolist() == [False, False, False, flagged], notch
+        # without the seen-share rule neither is flagged: the orthogonal hull holds both
+        assert not find_exterior(c, rects, wall=2, max_share=0.3, seen_min=0.1).any()

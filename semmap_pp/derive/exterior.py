@@ -31,7 +31,10 @@ band), and (c) more than half of it lies outside the *orthogonal hull* of the un
 three sides (:func:`ortho_hull`; an L-shaped building is its own orthogonal hull). A room
 glimpsed through its door, whose walls the laser did not draw, fails (b): its one enclosed side
 with a unit across is the wall with the door. A fan in a notch between two enclosed wings (a U)
-fails (c), since the orthogonal hull fills the notch, and stays a building unit.
+lies inside the orthogonal hull; in place of (c) it is told from a corridor piece between two
+wings (open at its ends, both walls drawn, rooms across them) by how little of it the map shows:
+rays spread out, so less than ``fan_seen_max`` of its interior cells are seen (free or
+occupied), while a space the robot drove through is seen nearly whole.
 
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
@@ -154,6 +157,14 @@ def _union(rects: np.ndarray, shape) -> np.ndarray:
     return m
 
 
+def _seen_inside(classes: np.ndarray, rect, wall: int) -> float:
+    """The share of ``rect``'s interior (its wall band excluded) seen in the map (free or
+    occupied); 1.0 for a rectangle without interior."""
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    inner = classes[max(r0 + wall, 0):max(r1 - wall, 0), max(c0 + wall, 0):max(c1 - wall, 0)]
+    return float(np.count_nonzero(inner != UNKNOWN)) / inner.size if inner.size else 1.0
+
+
 def _mask_outside_share(rect, mask: np.ndarray) -> float:
     """The share of ``rect``'s area outside ``mask`` (cells beyond the lattice count outside)."""
     r0, c0, r1, c1 = (int(v) for v in rect)
@@ -211,7 +222,8 @@ def _hull(rects: np.ndarray):
 
 
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
-                  seen_min: float, outside_min: float = 0.5, across: int = 3) -> np.ndarray:
+                  seen_min: float, outside_min: float = 0.5, across: int = 3,
+                  fan_seen_max: float = 0.0) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -221,7 +233,8 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     footprint and do not shield each other; without an enclosed unit nothing is flagged. A unit
     with two open sides is flagged when it lies between two drawn building walls and outside the
     orthogonal hull of the units enclosed on three sides (module docstring; ``across``: cells
-    beyond a side's band in which the enclosed unit across it is looked for). At
+    beyond a side's band in which the enclosed unit across it is looked for; inside that hull, such
+    a unit is flagged when less than ``fan_seen_max`` of its interior is seen, 0: never). At
     least two units are left: candidates are flagged the one most outside the footprint first
     (ties: the lower share, then the rectangle), so the result does not depend on the order of
     ``rects``."""
@@ -257,6 +270,8 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
             if ortho is None:
                 ortho = ortho_hull(three_sides, classes.shape)
             out = _mask_outside_share(rects[i], ortho)
+            if out <= outside_min and _seen_inside(classes, rects[i], wall) < fan_seen_max:
+                out = 1.0               # a fan in a notch: flagged first, as wholly outside
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
     for _key, i in sorted(order)[:max(n - 2, 0)]:
