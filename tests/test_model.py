@@ -32,6 +32,7 @@ def edited(tmp_path, old, new):
     ("enclosure_cost = 0.0", "enclosure_cost = -1.0", "sensor.enclosure_cost"),
     ("exterior_max_share = 0.3", "exterior_max_share = 1.5", "world.exterior_max_share"),
     ("exterior_seen_min = 0.1", 'exterior_seen_min = "low"', "world.exterior_seen_min"),
+    ("exterior_fan_seen_max = 0.7", "exterior_fan_seen_max = 1.5", "world.exterior_fan_seen_max"),
     ("walls_inside_max = 0.5", "walls_inside_max = 1.5", "diagnostics.walls_inside_max"),
     ('muldoor_scope = "space"', 'muldoor_scope = "building"', "evidence.muldoor_scope"),
     ('muldoor_scope = "space"', "muldoor_scope = 1", "evidence.muldoor_scope"),
@@ -75,8 +76,10 @@ def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path)
 
 
 def test_model_files_without_the_exterior_keys_load_with_the_test_off(tmp_path):
-    assert without_lines(tmp_path, "exterior_").cells(0.05).exterior_max_share == 0.0
-    assert load_model().cells(0.05).exterior_max_share == 0.3
+    old = without_lines(tmp_path, "exterior_", n=3).cells(0.05)
+    assert old.exterior_max_share == 0.0 and old.exterior_fan_seen_max == 0.0
+    now = load_model().cells(0.05)
+    assert now.exterior_max_share == 0.3 and now.exterior_fan_seen_max == 0.7
 
 
 def test_model_files_without_walls_inside_max_get_the_default(tmp_path):
