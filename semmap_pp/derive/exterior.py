@@ -64,15 +64,15 @@ import numpy as np
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 
 
-def _side_bands(rect, wall: int, depth: int | None = None) -> tuple:
+def _side_bands(rect, wall: int, beyond: int | None = None) -> tuple:
     """The (top, bottom, left, right) wall bands of ``rect`` as (r0, c0, r1, c1) boxes; with
-    ``depth``, the strips that deep just beyond each side instead."""
+    ``beyond``, the strips just outside each side instead, as deep as the band plus ``beyond``."""
     r0, c0, r1, c1 = (int(v) for v in rect)
     b = max(1, min(wall, r1 - r0, c1 - c0))
-    if depth is None:
+    if beyond is None:
         return ((r0, c0, r0 + b, c1), (r1 - b, c0, r1, c1),
                 (r0, c0, r1, c0 + b), (r0, c1 - b, r1, c1))
-    d = int(depth)
+    d = b + int(beyond)
     return ((r0 - d, c0, r0, c1), (r1, c0, r1 + d, c1), (r0, c0 - d, r1, c0), (r0, c1, r1, c1 + d))
 
 
@@ -175,15 +175,13 @@ def _mask_outside_share(rect, mask: np.ndarray) -> float:
     return 1.0 - inside / area
 
 
-def _between_building_walls(classes, rect, shares, wall, seen_min, max_share, enclosed_mask,
+def _between_building_walls(classes, rect, shares, own, wall, seen_min, max_share, enclosed_mask,
                             across) -> bool:
     """Condition (b) of the module docstring for the two sides of ``rect`` with the largest
-    ``shares`` (top, bottom, left, right)."""
-    own = side_shares(classes, rect, None, wall, seen_min, own=0)
-    r0, c0, r1, c1 = (int(v) for v in rect)
+    ``shares`` (top, bottom, left, right); ``own``: the sides' shares without cover."""
     h, w = classes.shape
     bands = _side_bands(rect, wall)
-    beyond = _side_bands(rect, wall, max(1, min(wall, r1 - r0, c1 - c0)) + int(across))
+    beyond = _side_bands(rect, wall, across)
     for side in np.argsort(shares, kind="stable")[2:]:
         ra, ca, rb, cb = bands[side]
         band = classes[max(ra, 0):max(rb, 0), max(ca, 0):max(cb, 0)]
@@ -265,8 +263,8 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     for i in range(n):
         out = _outside_share(rects[i], hull) if share[i] < max_share else 0.0
         if (out <= outside_min and ranked[i, 1] < max_share and len(three_sides)
-                and _between_building_walls(classes, rects[i], shares[i], wall, seen_min,
-                                            max_share, enclosed_mask, across)):
+                and _between_building_walls(classes, rects[i], shares[i], own[i], wall,
+                                            seen_min, max_share, enclosed_mask, across)):
             if ortho is None:
                 ortho = ortho_hull(three_sides, classes.shape)
             out = _mask_outside_share(rects[i], ortho)
