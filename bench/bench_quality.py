@@ -16,7 +16,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   (:func:`observed_truth`); ``*_either_l`` with each of the truth's L-shaped spaces cut whichever
   way W* cut it (:func:`semmap_pp.evaluate.score_world_either_l`; ``l_shapes_recut`` counts them);
   ``*_visible`` against what the map shows (:func:`visible_truth`: seen units, open doors, either
-  cut of each L); ``errors`` is :func:`error_breakdown`; ``seen_shares`` the medians of world.json's
+  cut of each L); ``errors`` is :func:`error_breakdown` (where unit F1 is lost), ``door_errors``
+  :func:`door_breakdown` (where door F1 is lost); ``seen_shares`` the medians of world.json's
   ``seen_share`` and ``walls_seen_share`` by what the units match (:func:`seen_by_class`).
   ``--pool K`` runs the floors as maps of K times coarser cells (:func:`pooled_floor`);
   ``--resolution R`` has the generator render them at R metres per cell (the same seeds and
@@ -265,29 +266,100 @@ def visible_truth(truth: dict) -> dict:
 
 
 def error_breakdown(pred: dict, truth: dict, shape, iou_min: float = 0.5) -> dict:
-    """Where unit F1 is lost: predicted units matching no true unit (IoU < ``iou_min`` with every
-    one), and of those the ones lying mostly (> half their cells) outside the building (ray fans seen
-    through windows and exits); true units matched by none, and of those the ones never seen
-    (``explored`` false) and the ones cut into pieces (>= 2 predicted units each holding > 20 % of
-    their own cells and > 10 % of the true unit's)."""
+    """Where unit F1 is lost, each unmatched unit in exactly one class.
+
+    Predicted units matching no true unit (IoU < ``iou_min`` with every one), ``pred_unmatched``:
+
+    * ``pred_outside_building``: lying mostly (> half their cells) outside the building (ray fans
+      seen through windows and exits);
+    * ``pred_spans``: holding > 30 % of each of two or more true units (rooms merged);
+    * ``pred_piece_of_matched``: > 70 % inside one true unit that another predicted unit matches
+      (a room or corridor in pieces, one of which matches: a cut at furniture, a stepped wall);
+    * ``pred_piece_of_missed``: > 70 % inside one true unit that no predicted unit matches (the
+      pieces of a cut room, the seen part of a partly seen one);
+    * ``pred_other``: the rest (straddling a wall).
+
+    True units matched by none, ``true_missed``:
+
+    * ``true_missed_unseen``: never seen (``explored`` false);
+    * ``true_missed_cut``: cut into pieces (>= 2 predicted units each holding > 20 % of their own
+      cells and > 10 % of the true unit's);
+    * ``true_missed_merged``: most of it (> half) lies in one predicted unit that also holds > 30 %
+      of another true unit;
+    * ``true_missed_partial``: the predicted unit holding most of it lies > 80 % inside it but
+      covers less than half of it (a room seen only through its door, covered where it was seen);
+    * ``true_missed_other``: the rest.
+    """
     from semmap_pp.evaluate.truth import polygon_mask
     T = [polygon_mask(u["corners_px"], shape) for u in truth["units"]]
     P = [polygon_mask(u["vertices_px"], shape) for u in pred["units"]]
     union = np.any(T, axis=0) if T else np.zeros(shape, bool)
-    iou = np.array([[(p & t).sum() / max(1, (p | t).sum()) for t in T] for p in P]).reshape(len(P), len(T))
-    out = dict(pred_unmatched=0, pred_outside_building=0, true_missed=0, true_missed_unseen=0,
-               true_missed_cut=0)
+    inter = np.array([[np.count_nonzero(p & t) for t in T] for p in P], dtype=np.int64).reshape(len(P), len(T))
+    ps = np.array([p.sum() for p in P], dtype=np.int64)
+    ts = np.array([t.sum() for t in T], dtype=np.int64)
+    iou = inter / np.maximum(1, ps[:, None] + ts[None, :] - inter)
+    matched_p = iou.max(axis=1) >= iou_min if len(T) else np.zeros(len(P), bool)
+    matched_t = iou.max(axis=0) >= iou_min if len(P) else np.zeros(len(T), bool)
+    keys = ("pred_unmatched", "pred_outside_building", "pred_spans", "pred_piece_of_matched",
+            "pred_piece_of_missed", "pred_other", "true_missed", "true_missed_unseen",
+            "true_missed_cut", "true_missed_merged", "true_missed_partial", "true_missed_other")
+    out = dict.fromkeys(keys, 0)
     for i, p in enumerate(P):
-        if not len(T) or iou[i].max() < iou_min:
-            out["pred_unmatched"] += 1
-            out["pred_outside_building"] += int(_mostly_outside(p, union))
-    for j, t in enumerate(T):
-        if not len(P) or iou[:, j].max() < iou_min:
-            out["true_missed"] += 1
-            if not truth["units"][j].get("explored", True):
-                out["true_missed_unseen"] += 1
-            elif sum((p & t).sum() > 0.2 * p.sum() and (p & t).sum() > 0.1 * t.sum() for p in P) >= 2:
-                out["true_missed_cut"] += 1
+        if matched_p[i]:
+            continue
+        out["pred_unmatched"] += 1
+        holds = np.flatnonzero(inter[i] > 0.3 * ts) if len(T) else []
+        inside = np.flatnonzero(inter[i] > 0.7 * ps[i]) if len(T) else []
+        if _mostly_outside(p, union):
+            out["pred_outside_building"] += 1
+        elif len(holds) >= 2:
+            out["pred_spans"] += 1
+        elif len(inside):
+            out["pred_piece_of_matched" if matched_t[inside[0]] else "pred_piece_of_missed"] += 1
+        else:
+            out["pred_other"] += 1
+    for j in range(len(T)):
+        if matched_t[j]:
+            continue
+        out["true_missed"] += 1
+        i = int(inter[:, j].argmax()) if len(P) else -1
+        if not truth["units"][j].get("explored", True):
+            out["true_missed_unseen"] += 1
+        elif np.count_nonzero((inter[:, j] > 0.2 * ps) & (inter[:, j] > 0.1 * ts[j])) >= 2:
+            out["true_missed_cut"] += 1
+        elif i >= 0 and inter[i, j] > 0.5 * ts[j] and np.any(np.delete(inter[i] > 0.3 * ts, j)):
+            out["true_missed_merged"] += 1
+        elif i >= 0 and 0 < inter[i, j] and inter[i, j] > 0.8 * ps[i]:
+            out["true_missed_partial"] += 1
+        else:
+            out["true_missed_other"] += 1
+    return out
+
+
+def door_breakdown(pred: dict, truth: dict, score) -> dict:
+    """Where door F1 is lost, given ``score`` (:func:`semmap_pp.evaluate.score_world` of ``pred``
+    against ``truth``): the predicted doors that match none (``door_fp``) split into those touching
+    a unit that matches no true unit (``door_fp_unmatched_unit``) and those between two matched
+    units (``door_fp_matched_pair``: no true door there, or too far from it); the true doors
+    found by none (``door_fn``) into those touching a true unit no unit matches
+    (``door_fn_unmatched_unit``, of which ``..._closed`` the generator drew closed: wall in the
+    map) and those between two matched units (``door_fn_matched_pair``);
+    ``door_closed_between_matched`` counts the closed true doors between two matched units (no
+    detector finds them)."""
+    pred_doors, true_doors = pred.get("doors", []), truth.get("doors", [])
+    tp = int(round(score.door_recall * len(true_doors))) if true_doors else 0
+    matched_true = set(score.matches.values())
+    fp_unmatched = sum(any(u not in score.matches for u in d["units"]) for d in pred_doors)
+    fn_unmatched = [d for d in true_doors if any(u not in matched_true for u in d["units"])]
+    fn_unmatched_closed = sum(not d.get("open", True) for d in fn_unmatched)
+    pair_closed = sum(not d.get("open", True) for d in true_doors
+                      if all(u in matched_true for u in d["units"]))
+    out = {"door_tp": tp, "door_fp": len(pred_doors) - tp, "door_fp_unmatched_unit": fp_unmatched,
+           "door_fp_matched_pair": len(pred_doors) - tp - fp_unmatched,
+           "door_fn": len(true_doors) - tp, "door_fn_unmatched_unit": len(fn_unmatched),
+           "door_fn_unmatched_unit_closed": fn_unmatched_closed,
+           "door_fn_matched_pair": len(true_doors) - tp - len(fn_unmatched),
+           "door_closed_between_matched": pair_closed}
     return out
 
 
@@ -431,6 +503,7 @@ def bench_synthetic(args, model, rules) -> dict:
                "observed_units": len(observed_truth(floor.truth)["units"]),
                "type_accuracy_observed": _r4(so.type_accuracy),
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
+               "door_errors": door_breakdown(pred, floor.truth, sc),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
         for k, v in seen_by_class(pred, floor.truth, sc.matches).items():
@@ -446,15 +519,17 @@ def bench_synthetic(args, model, rules) -> dict:
                                          "type_accuracy_either_l", "door_f1_either_l", "unit_f1_visible",
                                          "type_accuracy_visible", "door_f1_visible", "seconds")}
     errors = {k: sum(r["errors"][k] for r in rows if "errors" in r)
-              for k in ("pred_unmatched", "pred_outside_building", "true_missed", "true_missed_unseen",
-                        "true_missed_cut")}
+              for k in next((r["errors"] for r in rows if "errors" in r), {})}
+    door_errors = {k: sum(r["door_errors"][k] for r in rows if "door_errors" in r)
+                   for k in next((r["door_errors"] for r in rows if "door_errors" in r), {})}
     errors |= {"pred_units": sum(r["units"] for r in rows if "units" in r),
                "pred_exterior": sum(r.get("exterior", 0) for r in rows),
                "true_units": sum(r["true_units"] for r in rows if "true_units" in r)}
     seen_shares = {k: {"units": len(v), "interior_median": round(float(np.median([a for a, _ in v])), 2),
                        "walls_median": round(float(np.median([b for _, b in v])), 2)}
                    for k, v in sorted(seen.items())}
-    return {"rows": rows, "means": means, "errors": errors, "seen_shares": seen_shares,
+    return {"rows": rows, "means": means, "errors": errors, "door_errors": door_errors,
+            "seen_shares": seen_shares,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}
 

@@ -1,0 +1,84 @@
+"""bench_quality.error_breakdown and door_breakdown: each unmatched unit and each missed or extra
+door lands in exactly one class (docs/quality.md, "Where unit and door F1 are lost")."""
+import importlib.util
+from pathlib import Path
+
+from semmap_pp.evaluate import score_world
+
+_spec = importlib.util.spec_from_file_location(
+    "bench_quality", Path(__file__).parents[1] / "bench" / "bench_quality.py")
+bq = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bq)
+
+SHAPE = (100, 100)
+
+
+def box(x0, y0, x1, y1):
+    return [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+
+
+def worlds():
+    """A truth of seven units and a prediction with a unit of each error class (IoU 0.4 or less
+    where a unit is not to match: 0.5 matches)."""
+    truth = {"resolution": 0.05, "units": [
+        {"id": 0, "type": "room", "corners_px": box(0, 0, 20, 20)},     # matched by P0
+        {"id": 1, "type": "room", "corners_px": box(20, 0, 40, 20)},    # merged with T2 in P1
+        {"id": 2, "type": "room", "corners_px": box(40, 0, 60, 20)},
+        {"id": 3, "type": "room", "corners_px": box(0, 20, 40, 40)},    # cut: P2, P3 (+ uncovered)
+        {"id": 4, "type": "room", "corners_px": box(0, 40, 40, 60)},    # seen in part: P4
+        {"id": 5, "type": "room", "corners_px": box(40, 20, 80, 60)},   # matched by P5, piece P6
+        {"id": 6, "type": "room", "corners_px": box(60, 0, 80, 20), "explored": False},
+    ], "doors": [
+        {"units": [0, 5], "center_px": [40, 10], "width_m": 0.8, "open": True},   # found
+        {"units": [0, 3], "center_px": [10, 20], "width_m": 0.8, "open": True},   # T3 missed
+        {"units": [5, 6], "center_px": [70, 20], "width_m": 0.8, "open": False},  # T6 unseen
+        {"units": [0, 5], "center_px": [40, 18], "width_m": 0.8, "open": False},  # drawn as wall
+    ]}
+    pred = {"units": [
+        {"id": 10, "type": "room", "vertices_px": box(0, 0, 20, 20)},
+        {"id": 11, "type": "room", "vertices_px": box(20, 0, 70, 20)},
+        {"id": 12, "type": "room", "vertices_px": box(0, 20, 16, 40)},
+        {"id": 13, "type": "room", "vertices_px": box(16, 20, 32, 40)},
+        {"id": 14, "type": "room", "vertices_px": box(0, 40, 12, 60)},
+        {"id": 15, "type": "room", "vertices_px": box(40, 20, 70, 60)},
+        {"id": 16, "type": "room", "vertices_px": box(70, 20, 80, 60)},
+        {"id": 17, "type": "room", "vertices_px": box(85, 85, 99, 99)},   # outside the building
+    ], "doors": [
+        {"units": [10, 15], "center_px": [40, 10]},   # true positive
+        {"units": [10, 11], "center_px": [20, 10]},   # touches the unmatched P1
+        {"units": [10, 15], "center_px": [5, 5]},     # matched pair, no true door near
+    ]}
+    return pred, truth
+
+
+def test_every_unmatched_unit_is_in_exactly_one_class():
+    pred, truth = worlds()
+    e = bq.error_breakdown(pred, truth, SHAPE)
+    assert e == {"pred_unmatched": 6, "pred_outside_building": 1, "pred_spans": 1,
+                 "pred_piece_of_matched": 1, "pred_piece_of_missed": 3, "pred_other": 0,
+                 "true_missed": 5, "true_missed_unseen": 1, "true_missed_cut": 1,
+                 "true_missed_merged": 2, "true_missed_partial": 1, "true_missed_other": 0}
+    assert sum(v for k, v in e.items() if k.startswith("pred_") and k != "pred_unmatched") == 6
+    assert sum(v for k, v in e.items() if k.startswith("true_missed_")) == 5
+
+
+def test_every_extra_and_missed_door_is_in_exactly_one_class():
+    pred, truth = worlds()
+    sc = score_world(pred, truth, shape=SHAPE, resolution=0.05)
+    d = bq.door_breakdown(pred, truth, sc)
+    assert d == {"door_tp": 1, "door_fp": 2, "door_fp_unmatched_unit": 1, "door_fp_matched_pair": 1,
+                 "door_fn": 3, "door_fn_unmatched_unit": 2, "door_fn_unmatched_unit_closed": 1,
+                 "door_fn_matched_pair": 1, "door_closed_between_matched": 1}
+    assert d["door_tp"] == round(sc.door_precision * 3) == round(sc.door_recall * 4)
+
+
+def test_a_perfect_prediction_loses_nothing():
+    _, truth = worlds()
+    seen = [u for u in truth["units"] if u.get("explored", True)]
+    pred = {"units": [{"id": u["id"], "type": u["type"], "vertices_px": u["corners_px"]} for u in seen],
+            "doors": [d for d in truth["doors"] if d["open"] and 6 not in d["units"]]}
+    e = bq.error_breakdown(pred, truth, SHAPE)
+    assert e["pred_unmatched"] == 0 and e["true_missed"] == e["true_missed_unseen"] == 1
+    d = bq.door_breakdown(pred, truth, score_world(pred, truth, shape=SHAPE, resolution=0.05))
+    assert d["door_fp"] == 0 and d["door_fn"] == 2
+    assert d["door_fn_unmatched_unit_closed"] == 1 and d["door_closed_between_matched"] == 1
