@@ -86,7 +86,8 @@ def _budget(text: str) -> str | float:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--subset", default="all", choices=["synthetic", "truth", "real", "ipa", "types", "all"])
+    parser.add_argument("--subset", default="all",
+                        choices=["synthetic", "truth", "surgery", "real", "ipa", "types", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
     parser.add_argument("--furniture", action="store_true",
@@ -106,6 +107,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--outside-from", type=Path, default=None,
                         help="truth subset: add the units lying mostly outside the building of the W*s "
                              "saved here (--subset synthetic --save DIR) to the seen truth")
+    parser.add_argument("--wstars", type=Path, default=None,
+                        help="surgery subset: the W*s saved here (--subset synthetic --save DIR)")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--model", type=Path, default=None, help="model file (default models/default.toml)")
     parser.add_argument("--rules", type=Path, default=None, help="rule file (default rules/table3.lp)")
@@ -265,8 +268,64 @@ def visible_truth(truth: dict) -> dict:
     return out
 
 
+def _overlaps(pred: dict, truth: dict, shape):
+    """Cell counts of the predicted and true units' polygons: ``(inter, pred sizes, true sizes,
+    IoU, union of the true units)``, ``inter[i, j]`` the cells predicted unit ``i`` shares with true
+    unit ``j``."""
+    from semmap_pp.evaluate.truth import polygon_mask
+    T = [polygon_mask(u["corners_px"], shape) for u in truth["units"]]
+    P = [polygon_mask(u["vertices_px"], shape) for u in pred["units"]]
+    union = np.any(T, axis=0) if T else np.zeros(shape, bool)
+    inter = np.array([[np.count_nonzero(p & t) for t in T] for p in P], dtype=np.int64).reshape(len(P), len(T))
+    ps = np.array([p.sum() for p in P], dtype=np.int64)
+    ts = np.array([t.sum() for t in T], dtype=np.int64)
+    iou = inter / np.maximum(1, ps[:, None] + ts[None, :] - inter)
+    outside = [_mostly_outside(p, union) for p in P]
+    return inter, ps, ts, iou, outside
+
+
+def unit_classes(pred: dict, truth: dict, shape, iou_min: float = 0.5):
+    """The error class of every predicted and every true unit (``None`` when matched), as
+    :func:`error_breakdown` counts them: ``(pred classes, true classes, inter, pred sizes, true
+    sizes)`` with :func:`_overlaps`' counts."""
+    inter, ps, ts, iou, outside = _overlaps(pred, truth, shape)
+    n_p, n_t = inter.shape
+    matched_p = iou.max(axis=1) >= iou_min if n_t else np.zeros(n_p, bool)
+    matched_t = iou.max(axis=0) >= iou_min if n_p else np.zeros(n_t, bool)
+    pc: list = [None] * n_p
+    for i in range(n_p):
+        if matched_p[i]:
+            continue
+        holds = np.flatnonzero(inter[i] > 0.3 * ts)
+        inside = np.flatnonzero(inter[i] > 0.7 * ps[i])
+        if outside[i]:
+            pc[i] = "outside_building"
+        elif len(holds) >= 2:
+            pc[i] = "spans"
+        elif len(inside):
+            pc[i] = "piece_of_matched" if matched_t[inside[0]] else "piece_of_missed"
+        else:
+            pc[i] = "other"
+    tc: list = [None] * n_t
+    for j in range(n_t):
+        if matched_t[j]:
+            continue
+        i = int(inter[:, j].argmax()) if n_p else -1
+        if not truth["units"][j].get("explored", True):
+            tc[j] = "unseen"
+        elif np.count_nonzero((inter[:, j] > 0.2 * ps) & (inter[:, j] > 0.1 * ts[j])) >= 2:
+            tc[j] = "cut"
+        elif i >= 0 and inter[i, j] > 0.5 * ts[j] and np.any(np.delete(inter[i] > 0.3 * ts, j)):
+            tc[j] = "merged"
+        elif i >= 0 and 0 < inter[i, j] and inter[i, j] > 0.8 * ps[i]:
+            tc[j] = "partial"
+        else:
+            tc[j] = "other"
+    return pc, tc, inter, ps, ts
+
+
 def error_breakdown(pred: dict, truth: dict, shape, iou_min: float = 0.5) -> dict:
-    """Where unit F1 is lost, each unmatched unit in exactly one class.
+    """Where unit F1 is lost, each unmatched unit in exactly one class (:func:`unit_classes`).
 
     Predicted units matching no true unit (IoU < ``iou_min`` with every one), ``pred_unmatched``:
 
@@ -290,49 +349,12 @@ def error_breakdown(pred: dict, truth: dict, shape, iou_min: float = 0.5) -> dic
       covers less than half of it (a room seen only through its door, covered where it was seen);
     * ``true_missed_other``: the rest.
     """
-    from semmap_pp.evaluate.truth import polygon_mask
-    T = [polygon_mask(u["corners_px"], shape) for u in truth["units"]]
-    P = [polygon_mask(u["vertices_px"], shape) for u in pred["units"]]
-    union = np.any(T, axis=0) if T else np.zeros(shape, bool)
-    inter = np.array([[np.count_nonzero(p & t) for t in T] for p in P], dtype=np.int64).reshape(len(P), len(T))
-    ps = np.array([p.sum() for p in P], dtype=np.int64)
-    ts = np.array([t.sum() for t in T], dtype=np.int64)
-    iou = inter / np.maximum(1, ps[:, None] + ts[None, :] - inter)
-    matched_p = iou.max(axis=1) >= iou_min if len(T) else np.zeros(len(P), bool)
-    matched_t = iou.max(axis=0) >= iou_min if len(P) else np.zeros(len(T), bool)
-    keys = ("pred_unmatched", "pred_outside_building", "pred_spans", "pred_piece_of_matched",
-            "pred_piece_of_missed", "pred_other", "true_missed", "true_missed_unseen",
-            "true_missed_cut", "true_missed_merged", "true_missed_partial", "true_missed_other")
-    out = dict.fromkeys(keys, 0)
-    for i, p in enumerate(P):
-        if matched_p[i]:
-            continue
-        out["pred_unmatched"] += 1
-        holds = np.flatnonzero(inter[i] > 0.3 * ts) if len(T) else []
-        inside = np.flatnonzero(inter[i] > 0.7 * ps[i]) if len(T) else []
-        if _mostly_outside(p, union):
-            out["pred_outside_building"] += 1
-        elif len(holds) >= 2:
-            out["pred_spans"] += 1
-        elif len(inside):
-            out["pred_piece_of_matched" if matched_t[inside[0]] else "pred_piece_of_missed"] += 1
-        else:
-            out["pred_other"] += 1
-    for j in range(len(T)):
-        if matched_t[j]:
-            continue
-        out["true_missed"] += 1
-        i = int(inter[:, j].argmax()) if len(P) else -1
-        if not truth["units"][j].get("explored", True):
-            out["true_missed_unseen"] += 1
-        elif np.count_nonzero((inter[:, j] > 0.2 * ps) & (inter[:, j] > 0.1 * ts[j])) >= 2:
-            out["true_missed_cut"] += 1
-        elif i >= 0 and inter[i, j] > 0.5 * ts[j] and np.any(np.delete(inter[i] > 0.3 * ts, j)):
-            out["true_missed_merged"] += 1
-        elif i >= 0 and 0 < inter[i, j] and inter[i, j] > 0.8 * ps[i]:
-            out["true_missed_partial"] += 1
-        else:
-            out["true_missed_other"] += 1
+    pc, tc, *_ = unit_classes(pred, truth, shape, iou_min)
+    out = {"pred_unmatched": sum(c is not None for c in pc)}
+    out |= {f"pred_{k}": pc.count(k) for k in ("outside_building", "spans", "piece_of_matched",
+                                               "piece_of_missed", "other")}
+    out["true_missed"] = sum(c is not None for c in tc)
+    out |= {f"true_missed_{k}": tc.count(k) for k in ("unseen", "cut", "merged", "partial", "other")}
     return out
 
 
@@ -629,6 +651,83 @@ def bench_truth(args, model, rules) -> dict:
     return out
 
 
+def surgery_clusters(pred: dict, truth: dict, shape, iou_min: float = 0.5) -> list:
+    """The local repairs :func:`bench_surgery` scores: for each seen true unit that no predicted
+    unit matches, and each one holding an unmatched piece (:func:`unit_classes`), ``(true unit,
+    its class, predicted units to remove, true units to add)`` (indices into ``pred["units"]`` and
+    ``truth["units"]``). Removed: the predicted units with > 20 % of their cells in the true unit;
+    added: it and every other seen true unit one of those holds > 30 % of (a merged neighbour);
+    then also removed every predicted unit lying mostly (> 50 %) in an added one."""
+    pc, tc, inter, ps, ts = unit_classes(pred, truth, shape, iou_min)
+    seen = [u.get("explored", True) for u in truth["units"]]
+    targets = [(j, c) for j, c in enumerate(tc) if c not in (None, "unseen")]
+    for i, c in enumerate(pc):
+        if c == "piece_of_matched":
+            j = int(inter[i].argmax())
+            if all(j != t for t, _ in targets):
+                targets.append((j, "holds_piece"))
+    out = []
+    for j, c in targets:
+        remove = {i for i in range(len(ps)) if inter[i, j] > 0.2 * ps[i]}
+        add = {j} | {k for i in remove for k in range(len(ts)) if seen[k] and inter[i, k] > 0.3 * ts[k]}
+        remove |= {i for i in range(len(ps)) for k in add if inter[i, k] > 0.5 * ps[i]}
+        out.append((j, c, sorted(remove), sorted(add)))
+    return out
+
+
+def bench_surgery(args, model, rules) -> dict:
+    """Which of W*'s errors the target prefers (``--wstars DIR``: the W*s of ``--subset synthetic
+    --save DIR``). For each repair of :func:`surgery_clusters`, W* with its units over a missed or
+    pieced true unit replaced by the true units there, every wall then moved to its best position
+    (:func:`semmap_pp.ascent.align_walls`, the full target), against W* aligned the same way:
+    ``delta`` > 0 (the truth scores higher: a search miss), < 0 (the target's own choice) or 0
+    (the walls moved back to W*'s: a room seen in part shrinks to its seen part again)."""
+    from semmap_pp import world as wm
+    from semmap_pp.ascent import align_walls
+    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.pipeline import run_target
+    if args.wstars is None:
+        raise SystemExit("--subset surgery needs --wstars DIR (the W*s of --subset synthetic --save DIR)")
+    rows = []
+    for seed in range(args.first_floor, args.first_floor + args.floors):
+        path = args.wstars / f"synth-{seed}" / "world.json"
+        if not path.exists():
+            _log(args, f"surgery {seed:3d}: no {path}, skipped")
+            continue
+        t0 = time.perf_counter()
+        floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
+        post = run_target(inputs)
+        data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
+        pred = json.loads(path.read_text())
+        units = [u["vertices_px"] for u in pred["units"]]
+        extra = [u["vertices_px"] for u in pred.get("exterior", [])]
+
+        def aligned_logp(polygons):
+            w = wm.empty(max(model.prior.k_max, len(polygons)))
+            for slot, corners in enumerate(polygons):
+                w = wm.add(w, slot, lattice_rect(inputs.frame, corners))
+            return float(post.evaluate(align_walls(post, w, data)).total)
+
+        base = aligned_logp(units + extra)
+        repairs = []
+        for j, cls, remove, add in surgery_clusters(pred, floor.truth, floor.classes.shape):
+            kept = [u for i, u in enumerate(units) if i not in remove]
+            lp = aligned_logp(kept + [floor.truth["units"][k]["corners_px"] for k in add] + extra)
+            repairs.append({"true_unit": floor.truth["units"][j]["id"], "class": cls,
+                            "removed": len(remove), "added": len(add), "delta": round(lp - base, 1)})
+        rows.append({"seed": seed, "wstar_aligned_log_posterior": round(base, 1), "repairs": repairs,
+                     "seconds": round(time.perf_counter() - t0, 1)})
+        _log(args, f"surgery {seed:3d}: " + ", ".join(f"T{r['true_unit']} {r['class']} {r['delta']:+.1f}"
+                                                      for r in repairs))
+    by_class: dict = {}
+    for r in (r for row in rows for r in row["repairs"]):
+        c = by_class.setdefault(r["class"], {"repairs": 0, "truth_higher": 0, "equal": 0, "truth_lower": 0})
+        c["repairs"] += 1
+        c["truth_higher" if r["delta"] > 0.05 else "truth_lower" if r["delta"] < -0.05 else "equal"] += 1
+    return {"rows": rows, "by_class": by_class}
+
+
 def bench_real(args, model, rules) -> dict:
     from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
     rows = []
@@ -756,8 +855,8 @@ def run(args) -> dict:
     from semmap_pp.model import load_model
     from semmap_pp.pipeline import DEFAULT_RULES
     if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05)
-                         and args.subset not in ("synthetic", "truth")):
-        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic and truth only")
+                         and args.subset not in ("synthetic", "truth", "surgery")):
+        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic, truth and surgery only")
     model = load_model(args.model)
     rules = load_rules(args.rules or DEFAULT_RULES)
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
@@ -767,8 +866,8 @@ def run(args) -> dict:
               "furniture": args.furniture},
            "published": PUBLISHED, "targets": TARGETS}
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
-    fns = {"synthetic": bench_synthetic, "truth": bench_truth, "real": bench_real, "ipa": bench_ipa,
-           "types": bench_types}
+    fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
+           "real": bench_real, "ipa": bench_ipa, "types": bench_types}
     for name in subsets:
         t0 = time.perf_counter()
         out[name] = fns[name](args, model, rules)

@@ -603,7 +603,10 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         The kernels' data of the same lattice (line evidence, birth table).
     rounds : int
         Passes of removals, wall moves, merges, bridges, splits and births (stops early when nothing
-        changes).
+        changes); with ``shared_walls`` also the bound on the passes of whole-wall moves, and on
+        how often the two phases alternate: after whole walls moved, the other moves run again
+        (a moved wall may open a merge: synthetic floor 27's corridor in two pieces, joined on
+        the second pass for +287.6 nats; docs/quality.md What changed 33).
 
     Returns
     -------
@@ -628,15 +631,21 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             changed |= asc.births()
         return changed
 
-    for _ in range(rounds):
-        if not one_round():
+    for _ in range(rounds if shared_walls else 1):
+        for _ in range(rounds):
+            if not one_round():
+                break
+        if not shared_walls:
             break
-    if shared_walls:    # from where the other moves stop: the same world or a better one
+        walls_moved = False   # from where the other moves stop: the same world or a better one
         for _ in range(rounds):
             moved = asc.shared_wall_moves()
             if not moved:
                 break
+            walls_moved = True
             asc.all_wall_moves(asc.near(moved))   # the walls the moved ones may have unblocked
+        if not walls_moved:   # else the other moves again: a moved wall may open a merge or a cut
+            break
     out = asc.untyped()
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
         out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots

@@ -82,3 +82,13 @@ def test_a_perfect_prediction_loses_nothing():
     d = bq.door_breakdown(pred, truth, score_world(pred, truth, shape=SHAPE, resolution=0.05))
     assert d["door_fp"] == 0 and d["door_fn"] == 2
     assert d["door_fn_unmatched_unit_closed"] == 1 and d["door_closed_between_matched"] == 1
+
+
+def test_surgery_replaces_the_units_over_each_missed_or_pieced_true_unit():
+    """bench_surgery's repairs: the predicted units over a missed true unit (or one holding an
+    unmatched piece) out, that true unit and the seen neighbours they hold > 30 % of in; never an
+    unseen one (T6, which P1 holds half of)."""
+    pred, truth = worlds()
+    assert bq.surgery_clusters(pred, truth, SHAPE) == [
+        (1, "merged", [1], [1, 2]), (2, "merged", [1], [1, 2]), (3, "cut", [2, 3], [3]),
+        (4, "partial", [4], [4]), (5, "holds_piece", [5, 6], [5])]

@@ -587,3 +587,34 @@ def test_a_wall_move_reaches_as_many_walls_on_a_finer_map():
     assert ascent_peaks(8, 0.025) == fine.peaks == 16 and ascent_peaks(8, 0.05) == 8
     assert walls_reached(fine) == 2
     assert walls_reached(_Ascent(post, world, data, peaks=8)) == 1
+
+
+def test_after_whole_walls_moved_the_other_moves_run_again(monkeypatch):
+    """W*'s polish alternates its two phases: once whole walls have moved, the ascent's other
+    moves (merges among them) run again, since a moved wall may open a merge; when no whole wall
+    moves, one pass is all. From a local maximum, with the whole-wall phase made to report a
+    move once: two passes of the other moves instead of one."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(two_rooms())
+    wrong = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 80)), 1, (2, 78, 82, 142))
+    polished = refine_world(post, wrong, data, rounds=2, recuts=True, shared_walls=True)
+    calls = []
+    merges = ascent._Ascent.merges
+    monkeypatch.setattr(ascent._Ascent, "merges", lambda self: calls.append(1) or merges(self))
+    refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
+    assert len(calls) == 1          # a local maximum: nothing moves, one pass
+    reported = []
+    shared = ascent._Ascent.shared_wall_moves
+
+    def once(self):
+        moved = shared(self)
+        if not reported:
+            reported.append(1)
+            return moved | {0}
+        return moved
+    monkeypatch.setattr(ascent._Ascent, "shared_wall_moves", once)
+    calls.clear()
+    out = refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
+    assert len(calls) == 2          # the other moves again after the (reported) wall move
+    assert post.evaluate(out).total >= post.evaluate(polished).total - 1e-6
