@@ -604,9 +604,11 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     rounds : int
         Passes of removals, wall moves, merges, bridges, splits and births (stops early when nothing
         changes); with ``shared_walls`` also the bound on the passes of whole-wall moves, and on
-        how often the two phases alternate: after whole walls moved, the other moves run again
-        (a moved wall may open a merge: synthetic floor 27's corridor in two pieces, joined on
-        the second pass for +287.6 nats; docs/quality.md What changed 33).
+        how often the phases alternate: after whole walls moved, the moves that join or drop
+        units (removals, wall moves, merges, bridges) run again, since a moved wall may open a
+        merge (synthetic floor 27's corridor in two pieces, joined for +287.6 nats); splits,
+        recuts and births do not (with them aces' south corridor came out in three pieces;
+        docs/quality.md What changed 33).
 
     Returns
     -------
@@ -631,9 +633,17 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             changed |= asc.births()
         return changed
 
-    for _ in range(rounds if shared_walls else 1):
+    def join_round() -> bool:     # after whole walls moved: nothing cut, nothing born
+        changed = asc.removals()
+        changed |= asc.all_wall_moves()
+        if merges:
+            changed |= asc.merges()
+            changed |= asc.bridges()
+        return changed
+
+    for phase in range(rounds if shared_walls else 1):
         for _ in range(rounds):
-            if not one_round():
+            if not (one_round() if phase == 0 else join_round()):
                 break
         if not shared_walls:
             break
@@ -644,7 +654,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
                 break
             walls_moved = True
             asc.all_wall_moves(asc.near(moved))   # the walls the moved ones may have unblocked
-        if not walls_moved:   # else the other moves again: a moved wall may open a merge or a cut
+        if not walls_moved:   # else the joining moves again: a moved wall may open a merge
             break
     out = asc.untyped()
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:

@@ -589,21 +589,22 @@ def test_a_wall_move_reaches_as_many_walls_on_a_finer_map():
     assert walls_reached(_Ascent(post, world, data, peaks=8)) == 1
 
 
-def test_after_whole_walls_moved_the_other_moves_run_again(monkeypatch):
-    """W*'s polish alternates its two phases: once whole walls have moved, the ascent's other
-    moves (merges among them) run again, since a moved wall may open a merge; when no whole wall
-    moves, one pass is all. From a local maximum, with the whole-wall phase made to report a
-    move once: two passes of the other moves instead of one."""
+def test_after_whole_walls_moved_the_joining_moves_run_again(monkeypatch):
+    """W*'s polish alternates its phases: once whole walls have moved, the moves that join units
+    (merges among them) run again, since a moved wall may open a merge, but no split; when no
+    whole wall moves, one pass is all. From a local maximum, with the whole-wall phase made to
+    report a move once: two passes of the merges instead of one, one of the splits."""
     from semmap_pp import ascent
 
     post, data = knowledge_free(two_rooms())
     wrong = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 80)), 1, (2, 78, 82, 142))
     polished = refine_world(post, wrong, data, rounds=2, recuts=True, shared_walls=True)
-    calls = []
-    merges = ascent._Ascent.merges
+    calls, cuts = [], []
+    merges, splits = ascent._Ascent.merges, ascent._Ascent.splits
     monkeypatch.setattr(ascent._Ascent, "merges", lambda self: calls.append(1) or merges(self))
+    monkeypatch.setattr(ascent._Ascent, "splits", lambda self: cuts.append(1) or splits(self))
     refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
-    assert len(calls) == 1          # a local maximum: nothing moves, one pass
+    assert len(calls) == len(cuts) == 1          # a local maximum: nothing moves, one pass
     reported = []
     shared = ascent._Ascent.shared_wall_moves
 
@@ -615,6 +616,8 @@ def test_after_whole_walls_moved_the_other_moves_run_again(monkeypatch):
         return moved
     monkeypatch.setattr(ascent._Ascent, "shared_wall_moves", once)
     calls.clear()
+    cuts.clear()
     out = refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
-    assert len(calls) == 2          # the other moves again after the (reported) wall move
+    assert len(calls) == 2          # the merges again after the (reported) wall move ...
+    assert len(cuts) == 1           # ... but not the splits
     assert post.evaluate(out).total >= post.evaluate(polished).total - 1e-6
