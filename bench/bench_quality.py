@@ -1,6 +1,6 @@
 """Quality of the whole pipeline: synthetic truth, real-map CPR, ipa segmentation and typing.
 
-``python bench/run.py quality --json [--subset synthetic|truth|real|ipa|types|all] [--floors N] [--budget B]``
+``python bench/run.py quality --json [--subset synthetic|truth|surgery|real|ipa|types|all] [--floors N] [--budget B]``
 
 Every map goes through :func:`semmap_pp.pipeline.run_map` with the model file's defaults (``--budget
 model``), a shorter run (``--budget quick``) or the model's run capped at a number of seconds of
@@ -26,6 +26,9 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
   scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
   of the W*s a synthetic run saved in DIR, to compare log posteriors inside the building.
+* **surgery**: which of W*'s errors the target prefers (:func:`bench_surgery`; ``--wstars DIR``, the
+  W*s of ``--subset synthetic --save DIR``): each missed or pieced seen true unit put in W*'s place,
+  the walls aligned, the log posterior compared with W*'s aligned the same way.
 * **real**: ``data/maps/*.yaml`` of the repository (cartesium, intel), CPR with the default ROI, and
   the time to W*.
 * **ipa**: the ten plans of ``/work/shared/data/ipa-segmentation`` (with ``--furniture`` their
