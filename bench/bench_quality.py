@@ -273,8 +273,8 @@ def visible_truth(truth: dict) -> dict:
 
 def _overlaps(pred: dict, truth: dict, shape):
     """Cell counts of the predicted and true units' polygons: ``(inter, pred sizes, true sizes,
-    IoU, union of the true units)``, ``inter[i, j]`` the cells predicted unit ``i`` shares with true
-    unit ``j``."""
+    IoU, outside)``, ``inter[i, j]`` the cells predicted unit ``i`` shares with true unit ``j`` and
+    ``outside[i]`` whether unit ``i`` lies mostly outside the true units (:func:`_mostly_outside`)."""
     from semmap_pp.evaluate.truth import polygon_mask
     T = [polygon_mask(u["corners_px"], shape) for u in truth["units"]]
     P = [polygon_mask(u["vertices_px"], shape) for u in pred["units"]]
@@ -320,7 +320,7 @@ def unit_classes(pred: dict, truth: dict, shape, iou_min: float = 0.5):
             tc[j] = "cut"
         elif i >= 0 and inter[i, j] > 0.5 * ts[j] and np.any(np.delete(inter[i] > 0.3 * ts, j)):
             tc[j] = "merged"
-        elif i >= 0 and 0 < inter[i, j] and inter[i, j] > 0.8 * ps[i]:
+        elif i >= 0 and inter[i, j] > 0.8 * ps[i]:
             tc[j] = "partial"
         else:
             tc[j] = "other"
@@ -567,17 +567,31 @@ def lattice_rect(frame, corners_px) -> tuple:
     return tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
 
 
-def truth_world(frame, truth: dict, capacity: int, extra=()):
-    """The seen true units of a synthetic floor as a world on ``frame``'s lattice (units the robot
-    never saw left out), plus the polygons ``extra`` (pixel frame), each as :func:`lattice_rect`."""
+def polygons_world(frame, polygons, capacity: int):
+    """The polygons (pixel frame) as a world of ``capacity`` slots on ``frame``'s lattice, each as
+    :func:`lattice_rect`."""
     from semmap_pp import world as wm
-    polygons = [u["corners_px"] for u in observed_truth(truth)["units"]] + list(extra)
     if len(polygons) > capacity:
         raise ValueError(f"{len(polygons)} units, world capacity {capacity}")
     w = wm.empty(capacity)
     for slot, corners in enumerate(polygons):
         w = wm.add(w, slot, lattice_rect(frame, corners))
     return w
+
+
+def truth_world(frame, truth: dict, capacity: int, extra=()):
+    """The seen true units of a synthetic floor as a world on ``frame``'s lattice (units the robot
+    never saw left out), plus the polygons ``extra`` (pixel frame), each as :func:`lattice_rect`."""
+    return polygons_world(frame, [u["corners_px"] for u in observed_truth(truth)["units"]] + list(extra),
+                          capacity)
+
+
+def kernel_data(inputs, model):
+    """The kernels' data of ``inputs``' lattice with the model's ``[kernels]`` settings (what
+    :func:`semmap_pp.ascent.align_walls` needs)."""
+    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.kernels.data import settings_from_mapping
+    return data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
 
 
 def outside_units(pred: dict, truth: dict, shape) -> list:
@@ -613,8 +627,6 @@ def bench_truth(args, model, rules) -> dict:
     (:func:`outside_units`) join the seen truth before the walls are aligned, so that the two log
     posteriors differ only inside the building; rows then carry W*'s log posterior too."""
     from semmap_pp.ascent import align_walls
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
     from semmap_pp.outputs import world_dict
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.pipeline import run_target
@@ -623,7 +635,7 @@ def bench_truth(args, model, rules) -> dict:
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
         post = run_target(inputs)
-        data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
+        data = kernel_data(inputs, model)
         wstar = (json.loads((args.outside_from / f"synth-{seed}" / "world.json").read_text())
                  if args.outside_from else None)
         extra = outside_units(wstar, floor.truth, floor.classes.shape) if wstar else []
@@ -685,10 +697,7 @@ def bench_surgery(args, model, rules) -> dict:
     (:func:`semmap_pp.ascent.align_walls`, the full target), against W* aligned the same way:
     ``delta`` > 0 (the truth scores higher: a search miss), < 0 (the target's own choice) or 0
     (the walls moved back to W*'s: a room seen in part shrinks to its seen part again)."""
-    from semmap_pp import world as wm
     from semmap_pp.ascent import align_walls
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
     from semmap_pp.pipeline import run_target
     if args.wstars is None:
         raise SystemExit("--subset surgery needs --wstars DIR (the W*s of --subset synthetic --save DIR)")
@@ -701,15 +710,13 @@ def bench_surgery(args, model, rules) -> dict:
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
         post = run_target(inputs)
-        data = data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
+        data = kernel_data(inputs, model)
         pred = json.loads(path.read_text())
         units = [u["vertices_px"] for u in pred["units"]]
         extra = [u["vertices_px"] for u in pred.get("exterior", [])]
 
         def aligned_logp(polygons):
-            w = wm.empty(max(model.prior.k_max, len(polygons)))
-            for slot, corners in enumerate(polygons):
-                w = wm.add(w, slot, lattice_rect(inputs.frame, corners))
+            w = polygons_world(inputs.frame, polygons, max(model.prior.k_max, len(polygons)))
             return float(post.evaluate(align_walls(post, w, data)).total)
 
         base = aligned_logp(units + extra)
