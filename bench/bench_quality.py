@@ -738,10 +738,21 @@ def bench_surgery(args, model, rules) -> dict:
     return {"rows": rows, "by_class": by_class}
 
 
+def real_maps(bundled: Path, shared: Path) -> list[tuple[Path, bool]]:
+    """The real maps of ``--subset real``: ``(yaml path, bundled)``, the maps bundled in ``bundled``
+    (the paper's two, with CPR targets) first, then those of ``shared`` that are not bundled (the
+    other Radish floors, aces and freiburg-079: no ground truth, no target, scored so that a change
+    that breaks them shows), each by name; the shared folder may be absent."""
+    own = sorted(bundled.glob("*.yaml"))
+    names = {p.stem for p in own}
+    more = sorted(p for p in shared.glob("*.yaml") if p.stem not in names) if shared.is_dir() else []
+    return [(p, True) for p in own] + [(p, False) for p in more]
+
+
 def bench_real(args, model, rules) -> dict:
     from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
     rows = []
-    for path in sorted((ROOT / "data" / "maps").glob("*.yaml")):
+    for path, bundled in real_maps(ROOT / "data" / "maps", SHARED / "real"):
         if not _keep(path.stem, args):
             continue
         inputs = load_inputs(path, model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
@@ -754,7 +765,7 @@ def bench_real(args, model, rules) -> dict:
             continue
         sm = run.semantic
         ttb = time_to_best(run, clock)
-        row = {"map": path.stem, "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
+        row = {"map": path.stem, "bundled": bundled, "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
                "cpr": round(sm.cpr, 4),
                "paper_cpr": PUBLISHED["cpr"].get(path.stem), "log_posterior": round(sm.log_posterior, 1),
                "run_s": round(run.seconds, 1), "time_to_wstar_s": ttb.get("seconds"),

@@ -92,3 +92,20 @@ def test_surgery_replaces_the_units_over_each_missed_or_pieced_true_unit():
     assert bq.surgery_clusters(pred, truth, SHAPE) == [
         (1, "merged", [1], [1, 2]), (2, "merged", [1], [1, 2]), (3, "cut", [2, 3], [3]),
         (4, "partial", [4], [4]), (5, "holds_piece", [5, 6], [5])]
+
+
+def test_the_real_subset_scores_the_bundled_maps_then_the_shared_ones_not_bundled(tmp_path):
+    bundled, shared = tmp_path / "maps", tmp_path / "real"
+    bundled.mkdir()
+    for name in ("intel-lab", "ubremen-cartesium"):
+        (bundled / f"{name}.yaml").write_text("image: x.png\n")
+    assert bq.real_maps(bundled, shared) == [(bundled / "intel-lab.yaml", True),
+                                             (bundled / "ubremen-cartesium.yaml", True)]
+    shared.mkdir()
+    for name in ("aces", "intel-lab", "freiburg-079"):
+        (shared / f"{name}.yaml").write_text("image: x.pgm\n")
+    (shared / "aces.pgm").write_text("")
+    assert bq.real_maps(bundled, shared) == [(bundled / "intel-lab.yaml", True),
+                                             (bundled / "ubremen-cartesium.yaml", True),
+                                             (shared / "aces.yaml", False),
+                                             (shared / "freiburg-079.yaml", False)]
