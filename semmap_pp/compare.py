@@ -63,6 +63,7 @@ class RuleSetSummary:
     seconds: float
     wall_disagreement_m2: float = math.nan
     wall_sd_m: float = math.nan   # mean conditional sd of W*'s wall positions
+    spread_chains: tuple = ()     # the chains (from 1) the sampled worlds come from: the best one's mode
 
 
 # Offsets tried per wall by :func:`conditional_wall_sd` in ``summarise``: +- 0.25 m.
@@ -112,8 +113,8 @@ def mean_wall_sd_m(post, world) -> float:
 
 
 def typed_sampled_worlds(run, n: int) -> list:
-    """Up to ``n`` recorded worlds of ``run``, typed by its own target (knowledge on when it had rules):
-    :func:`semmap_pp.outputs.write.posterior_worlds`."""
+    """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode, typed by its own
+    target (knowledge on when it had rules): :func:`semmap_pp.outputs.write.posterior_worlds`."""
     from semmap_pp.outputs.write import posterior_worlds
 
     return posterior_worlds(run, n)
@@ -161,7 +162,8 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
         wall_spread=acc.wall_spread(), n_worlds=len(worlds),
         defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
         seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution),
-        wall_sd_m=mean_wall_sd_m(run_target(run.inputs), run.world))
+        wall_sd_m=mean_wall_sd_m(run_target(run.inputs), run.world),
+        spread_chains=tuple(run.report.mode_chains()))
 
 
 def _fmt(v, spec: str) -> str:
@@ -188,7 +190,8 @@ def compare_table(rows: list[RuleSetSummary]) -> str:
     add("wall spread (mean p(1-p) over cells ever wall)", [_fmt(r.wall_spread, ".4f") for r in rows])
     add("wall disagreement, m² (Σ 2p(1-p) · cell area)", [_fmt(r.wall_disagreement_m2, ".2f") for r in rows])
     add("wall sd given the rest of W*, mean over its walls, m", [_fmt(r.wall_sd_m, ".4f") for r in rows])
-    add("sampled worlds", [str(r.n_worlds) for r in rows])
+    add("sampled worlds (chains: the best one's mode)",
+        [f"{r.n_worlds} ({', '.join(map(str, r.spread_chains))})" for r in rows])
     names = list(rows[0].rhat)
     for n in names:
         add(f"R-hat {n}", [_fmt(r.rhat.get(n, math.nan), ".3f") for r in rows])

@@ -106,10 +106,23 @@ class ConvergenceReport:
                 out.append((c + 1, round(gap, 1)))
         return best + 1, out
 
+    def mode_chains(self, name: str = "log_posterior") -> list[int]:
+        """The chains (numbered from 1) in the best chain's mode: every chain that
+        :meth:`separated_chains` does not name; all chains when there is no best one.
+
+        >>> import numpy as np
+        >>> lp = np.tile(np.arange(50.0) % 5, (3, 1)); lp[1] -= 100.0   # chain 2 far below
+        >>> convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10).mode_chains()
+        [1, 3]
+        """
+        best, sep = self._separation(name)
+        apart = {c for c, _ in sep}
+        return [c for c in range(1, self.n_chains + 1) if c not in apart]
+
     def separation_note(self) -> str:
         """One line naming the chains in separate modes (:meth:`separated_chains`), "" if none."""
         best, sep = self._separation("log_posterior")
-        return _separation_text(sep, best) if sep else ""
+        return _separation_text(sep, best, self.n_chains) if sep else ""
 
     def to_dict(self) -> dict:
         def clean(v):
@@ -185,7 +198,9 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
                                chain_means, chain_sds)
 
 
-def _separation_text(separated: list[tuple[int, float]], best: int) -> str:
+def _separation_text(separated: list[tuple[int, float]], best: int, n_chains: int) -> str:
+    apart = {c for c, _ in separated}
+    mode = [str(c) for c in range(1, n_chains + 1) if c not in apart]
     if len(separated) == 1:
         (c, g), = separated
         what = f"chain {c}'s mean log posterior lies {g:,.1f} nats below chain {best}'s"
@@ -194,7 +209,8 @@ def _separation_text(separated: list[tuple[int, float]], best: int) -> str:
                 f"{', '.join(f'{g:,.1f}' for _, g in separated)} nats below chain {best}'s")
     return (f"chains in separate modes: {what}, more than {SEPARATION_SDS:g} of the chains' own "
             f"standard deviations (another mode, or still climbing: docs/sampler.md, \"Chains in "
-            f"separate modes\"); W* comes from the best world of any chain")
+            f"separate modes\"); W* comes from the best world of any chain, the posterior spread "
+            f"from chain{'s' if len(mode) > 1 else ''} {', '.join(mode)} (chain {best}'s mode)")
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,

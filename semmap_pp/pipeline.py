@@ -380,13 +380,26 @@ def _walls_inside_note(sm, post, model) -> str | None:
             f"explains it best); mark the outside unknown or crop the map to the building")
 
 
-def sampled_worlds(run: MapRun, n: int) -> list[wm.World]:
-    """Up to ``n`` recorded worlds, evenly thinned over all chains and draws (types not assigned)."""
-    rects = run.samples["rects"].reshape(-1, *run.samples["rects"].shape[2:])
-    active = run.samples["active"].reshape(-1, run.samples["active"].shape[-1])
+def sampled_worlds(run: MapRun, n: int, chains=None) -> list[wm.World]:
+    """Up to ``n`` recorded worlds, evenly thinned over the draws of ``chains`` (indices from 0 into
+    the recorded chains; all of them when None), types not assigned."""
+    rects, active = run.samples["rects"], run.samples["active"]
+    if chains is not None:
+        idx = np.asarray(sorted(chains), dtype=int)
+        rects, active = rects[idx], active[idx]
+    rects = rects.reshape(-1, *rects.shape[2:])
+    active = active.reshape(-1, active.shape[-1])
     idx = np.unique(np.linspace(0, len(rects) - 1, num=min(n, len(rects))).round().astype(int))
     K = active.shape[1]
     return [wm.make(rects[i], active[i], np.full(K, wm.NO_TYPE)) for i in idx]
+
+
+def spread_chains(run: MapRun) -> list[int]:
+    """The recorded chains (indices from 0) whose draws the posterior spread is drawn from: those in
+    the best chain's mode (:meth:`ConvergenceReport.mode_chains`). A chain whose mean log posterior
+    lies thousands of nats below the best chain's carries no posterior mass worth drawing (e^-1000
+    of it); pooled, its worlds would show the spread between modes, not around W*."""
+    return [c - 1 for c in run.report.mode_chains()]
 
 
 def check_out_dir(out: Path, force: bool) -> None:

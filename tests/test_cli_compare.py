@@ -30,7 +30,10 @@ def test_compare_writes_table_json_and_figure(tmp_path, capsys):
     assert doc["settings"]["seed"] == 4 and doc["settings"]["draws"] == 4
     for r in doc["rule_sets"]:
         assert isinstance(r["defects_best"], int) and r["defects_best"] >= 0
-        assert r["n_worlds"] == 6 and 0 <= r["cpr"] <= 1 and 0 <= r["wall_spread"] <= 0.25
+        # the sampled worlds come from the chains in the best chain's mode, 4 draws each
+        assert r["spread_chains"] and set(r["spread_chains"]) <= {1, 2}
+        assert r["n_worlds"] == min(6, 4 * len(r["spread_chains"]))
+        assert 0 <= r["cpr"] <= 1 and 0 <= r["wall_spread"] <= 0.25
         assert set(r["rhat"]) >= {"log_posterior", "n_units", "cpr"}
     w, h = Image.open(out / "compare.png").size
     assert w > h       # two panels side by side

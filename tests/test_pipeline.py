@@ -152,3 +152,33 @@ def test_a_unit_over_the_building_and_its_free_surroundings_gets_a_note():
     off = dataclasses.replace(MODEL, diagnostics=dataclasses.replace(MODEL.diagnostics, walls_inside_max=1.0))
     assert " holds 100 % " in note        # every wall of the building lies inside it
     assert _walls_inside_note(semantic_map(g, f, post, everything, roi=roi), post, off) is None
+
+
+def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode():
+    """A chain started with one room missing stays thousands of nats below the other (n_inner=1, a
+    few draws): the spread figures' worlds come from the other chain only, and sampled_worlds
+    draws from the chains it is given."""
+    from semmap_pp.outputs.write import posterior_worlds
+    from semmap_pp.pipeline import Inputs, RunSettings, run_map, sampled_worlds, spread_chains
+
+    g = rooms_grid(door=True)
+    f = build_frame(g, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    inputs = Inputs(g, MODEL, None, f, roi, "default")
+    good = W.add(W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    bad = W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60))
+    run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=0, draws=6,
+                                                 n_inner=1), log=lambda m: None, starts=[good, bad])
+    lp = run.summaries["log_posterior"]
+    assert lp[0].min() - lp[1].max() > 1000          # chain 2 far below: another mode
+    assert run.report.mode_chains() == [1] and spread_chains(run) == [0]
+    def key(rects, active):
+        return str(np.asarray(rects)[np.asarray(active)].tolist())
+
+    chain = [{key(r, a) for r, a in zip(run.samples["rects"][c], run.samples["active"][c])} for c in (0, 1)]
+    assert chain[0].isdisjoint(chain[1])
+    for c in (0, 1):
+        assert {key(w.rects, w.active) for w in sampled_worlds(run, 6, [c])} == chain[c]
+    assert len(sampled_worlds(run, 100)) == 12          # all chains by default
+    spread = posterior_worlds(run, 100)
+    assert len(spread) == 6 and {key(w.rects, w.active) for w in spread} == chain[0]

@@ -235,7 +235,7 @@ def posterior_png(sm, worlds) -> bytes:
     alpha = float(np.clip(10.0 / max(len(worlds), 1), 0.02, 0.6))
     ax.add_collection(LineCollection(lines, colors=[(0.85, 0.0, 0.1, alpha)], linewidths=0.5))
     fig.text(0.5, 0.12 / fig.get_figheight(), f"{len(worlds)} sampled worlds, each unit drawn with a thin "
-             f"line (opacity {alpha:.2f}): where lines pile up, the chains agree", ha="center", fontsize=9)
+             f"line (opacity {alpha:.2f}): where lines pile up, the sampled worlds agree", ha="center", fontsize=9)
     fig.subplots_adjust(0.005, 0.35 / fig.get_figheight(), 0.995, 0.995)
     return png(fig)
 

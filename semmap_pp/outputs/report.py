@@ -125,6 +125,27 @@ def convergence_table(report) -> str:
                   rows, classes)
 
 
+def spread_text(rep) -> str:
+    """Which chains' draws the spread figures hold (:func:`semmap_pp.pipeline.spread_chains`).
+
+    >>> import numpy as np
+    >>> from semmap_pp.diagnostics import convergence
+    >>> lp = np.tile(np.arange(50.0) % 5, (3, 1)); lp[1] -= 100.0
+    >>> spread_text(convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10))
+    "Drawn from chains 1, 3, the best chain's mode; chain 2 left out: its mean log posterior lies far below (Convergence)."
+    """
+    mode = rep.mode_chains()
+    left = [c for c in range(1, rep.n_chains + 1) if c not in mode]
+    if not left:
+        return f"Drawn from {'all ' + str(rep.n_chains) + ' chains' if rep.n_chains > 1 else 'the one chain'}."
+    s = "s" if len(mode) > 1 else ""
+    t = "s" if len(left) > 1 else ""
+    return (f"Drawn from chain{s} {', '.join(map(str, mode))}, the best chain's mode; chain{t} "
+            f"{', '.join(map(str, left))} left out: "
+            f"{'their mean log posteriors lie' if left[1:] else 'its mean log posterior lies'} far below "
+            f"(Convergence).")
+
+
 def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, int], *, rules_name: str,
                 files: list[str] | None = None) -> str:
     """The page.
@@ -196,6 +217,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
                 "Units joined where the wall between them is open (wider than a door), one colour each: "
                 "the rooms a person would draw."),
         '<h2 id="spread">Posterior spread</h2>',
+        f"<p>{e(spread_text(rep))}</p>",
         _figure(f("posterior"), "Sampled worlds (posterior.png)",
                 "Each sampled world drawn with very thin lines on the map (paper Fig. 7)."),
         _figure(f("posterior_cells"), "Per-cell probabilities (posterior_cells.png)",

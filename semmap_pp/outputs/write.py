@@ -54,10 +54,11 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
 
 
 def posterior_worlds(run, n: int) -> list:
-    """Up to ``n`` recorded worlds of ``run``, typed as the sampler typed them."""
-    from semmap_pp.pipeline import run_target, sampled_worlds
+    """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode
+    (:func:`semmap_pp.pipeline.spread_chains`), typed as the sampler typed them."""
+    from semmap_pp.pipeline import run_target, sampled_worlds, spread_chains
 
-    return typed_worlds(run_target(run.inputs), sampled_worlds(run, n))
+    return typed_worlds(run_target(run.inputs), sampled_worlds(run, n, spread_chains(run)))
 
 
 def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
