@@ -120,6 +120,10 @@ class Frame:
         Lattice cells whose centre falls outside the input image.
     image_shape : (H, W)
         Shape of the input image.
+    window : (r0, c0, r1, c1) or None
+        The part of the image the lattice covers (rows r0..r1-1, columns c0..c1-1: the known cells
+        and a margin, :func:`known_window`); None for the whole image. The lattice's centre maps
+        to the window's centre.
     resolution : float
         Metres per cell (the same on the lattice).
     cells : CellParams
@@ -135,15 +139,16 @@ class Frame:
     resolution: float
     cells: CellParams
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    window: tuple[int, int, int, int] | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.classes.shape
 
     def _centres(self):
-        h, w = self.image_shape
+        r0, c0, r1, c1 = self.window if self.window is not None else (0, 0) + tuple(self.image_shape)
         hl, wl = self.classes.shape
-        return (w - 1) / 2.0, (h - 1) / 2.0, (wl - 1) / 2.0, (hl - 1) / 2.0
+        return c0 + (c1 - c0 - 1) / 2.0, r0 + (r1 - r0 - 1) / 2.0, (wl - 1) / 2.0, (hl - 1) / 2.0
 
     def lattice_to_image(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
         """Continuous image coordinates ``(x_px, y_px)`` of (fractional) lattice ``(rows, cols)``."""
@@ -202,16 +207,50 @@ class Frame:
         if a.shape[:2] != self.classes.shape:
             raise ValueError(f"expected a lattice array of shape {self.classes.shape}, got {a.shape}")
         if self.theta == 0.0:
-            return a.copy()
+            if self.window is None:
+                return a.copy()
+            r0, c0, r1, c1 = self.window
+            out = np.full(tuple(self.image_shape) + a.shape[2:], fill, dtype=a.dtype)
+            out[r0:r1, c0:c1] = a
+            return out
         h, w = self.image_shape
-        y, x = np.mgrid[0:h, 0:w]
-        rows, cols = self.image_to_lattice(x, y)
-        ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
         hl, wl = a.shape[:2]
-        ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
         out = np.full((h, w) + a.shape[2:], fill, dtype=a.dtype)
-        out[ok] = a[ri[ok], ci[ok]]
+        # only the pixels of the lattice's footprint (its corners' bounding box, a cell wider)
+        x, y = self.lattice_to_image(np.array([-0.5, -0.5, hl - 0.5, hl - 0.5]),
+                                     np.array([-0.5, wl - 0.5, -0.5, wl - 0.5]))
+        x0, x1 = max(int(math.floor(x.min())) - 1, 0), min(int(math.ceil(x.max())) + 2, w)
+        y0, y1 = max(int(math.floor(y.min())) - 1, 0), min(int(math.ceil(y.max())) + 2, h)
+        if x0 >= x1 or y0 >= y1:
+            return out
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        rows, cols = self.image_to_lattice(xx, yy)
+        ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
+        ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
+        part = out[y0:y1, x0:x1]
+        part[ok] = a[ri[ok], ci[ok]]
         return out
+
+
+def known_window(classes: np.ndarray, margin: int) -> tuple[int, int, int, int] | None:
+    """``(r0, c0, r1, c1)``: the bounding box of the known (not unknown) cells grown by ``margin``
+    cells and clipped to the image; None when that is the whole image, when ``margin`` is 0 (no
+    crop) or when no cell is known.
+
+    >>> c = np.full((100, 200), UNKNOWN, np.uint8); c[40:50, 90:120] = 0
+    >>> known_window(c, 10), known_window(c, 0), known_window(c, 100)
+    ((30, 80, 60, 130), None, None)
+    """
+    if margin <= 0:
+        return None
+    known = np.asarray(classes) != UNKNOWN
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if rows.size == 0:
+        return None
+    h, w = known.shape
+    win = (max(int(rows[0]) - margin, 0), max(int(cols[0]) - margin, 0),
+           min(int(rows[-1]) + 1 + margin, h), min(int(cols[-1]) + 1 + margin, w))
+    return None if win == (0, 0, h, w) else win
 
 
 def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Model,
@@ -239,15 +278,17 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
     h, w = classes.shape
     cells = model.cells(resolution)
     origin = tuple(float(v) for v in origin)
+    window = known_window(classes, int(math.ceil(model.lattice.crop_margin_m / resolution - 1e-9)))
+    r0, c0, r1, c1 = window if window is not None else (0, 0, h, w)
     if theta == 0.0:
-        lat = classes.copy()
-        outside = np.zeros(classes.shape, dtype=bool)
+        lat = classes[r0:r1, c0:c1].copy()
+        outside = np.zeros(lat.shape, dtype=bool)
     else:
         c, s = abs(math.cos(theta)), abs(math.sin(theta))
-        wl = int(math.ceil(w * c + h * s - 1e-9))
-        hl = int(math.ceil(w * s + h * c - 1e-9))
+        wl = int(math.ceil((c1 - c0) * c + (r1 - r0) * s - 1e-9))
+        hl = int(math.ceil((c1 - c0) * s + (r1 - r0) * c - 1e-9))
         probe = Frame(theta, np.zeros((hl, wl), np.uint8), np.zeros((hl, wl), bool), (h, w),
-                      float(resolution), cells, origin)
+                      float(resolution), cells, origin, window)
         rows, cols = np.mgrid[0:hl, 0:wl]
         x, y = probe.lattice_to_image(rows, cols)
         xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
@@ -257,7 +298,7 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
         outside = ~inside
     lat.setflags(write=False)
     outside.setflags(write=False)
-    return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin)
+    return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin, window)
 
 
 def build_frame(grid, model: Model, theta: float | None = None) -> Frame:

@@ -51,6 +51,7 @@ class LatticeParams:
     identity_below_deg: float
     angle_bin_deg: float
     refine_window_deg: float
+    crop_margin_m: float = 0.0   # the lattice covers the known cells and this much around them; 0: the whole image
 
 
 @dataclass(frozen=True)
@@ -347,7 +348,8 @@ def load_model(path: str | Path | None = None) -> Model:
     lattice = LatticeParams(
         identity_below_deg=r.number("lattice.identity_below_deg", lo=0.0, hi=45.0),
         angle_bin_deg=r.number("lattice.angle_bin_deg", positive=True, hi=15.0),
-        refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0))
+        refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0),
+        crop_margin_m=r.optional("lattice.crop_margin_m", 0.0, r.number, lo=0.0, hi=1000.0))
     # the exterior test is optional (off when its keys are absent: model files written before it)
     exterior = {k: r.number(f"world.{k}", lo=0.0, hi=1.0) for k in
                 ("exterior_max_share", "exterior_seen_min", "exterior_fan_seen_max")

@@ -146,3 +146,25 @@ def test_closing_by_distance_transforms_equals_scipys_closing_with_the_disk():
         inner = (slice(r + 1, -(r + 1)), slice(r + 1, -(r + 1)))
         assert np.array_equal(closing_disk(m, r)[inner], ndi.binary_closing(m, structure=disk(r))[inner])
     assert not closing_disk(np.zeros((5, 5), bool), 2).any()
+
+
+def test_default_roi_is_the_closing_of_the_whole_map_however_much_unknown_surrounds_it():
+    """default_roi works on the known cells' bounding box; the reference closes the whole map,
+    padded, with scipy's binary closing and the disk, then fills its holes."""
+    from scipy import ndimage as ndi
+
+    rng = np.random.default_rng(11)
+    for _ in range(120):
+        h, w = rng.integers(5, 70, 2)
+        c = np.full((h, w), U, np.uint8)
+        for _ in range(int(rng.integers(0, 4))):
+            a, b = int(rng.integers(0, h)), int(rng.integers(0, w))
+            blob = rng.random((int(rng.integers(1, 15)), int(rng.integers(1, 15)))) < rng.uniform(0.1, 1.0)
+            part = c[a:a + blob.shape[0], b:b + blob.shape[1]]
+            part[blob[:part.shape[0], :part.shape[1]]] = rng.choice([F, O])
+        r = int(rng.integers(0, 6))
+        known = c != U
+        if r:
+            closed = ndi.binary_closing(np.pad(known, r + 1), structure=disk(r))[r + 1:-(r + 1), r + 1:-(r + 1)]
+            known = known | closed
+        assert np.array_equal(default_roi(c, r), ndi.binary_fill_holes(known))

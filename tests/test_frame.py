@@ -37,8 +37,10 @@ def test_orientation_of_rotated_rooms_within_half_a_degree(deg):
 
 def test_small_angle_gives_identity_frame():
     f = build_frame_from_classes(rooms(), 0.05, MODEL)
-    assert f.theta == 0.0 and f.classes.shape == (240, 240) and not f.outside.any()
-    assert np.array_equal(f.classes, rooms())
+    assert f.theta == 0.0 and not f.outside.any()
+    r0, c0, r1, c1 = f.window if f.window is not None else (0, 0, 240, 240)   # the known cells + margin
+    assert np.array_equal(f.classes, rooms()[r0:r1, c0:c1])
+    assert np.array_equal(f.to_image(f.classes, fill=UNKNOWN), rooms())
 
 
 def test_rotated_lattice_is_axis_aligned_and_round_trips():
@@ -85,3 +87,39 @@ def test_metres_follow_map_server():
     assert (float(x), float(y)) == (10.25, 20.25)
     x, y = f.image_to_metres(0, 4)       # bottom-left image corner = the map origin
     assert (float(x), float(y)) == (10.0, 20.0)
+
+
+@pytest.mark.parametrize("deg", [0.0, 12.3])
+def test_the_lattice_covers_the_known_cells_and_a_margin_not_the_whole_canvas(deg):
+    """A map padded with unknown cells (a ROS canvas) gets the same lattice as the map itself once
+    both have more than ``crop_margin_m`` of unknown around the known cells: the same cells, the
+    same orientation, its image coordinates shifted by the padding."""
+    base = np.pad(rooms(), 30, constant_values=UNKNOWN)           # 90 cells around the known ones
+    pad = 400
+    big = np.pad(base, pad, constant_values=UNKNOWN)
+    theta = math.radians(deg)
+    f = build_frame_from_classes(base, 0.05, MODEL, theta=theta)
+    g = build_frame_from_classes(big, 0.05, MODEL, theta=theta)
+    margin = round(MODEL.lattice.crop_margin_m / 0.05)
+    assert g.window is not None and g.window[0] == pad + 90 - margin
+    assert np.array_equal(f.classes, g.classes)
+    assert not (g.outside & ~f.outside).any()    # outside the image: the canvas holds more of it
+    rows, cols = np.array([0.0, 10.5, 77.0]), np.array([3.0, 50.25, 120.0])
+    xf, yf = f.lattice_to_image(rows, cols)
+    xg, yg = g.lattice_to_image(rows, cols)
+    assert np.allclose(xg, xf + pad) and np.allclose(yg, yf + pad)
+    lat = np.arange(f.classes.size, dtype=np.int32).reshape(f.classes.shape)
+    img = g.to_image(lat, fill=-1)
+    assert np.array_equal(img[pad:-pad, pad:-pad], f.to_image(lat, fill=-1))
+    assert (img[:pad] == -1).all() and (img[-pad:] == -1).all()
+    if deg == 0.0:
+        assert np.array_equal(g.to_image(g.classes, fill=UNKNOWN), big)
+
+
+def test_without_a_crop_margin_the_lattice_is_the_whole_image():
+    import dataclasses
+
+    model = dataclasses.replace(MODEL, lattice=dataclasses.replace(MODEL.lattice, crop_margin_m=0.0))
+    big = np.pad(rooms(), 300, constant_values=UNKNOWN)
+    f = build_frame_from_classes(big, 0.05, model, theta=0.0)
+    assert f.window is None and f.classes.shape == big.shape

@@ -182,3 +182,33 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
     assert len(sampled_worlds(run, 100)) == 12          # all chains by default
     spread = posterior_worlds(run, 100)
     assert len(spread) == 6 and {key(w.rects, w.active) for w in spread} == chain[0]
+
+
+def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():
+    """A ROS canvas: the same map padded with unknown cells. The lattice covers the known cells and
+    the model's crop margin, so the run sees the same lattice: the same W*, log posterior and CPR,
+    its pixel coordinates shifted by the padding, and labels.png as big as the input."""
+    from semmap_pp.outputs.world_json import world_dict
+    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+
+    def run(pad):
+        g = rooms_grid(door=True)
+        c = np.pad(g.classes, pad, constant_values=UNKNOWN)
+        g = OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                          origin=(0.0, 0.0, 0.0), source=None, image_path=None)
+        roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+        inputs = Inputs(g, MODEL, None, build_frame(g, MODEL), roi, "default")
+        r = run_map(inputs, RunSettings.from_model(MODEL, seed=5, chains=1, cores=1, tune=2, draws=4,
+                                                   n_inner=5), log=lambda m: None)
+        return r, world_dict(r.semantic)
+
+    (a, da), (b, db) = run(60), run(560)
+    assert a.semantic.frame.window is not None and b.semantic.frame.window is not None
+    assert np.array_equal(a.world.rects[a.world.active], b.world.rects[b.world.active])
+    assert a.semantic.log_posterior == pytest.approx(b.semantic.log_posterior, abs=1e-6)
+    assert a.semantic.cpr == pytest.approx(b.semantic.cpr, abs=1e-12)
+    assert len(da["units"]) == len(db["units"]) > 0
+    for u, v in zip(da["units"], db["units"]):
+        assert np.allclose(np.asarray(v["vertices_px"]), np.asarray(u["vertices_px"]) + 500)
+    assert b.semantic.labels_image.shape == (60 + 2 * 560, 120 + 2 * 560)
+    assert np.array_equal(b.semantic.labels_image[500:-500, 500:-500], a.semantic.labels_image)

@@ -187,13 +187,20 @@ def default_roi(input_classes: np.ndarray, closing_radius_cells: int) -> np.ndar
     r = int(closing_radius_cells)
     if r < 0:
         raise ValueError(f"closing radius must be >= 0, got {closing_radius_cells}")
-    if r > 0 and known.any():
-        padded = np.pad(known, r + 1, mode="constant", constant_values=False)
-        closed = closing_disk(padded, r)[r + 1:-(r + 1), r + 1:-(r + 1)]
-        region = closed | known
-    else:
-        region = known
-    return ndi.binary_fill_holes(region)
+    if not known.any():
+        return ndi.binary_fill_holes(known)
+    # Work on the known cells' bounding box: the closing of a set lies within its bounding box,
+    # and a background region touching the box's edge reaches the map border around it, so the
+    # result is the same as on the whole map (a ROS map's canvas is often mostly unknown).
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    a0, a1, b0, b1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    box = known[a0:a1, b0:b1]
+    if r > 0:
+        padded = np.pad(box, r + 1, mode="constant", constant_values=False)
+        box = closing_disk(padded, r)[r + 1:-(r + 1), r + 1:-(r + 1)] | box
+    out = np.zeros(known.shape, dtype=bool)
+    out[a0:a1, b0:b1] = ndi.binary_fill_holes(box)
+    return out
 
 
 def load_roi(path: str | os.PathLike, shape: tuple[int, int]) -> np.ndarray:

@@ -49,10 +49,10 @@ def classified_rgb(classes: np.ndarray, light: bool = False) -> np.ndarray:
     """(H, W, 3) uint8 picture of input classes; ``light`` greys it so drawings on top stand out."""
     colours = {FREE: RGB["free"], UNKNOWN: (215, 215, 215) if light else RGB["unknown"],
                OCCUPIED: (110, 110, 110) if light else RGB["occupied"]}
-    out = np.zeros(classes.shape + (3,), np.uint8)
+    lut = np.zeros((256, 3), np.uint8)   # any other code black, as before
     for code, rgb in colours.items():
-        out[classes == code] = rgb
-    return out
+        lut[code] = rgb
+    return lut[np.asarray(classes, dtype=np.uint8)]
 
 
 def door_mask_image(sm) -> np.ndarray:
