@@ -38,8 +38,8 @@ def test_orientation_of_rotated_rooms_within_half_a_degree(deg):
 def test_small_angle_gives_identity_frame():
     f = build_frame_from_classes(rooms(), 0.05, MODEL)
     assert f.theta == 0.0 and not f.outside.any()
-    r0, c0, r1, c1 = f.window if f.window is not None else (0, 0, 240, 240)   # the known cells + margin
-    assert np.array_equal(f.classes, rooms()[r0:r1, c0:c1])
+    r0, c0 = f.crop[:2] if f.crop is not None else (0, 0)    # the known cells + margin
+    assert np.array_equal(f.classes, rooms()[r0:r0 + f.classes.shape[0], c0:c0 + f.classes.shape[1]])
     assert np.array_equal(f.to_image(f.classes, fill=UNKNOWN), rooms())
 
 
@@ -89,29 +89,31 @@ def test_metres_follow_map_server():
     assert (float(x), float(y)) == (10.0, 20.0)
 
 
-@pytest.mark.parametrize("deg", [0.0, 12.3])
+@pytest.mark.parametrize("deg", [0.0, 12.3, -33.0])
 def test_the_lattice_covers_the_known_cells_and_a_margin_not_the_whole_canvas(deg):
-    """A map padded with unknown cells (a ROS canvas) gets the same lattice as the map itself once
-    both have more than ``crop_margin_m`` of unknown around the known cells: the same cells, the
-    same orientation, its image coordinates shifted by the padding."""
-    base = np.pad(rooms(), 30, constant_values=UNKNOWN)           # 90 cells around the known ones
-    pad = 400
-    big = np.pad(base, pad, constant_values=UNKNOWN)
+    """A map in a large unknown canvas (a ROS map) gets the part of the whole image's lattice that
+    covers its known cells and ``crop_margin_m``: the same cells, the same coordinates, a fraction
+    of the size; outputs resampled to the image are the same as with the whole lattice."""
+    import dataclasses
+
+    whole = dataclasses.replace(MODEL, lattice=dataclasses.replace(MODEL.lattice, crop_margin_m=0.0))
+    big = np.pad(rooms(), 400, constant_values=UNKNOWN)
     theta = math.radians(deg)
-    f = build_frame_from_classes(base, 0.05, MODEL, theta=theta)
+    f = build_frame_from_classes(big, 0.05, whole, theta=theta)
     g = build_frame_from_classes(big, 0.05, MODEL, theta=theta)
-    margin = round(MODEL.lattice.crop_margin_m / 0.05)
-    assert g.window is not None and g.window[0] == pad + 90 - margin
-    assert np.array_equal(f.classes, g.classes)
-    assert not (g.outside & ~f.outside).any()    # outside the image: the canvas holds more of it
+    assert f.crop is None and g.crop is not None and g.crop[2:] == f.classes.shape
+    i0, j0 = g.crop[:2]
+    hl, wl = g.classes.shape
+    assert hl * wl < 0.2 * f.classes.size
+    assert np.array_equal(g.classes, f.classes[i0:i0 + hl, j0:j0 + wl])
+    assert (f.classes != UNKNOWN).sum() == (g.classes != UNKNOWN).sum()    # every known cell kept
     rows, cols = np.array([0.0, 10.5, 77.0]), np.array([3.0, 50.25, 120.0])
-    xf, yf = f.lattice_to_image(rows, cols)
-    xg, yg = g.lattice_to_image(rows, cols)
-    assert np.allclose(xg, xf + pad) and np.allclose(yg, yf + pad)
-    lat = np.arange(f.classes.size, dtype=np.int32).reshape(f.classes.shape)
-    img = g.to_image(lat, fill=-1)
-    assert np.array_equal(img[pad:-pad, pad:-pad], f.to_image(lat, fill=-1))
-    assert (img[:pad] == -1).all() and (img[-pad:] == -1).all()
+    assert np.allclose(g.lattice_to_image(rows, cols), f.lattice_to_image(rows + i0, cols + j0))
+    assert np.allclose(g.rect_vertices_px((5, 7, 60, 90)), f.rect_vertices_px((5 + i0, 7 + j0, 60 + i0, 90 + j0)))
+    lat = np.arange(g.classes.size, dtype=np.int32).reshape(g.classes.shape)
+    whole_lat = np.full(f.classes.shape, -1, np.int32)
+    whole_lat[i0:i0 + hl, j0:j0 + wl] = lat
+    assert np.array_equal(g.to_image(lat, fill=-1), f.to_image(whole_lat, fill=-1))
     if deg == 0.0:
         assert np.array_equal(g.to_image(g.classes, fill=UNKNOWN), big)
 
@@ -122,4 +124,15 @@ def test_without_a_crop_margin_the_lattice_is_the_whole_image():
     model = dataclasses.replace(MODEL, lattice=dataclasses.replace(MODEL.lattice, crop_margin_m=0.0))
     big = np.pad(rooms(), 300, constant_values=UNKNOWN)
     f = build_frame_from_classes(big, 0.05, model, theta=0.0)
-    assert f.window is None and f.classes.shape == big.shape
+    assert f.crop is None and f.classes.shape == big.shape
+
+
+def test_a_crop_that_would_keep_most_of_the_lattice_is_not_made():
+    from semmap_pp.frame import CROP_MAX_SHARE, known_window
+
+    c = rooms()                                   # 40-60 unknown cells around the known ones
+    win = known_window(c, round(MODEL.lattice.crop_margin_m / 0.05))
+    assert win is not None and (win[2] - win[0]) * (win[3] - win[1]) > CROP_MAX_SHARE * c.size
+    for deg in (0.0, 12.3):
+        f = build_frame_from_classes(c, 0.05, MODEL, theta=math.radians(deg))
+        assert f.crop is None

@@ -202,13 +202,13 @@ def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():
                                                    n_inner=5), log=lambda m: None)
         return r, world_dict(r.semantic)
 
-    (a, da), (b, db) = run(60), run(560)
-    assert a.semantic.frame.window is not None and b.semantic.frame.window is not None
+    (a, da), (b, db) = run(100), run(600)
+    assert a.semantic.frame.crop is not None and b.semantic.frame.crop is not None
     assert np.array_equal(a.world.rects[a.world.active], b.world.rects[b.world.active])
     assert a.semantic.log_posterior == pytest.approx(b.semantic.log_posterior, abs=1e-6)
     assert a.semantic.cpr == pytest.approx(b.semantic.cpr, abs=1e-12)
     assert len(da["units"]) == len(db["units"]) > 0
     for u, v in zip(da["units"], db["units"]):
         assert np.allclose(np.asarray(v["vertices_px"]), np.asarray(u["vertices_px"]) + 500)
-    assert b.semantic.labels_image.shape == (60 + 2 * 560, 120 + 2 * 560)
+    assert b.semantic.labels_image.shape == (60 + 2 * 600, 120 + 2 * 600)
     assert np.array_equal(b.semantic.labels_image[500:-500, 500:-500], a.semantic.labels_image)
