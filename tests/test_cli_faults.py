@@ -133,3 +133,23 @@ def test_resume_refuses_changed_settings(interrupted, extra, needle, capsys):
 def test_resume_of_a_folder_without_resume_file(tmp_path, capsys):
     assert main(["map", "--resume", str(tmp_path)]) == 2
     assert "no resume file here" in capsys.readouterr().err
+
+
+def test_resume_refuses_a_run_written_for_another_lattice(interrupted, tmp_path, capsys):
+    """The stored worlds are in the lattice's cells: a resume file whose lattice differs from the
+    one the map and model give now (another version, an edited model file) is refused by name."""
+    import shutil
+
+    out, _, _ = interrupted
+    other = tmp_path / "other"
+    shutil.copytree(out, other)
+    with np.load(other / "resume.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    assert meta["inputs"]["lattice"] and len(meta["inputs"]["lattice"]) == 2
+    meta["inputs"]["lattice"] = [meta["inputs"]["lattice"][0] + 1, meta["inputs"]["lattice"][1]]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez_compressed(other / "resume.npz", **arrays)
+    assert main(["map", "--resume", str(other), "--progress", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "resume.npz" in err and "written for a lattice of" in err and "Traceback" not in err

@@ -76,6 +76,7 @@ def _usage(message: str) -> int:
 
 def _resume_inputs(args):
     """Inputs, settings and resume state of ``--resume DIR``."""
+    from semmap_pp.errors import SemmapError
     from semmap_pp.pipeline import RunSettings, load_inputs
     from semmap_pp.resume import read_resume
 
@@ -84,6 +85,12 @@ def _resume_inputs(args):
     inputs = load_inputs(m["map"], model_path=m["model"],
                          rules_path=Path(m["rules"]) if m["rules"] else None, roi_path=m["roi"],
                          map_options=m["map_options"])
+    lattice = m.get("lattice")   # written since session 17; the worlds are in its cells
+    if lattice is not None and tuple(lattice) != tuple(inputs.frame.shape):
+        raise SemmapError(Path(args.resume) / "resume.npz",
+                          f"written for a lattice of {lattice[0]} x {lattice[1]} cells, but the map and "
+                          f"model now give {inputs.frame.shape[0]} x {inputs.frame.shape[1]} (the map, "
+                          "the model file or this version changed): run `semmap map` again")
     values = dict(state.meta["settings"])
     if args.cores is not None:
         values["cores"] = args.cores
@@ -171,7 +178,8 @@ def run(args) -> int:
             "rules": str(Path(rules).resolve()) if rules is not None else None,
             "roi": None if state is None and args.roi is None else
             (state.meta["inputs"]["roi"] if state is not None else str(Path(args.roi).resolve())),
-            "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args)}
+            "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args),
+            "lattice": [int(v) for v in inputs.frame.shape]}
     written.append(write_resume(out, result, meta))
     for path in written:
         print(path)
