@@ -36,6 +36,7 @@ def test_text_output_of_the_tiny_map(capsys):
     assert "free                 4 cells   20.00 %" in out
     assert "unknown              9 cells   45.00 %" in out
     assert "occupied             7 cells   35.00 %" in out
+    assert "known part  " in out
     assert "note" not in out
 
 
@@ -51,6 +52,22 @@ def test_json_output_is_one_object(capsys):
     assert facts["fractions"]["unknown"] == pytest.approx(0.45)
     assert sum(facts["fractions"].values()) == pytest.approx(1.0)
     assert facts["image"].endswith("tiny.pgm") and facts["notes"] == []
+    r0, c0, r1, c1 = facts["known_box"]          # the free and occupied cells' bounding box
+    assert 0 <= r0 < r1 <= 4 and 0 <= c0 < c1 <= 5
+
+
+def test_the_known_part_of_a_map_in_a_large_unknown_canvas(capsys, tmp_path):
+    from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+    from semmap_pp.grid import classes_to_image
+
+    c = np.full((300, 400), UNKNOWN, np.uint8)
+    c[100:120, 50:90] = FREE
+    c[100, 50:90] = OCCUPIED
+    write_map(tmp_path / "m.yaml", classes_to_image(c), 0.05)
+    assert main(["info", str(tmp_path / "m.yaml"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["known_box"] == [100, 50, 120, 90]
+    assert main(["info", str(tmp_path / "m.yaml")]) == 0
+    assert "known part  40 x 20 cells from column 50, row 100 (0.7 % of the image)" in capsys.readouterr().out
 
 
 def test_bare_image_reports_the_assumed_resolution_and_options_apply(capsys, tmp_path):

@@ -79,8 +79,24 @@ def describe(grid: OccupancyGrid) -> dict:
         # outside as unknown (semmap_pp.grid.outside)
         "border_open": border_open_share(grid.classes,
                                          seal_radius(OutsideParams.seal_gap_m, grid.resolution)),
+        "known_box": known_box(grid.classes),
         "notes": list(grid.notes),
     }
+
+
+def known_box(classes) -> list[int] | None:
+    """``[row0, col0, row1, col1]`` (ends excluded): the bounding box of the known (free or
+    occupied) cells, None when there is none. `semmap map` works on that part and
+    ``[lattice] crop_margin_m`` around it when the rest is most of the image (docs/model.md)."""
+    import numpy as np
+
+    from semmap_pp.cells import UNKNOWN
+
+    known = np.asarray(classes) != UNKNOWN
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if rows.size == 0:
+        return None
+    return [int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1]
 
 
 def format_text(facts: dict) -> str:
@@ -102,6 +118,12 @@ def format_text(facts: dict) -> str:
     lines.append(f"border      {100.0 * facts['border_open']:6.2f} % of the border cells open free space"
                  + (" (the outside is shown as free: see [outside] in the model file)"
                     if facts["border_open"] >= OutsideParams.border_open_min else ""))
+    box = facts["known_box"]
+    if box is not None:
+        r0, c0, r1, c1 = box
+        share = (r1 - r0) * (c1 - c0) / max(facts["width"] * facts["height"], 1)
+        lines.append(f"known part  {c1 - c0} x {r1 - r0} cells from column {c0}, row {r0} "
+                     f"({100.0 * share:.1f} % of the image)")
     lines += [f"note        {note}" for note in facts["notes"]]
     return "\n".join(lines)
 
