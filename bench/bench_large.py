@@ -45,7 +45,7 @@ def rss_kib():
 def peak_kib():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
-model = load_model()
+model = load_model(sys.argv[3] if len(sys.argv) > 3 else None)
 base = rss_kib()
 out = {"import_s": round(time.perf_counter() - t0, 3), "base_rss_mib": round(base / 1024, 1), "phases": {}}
 def phase(name, fn):
@@ -75,6 +75,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--resolution", type=float, default=0.05)
     parser.add_argument("--room", type=float, default=6.0, help="room pitch, metres")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--canvas", type=int, default=4000,
+                        help="also a --canvas-floor floor in a canvas of this many cells a side, unknown around it "
+                             "(gmapping's default map: 4000), with the model's lattice crop and without; 0: skip")
+    parser.add_argument("--canvas-floor", type=int, default=1000, help="side of the floor in the canvas, cells")
 
 
 def synthetic_floor(n: int, angle_deg: float, resolution: float, room_m: float,
@@ -106,8 +110,9 @@ def synthetic_floor(n: int, angle_deg: float, resolution: float, room_m: float,
     return image
 
 
-def measure(path: Path, cells: int) -> dict:
-    result = subprocess.run([sys.executable, "-c", CHILD, str(path), str(max(cells, 1))],
+def measure(path: Path, cells: int, model: Path | None = None) -> dict:
+    extra = [str(model)] if model is not None else []
+    result = subprocess.run([sys.executable, "-c", CHILD, str(path), str(max(cells, 1)), *extra],
                             capture_output=True, text=True, cwd=ROOT, timeout=3600)
     if result.returncode != 0:
         raise RuntimeError(result.stderr[-2000:])
@@ -130,6 +135,7 @@ def run(args) -> dict:
             rows.append(m)
             print(f"{n}x{n}: load {m['phases']['load_map']['s']} s, all phases {m['total_s']} s, "
                   f"peak {m['peak_mib']} MiB over {m['base_rss_mib']} MiB", file=sys.stderr, flush=True)
+        canvas = measure_canvas(args, rng, Path(d)) if args.canvas else None
     small = rows[0]
     for m in rows:
         scale = m["cells"] / small["cells"]
@@ -137,4 +143,33 @@ def run(args) -> dict:
         m["load_time_per_cell_ratio"] = round(
             m["phases"]["load_map"]["s"] / small["phases"]["load_map"]["s"] / scale, 2)
         m["peak_per_cell_ratio"] = round(m["peak_mib"] / max(small["peak_mib"], 1e-9) / scale, 2)
-    return {"angle_deg": args.angle, "resolution": args.resolution, "sizes": rows}
+    return {"angle_deg": args.angle, "resolution": args.resolution, "sizes": rows, "canvas": canvas}
+
+
+def measure_canvas(args, rng, d: Path) -> dict:
+    """A ``--canvas-floor`` floor pasted off-centre into a ``--canvas`` canvas of unknown cells (a ROS
+    map as gmapping writes it), measured with the model's lattice crop and with a copy of the model
+    whose ``crop_margin_m`` is 0 (the lattice over the whole canvas), one after the other."""
+    import re
+
+    from semmap_pp.grid import write_map
+    from semmap_pp.model import DEFAULT_MODEL
+
+    n, f = args.canvas, args.canvas_floor
+    image = np.full((n, n), 205, np.uint8)
+    r0, c0 = n // 3, n // 4
+    image[r0:r0 + f, c0:c0 + f] = synthetic_floor(f, args.angle, args.resolution, args.room, rng)
+    path = write_map(d / f"canvas{n}.yaml", image, args.resolution)
+    del image
+    text = Path(DEFAULT_MODEL).read_text()
+    whole = d / "whole_canvas.toml"
+    whole.write_text(re.sub(r"(?m)^crop_margin_m = .*$", "crop_margin_m = 0.0", text))
+    out = {"canvas": n, "floor": f, "at": [r0, c0]}
+    for name, model in (("crop", None), ("whole", whole)):
+        m = measure(path, n * n, model)
+        out[name] = m
+        print(f"canvas {n}x{n} ({name}): lattice {m['lattice']}, all phases {m['total_s']} s, "
+              f"peak {m['peak_mib']} MiB", file=sys.stderr, flush=True)
+    out["time_ratio_whole_to_crop"] = round(out["whole"]["total_s"] / out["crop"]["total_s"], 1)
+    out["peak_ratio_whole_to_crop"] = round(out["whole"]["peak_mib"] / max(out["crop"]["peak_mib"], 1e-9), 1)
+    return out
