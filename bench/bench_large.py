@@ -9,7 +9,9 @@ A fresh subprocess then measures, phase by phase: ``load_map`` (decode + classif
 process's peak resident set size (``resource.getrusage(RUSAGE_SELF).ru_maxrss``) after each phase,
 less the resident size after imports; times are wall-clock seconds. The result holds each size's
 numbers, bytes per cell at the peak, and the ratios between sizes (time per cell relative to the
-smallest size: 1.0 means linear).
+smallest size: 1.0 means linear). With ``--canvas N`` (default 4000; 0 skips it) a
+``--canvas-floor`` floor pasted into an N x N canvas of unknown cells, as gmapping writes maps, is
+measured with the model's lattice crop and without (``crop_margin_m = 0``): the ratios of the two.
 """
 
 from __future__ import annotations
