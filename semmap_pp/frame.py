@@ -9,7 +9,10 @@ Everything this module hands to the outside world in pixels (``rect_vertices_px`
 ``(row r, col c)`` spans ``x in [c, c+1)``, ``y in [r, r+1)``, so its centre is ``(c + 0.5, r + 0.5)``.
 A lattice point maps to the image by ``p_img = R(θ0) (p_lat - o_lat) + o_img`` on ``[x, y]``
 pairs, with ``o_lat`` and ``o_img`` the centres of the two grids; the lattice's column axis runs
-along the image direction ``(cos θ0, sin θ0)`` (y pointing down the image).
+along the image direction ``(cos θ0, sin θ0)`` (y pointing down the image). The lattice kept may be
+a part of the whole image's lattice (``Frame.crop``: the known cells and ``[lattice]
+crop_margin_m`` around them, when that leaves out at least half the cells); ``o_lat`` is then the
+whole lattice's centre in the part's indices, so every cell keeps its place.
 
 Examples
 --------
