@@ -26,3 +26,18 @@ WORLD_STATES = ("wall", "free", "object", "unknown")
 
 # Unit types, in the order used by every marginal vector.
 UNIT_TYPES = ("room", "corridor", "hall", "other")
+
+
+def known_box(classes) -> tuple[int, int, int, int] | None:
+    """``(r0, c0, r1, c1)`` (ends excluded): the bounding box of the known (free or occupied) cells
+    of an array of input classes; None when every cell is unknown.
+
+    >>> c = np.full((4, 6), UNKNOWN); c[1, 2] = FREE; c[2, 4] = OCCUPIED
+    >>> known_box(c), known_box(np.full((2, 2), UNKNOWN))
+    ((1, 2, 3, 5), None)
+    """
+    known = np.asarray(classes) != UNKNOWN
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if rows.size == 0:
+        return None
+    return int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1

@@ -115,14 +115,13 @@ class ConvergenceReport:
         >>> convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10).mode_chains()
         [1, 3]
         """
-        best, sep = self._separation(name)
-        apart = {c for c, _ in sep}
+        apart = {c for c, _ in self._separation(name)[1]}
         return [c for c in range(1, self.n_chains + 1) if c not in apart]
 
     def separation_note(self) -> str:
         """One line naming the chains in separate modes (:meth:`separated_chains`), "" if none."""
         best, sep = self._separation("log_posterior")
-        return _separation_text(sep, best, self.n_chains) if sep else ""
+        return _separation_text(sep, best, self.mode_chains()) if sep else ""
 
     def to_dict(self) -> dict:
         def clean(v):
@@ -198,9 +197,7 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
                                chain_means, chain_sds)
 
 
-def _separation_text(separated: list[tuple[int, float]], best: int, n_chains: int) -> str:
-    apart = {c for c, _ in separated}
-    mode = [str(c) for c in range(1, n_chains + 1) if c not in apart]
+def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[int]) -> str:
     if len(separated) == 1:
         (c, g), = separated
         what = f"chain {c}'s mean log posterior lies {g:,.1f} nats below chain {best}'s"
@@ -210,7 +207,7 @@ def _separation_text(separated: list[tuple[int, float]], best: int, n_chains: in
     return (f"chains in separate modes: {what}, more than {SEPARATION_SDS:g} of the chains' own "
             f"standard deviations (another mode, or still climbing: docs/sampler.md, \"Chains in "
             f"separate modes\"); W* comes from the best world of any chain, the posterior spread "
-            f"from chain{'s' if len(mode) > 1 else ''} {', '.join(mode)} (chain {best}'s mode)")
+            f"from chain{'s' if len(mode) > 1 else ''} {', '.join(map(str, mode))} (chain {best}'s mode)")
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,

@@ -30,7 +30,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from semmap_pp.cells import OCCUPIED, UNKNOWN
+from semmap_pp.cells import OCCUPIED, UNKNOWN, known_box
 from semmap_pp.model import CellParams, LatticeParams, Model
 
 
@@ -251,15 +251,12 @@ def known_window(classes: np.ndarray, margin: int) -> tuple[int, int, int, int] 
     >>> known_window(c, 10), known_window(c, 0), known_window(c, 100)
     ((30, 80, 60, 130), None, None)
     """
-    if margin <= 0:
+    box = known_box(classes) if margin > 0 else None
+    if box is None:
         return None
-    known = np.asarray(classes) != UNKNOWN
-    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
-    if rows.size == 0:
-        return None
-    h, w = known.shape
-    win = (max(int(rows[0]) - margin, 0), max(int(cols[0]) - margin, 0),
-           min(int(rows[-1]) + 1 + margin, h), min(int(cols[-1]) + 1 + margin, w))
+    h, w = np.shape(classes)
+    r0, c0, r1, c1 = box
+    win = (max(r0 - margin, 0), max(c0 - margin, 0), min(r1 + margin, h), min(c1 + margin, w))
     return None if win == (0, 0, h, w) else win
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from semmap_pp.cells import INPUT_CLASSES
+from semmap_pp.cells import INPUT_CLASSES, known_box
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.grid.outside import border_open_share, seal_radius
@@ -79,24 +79,11 @@ def describe(grid: OccupancyGrid) -> dict:
         # outside as unknown (semmap_pp.grid.outside)
         "border_open": border_open_share(grid.classes,
                                          seal_radius(OutsideParams.seal_gap_m, grid.resolution)),
-        "known_box": known_box(grid.classes),
+        # the known cells' bounding box: `semmap map` works on it and [lattice] crop_margin_m
+        # around it when the rest is most of the image (docs/model.md)
+        "known_box": list(box) if (box := known_box(grid.classes)) is not None else None,
         "notes": list(grid.notes),
     }
-
-
-def known_box(classes) -> list[int] | None:
-    """``[row0, col0, row1, col1]`` (ends excluded): the bounding box of the known (free or
-    occupied) cells, None when there is none. `semmap map` works on that part and
-    ``[lattice] crop_margin_m`` around it when the rest is most of the image (docs/model.md)."""
-    import numpy as np
-
-    from semmap_pp.cells import UNKNOWN
-
-    known = np.asarray(classes) != UNKNOWN
-    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
-    if rows.size == 0:
-        return None
-    return [int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1]
 
 
 def format_text(facts: dict) -> str:

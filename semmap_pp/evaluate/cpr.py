@@ -18,7 +18,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from semmap_pp.cells import (FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL,
-                             WORLD_STATES)
+                             WORLD_STATES, known_box)
 from semmap_pp.errors import MapError
 from semmap_pp.evaluate.io import read_image
 
@@ -187,13 +187,13 @@ def default_roi(input_classes: np.ndarray, closing_radius_cells: int) -> np.ndar
     r = int(closing_radius_cells)
     if r < 0:
         raise ValueError(f"closing radius must be >= 0, got {closing_radius_cells}")
-    if not known.any():
+    bounds = known_box(c)
+    if bounds is None:
         return ndi.binary_fill_holes(known)
     # Work on the known cells' bounding box: the closing of a set lies within its bounding box,
     # and a background region touching the box's edge reaches the map border around it, so the
     # result is the same as on the whole map (a ROS map's canvas is often mostly unknown).
-    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
-    a0, a1, b0, b1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    a0, b0, a1, b1 = bounds
     box = known[a0:a1, b0:b1]
     if r > 0:
         padded = np.pad(box, r + 1, mode="constant", constant_values=False)
