@@ -51,3 +51,20 @@ def test_missing_trace_is_a_user_error(tmp_path, capsys):
     assert main(["diagnose", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "no trace file here" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("shift, chains", [(5.0, [1]), (-5.0, [2, 3, 4]), (0.0, [1, 2, 3, 4])])
+def test_the_spread_pools_only_the_chains_in_the_best_chains_mode(tmp_path, capsys, shift, chains):
+    # Chain 1 five standard deviations above (or below) the other three: a separate mode. The
+    # spread summarises the draws of the best chain's mode, as the run's figures do.
+    d = write_run(tmp_path / "m", shift=shift)
+    main(["diagnose", str(d), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["spread_chains"] == chains
+    lp = doc["spread"]["log_posterior"]
+    assert lp["mean"] == pytest.approx(-100.0 + (shift if chains == [1] else 0.0), abs=0.2)
+    assert lp["sd"] == pytest.approx(1.0, abs=0.1)          # pooled across modes it would be ~2.4
+    main(["diagnose", str(d)])
+    heading = {1: "(chain 1's draws: the best chain's mode)", 3: "(chains 2, 3, 4's draws: the best chain's mode)",
+               4: "(all chains and draws)"}[len(chains)]
+    assert "posterior spread of the summaries " + heading in capsys.readouterr().out

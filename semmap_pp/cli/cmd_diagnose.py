@@ -3,8 +3,9 @@
 Reads ``DIR/trace.nc`` (or a trace file given directly) with
 :func:`semmap_pp.diagnostics.read_trace` and prints the run's provenance (its attributes), R-hat
 and bulk / tail ESS of every label-invariant summary with the verdict, the posterior spread of
-each summary (mean, sd, 5 % / 50 % / 95 % quantiles over all chains and draws), the acceptance
-rates, and any spread numbers stored as trace attributes. The thresholds are the model file's
+each summary (mean, sd, 5 % / 50 % / 95 % quantiles over the draws of the chains in the best
+chain's mode, :meth:`~semmap_pp.diagnostics.ConvergenceReport.mode_chains`, as the run's figures
+use them), the acceptance rates, and any spread numbers stored as trace attributes. The thresholds are the model file's
 ``[diagnostics]`` (``rhat_max``, ``ess_min``), as ``semmap map`` uses them.
 
 Exit status: 0 converged, 1 not converged (so scripts can write ``semmap diagnose DIR && ...``),
@@ -51,9 +52,13 @@ def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
 
     report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min)
     post = tree["posterior"]
+    # A chain thousands of nats below the best one carries no posterior mass worth summarising;
+    # pooled, its draws would report the spread between modes (docs/sampler.md).
+    chains = report.mode_chains()
     spread = {}
     for name in post.data_vars:
-        a = np.asarray(post[name].values, float).ravel()
+        a = np.asarray(post[name].values, float)
+        a = a[[c - 1 for c in chains]].ravel() if a.ndim >= 2 and a.shape[0] == report.n_chains else a.ravel()
         a = a[np.isfinite(a)]
         spread[name] = ({"mean": float(a.mean()), "sd": float(a.std()),
                          "q05": float(np.quantile(a, 0.05)), "q50": float(np.quantile(a, 0.5)),
@@ -67,14 +72,28 @@ def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
                 a = np.asarray(stats[name].values, float)
                 accept[name] = float(np.nanmean(a)) if np.isfinite(a).any() else math.nan
     attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in tree.attrs.items()}
-    return {"attrs": attrs, "convergence": report.to_dict(), "spread": spread, "acceptance": accept,
+    return {"attrs": attrs, "convergence": report.to_dict(), "spread": spread, "spread_chains": chains,
+            "acceptance": accept,
             "stored_spread": {k: v for k, v in attrs.items() if "spread" in k}, "text": report.to_text()}
+
+
+def _chains_text(chains: list[int], n_chains: int) -> str:
+    """Whose draws the spread pools, for its heading.
+
+    >>> _chains_text([1, 2], 2), _chains_text([1], 2), _chains_text([1, 3], 3)
+    ('all chains and draws', "chain 1's draws: the best chain's mode", "chains 1, 3's draws: the best chain's mode")
+    """
+    if len(chains) == n_chains:
+        return "all chains and draws"
+    names = ("chain " if len(chains) == 1 else "chains ") + ", ".join(str(c) for c in chains)
+    return f"{names}'s draws: the best chain's mode"
 
 
 def format_text(d: dict) -> str:
     a = d["attrs"]
     lines = ["run: " + ", ".join(f"{k} {v}" for k, v in a.items() if "spread" not in k), "", d["text"], "",
-             "posterior spread of the summaries (all chains and draws)",
+             "posterior spread of the summaries (" + _chains_text(d["spread_chains"], d["convergence"]["chains"])
+             + ")",
              f"{'quantity':<16}{'mean':>12}{'sd':>10}{'5 %':>12}{'50 %':>12}{'95 %':>12}"]
     for name, s in d["spread"].items():
         lines.append(f"{name:<16}{s['mean']:>12.4g}{s['sd']:>10.3g}{s['q05']:>12.4g}{s['q50']:>12.4g}"
