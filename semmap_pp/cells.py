@@ -36,8 +36,18 @@ def known_box(classes) -> tuple[int, int, int, int] | None:
     >>> known_box(c), known_box(np.full((2, 2), UNKNOWN))
     ((1, 2, 3, 5), None)
     """
-    known = np.asarray(classes) != UNKNOWN
-    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    return mask_box(np.asarray(classes) != UNKNOWN)
+
+
+def mask_box(mask) -> tuple[int, int, int, int] | None:
+    """``(r0, c0, r1, c1)`` (ends excluded): the bounding box of the True cells of a 2-D mask;
+    None when there are none (:func:`known_box` for a mask already made).
+
+    >>> mask_box(np.eye(3, dtype=bool)[::-1]), mask_box(np.zeros((2, 2), bool))
+    ((0, 0, 3, 3), None)
+    """
+    mask = np.asarray(mask, dtype=bool)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     if rows.size == 0:
         return None
     return int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1

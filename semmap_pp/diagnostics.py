@@ -197,6 +197,16 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
                                chain_means, chain_sds)
 
 
+def chains_phrase(chains) -> str:
+    """"chain 2" or "chains 1, 3": chain numbers as the reports name them.
+
+    >>> chains_phrase([2]), chains_phrase([1, 3])
+    ('chain 2', 'chains 1, 3')
+    """
+    chains = list(chains)
+    return ("chain " if len(chains) == 1 else "chains ") + ", ".join(map(str, chains))
+
+
 def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[int]) -> str:
     if len(separated) == 1:
         (c, g), = separated
@@ -207,7 +217,7 @@ def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[i
     return (f"chains in separate modes: {what}, more than {SEPARATION_SDS:g} of the chains' own "
             f"standard deviations (another mode, or still climbing: docs/sampler.md, \"Chains in "
             f"separate modes\"); W* comes from the best world of any chain, the posterior spread "
-            f"from chain{'s' if len(mode) > 1 else ''} {', '.join(map(str, mode))} (chain {best}'s mode)")
+            f"from {chains_phrase(mode)} (chain {best}'s mode)")
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,

@@ -55,10 +55,10 @@ def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
     # A chain thousands of nats below the best one carries no posterior mass worth summarising;
     # pooled, its draws would report the spread between modes (docs/sampler.md).
     chains = report.mode_chains()
+    keep = [c - 1 for c in chains]          # the posterior group's first dimension is the chain
     spread = {}
     for name in post.data_vars:
-        a = np.asarray(post[name].values, float)
-        a = a[[c - 1 for c in chains]].ravel() if a.ndim >= 2 and a.shape[0] == report.n_chains else a.ravel()
+        a = np.asarray(post[name].values, float)[keep].ravel()
         a = a[np.isfinite(a)]
         spread[name] = ({"mean": float(a.mean()), "sd": float(a.std()),
                          "q05": float(np.quantile(a, 0.05)), "q50": float(np.quantile(a, 0.5)),
@@ -83,10 +83,11 @@ def _chains_text(chains: list[int], n_chains: int) -> str:
     >>> _chains_text([1, 2], 2), _chains_text([1], 2), _chains_text([1, 3], 3)
     ('all chains and draws', "chain 1's draws: the best chain's mode", "chains 1, 3's draws: the best chain's mode")
     """
+    from semmap_pp.diagnostics import chains_phrase
+
     if len(chains) == n_chains:
         return "all chains and draws"
-    names = ("chain " if len(chains) == 1 else "chains ") + ", ".join(str(c) for c in chains)
-    return f"{names}'s draws: the best chain's mode"
+    return f"{chains_phrase(chains)}'s draws: the best chain's mode"
 
 
 def format_text(d: dict) -> str:

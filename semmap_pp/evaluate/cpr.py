@@ -18,7 +18,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from semmap_pp.cells import (FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL,
-                             WORLD_STATES, known_box)
+                             WORLD_STATES, mask_box)
 from semmap_pp.errors import MapError
 from semmap_pp.evaluate.io import read_image
 
@@ -187,7 +187,7 @@ def default_roi(input_classes: np.ndarray, closing_radius_cells: int) -> np.ndar
     r = int(closing_radius_cells)
     if r < 0:
         raise ValueError(f"closing radius must be >= 0, got {closing_radius_cells}")
-    bounds = known_box(c)
+    bounds = mask_box(known)    # the known cells' bounding box (cells.known_box)
     if bounds is None:
         return ndi.binary_fill_holes(known)
     # Work on the known cells' bounding box: the closing of a set lies within its bounding box,

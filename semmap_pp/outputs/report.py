@@ -134,14 +134,13 @@ def spread_text(rep) -> str:
     >>> spread_text(convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10))
     "Drawn from chains 1, 3, the best chain's mode; chain 2 left out: its mean log posterior lies far below (Convergence)."
     """
+    from semmap_pp.diagnostics import chains_phrase
+
     mode = rep.mode_chains()
     left = [c for c in range(1, rep.n_chains + 1) if c not in mode]
     if not left:
         return f"Drawn from {'all ' + str(rep.n_chains) + ' chains' if rep.n_chains > 1 else 'the one chain'}."
-    s = "s" if len(mode) > 1 else ""
-    t = "s" if len(left) > 1 else ""
-    return (f"Drawn from chain{s} {', '.join(map(str, mode))}, the best chain's mode; chain{t} "
-            f"{', '.join(map(str, left))} left out: "
+    return (f"Drawn from {chains_phrase(mode)}, the best chain's mode; {chains_phrase(left)} left out: "
             f"{'their mean log posteriors lie' if left[1:] else 'its mean log posterior lies'} far below "
             f"(Convergence).")
 
