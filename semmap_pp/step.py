@@ -137,7 +137,8 @@ def _scalar_stats() -> dict:
              "chain": (np.int64, []), "draw_index": (np.int64, []), "burn_in": (np.int64, []),
              "stopped": (np.int64, []), "n_tune": (np.int64, []), "total_draws": (np.int64, []),
              "wall_length": (np.float64, []), "knowledge": (np.int64, []),
-             "accept": (np.float64, []), "temperature": (np.float64, []), "best_logp": (np.float64, [])}
+             "accept": (np.float64, []), "temperature": (np.float64, []), "best_logp": (np.float64, []),
+             "seconds": (np.float64, [])}
     stats.update({f"accept_{k}": (np.float64, []) for k in KIND_NAMES})
     stats.update({f"n_{t}": (np.int64, []) for t in UNIT_TYPES})
     return stats
@@ -360,6 +361,7 @@ class WorldStep(BlockedStep):
         attempted, accepted = np.zeros(k, np.int64), np.zeros(k, np.int64)
         best = self._best[0]
         stop = self.stop if self._draw >= self.min_draws else None
+        t0 = time.perf_counter()
         for _ in range(self.n_inner):
             if stop is not None and stop():
                 break  # a partial draw is still a valid state of the chain
@@ -371,9 +373,10 @@ class WorldStep(BlockedStep):
                     self._remember(tr)
                     best = tr.logp
         self._draw += 1
-        return self._emit(tr, temp, attempted, accepted, stopped=False)
+        return self._emit(tr, temp, attempted, accepted, stopped=False,
+                          seconds=time.perf_counter() - t0)
 
-    def _emit(self, tr, temp, attempted, accepted, *, stopped: bool):
+    def _emit(self, tr, temp, attempted, accepted, *, stopped: bool, seconds: float = 0.0):
         world = tr.world
         n_done = max(int(attempted.sum()), 1) if attempted is not None else 1
         stats = {"logp": float(tr.logp), "n_units": wm.n_units(world), "temperature": temp,
@@ -385,7 +388,8 @@ class WorldStep(BlockedStep):
                  "best_logp": float(self._best[0]), "chain": self._chain,
                  "draw_index": self._draw - (0 if stopped else 1),
                  "burn_in": int(not stopped and self._draw - 1 < self._n_tune), "stopped": int(stopped),
-                 "n_tune": self._n_tune, "total_draws": -1 if self._total is None else self._total}
+                 "n_tune": self._n_tune, "total_draws": -1 if self._total is None else self._total,
+                 "seconds": float(seconds)}
         for kind in KIND_NAMES:
             stats[f"accept_{kind}"] = math.nan
         if attempted is not None:

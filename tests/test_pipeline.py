@@ -81,6 +81,29 @@ def test_run_map_keeps_recorded_worlds():
     assert (run.samples["active"].sum(axis=2) == run.summaries["n_units"]).all()
     worlds = sampled_worlds(run, 4)
     assert len(worlds) == 4 and all(W.is_valid(w, f.shape, f.cells.min_side) for w in worlds)
+    # time inside each draw's kernels: one entry per draw (burn-in too), within the wall time
+    assert [len(t) for t in run.draw_seconds] == [8, 8]
+    inside = np.concatenate(run.draw_seconds)
+    assert np.all(inside >= 0) and inside.sum() <= run.seconds
+    assert " kernels/s per chain" in run.timing_text()
+
+
+def test_timing_text_leaves_compiling_draws_out_of_the_rate():
+    from types import SimpleNamespace as NS
+
+    from semmap_pp.pipeline import MapRun
+
+    def text(*chains):
+        return MapRun.timing_text(NS(seconds=2.0, kernels_per_second=1000.0, settings=NS(n_inner=10),
+                                     draw_seconds=chains))
+
+    assert text() == "2.0 s (1,000 kernels/s)"                    # no draws timed (an older run)
+    assert text([0.01] * 20) == "2.0 s (1,000 kernels/s); inside the draws 1,000 kernels/s per chain"
+    one_slow = text([0.01] * 19 + [1.5])
+    assert one_slow.endswith("1,000 kernels/s per chain, after 1 draw of 1.5 s that compiled code on first use")
+    # a draw under 0.1 s is never counted as compiling, however slow beside the others
+    assert "compiled" not in text([0.0001] * 19 + [0.09])
+    assert "after 1 draw of 0.1 s" in text([0.0001] * 19 + [0.11])
 
 
 def test_run_map_starts_every_chain_from_the_given_world():

@@ -177,7 +177,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         ("rules", rules_name), ("model", inputs.model.path.name), ("seed", s.seed),
         ("chains", f"{s.chains} on {s.cores} core(s)"),
         ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
-        ("sampling time", f"{run.seconds:.1f} s ({run.kernels_per_second:.0f} kernels/s)"),
+        ("sampling time", run.timing_text()),
         ("W* from chain", run.best_chain), ("generator", f"semmap_pp {__version__}"),
     ] + ([("stopped early", getattr(run, "stopped"))] if getattr(run, "stopped", None) else [])
       + [("note", n) for n in run.notes])

@@ -29,8 +29,7 @@ def diagnostics_text(run, rules_path) -> str:
     """diagnostics.txt: provenance, timing, W* in one line, then the convergence table."""
     inputs, settings, sm = run.inputs, run.settings, run.semantic
     return (f"map: {inputs.grid.source}\nrules: {rules_path}\nmodel: {inputs.model.path}\n"
-            f"seed: {settings.seed}; sampling took {run.seconds:.1f} s "
-            f"({run.kernels_per_second:.0f} kernels/s)\n"
+            f"seed: {settings.seed}; sampling took {run.timing_text()}\n"
             f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.2f}, "
             f"CPR {sm.cpr:.4f} (ROI {inputs.roi_name})\n\n{run.report.to_text()}\n")
 
