@@ -561,10 +561,8 @@ def bench_synthetic(args, model, rules) -> dict:
 
 def lattice_rect(frame, corners_px) -> tuple:
     """The lattice cell box enclosing a polygon given in the pixel frame (the inverse of
-    :meth:`semmap_pp.frame.Frame.rect_vertices_px`, rounded)."""
-    p = np.asarray(corners_px, dtype=np.float64)
-    r, c = frame.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
-    return tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
+    :meth:`semmap_pp.frame.Frame.rect_vertices_px`, rounded: :meth:`~semmap_pp.frame.Frame.rect_from_vertices_px`)."""
+    return frame.rect_from_vertices_px(corners_px)[0]
 
 
 def polygons_world(frame, polygons, capacity: int):

@@ -182,6 +182,26 @@ class Frame:
         x, y = self.lattice_to_image(rows, cols)
         return np.stack([x + 0.5, y + 0.5], axis=1)
 
+    def rect_from_vertices_px(self, vertices_px) -> tuple[tuple[int, int, int, int], float]:
+        """The lattice rectangle nearest to four ``[x, y]`` corners in the continuous pixel frame,
+        and how far (pixels) the corners lie from its own: the inverse of :meth:`rect_vertices_px`
+        (0 up to the rounding of world.json's coordinates for a unit of this lattice).
+
+        >>> from semmap_pp.model import load_model
+        >>> f = build_frame_from_classes(np.zeros((50, 60), np.uint8), 0.05, load_model(), theta=0.3)
+        >>> rect, off = f.rect_from_vertices_px(f.rect_vertices_px((3, 4, 20, 31)).round(3))
+        >>> rect, off < 0.001
+        ((3, 4, 20, 31), True)
+        >>> f.rect_from_vertices_px([[0, 0], [10, 0], [10, 10], [0, 10]])[1] > 1   # not of this lattice
+        True
+        """
+        p = np.asarray(vertices_px, dtype=np.float64).reshape(-1, 2)
+        r, c = self.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
+        rect = tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
+        own = self.rect_vertices_px(rect)
+        off = max(float(np.min(np.hypot(*(own - q).T))) for q in p) if len(p) else math.inf
+        return rect, off
+
     def image_to_metres(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
         """Map-frame metres of continuous pixel-frame coordinates (ROS map_server, as :mod:`semmap_pp.grid`).
 

@@ -59,6 +59,9 @@ def register(subparsers) -> None:
     p.add_argument("--budget", type=_seconds, metavar="SECONDS",
                    help="stop sampling after SECONDS of wall time and keep the draws made "
                         "(the result then depends on the machine's speed)")
+    p.add_argument("--start", type=Path, metavar="WORLD_JSON",
+                   help="start every chain from this world.json (an earlier run's W*, edited or not; "
+                        "with --tune 0 the paper's Fig. 7)")
     p.add_argument("--resume", type=Path, metavar="DIR",
                    help="continue the run in DIR (its resume.npz): the chains go on and draws are appended")
     p.add_argument("--progress", choices=("auto", "rich", "plain", "none"), default="auto",
@@ -122,10 +125,10 @@ def run(args) -> int:
     from semmap_pp.resume import write_resume
     from semmap_pp.step import StopFlag
 
-    state = None
+    state, starts = None, None
     if args.resume is not None:
         fixed = FIXED_WHEN_RESUMING + ("occupied_thresh", "free_thresh", "negate", "resolution", "mode")
-        given = [f"--{k.replace('_', '-')}" for k in fixed if getattr(args, k) is not None]
+        given = [f"--{k.replace('_', '-')}" for k in fixed + ("start",) if getattr(args, k) is not None]
         if given or args.map is not None:
             what = ", ".join(given + (["MAP"] if args.map is not None else []))
             return _usage(f"{what} cannot be given with --resume (the run keeps its own; "
@@ -147,6 +150,9 @@ def run(args) -> int:
                                           n_inner=args.n_inner)
         if settings.draws < 4:
             return _usage("--draws must be at least 4 (R-hat and ESS need them)")
+        if args.start is not None:
+            from semmap_pp.world_file import read_start_world
+            starts = [read_start_world(args.start, inputs.frame, inputs.grid, inputs.model.prior.k_max)]
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
@@ -161,7 +167,7 @@ def run(args) -> int:
         with Progress(settings.chains, left, budget=args.budget, mode=args.progress,
                       every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
-                             stop=stop, budget=args.budget, resume=state)
+                             stop=stop, budget=args.budget, resume=state, starts=starts)
     except SemmapError as exc:
         if stop():
             log(f"semmap: interrupted: nothing written ({exc.message})")
@@ -169,6 +175,8 @@ def run(args) -> int:
         raise
     finally:
         signal.signal(signal.SIGINT, previous)
+    if starts is not None:
+        result.notes.insert(0, f"every chain started from {args.start} ({int(starts[0].active.sum())} units)")
     for note in result.notes:
         log(f"note: {note}")
     written = write_all(out, result, rules_name=rules.name, rules_path=rules,

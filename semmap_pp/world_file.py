@@ -1,0 +1,96 @@
+"""A world.json read back onto a map's lattice: the start world of ``semmap map --start FILE``.
+
+world.json (docs/outputs.md) gives each unit and exterior unit as four corners in the input image's
+pixel frame. On the lattice of the map that run used, each is one lattice rectangle
+(:meth:`semmap_pp.frame.Frame.rect_from_vertices_px`). The file may come from another run on the same
+map (the paper's Fig. 7 samples from W*) or be edited by hand (a wall moved, a unit added: any
+rectangle of the lattice will do; corners within :data:`MAX_OFF_PX` of one are snapped to it). What cannot start a chain is refused with a one-line
+:class:`~semmap_pp.errors.SemmapError` naming the file: not a world.json, written for a map of
+another size or resolution, a unit that is not a rectangle of this map's lattice (the building's
+orientation differs: another map, or a model whose lattice settings changed), or a unit outside
+the lattice or outside the prior's side range.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.errors import SemmapError
+
+FORMAT = "semmap_pp.world/1"
+
+#: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
+#: world.json rounds pixel coordinates to 3 decimals, so a unit of this lattice lies within 0.001;
+#: a corner moved by hand is snapped to the nearest lattice rectangle when it lies within a pixel.
+MAX_OFF_PX = 1.0
+
+
+def _corners(path, item, name: str) -> np.ndarray:
+    v = item.get("vertices_px") if isinstance(item, dict) else None
+    try:
+        arr = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.shape != (4, 2) or not np.all(np.isfinite(arr)):
+        raise SemmapError(path, f"{name}: 'vertices_px' must be four [x, y] numbers")
+    return arr
+
+
+def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.World:
+    """The units and exterior units of the world.json at ``path`` as a world on ``frame``'s lattice
+    (types unassigned), in ``capacity`` slots or, for more units, the smallest doubling of it.
+
+    ``grid`` is the map the run reads (:class:`semmap_pp.grid.OccupancyGrid`): the file must have
+    been written for a map of the same width, height and resolution.
+    """
+    from semmap_pp.evaluate.io import read_json
+
+    doc = read_json(path)
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
+    m = doc.get("map")
+    size = (m.get("width"), m.get("height"), m.get("resolution")) if isinstance(m, dict) else None
+    here = (grid.width, grid.height, grid.resolution)
+    if size is None or size[:2] != here[:2] or not isinstance(size[2], (int, float)) \
+            or not math.isclose(size[2], here[2], rel_tol=1e-9):
+        was = "no 'map' size" if size is None else f"a {size[0]}x{size[1]} map at {size[2]} m/cell"
+        raise SemmapError(path, f"written for {was}; this map is {here[0]}x{here[1]} at {here[2]} "
+                                f"m/cell")
+    items = []
+    for key, prefix in (("units", "unit "), ("exterior", "exterior unit X")):
+        listed = doc.get(key, [])
+        if not isinstance(listed, list):
+            raise SemmapError(path, f"'{key}' must be a list")
+        items += [(f"{prefix}{u.get('id', i + 1) if isinstance(u, dict) else i + 1}", u)
+                  for i, u in enumerate(listed)]
+    c = frame.cells
+    rects = []
+    for name, item in items:
+        rect, off = frame.rect_from_vertices_px(_corners(path, item, name))
+        if off > MAX_OFF_PX:
+            raise SemmapError(path, f"{name} is not a rectangle of this map's lattice (its corners lie "
+                                    f"{off:.2f} px from the nearest one; the building's orientation here "
+                                    f"is {math.degrees(frame.theta):.1f} deg, the file's "
+                                    f"{m.get('orientation_deg', '?')}): was it written for this map "
+                                    f"and model?")
+        r0, c0, r1, c1 = rect
+        if r0 < 0 or c0 < 0 or r1 > frame.shape[0] or c1 > frame.shape[1]:
+            raise SemmapError(path, f"{name} reaches beyond the map's lattice ({frame.shape[0]} x "
+                                    f"{frame.shape[1]} cells; the unit spans rows {r0}..{r1}, columns "
+                                    f"{c0}..{c1})")
+        sides = (r1 - r0, c1 - c0)
+        if min(sides) < c.min_side or max(sides) > c.max_side:
+            raise SemmapError(path, f"{name} is {sides[0]} x {sides[1]} cells; the model allows sides of "
+                                    f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, max_unit_side_m)")
+        rects.append(rect)
+    size_k = max(1, int(capacity))
+    while size_k < len(rects):
+        size_k *= 2
+    world = wm.empty(size_k)
+    for slot, rect in enumerate(rects):
+        world = wm.add(world, slot, rect)
+    return world
