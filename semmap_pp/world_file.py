@@ -28,6 +28,9 @@ FORMAT = "semmap_pp.world/1"
 #: a corner moved by hand is snapped to the nearest lattice rectangle when it lies within a pixel.
 MAX_OFF_PX = 1.0
 
+#: A larger file is refused before it is read (cartesium's world.json: 0.3 MB).
+MAX_BYTES = 256 * 2 ** 20
+
 
 def _corners(path, item, name: str) -> np.ndarray:
     v = item.get("vertices_px") if isinstance(item, dict) else None
@@ -47,8 +50,15 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
     ``grid`` is the map the run reads (:class:`semmap_pp.grid.OccupancyGrid`): the file must have
     been written for a map of the same width, height and resolution.
     """
+    from pathlib import Path
+
     from semmap_pp.evaluate.io import read_json
 
+    p = Path(path)
+    if p.exists() and not p.is_file():   # a directory, FIFO or device would fail or block
+        raise SemmapError(path, "not a regular file")
+    if p.exists() and p.stat().st_size > MAX_BYTES:
+        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json (at most {MAX_BYTES})")
     doc = read_json(path)
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")

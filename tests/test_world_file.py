@@ -101,6 +101,18 @@ def test_what_cannot_start_a_chain_is_refused_naming_the_file(run_dir, tmp_path,
     assert needle in exc.value.message and exc.value.path == str(path)
 
 
+def test_a_fifo_or_a_folder_is_refused_without_reading_it(tmp_path, inputs):
+    import os
+
+    fifo = tmp_path / "world.json"
+    os.mkfifo(fifo)
+    for path in (fifo, tmp_path):
+        with pytest.raises(SemmapError, match="not a regular file"):
+            read_start_world(path, inputs.frame, inputs.grid, 64)
+    with pytest.raises(SemmapError, match="no such file"):
+        read_start_world(tmp_path / "missing.json", inputs.frame, inputs.grid, 64)
+
+
 def test_the_cli_refuses_a_bad_start_in_one_line_and_writes_nothing(tmp_path):
     bad = tmp_path / "world.json"
     bad.write_text("{not json")
