@@ -244,7 +244,8 @@ class MapRun:
         rest = every[~slow]
         if rest.sum() <= 0:
             return text
-        text += f"; inside the draws {rest.size * self.settings.n_inner / rest.sum():,.0f} kernels/s per chain"
+        rate = rest.size * self.settings.n_inner / rest.sum()
+        text += f"; inside the draws {rate:,.0f} kernels/s per chain"
         if slow.any():
             lo, hi = every[slow].min(), every[slow].max()
             span = f"{hi:.1f}" if f"{lo:.1f}" == f"{hi:.1f}" else f"{lo:.1f}-{hi:.1f}"

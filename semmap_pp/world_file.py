@@ -4,8 +4,9 @@ world.json (docs/outputs.md) gives each unit and exterior unit as four corners i
 pixel frame. On the lattice of the map that run used, each is one lattice rectangle
 (:meth:`semmap_pp.frame.Frame.rect_from_vertices_px`). The file may come from another run on the same
 map (the paper's Fig. 7 samples from W*) or be edited by hand (a wall moved, a unit added: any
-rectangle of the lattice will do; corners within :data:`MAX_OFF_PX` of one are snapped to it). What cannot start a chain is refused with a one-line
-:class:`~semmap_pp.errors.SemmapError` naming the file: not a world.json, written for a map of
+rectangle of the lattice will do; corners within :data:`MAX_OFF_PX` of one are snapped to it).
+What cannot start a chain is refused with a one-line :class:`~semmap_pp.errors.SemmapError`
+naming the file: not a world.json, written for a map of
 another size or resolution, a unit that is not a rectangle of this map's lattice (the building's
 orientation differs: another map, or a model whose lattice settings changed), or a unit outside
 the lattice or outside the prior's side range.
@@ -15,13 +16,13 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
-
-FORMAT = "semmap_pp.world/1"
+from semmap_pp.outputs.world_json import FORMAT
 
 #: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
 #: world.json rounds pixel coordinates to 3 decimals, so a unit of this lattice lies within 0.001;
@@ -50,15 +51,14 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
     ``grid`` is the map the run reads (:class:`semmap_pp.grid.OccupancyGrid`): the file must have
     been written for a map of the same width, height and resolution.
     """
-    from pathlib import Path
-
     from semmap_pp.evaluate.io import read_json
 
     p = Path(path)
     if p.exists() and not p.is_file():   # a directory, FIFO or device would fail or block
         raise SemmapError(path, "not a regular file")
     if p.exists() and p.stat().st_size > MAX_BYTES:
-        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json (at most {MAX_BYTES})")
+        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json "
+                                f"(at most {MAX_BYTES})")
     doc = read_json(path)
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
@@ -95,7 +95,8 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
         sides = (r1 - r0, c1 - c0)
         if min(sides) < c.min_side or max(sides) > c.max_side:
             raise SemmapError(path, f"{name} is {sides[0]} x {sides[1]} cells; the model allows sides of "
-                                    f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, max_unit_side_m)")
+                                    f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, "
+                                    f"max_unit_side_m)")
         rects.append(rect)
     size_k = max(1, int(capacity))
     while size_k < len(rects):
