@@ -199,7 +199,7 @@ class Frame:
         r, c = self.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
         rect = tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
         own = self.rect_vertices_px(rect)
-        off = max(float(np.min(np.hypot(*(own - q).T))) for q in p) if len(p) else math.inf
+        off = max(float(np.min(np.hypot(*(own - q).T))) for q in p)
         return rect, off
 
     def image_to_metres(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:

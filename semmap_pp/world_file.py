@@ -22,6 +22,7 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
+from semmap_pp.model import MAX_K
 from semmap_pp.outputs.world_json import FORMAT
 
 #: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
@@ -46,7 +47,8 @@ def _corners(path, item, name: str) -> np.ndarray:
 
 def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.World:
     """The units and exterior units of the world.json at ``path`` as a world on ``frame``'s lattice
-    (types unassigned), in ``capacity`` slots or, for more units, the smallest doubling of it.
+    (types unassigned), in ``capacity`` slots or, for more units, the smallest doubling of it
+    (at most :data:`semmap_pp.model.MAX_K`).
 
     ``grid`` is the map the run reads (:class:`semmap_pp.grid.OccupancyGrid`): the file must have
     been written for a map of the same width, height and resolution.
@@ -98,9 +100,11 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
                                     f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, "
                                     f"max_unit_side_m)")
         rects.append(rect)
+    if len(rects) > MAX_K:
+        raise SemmapError(path, f"{len(rects)} units; a world holds at most {MAX_K}")
     size_k = max(1, int(capacity))
-    while size_k < len(rects):
-        size_k *= 2
+    while size_k < len(rects):   # doubled as the ascent grows a full world (ascent._Ascent.free)
+        size_k = min(2 * size_k, MAX_K)
     world = wm.empty(size_k)
     for slot, rect in enumerate(rects):
         world = wm.add(world, slot, rect)

@@ -55,6 +55,17 @@ def test_a_world_json_comes_back_as_the_worlds_lattice_rectangles(run_dir, input
     assert read_start_world(run_dir / "world.json", inputs.frame, inputs.grid, 1).capacity >= wm.n_units(world)
 
 
+def test_the_capacity_stops_at_max_k(run_dir, inputs, monkeypatch):
+    import semmap_pp.world_file as wf
+
+    n = wm.n_units(read_start_world(run_dir / "world.json", inputs.frame, inputs.grid, 64))
+    monkeypatch.setattr(wf, "MAX_K", n)
+    assert read_start_world(run_dir / "world.json", inputs.frame, inputs.grid, 1).capacity == n
+    monkeypatch.setattr(wf, "MAX_K", n - 1)
+    with pytest.raises(SemmapError, match=f"{n} units; a world holds at most {n - 1}"):
+        read_start_world(run_dir / "world.json", inputs.frame, inputs.grid, 1)
+
+
 def test_every_chain_starts_from_the_given_world(run_dir, tmp_path, inputs):
     out = tmp_path / "b"
     r = semmap("map", MAP, "--out", out, "--start", run_dir / "world.json",

@@ -176,7 +176,8 @@ def run(args) -> int:
     finally:
         signal.signal(signal.SIGINT, previous)
     if starts is not None:
-        result.notes.insert(0, f"every chain started from {args.start} ({int(starts[0].active.sum())} units)")
+        from semmap_pp.world import n_units
+        result.notes.insert(0, f"every chain started from {args.start} ({n_units(starts[0])} units)")
     for note in result.notes:
         log(f"note: {note}")
     written = write_all(out, result, rules_name=rules.name, rules_path=rules,
