@@ -6,6 +6,13 @@ world — its log posterior, number of units, total wall length, cell prediction
 type — with ArviZ's rank-normalised split R-hat and bulk / tail ESS. A NaN R-hat or ESS (for example
 a summary that never moved in any chain) counts as a failure, never as a pass.
 
+Chains in separate modes never agree, so the verdict above fails on every map with dispersed starts.
+What the posterior spread figures rest on is judged apart (:class:`ModeReport`): the same
+diagnostics over the draws of the chains in the best chain's mode only, for the summaries that
+moved there (one that is constant over those draws is listed with its value; it is the mode's, not
+a mixing failure), after the draws in which those chains were still climbing (:func:`warmup_draws`,
+the MSER rule). One chain is judged by R-hat of its two halves, as ArviZ needs two chains.
+
 Posterior spread is shown per cell: the probability, over sampled worlds, that a cell is wall or
 belongs to a unit of each type (:class:`SpreadAccumulator`), and one number, the mean Bernoulli
 variance ``p (1 - p)`` of the wall indicator over the cells that are ever wall.
@@ -42,6 +49,10 @@ from semmap_pp.errors import SemmapError
 #: the best chain's sits in another mode (:meth:`ConvergenceReport.separated_chains`).
 SEPARATION_SDS = 4.0
 
+#: :func:`warmup_draws` cuts a chain's first draws where the squared standard error of the rest's
+#: mean (MSER) comes within this factor of its least value.
+WARMUP_GAIN = 2.0
+
 #: Label-invariant summaries recorded for every draw, in report order.
 SUMMARIES = ("log_posterior", "n_units", "wall_length", "cpr") + tuple(f"n_{t}" for t in UNIT_TYPES)
 
@@ -63,14 +74,83 @@ class QuantityDiagnostics:
 
 
 @dataclass(frozen=True)
+class ModeReport:
+    """Diagnostics over the draws of the chains in the best chain's mode only (the chains the
+    posterior spread figures use), for the summaries that moved there.
+
+    ``chains`` are numbered from 1; ``constant`` holds ``(name, value)`` for each summary that kept
+    one value over all those draws. ``ok`` needs at least one summary that moved, and each of them
+    to pass the report's thresholds. ``ess`` is the smallest bulk or tail ESS of those summaries:
+    about how many independent draws the spread figures rest on.
+    """
+
+    chains: tuple[int, ...]
+    n_draws: int
+    quantities: tuple[QuantityDiagnostics, ...]
+    constant: tuple[tuple[str, float], ...]
+    first_draw: int = 0   # draws before it (from 0) left out: the mode's chains still climbing
+
+    @property
+    def ok(self) -> bool:
+        return bool(self.quantities) and all(q.ok for q in self.quantities)
+
+    @property
+    def ess(self) -> float:
+        v = [min(q.ess_bulk, q.ess_tail) for q in self.quantities]
+        return float(min(v)) if v and all(math.isfinite(x) for x in v) else math.nan
+
+    def verdict(self) -> str:
+        """One line: whether the chains mixed within the best chain's mode."""
+        if self.ok:
+            return f"mixed within the mode (smallest ESS {self.ess:.0f})"
+        if not self.quantities:
+            return ("NOT mixed within the mode: no summary moved over its draws (nothing to estimate a "
+                    "spread from)")
+        ess = (f"the spread figures rest on about {self.ess:.0f} independent draws (smallest ESS); "
+               if math.isfinite(self.ess) else "")
+        return f"NOT mixed within the mode: {ess}more draws (--draws) steady them"
+
+    def heading(self, n_chains: int) -> str:
+        which = "all chains" if len(self.chains) == n_chains else chains_phrase(self.chains)
+        limit = ("; at the rule's limit of half the draws, so maybe climbing still"
+                 if self.first_draw == self.n_draws // 2 else "")
+        draws = (f"draws {self.first_draw + 1}-{self.n_draws}, the first {self.first_draw} left out as "
+                 f"still climbing (MSER{limit})" if self.first_draw else f"all {self.n_draws} draws")
+        halves = "; one chain: R-hat of its two halves" if len(self.chains) == 1 else ""
+        const = (("; constant there: " + ", ".join(f"{n} {v:.6g}" for n, v in self.constant))
+                 if self.constant else "")
+        return f"within the best chain's mode ({which}, {draws}{halves}{const})"
+
+    def to_dict(self) -> dict:
+        def clean(v):
+            return None if isinstance(v, float) and not math.isfinite(v) else v
+
+        return {"ok": self.ok, "chains": list(self.chains), "draws": self.n_draws,
+                "first_draw": self.first_draw, "ess": clean(self.ess),
+                "quantities": {q.name: {"mean": clean(q.mean), "sd": clean(q.sd), "rhat": clean(q.rhat),
+                                        "ess_bulk": clean(q.ess_bulk), "ess_tail": clean(q.ess_tail),
+                                        "ok": q.ok, "reason": q.reason}
+                               for q in self.quantities},
+                "constant": {n: v for n, v in self.constant}}
+
+
+@dataclass(frozen=True)
 class ConvergenceReport:
-    """Diagnostics of every summary, with the thresholds they were judged by."""
+    """Diagnostics of every summary, with the thresholds they were judged by, and the same over the
+    best chain's mode (``within_mode``, :class:`ModeReport`)."""
 
     quantities: tuple[QuantityDiagnostics, ...]
     n_chains: int
     n_draws: int
     rhat_max: float
     ess_min: float
+    within_mode: ModeReport | None = None
+
+    def shows_mode(self) -> bool:
+        """Whether the within-mode diagnostics say more than the main table: some chain lies in
+        another mode, was still climbing, or some summary is constant there."""
+        m = self.within_mode
+        return m is not None and (len(m.chains) < self.n_chains or bool(m.constant) or m.first_draw > 0)
 
     @property
     def ok(self) -> bool:
@@ -138,26 +218,38 @@ class ConvergenceReport:
                            for q in self.quantities},
             "separated_chains": [{"chain": c, "log_posterior_below_best": g}
                                  for c, g in self.separated_chains()],
+            "within_mode": self.within_mode.to_dict() if self.within_mode is not None else None,
         }
 
     def to_text(self) -> str:
         lines = [f"chains: {self.n_chains}, draws per chain: {self.n_draws}; "
                  f"pass when R-hat <= {self.rhat_max} and ESS >= {self.ess_min} (NaN fails)",
-                 f"{'quantity':<16}{'mean':>12}{'sd':>10}{'R-hat':>8}{'ESS bulk':>10}{'ESS tail':>10}  verdict"]
-        for q in self.quantities:
-            verdict = "ok" if q.ok else f"FAIL: {q.reason}"
-            lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
-                         f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
+                 *_table_lines(self.quantities)]
         lines.append("converged" if self.ok else "NOT converged")
         note = self.separation_note()
         if note:
             lines.append(note)
+        if self.shows_mode():
+            m = self.within_mode
+            lines += ["", m.heading(self.n_chains)]
+            if m.quantities:
+                lines += _table_lines(m.quantities)
+            lines.append(m.verdict())
         if self.n_chains > 1:
             lines += ["", "mean per chain (chains that settled in different modes differ here)",
                       f"{'quantity':<16}" + "".join(f"{'chain ' + str(c + 1):>12}" for c in range(self.n_chains))]
             for q in self.quantities:
                 lines.append(f"{q.name:<16}" + "".join(f"{m:>12.4g}" for m in q.chain_means))
         return "\n".join(lines)
+
+
+def _table_lines(quantities) -> list[str]:
+    lines = [f"{'quantity':<16}{'mean':>12}{'sd':>10}{'R-hat':>8}{'ESS bulk':>10}{'ESS tail':>10}  verdict"]
+    for q in quantities:
+        verdict = "ok" if q.ok else f"FAIL: {q.reason}"
+        lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
+                     f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
+    return lines
 
 
 def _as_chain_draw(name: str, values) -> np.ndarray:
@@ -175,7 +267,9 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
         if np.all(np.isnan(a)):
             rhat = ess_b = ess_t = float("nan")
         else:
-            rhat = float(az.rhat(a))
+            # ArviZ gives NaN for one chain: judge its two halves as two chains instead.
+            half = a.shape[1] // 2
+            rhat = float(az.rhat(a if a.shape[0] > 1 else a[:, :2 * half].reshape(2, half)))
             ess_b = float(az.ess(a, method="bulk"))
             ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
@@ -220,6 +314,34 @@ def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[i
             f"from {chains_phrase(mode)} (chain {best}'s mode)")
 
 
+def warmup_draws(x) -> int:
+    """How many leading draws of one chain's trace ``x`` to leave out as warm-up, by the MSER rule
+    (White 1997): the squared standard error of the mean of the draws left,
+    ``sum((x[d:] - mean)^2) / (n - d)^2``, for each cut ``d <= len(x) // 2``; the smallest cut whose
+    error is within ``WARMUP_GAIN`` of the least. Plain MSER takes the least itself, which on a
+    flat trace falls anywhere by chance (it cut 4 of 20 white-noise traces of 25 draws, and a
+    chain 24 draws deep that had stopped climbing after 12); with the factor a cut is made only
+    where it divides that error by at least ``WARMUP_GAIN``, and no further. 0 when ``x`` holds a
+    non-finite value or fewer than 4 draws. A chain still climbing towards its mode has a trend
+    that the rule cuts off; one already there keeps every draw.
+
+    >>> warmup_draws([-50.0, -20.0, -5.0, 0.0, 0.1, -0.1, 0.0, 0.1, -0.1, 0.0])
+    3
+    >>> warmup_draws([0.0, 0.1, -0.1, 0.0, 0.1, -0.1, 0.0, 0.1])
+    0
+    """
+    x = np.asarray(x, float)
+    n = x.size
+    if n < 4 or not np.all(np.isfinite(x)):
+        return 0
+    x = x - x[-1]                                   # log posteriors are ~1e6: keep the sums small
+    m = np.arange(n, 0, -1, dtype=float)            # draws left after cutting d = 0 .. n-1
+    s1, s2 = np.cumsum(x[::-1])[::-1], np.cumsum((x * x)[::-1])[::-1]
+    mser = np.maximum(s2 - s1 * s1 / m, 0.0) / (m * m)
+    mser = mser[: n // 2 + 1]
+    return int(np.flatnonzero(mser <= mser.min() * WARMUP_GAIN + 1e-300)[0])
+
+
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,
                 ess_min: float) -> ConvergenceReport:
     """Judge convergence of label-invariant summaries.
@@ -242,7 +364,19 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
         raise ValueError(f"summaries differ in shape: {sorted(shapes)}")
     (n_chains, n_draws), = shapes
     qs = tuple(_diagnose_one(n, arrays[n], rhat_max, ess_min) for n in names)
-    return ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min)
+    report = ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min)
+    chains = tuple(report.mode_chains())
+    lp = arrays.get("log_posterior")
+    first = max((warmup_draws(lp[c - 1]) for c in chains), default=0) if lp is not None else 0
+    moved, constant = [], []
+    for n in names:
+        a = arrays[n][[c - 1 for c in chains], first:]
+        if np.all(np.isfinite(a)) and np.all(a == a.flat[0]):
+            constant.append((n, float(a.flat[0])))
+        else:
+            moved.append(_diagnose_one(n, a, rhat_max, ess_min))
+    mode = ModeReport(chains, n_draws, tuple(moved), tuple(constant), first)
+    return ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min, mode)
 
 
 def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,

@@ -419,10 +419,10 @@ def _walls_inside_note(sm, post, model) -> str | None:
             f"explains it best); mark the outside unknown or crop the map to the building")
 
 
-def sampled_worlds(run: MapRun, n: int, chains=None) -> list[wm.World]:
-    """Up to ``n`` recorded worlds, evenly thinned over the draws of ``chains`` (indices from 0 into
-    the recorded chains; all of them when None), types not assigned."""
-    rects, active = run.samples["rects"], run.samples["active"]
+def sampled_worlds(run: MapRun, n: int, chains=None, first: int = 0) -> list[wm.World]:
+    """Up to ``n`` recorded worlds, evenly thinned over the draws ``first..`` (from 0) of ``chains``
+    (indices from 0 into the recorded chains; all of them when None), types not assigned."""
+    rects, active = run.samples["rects"][:, first:], run.samples["active"][:, first:]
     if chains is not None:
         idx = np.asarray(sorted(chains), dtype=int)
         rects, active = rects[idx], active[idx]
@@ -439,6 +439,14 @@ def spread_chains(run: MapRun) -> list[int]:
     lies thousands of nats below the best chain's carries no posterior mass worth drawing (e^-1000
     of it); pooled, its worlds would show the spread between modes, not around W*."""
     return [c - 1 for c in run.report.mode_chains()]
+
+
+def spread_first_draw(run: MapRun) -> int:
+    """The first recorded draw (from 0) the posterior spread uses: the draws before it, in which the
+    chains of the best chain's mode were still climbing, are left out
+    (:func:`semmap_pp.diagnostics.warmup_draws`, :class:`~semmap_pp.diagnostics.ModeReport`)."""
+    mode = run.report.within_mode
+    return mode.first_draw if mode is not None else 0
 
 
 def check_out_dir(out: Path, force: bool) -> None:

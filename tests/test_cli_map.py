@@ -53,6 +53,15 @@ def test_map_writes_every_file(first_run):
     assert f"chains: {verdict} (2 x 4 draws; R-hat and ESS: `semmap diagnose {out}`)" in r.stderr
     note = [x for x in text.splitlines() if x.startswith("chains in separate modes")]
     assert note == [x for x in r.stderr.splitlines() if x.startswith("chains in separate modes")]
+    # the diagnostics within the best chain's mode: heading and verdict in the file, one line in the log
+    lines = text.splitlines()
+    heads = [i for i, x in enumerate(lines) if x.startswith("within the best chain's mode (")]
+    logged = [x for x in r.stderr.splitlines() if x.startswith("within the best chain's mode (")]
+    assert len(heads) == len(logged) == 1              # n_hall is 0 in every draw: constant there
+    verdict = next(x for x in lines[heads[0]:] if "mixed within the mode" in x)
+    assert logged == [f"{lines[heads[0]]}: {verdict}"]
+    report_html = (out / "report.html").read_text()
+    assert "ithin the best chain&#x27;s mode (" in report_html and "mixed within the mode" in report_html
     # the report links every file of the folder, resume.npz (written after it) included
     report = (out / "report.html").read_text()
     for name in names:

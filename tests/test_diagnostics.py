@@ -143,3 +143,66 @@ def test_chains_in_separate_modes_are_named():
     # without a log posterior summary, or with one chain, nothing to say
     assert dg.convergence({"n_units": stuck}, rhat_max=1.05, ess_min=10).separated_chains() == []
     assert dg.convergence({"log_posterior": stuck[:1]}, rhat_max=1.05, ess_min=10).separated_chains() == []
+
+
+def mser_brute_force(x, gain=dg.WARMUP_GAIN):
+    """The MSER cut written out: every d <= n // 2, the rest's squared standard error of the mean."""
+    n = len(x)
+    se = [np.sum((x[d:] - np.mean(x[d:])) ** 2) / (n - d) ** 2 for d in range(n // 2 + 1)]
+    return next(d for d, v in enumerate(se) if v <= min(se) * gain + 1e-300)
+
+
+def test_warmup_draws_is_the_mser_cut():
+    rng = np.random.default_rng(7)
+    for n in (4, 5, 25, 60):
+        for k in range(40):
+            climb = np.r_[np.linspace(-rng.uniform(0, 50), 0, rng.integers(1, n)), np.zeros(n)][:n]
+            x = -777_000.0 + climb + rng.normal(scale=rng.uniform(0.1, 5.0), size=n)
+            assert dg.warmup_draws(x) == mser_brute_force(x), (n, k)
+    assert dg.warmup_draws([1.0, 2.0, np.nan, 3.0, 4.0]) == 0 and dg.warmup_draws([5.0, 0.0, 0.0]) == 0
+
+
+def test_warmup_draws_cuts_a_climb_and_leaves_a_stationary_chain():
+    rng = np.random.default_rng(8)
+    climb = np.r_[np.linspace(-400.0, -20.0, 10), np.zeros(40)] + rng.normal(size=50)
+    assert 9 <= dg.warmup_draws(climb) <= 11
+    # stationary traces keep their draws: 12 of 2,000 white-noise traces of 25 draws lose some
+    cut = [dg.warmup_draws(rng.normal(size=25)) for _ in range(2000)]
+    assert sum(c > 0 for c in cut) < 40
+
+
+def test_within_mode_leaves_out_other_modes_climbing_draws_and_constant_summaries():
+    rng = np.random.default_rng(9)
+    lp = rng.normal(size=(3, 60))
+    lp[0, :12] += np.linspace(-300.0, -30.0, 12)     # chain 1 still climbing in its first 12 draws
+    lp[1] -= 5_000.0                                  # chain 2 in another mode
+    n_units = np.full((3, 60), 20.0)
+    n_units[1] = 15.0                                 # constant in chains 1 and 3, not in all
+    rep = dg.convergence({"log_posterior": lp, "n_units": n_units}, rhat_max=1.1, ess_min=50)
+    m = rep.within_mode
+    assert m.chains == (1, 3) and 11 <= m.first_draw <= 13
+    assert [q.name for q in m.quantities] == ["log_posterior"] and m.constant == (("n_units", 20.0),)
+    q = m.quantities[0]
+    rest = lp[[0, 2], m.first_draw:]
+    assert q.mean == pytest.approx(rest.mean()) and q.sd == pytest.approx(rest.std())
+    assert m.ok and m.ess >= 50 and not rep.ok       # mixed within the mode, not converged overall
+    assert rep.shows_mode()
+    text = rep.to_text()
+    assert "within the best chain's mode (chains 1, 3, draws" in text and "constant there: n_units 20" in text
+    assert any(line.startswith("mixed within the mode (smallest ESS") for line in text.splitlines())
+    d = rep.to_dict()["within_mode"]
+    assert d["chains"] == [1, 3] and d["first_draw"] == m.first_draw and d["constant"] == {"n_units": 20.0}
+
+
+def test_within_mode_with_nothing_moving_is_not_mixed_and_one_chain_uses_its_halves():
+    frozen = dg.convergence({"log_posterior": np.full((2, 30), -10.0)}, rhat_max=1.05, ess_min=10)
+    assert not frozen.within_mode.ok and frozen.within_mode.quantities == ()
+    assert "no summary moved" in frozen.within_mode.verdict()
+    rng = np.random.default_rng(10)
+    one = dg.convergence({"log_posterior": rng.normal(size=(1, 400))}, rhat_max=1.05, ess_min=100)
+    assert one.ok and np.isfinite(one.quantities[0].rhat)       # ArviZ alone gives NaN for one chain
+    trend = dg.convergence({"log_posterior": np.linspace(0.0, 50.0, 400)[None] + rng.normal(size=(1, 400))},
+                           rhat_max=1.05, ess_min=100)
+    assert not trend.ok and trend.quantities[0].rhat > 1.05
+    plain = dg.convergence({"log_posterior": rng.normal(size=(2, 100))}, rhat_max=1.05, ess_min=10)
+    assert not plain.shows_mode() and "within the best chain's mode" not in plain.to_text()

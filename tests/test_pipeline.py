@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -204,7 +206,15 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
         assert {key(w.rects, w.active) for w in sampled_worlds(run, 6, [c])} == chain[c]
     assert len(sampled_worlds(run, 100)) == 12          # all chains by default
     spread = posterior_worlds(run, 100)
-    assert len(spread) == 6 and {key(w.rects, w.active) for w in spread} == chain[0]
+    first = run.report.within_mode.first_draw                  # draws in which chain 1 still climbed
+    after = {key(r, a) for r, a in zip(run.samples["rects"][0, first:], run.samples["active"][0, first:])}
+    assert len(spread) == 6 - first and {key(w.rects, w.active) for w in spread} == after
+    # a later first draw: the spread figures' worlds start there
+    mode = dataclasses.replace(run.report.within_mode, first_draw=4)
+    late = dataclasses.replace(run, report=dataclasses.replace(run.report, within_mode=mode))
+    assert [key(w.rects, w.active) for w in posterior_worlds(late, 100)] == \
+        [key(r, a) for r, a in zip(run.samples["rects"][0, 4:], run.samples["active"][0, 4:])]
+    assert len(sampled_worlds(run, 100, None, 5)) == 2        # draw 6 of each chain
 
 
 def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():

@@ -56,9 +56,10 @@ def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
     # pooled, its draws would report the spread between modes (docs/sampler.md).
     chains = report.mode_chains()
     keep = [c - 1 for c in chains]          # the posterior group's first dimension is the chain
+    first = report.within_mode.first_draw   # the draws before it: those chains still climbing
     spread = {}
     for name in post.data_vars:
-        a = np.asarray(post[name].values, float)[keep].ravel()
+        a = np.asarray(post[name].values, float)[keep, first:].ravel()
         a = a[np.isfinite(a)]
         spread[name] = ({"mean": float(a.mean()), "sd": float(a.std()),
                          "q05": float(np.quantile(a, 0.05)), "q50": float(np.quantile(a, 0.5)),
@@ -73,27 +74,30 @@ def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
                 accept[name] = float(np.nanmean(a)) if np.isfinite(a).any() else math.nan
     attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in tree.attrs.items()}
     return {"attrs": attrs, "convergence": report.to_dict(), "spread": spread, "spread_chains": chains,
+            "spread_first_draw": first + 1,
             "acceptance": accept,
             "stored_spread": {k: v for k, v in attrs.items() if "spread" in k}, "text": report.to_text()}
 
 
-def _chains_text(chains: list[int], n_chains: int) -> str:
-    """Whose draws the spread pools, for its heading.
+def _chains_text(chains: list[int], n_chains: int, first: int = 1) -> str:
+    """Whose draws the spread pools, for its heading (``first``: the first draw used, from 1).
 
-    >>> _chains_text([1, 2], 2), _chains_text([1], 2), _chains_text([1, 3], 3)
-    ('all chains and draws', "chain 1's draws: the best chain's mode", "chains 1, 3's draws: the best chain's mode")
+    >>> _chains_text([1, 2], 2), _chains_text([1], 2), _chains_text([1, 3], 3, 5)
+    ('all chains and draws', "chain 1's draws: the best chain's mode", "chains 1, 3's draws from draw 5: the best chain's mode")
     """
     from semmap_pp.diagnostics import chains_phrase
 
+    since = f" from draw {first}" if first > 1 else ""
     if len(chains) == n_chains:
-        return "all chains and draws"
-    return f"{chains_phrase(chains)}'s draws: the best chain's mode"
+        return f"all chains and draws{since}"
+    return f"{chains_phrase(chains)}'s draws{since}: the best chain's mode"
 
 
 def format_text(d: dict) -> str:
     a = d["attrs"]
     lines = ["run: " + ", ".join(f"{k} {v}" for k, v in a.items() if "spread" not in k), "", d["text"], "",
-             "posterior spread of the summaries (" + _chains_text(d["spread_chains"], d["convergence"]["chains"])
+             "posterior spread of the summaries (" + _chains_text(d["spread_chains"], d["convergence"]["chains"],
+                                                             d["spread_first_draw"])
              + ")",
              f"{'quantity':<16}{'mean':>12}{'sd':>10}{'5 %':>12}{'50 %':>12}{'95 %':>12}"]
     for name, s in d["spread"].items():

@@ -125,6 +125,17 @@ def convergence_table(report) -> str:
                   rows, classes)
 
 
+def mode_section(rep) -> str:
+    """The diagnostics within the best chain's mode (:class:`semmap_pp.diagnostics.ModeReport`), when
+    they say more than the main table; "" otherwise."""
+    if not rep.shows_mode():
+        return ""
+    m = rep.within_mode
+    heading = m.heading(rep.n_chains)
+    return (f"<h3>{e(heading[0].upper() + heading[1:])}</h3>"
+            + (convergence_table(m) if m.quantities else "") + f"<p>{e(m.verdict())}.</p>")
+
+
 def spread_text(rep) -> str:
     """Which chains' draws the spread figures hold (:func:`semmap_pp.pipeline.spread_chains`).
 
@@ -138,9 +149,12 @@ def spread_text(rep) -> str:
 
     mode = rep.mode_chains()
     left = [c for c in range(1, rep.n_chains + 1) if c not in mode]
+    first = rep.within_mode.first_draw if rep.within_mode is not None else 0
+    since = f" from draw {first + 1} on (the draws before it still climbing)" if first else ""
     if not left:
-        return f"Drawn from {'all ' + str(rep.n_chains) + ' chains' if rep.n_chains > 1 else 'the one chain'}."
-    return (f"Drawn from {chains_phrase(mode)}, the best chain's mode; {chains_phrase(left)} left out: "
+        return (f"Drawn from {'all ' + str(rep.n_chains) + ' chains' if rep.n_chains > 1 else 'the one chain'}"
+                f"{since}.")
+    return (f"Drawn from {chains_phrase(mode)}, the best chain's mode{since}; {chains_phrase(left)} left out: "
             f"{'their mean log posteriors lie' if left[1:] else 'its mean log posterior lies'} far below "
             f"(Convergence).")
 
@@ -227,6 +241,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (NaN fails).</p>",
         convergence_table(rep),
         f"<p>{e(note)}.</p>" if (note := rep.separation_note()) else "",
+        mode_section(rep),
         '<h2 id="cpr">Cell prediction rate</h2>',
         f"<p>CPR = <b>{e(cpr)}</b>: the share of cells in the region of interest "
         f"(<code>{e(inputs.roi_name)}</code>) that W* explains correctly (free as free, occupied as wall "

@@ -54,10 +54,12 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
 
 def posterior_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode
-    (:func:`semmap_pp.pipeline.spread_chains`), typed as the sampler typed them."""
-    from semmap_pp.pipeline import run_target, sampled_worlds, spread_chains
+    (:func:`semmap_pp.pipeline.spread_chains`), after the draws in which they were still climbing
+    (:func:`semmap_pp.pipeline.spread_first_draw`), typed as the sampler typed them."""
+    from semmap_pp.pipeline import run_target, sampled_worlds, spread_chains, spread_first_draw
 
-    return typed_worlds(run_target(run.inputs), sampled_worlds(run, n, spread_chains(run)))
+    return typed_worlds(run_target(run.inputs),
+                        sampled_worlds(run, n, spread_chains(run), spread_first_draw(run)))
 
 
 def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
