@@ -64,6 +64,7 @@ class RuleSetSummary:
     wall_disagreement_m2: float = math.nan
     wall_sd_m: float = math.nan   # mean conditional sd of W*'s wall positions
     spread_chains: tuple = ()     # the chains (from 1) the sampled worlds come from: the best one's mode
+    spread_first_draw: int = 1    # their first draw (from 1): the draws before it still settling
 
 
 # Offsets tried per wall by :func:`conditional_wall_sd` in ``summarise``: +- 0.25 m.
@@ -151,7 +152,7 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
     best = count_defects([run.world], c.resolution, c.wall, c.adjacency_dilation, tol)
     q = run.report.quantities
     from semmap_pp.outputs.spread import wall_disagreement_m2
-    from semmap_pp.pipeline import run_target
+    from semmap_pp.pipeline import run_target, spread_first_draw
 
     acc = _accumulate(worlds, frame.shape, c.wall)
     return RuleSetSummary(
@@ -163,7 +164,7 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
         defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
         seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution),
         wall_sd_m=mean_wall_sd_m(run_target(run.inputs), run.world),
-        spread_chains=tuple(run.report.mode_chains()))
+        spread_chains=tuple(run.report.mode_chains()), spread_first_draw=spread_first_draw(run) + 1)
 
 
 def _fmt(v, spec: str) -> str:
@@ -190,8 +191,8 @@ def compare_table(rows: list[RuleSetSummary]) -> str:
     add("wall spread (mean p(1-p) over cells ever wall)", [_fmt(r.wall_spread, ".4f") for r in rows])
     add("wall disagreement, m² (Σ 2p(1-p) · cell area)", [_fmt(r.wall_disagreement_m2, ".2f") for r in rows])
     add("wall sd given the rest of W*, mean over its walls, m", [_fmt(r.wall_sd_m, ".4f") for r in rows])
-    add("sampled worlds (chains: the best one's mode)",
-        [f"{r.n_worlds} ({', '.join(map(str, r.spread_chains))})" for r in rows])
+    add("sampled worlds (chains: the best one's mode; from draw)",
+        [f"{r.n_worlds} ({', '.join(map(str, r.spread_chains))}; {r.spread_first_draw})" for r in rows])
     names = list(rows[0].rhat)
     for n in names:
         add(f"R-hat {n}", [_fmt(r.rhat.get(n, math.nan), ".3f") for r in rows])

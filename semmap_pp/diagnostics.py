@@ -10,8 +10,9 @@ Chains in separate modes never agree, so the verdict above fails on every map wi
 What the posterior spread figures rest on is judged apart (:class:`ModeReport`): the same
 diagnostics over the draws of the chains in the best chain's mode only, for the summaries that
 moved there (one that is constant over those draws is listed with its value; it is the mode's, not
-a mixing failure), after the draws in which those chains were still climbing (:func:`warmup_draws`,
-the MSER rule). One chain is judged by R-hat of its two halves, as ArviZ needs two chains.
+a mixing failure), after the draws in which those chains were still settling: climbing towards
+the mode, or leaving a start at its top (:func:`warmup_draws`, the MSER rule). One chain is judged
+by R-hat of its two halves, as ArviZ needs two chains.
 
 Posterior spread is shown per cell: the probability, over sampled worlds, that a cell is wall or
 belongs to a unit of each type (:class:`SpreadAccumulator`), and one number, the mean Bernoulli
@@ -88,7 +89,7 @@ class ModeReport:
     n_draws: int
     quantities: tuple[QuantityDiagnostics, ...]
     constant: tuple[tuple[str, float], ...]
-    first_draw: int = 0   # draws before it (from 0) left out: the mode's chains still climbing
+    first_draw: int = 0   # draws before it (from 0) left out: the mode's chains still settling
 
     @property
     def ok(self) -> bool:
@@ -112,10 +113,10 @@ class ModeReport:
 
     def heading(self, n_chains: int) -> str:
         which = "all chains" if len(self.chains) == n_chains else chains_phrase(self.chains)
-        limit = ("; at the rule's limit of half the draws, so maybe climbing still"
+        limit = ("; at the rule's limit of half the draws, so maybe settling still"
                  if self.first_draw == self.n_draws // 2 else "")
         draws = (f"draws {self.first_draw + 1}-{self.n_draws}, the first {self.first_draw} left out as "
-                 f"still climbing (MSER{limit})" if self.first_draw else f"all {self.n_draws} draws")
+                 f"still settling (MSER{limit})" if self.first_draw else f"all {self.n_draws} draws")
         halves = "; one chain: R-hat of its two halves" if len(self.chains) == 1 else ""
         const = (("; constant there: " + ", ".join(f"{n} {v:.6g}" for n, v in self.constant))
                  if self.constant else "")
@@ -148,7 +149,7 @@ class ConvergenceReport:
 
     def shows_mode(self) -> bool:
         """Whether the within-mode diagnostics say more than the main table: some chain lies in
-        another mode, was still climbing, or some summary is constant there."""
+        another mode, was still settling, or some summary is constant there."""
         m = self.within_mode
         return m is not None and (len(m.chains) < self.n_chains or bool(m.constant) or m.first_draw > 0)
 
@@ -270,6 +271,8 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
             # ArviZ gives NaN for one chain: judge its two halves as two chains instead.
             half = a.shape[1] // 2
             rhat = float(az.rhat(a if a.shape[0] > 1 else a[:, :2 * half].reshape(2, half)))
+            if a.shape[0] > 1 and np.all(np.ptp(a, axis=1) == 0) and np.ptp(a[:, 0]) > 0:
+                rhat = math.inf     # each chain constant at its own value (ArviZ: a huge finite number)
             ess_b = float(az.ess(a, method="bulk"))
             ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
@@ -322,8 +325,8 @@ def warmup_draws(x) -> int:
     flat trace falls anywhere by chance (it cut 4 of 20 white-noise traces of 25 draws, and a
     chain 24 draws deep that had stopped climbing after 12); with the factor a cut is made only
     where it divides that error by at least ``WARMUP_GAIN``, and no further. 0 when ``x`` holds a
-    non-finite value or fewer than 4 draws. A chain still climbing towards its mode has a trend
-    that the rule cuts off; one already there keeps every draw.
+    non-finite value or fewer than 4 draws. A chain still climbing towards its mode (or leaving a
+    start at its top) has a trend that the rule cuts off; one already there keeps every draw.
 
     >>> warmup_draws([-50.0, -20.0, -5.0, 0.0, 0.1, -0.1, 0.0, 0.1, -0.1, 0.0])
     3

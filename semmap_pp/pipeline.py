@@ -443,7 +443,7 @@ def spread_chains(run: MapRun) -> list[int]:
 
 def spread_first_draw(run: MapRun) -> int:
     """The first recorded draw (from 0) the posterior spread uses: the draws before it, in which the
-    chains of the best chain's mode were still climbing, are left out
+    chains of the best chain's mode were still settling, are left out
     (:func:`semmap_pp.diagnostics.warmup_draws`, :class:`~semmap_pp.diagnostics.ModeReport`)."""
     mode = run.report.within_mode
     return mode.first_draw if mode is not None else 0

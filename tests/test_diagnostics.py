@@ -206,3 +206,10 @@ def test_within_mode_with_nothing_moving_is_not_mixed_and_one_chain_uses_its_hal
     assert not trend.ok and trend.quantities[0].rhat > 1.05
     plain = dg.convergence({"log_posterior": rng.normal(size=(2, 100))}, rhat_max=1.05, ess_min=10)
     assert not plain.shows_mode() and "within the best chain's mode" not in plain.to_text()
+
+
+def test_chains_each_constant_at_their_own_value_give_an_infinite_rhat():
+    """ArviZ returns a huge finite number here (rank normalisation); the report says infinite."""
+    a = np.r_[np.full(20, -777_734.6), np.full(20, -777_735.1)].reshape(2, 20)
+    q = dg.convergence({"log_posterior": a}, rhat_max=1.05, ess_min=10).quantities[0]
+    assert q.rhat == np.inf and "each chain stuck at its own value" in q.reason

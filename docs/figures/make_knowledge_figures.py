@@ -325,6 +325,8 @@ def _markdown(names, wstar, spread, rows, settings) -> str:
         [f"{spread[n]['defects_table3_typing_mean']:.2f}" for n in names])
     add("defects, mean over sampled worlds (every adjacent pair)",
         [f"{spread[n]['defects_all_adjacent_mean']:.2f}" for n in names])
+    add("sampled worlds drawn from (draw of each chain; before it still settling, MSER)",
+        [r.spread_first_draw for r in rows])
     add("units, mean ± sd over sampled worlds", [f"{spread[n]['units_mean']:.1f} ± {spread[n]['units_sd']:.1f}"
                                                 for n in names])
     add("wall spread, mean p(1-p) over cells ever wall (compare.py)",

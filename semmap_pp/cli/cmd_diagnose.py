@@ -56,7 +56,7 @@ def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
     # pooled, its draws would report the spread between modes (docs/sampler.md).
     chains = report.mode_chains()
     keep = [c - 1 for c in chains]          # the posterior group's first dimension is the chain
-    first = report.within_mode.first_draw   # the draws before it: those chains still climbing
+    first = report.within_mode.first_draw   # the draws before it: those chains still settling
     spread = {}
     for name in post.data_vars:
         a = np.asarray(post[name].values, float)[keep, first:].ravel()

@@ -195,11 +195,11 @@ def run(args) -> int:
     rep = result.report
     log(f"chains: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x {rep.n_draws} draws; "
         f"R-hat and ESS: `semmap diagnose {out}`)")
-    if rep.shows_mode():
-        log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
     note = rep.separation_note()
     if note:
         log(note)
+    if rep.shows_mode():
+        log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
     kept_chains, kept_draws = result.kept
     if result.stopped == "interrupted":
         log(f"semmap: interrupted: wrote partial results ({len(kept_chains)} chain(s) x {kept_draws} draws) "

@@ -150,7 +150,7 @@ def spread_text(rep) -> str:
     mode = rep.mode_chains()
     left = [c for c in range(1, rep.n_chains + 1) if c not in mode]
     first = rep.within_mode.first_draw if rep.within_mode is not None else 0
-    since = f" from draw {first + 1} on (the draws before it still climbing)" if first else ""
+    since = f" from draw {first + 1} on (the draws before it still settling)" if first else ""
     if not left:
         return (f"Drawn from {'all ' + str(rep.n_chains) + ' chains' if rep.n_chains > 1 else 'the one chain'}"
                 f"{since}.")

@@ -54,7 +54,7 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
 
 def posterior_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode
-    (:func:`semmap_pp.pipeline.spread_chains`), after the draws in which they were still climbing
+    (:func:`semmap_pp.pipeline.spread_chains`), after the draws in which they were still settling
     (:func:`semmap_pp.pipeline.spread_first_draw`), typed as the sampler typed them."""
     from semmap_pp.pipeline import run_target, sampled_worlds, spread_chains, spread_first_draw
 
