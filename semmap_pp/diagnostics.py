@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping
 
@@ -123,15 +123,9 @@ class ModeReport:
         return f"within the best chain's mode ({which}, {draws}{halves}{const})"
 
     def to_dict(self) -> dict:
-        def clean(v):
-            return None if isinstance(v, float) and not math.isfinite(v) else v
-
         return {"ok": self.ok, "chains": list(self.chains), "draws": self.n_draws,
-                "first_draw": self.first_draw, "ess": clean(self.ess),
-                "quantities": {q.name: {"mean": clean(q.mean), "sd": clean(q.sd), "rhat": clean(q.rhat),
-                                        "ess_bulk": clean(q.ess_bulk), "ess_tail": clean(q.ess_tail),
-                                        "ok": q.ok, "reason": q.reason}
-                               for q in self.quantities},
+                "first_draw": self.first_draw, "ess": _clean(self.ess),
+                "quantities": {q.name: _quantity_dict(q) for q in self.quantities},
                 "constant": {n: v for n, v in self.constant}}
 
 
@@ -205,17 +199,11 @@ class ConvergenceReport:
         return _separation_text(sep, best, self.mode_chains()) if sep else ""
 
     def to_dict(self) -> dict:
-        def clean(v):
-            return None if isinstance(v, float) and not math.isfinite(v) else v
-
         return {
             "ok": self.ok, "chains": self.n_chains, "draws": self.n_draws,
             "rhat_max": self.rhat_max, "ess_min": self.ess_min,
-            "quantities": {q.name: {"mean": clean(q.mean), "sd": clean(q.sd), "rhat": clean(q.rhat),
-                                    "ess_bulk": clean(q.ess_bulk), "ess_tail": clean(q.ess_tail),
-                                    "ok": q.ok, "reason": q.reason,
-                                    "chain_means": [clean(m) for m in q.chain_means],
-                                    "chain_sds": [clean(m) for m in q.chain_sds]}
+            "quantities": {q.name: dict(_quantity_dict(q), chain_means=[_clean(m) for m in q.chain_means],
+                                        chain_sds=[_clean(m) for m in q.chain_sds])
                            for q in self.quantities},
             "separated_chains": [{"chain": c, "log_posterior_below_best": g}
                                  for c, g in self.separated_chains()],
@@ -242,6 +230,21 @@ class ConvergenceReport:
             for q in self.quantities:
                 lines.append(f"{q.name:<16}" + "".join(f"{m:>12.4g}" for m in q.chain_means))
         return "\n".join(lines)
+
+
+def _clean(v):
+    """NaN and infinities as None (JSON has neither)."""
+    return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def _quantity_dict(q: QuantityDiagnostics) -> dict:
+    return {"mean": _clean(q.mean), "sd": _clean(q.sd), "rhat": _clean(q.rhat), "ess_bulk": _clean(q.ess_bulk),
+            "ess_tail": _clean(q.ess_tail), "ok": q.ok, "reason": q.reason}
+
+
+def _constant(a: np.ndarray) -> bool:
+    """Whether every value of ``a`` is finite and the same."""
+    return bool(np.all(np.isfinite(a)) and np.all(a == a.flat[0]))
 
 
 def _table_lines(quantities) -> list[str]:
@@ -282,7 +285,7 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
     if math.isinf(rhat):
         reasons.append("R-hat is infinite (each chain stuck at its own value)")
     elif not math.isfinite(rhat):
-        same = np.all(a == a.flat[0]) if np.all(np.isfinite(a)) else False
+        same = _constant(a)
         reasons.append("R-hat is NaN (" + ("summary never moved in any chain" if same else "NaN values") + ")")
     elif rhat > rhat_max:
         reasons.append(f"R-hat {rhat:.3f} > {rhat_max}")
@@ -374,12 +377,11 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
     moved, constant = [], []
     for n in names:
         a = arrays[n][[c - 1 for c in chains], first:]
-        if np.all(np.isfinite(a)) and np.all(a == a.flat[0]):
+        if _constant(a):
             constant.append((n, float(a.flat[0])))
         else:
             moved.append(_diagnose_one(n, a, rhat_max, ess_min))
-    mode = ModeReport(chains, n_draws, tuple(moved), tuple(constant), first)
-    return ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min, mode)
+    return replace(report, within_mode=ModeReport(chains, n_draws, tuple(moved), tuple(constant), first))
 
 
 def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,
