@@ -126,6 +126,7 @@ def _settings(model, args):
         v = getattr(args, key)
         if v is not None:
             over[key] = v
+    over["spread_draws"] = 0    # W* is scored: the sample around it (the spread figures) is not needed
     return RunSettings.from_model(model, seed=args.seed, **over)
 
 

@@ -65,6 +65,7 @@ class RuleSetSummary:
     wall_sd_m: float = math.nan   # mean conditional sd of W*'s wall positions
     spread_chains: tuple = ()     # the chains (from 1) the sampled worlds come from: the best one's mode
     spread_first_draw: int = 1    # their first draw (from 1): the draws before it still settling
+    around_wstar: bool = False    # whether they come from the sample around W* (else the search's draws)
 
 
 # Offsets tried per wall by :func:`conditional_wall_sd` in ``summarise``: +- 0.25 m.
@@ -152,9 +153,10 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
     best = count_defects([run.world], c.resolution, c.wall, c.adjacency_dilation, tol)
     q = run.report.quantities
     from semmap_pp.outputs.spread import wall_disagreement_m2
-    from semmap_pp.pipeline import run_target, spread_first_draw
+    from semmap_pp.pipeline import figure_source, run_target, spread_first_draw
 
     acc = _accumulate(worlds, frame.shape, c.wall)
+    src = figure_source(run)          # the sample around W*, or the search's own draws
     return RuleSetSummary(
         name=name, rules=rules, n_units=len(run.semantic.unit_ids), cpr=float(run.semantic.cpr),
         log_posterior=float(run.semantic.log_posterior), converged=bool(run.report.ok),
@@ -164,7 +166,8 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
         defects_best=int(best[0]), defects_mean=float(defects.mean()) if len(defects) else math.nan,
         seconds=float(run.seconds), wall_disagreement_m2=wall_disagreement_m2(acc.p_wall(), c.resolution),
         wall_sd_m=mean_wall_sd_m(run_target(run.inputs), run.world),
-        spread_chains=tuple(run.report.mode_chains()), spread_first_draw=spread_first_draw(run) + 1)
+        spread_chains=tuple(src.report.mode_chains()), spread_first_draw=spread_first_draw(src) + 1,
+        around_wstar=src is not run)
 
 
 def _fmt(v, spec: str) -> str:
@@ -191,8 +194,9 @@ def compare_table(rows: list[RuleSetSummary]) -> str:
     add("wall spread (mean p(1-p) over cells ever wall)", [_fmt(r.wall_spread, ".4f") for r in rows])
     add("wall disagreement, m² (Σ 2p(1-p) · cell area)", [_fmt(r.wall_disagreement_m2, ".2f") for r in rows])
     add("wall sd given the rest of W*, mean over its walls, m", [_fmt(r.wall_sd_m, ".4f") for r in rows])
-    add("sampled worlds (chains: the best one's mode; from draw)",
-        [f"{r.n_worlds} ({', '.join(map(str, r.spread_chains))}; {r.spread_first_draw})" for r in rows])
+    add("sampled worlds (chains: the best one's mode; from draw; of the sample around W* or the search)",
+        [f"{r.n_worlds} ({', '.join(map(str, r.spread_chains))}; {r.spread_first_draw}; "
+         f"{'around W*' if r.around_wstar else 'search'})" for r in rows])
     names = list(rows[0].rhat)
     for n in names:
         add(f"R-hat {n}", [_fmt(r.rhat.get(n, math.nan), ".3f") for r in rows])

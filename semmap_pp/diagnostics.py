@@ -90,6 +90,8 @@ class ModeReport:
     quantities: tuple[QuantityDiagnostics, ...]
     constant: tuple[tuple[str, float], ...]
     first_draw: int = 0   # draws before it (from 0) left out: the mode's chains still settling
+    figures: bool = True  # whether the spread figures are drawn from these draws (else: W*'s search)
+    draws_option: str = "--draws"   # the option that lengthens these chains (for the verdict)
 
     @property
     def ok(self) -> bool:
@@ -107,9 +109,10 @@ class ModeReport:
         if not self.quantities:
             return ("NOT mixed within the mode: no summary moved over its draws (nothing to estimate a "
                     "spread from)")
-        ess = (f"the spread figures rest on about {self.ess:.0f} independent draws (smallest ESS); "
+        what = "the spread figures rest on" if self.figures else "its estimates rest on"
+        ess = (f"{what} about {self.ess:.0f} independent draws (smallest ESS); "
                if math.isfinite(self.ess) else "")
-        return f"NOT mixed within the mode: {ess}more draws (--draws) steady them"
+        return f"NOT mixed within the mode: {ess}more draws ({self.draws_option}) steady them"
 
     def heading(self, n_chains: int) -> str:
         which = "all chains" if len(self.chains) == n_chains else chains_phrase(self.chains)
@@ -196,7 +199,8 @@ class ConvergenceReport:
     def separation_note(self) -> str:
         """One line naming the chains in separate modes (:meth:`separated_chains`), "" if none."""
         best, sep = self._separation("log_posterior")
-        return _separation_text(sep, best, self.mode_chains()) if sep else ""
+        figures = self.within_mode is None or self.within_mode.figures
+        return _separation_text(sep, best, self.mode_chains(), figures) if sep else ""
 
     def to_dict(self) -> dict:
         return {
@@ -307,7 +311,7 @@ def chains_phrase(chains) -> str:
     return ("chain " if len(chains) == 1 else "chains ") + ", ".join(map(str, chains))
 
 
-def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[int]) -> str:
+def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[int], figures: bool = True) -> str:
     if len(separated) == 1:
         (c, g), = separated
         what = f"chain {c}'s mean log posterior lies {g:,.1f} nats below chain {best}'s"
@@ -316,8 +320,9 @@ def _separation_text(separated: list[tuple[int, float]], best: int, mode: list[i
                 f"{', '.join(f'{g:,.1f}' for _, g in separated)} nats below chain {best}'s")
     return (f"chains in separate modes: {what}, more than {SEPARATION_SDS:g} of the chains' own "
             f"standard deviations (another mode, or still climbing: docs/sampler.md, \"Chains in "
-            f"separate modes\"); W* comes from the best world of any chain, the posterior spread "
-            f"from {chains_phrase(mode)} (chain {best}'s mode)")
+            f"separate modes\"); W* comes from the best world of any chain"
+            + (f", the posterior spread from {chains_phrase(mode)} (chain {best}'s mode)" if figures else
+               " (the spread figures from the sample around W*)"))
 
 
 def warmup_draws(x) -> int:
@@ -349,7 +354,7 @@ def warmup_draws(x) -> int:
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,
-                ess_min: float) -> ConvergenceReport:
+                ess_min: float, figures: bool = True, draws_option: str = "--draws") -> ConvergenceReport:
     """Judge convergence of label-invariant summaries.
 
     Parameters
@@ -357,6 +362,11 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
     summaries : mapping of name to (chains, draws) array, or a DataTree from :func:`to_datatree`
     rhat_max, ess_min : float
         Thresholds (the model file's ``[diagnostics]`` section holds the project's values).
+    figures : bool
+        Whether the spread figures are drawn from these draws (the texts say so); False for W*'s
+        search when the run has a sample around W*.
+    draws_option : str
+        The ``semmap map`` option that lengthens these chains, named by the within-mode verdict.
     """
     if hasattr(summaries, "children"):  # an ArviZ DataTree (itself a Mapping of groups)
         post = summaries["posterior"]
@@ -381,7 +391,8 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
             constant.append((n, float(a.flat[0])))
         else:
             moved.append(_diagnose_one(n, a, rhat_max, ess_min))
-    return replace(report, within_mode=ModeReport(chains, n_draws, tuple(moved), tuple(constant), first))
+    return replace(report, within_mode=ModeReport(chains, n_draws, tuple(moved), tuple(constant), first,
+                                                  figures, draws_option))
 
 
 def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,

@@ -43,6 +43,8 @@ OUTSIDE_MODES = ("auto", "unknown", "keep")
 # up front, so k_max bounds memory; a length in cells must fit the int32 arrays of the samples.
 MAX_MODEL_BYTES = 1 << 20
 MAX_K = 100_000
+#: Most draws per chain of the sample around W* (each records a world: memory grows with it).
+MAX_SPREAD_DRAWS = 100_000
 MAX_CELLS_PER_LENGTH = 2**31 - 1
 
 
@@ -160,6 +162,11 @@ class SamplerParams:
     n_inner: int
     anneal: float
     start_factor: int
+    #: The sample around W* (paper Fig. 7) after the search: recorded draws per chain, each of
+    #: ``spread_n_inner`` kernels, every chain started at W* (0 draws: no such sample; the spread
+    #: figures then use the search's draws). Optional: a model file without the keys gets 0.
+    spread_draws: int = 0
+    spread_n_inner: int = 20
 
 
 @dataclass(frozen=True)
@@ -415,7 +422,12 @@ def load_model(path: str | Path | None = None) -> Model:
         chains=r.integer("sampler.chains", lo=1), cores=r.integer("sampler.cores", lo=1),
         tune=r.integer("sampler.tune", lo=0), draws=r.integer("sampler.draws", lo=4),
         n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
-        start_factor=r.integer("sampler.start_factor", lo=1))
+        start_factor=r.integer("sampler.start_factor", lo=1),
+        spread_draws=r.optional("sampler.spread_draws", 0, r.integer, lo=0, hi=MAX_SPREAD_DRAWS),
+        spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1))
+    if 0 < sampler.spread_draws < 4:
+        raise r.error("sampler.spread_draws", "must be 0 (no sample around W*) or at least 4 "
+                      "(R-hat and ESS need them)")
     r.raw("diagnostics")                   # a missing table is named as such
     defect_tol = r.optional("diagnostics.defect_tolerance_m", 2.0 * prior.sale_sigma_m, r.number, lo=0.0)
     walls_inside_max = r.optional("diagnostics.walls_inside_max", 0.5, r.number, lo=0.0, hi=1.0)

@@ -188,15 +188,50 @@ class RunSettings:
     n_inner: int
     anneal: float
     seed: int
+    spread_draws: int = 0           # the sample around W* (paper Fig. 7), draws per chain; 0: none
+    spread_n_inner: int = 20        # its kernels per draw
 
     @classmethod
     def from_model(cls, model: Model, seed: int = 0, **overrides) -> "RunSettings":
         s = model.sampler
         values = dict(chains=s.chains, cores=s.cores, tune=s.tune, draws=s.draws, n_inner=s.n_inner,
-                      anneal=s.anneal, seed=seed)
+                      anneal=s.anneal, seed=seed, spread_draws=s.spread_draws,
+                      spread_n_inner=s.spread_n_inner)
         values.update({k: v for k, v in overrides.items() if v is not None})
         values["cores"] = max(1, min(values["cores"], values["chains"], os.cpu_count() or 1))
         return cls(**values)
+
+
+@dataclass
+class SpreadSample:
+    """The sample around W* (the paper's Fig. 7): after the search, every chain started at W* and
+    recorded ``draws`` draws of ``n_inner`` kernels under the same target, with no burn-in. The
+    spread figures are drawn from it (:func:`figure_source`); it never changes W*."""
+
+    draws: int
+    n_inner: int
+    summaries: dict                 # as MapRun's, over this sample's draws
+    sample_stats: dict
+    report: ConvergenceReport
+    samples: dict
+    seconds: float
+    kernels_per_second: float
+    start_logp: float               # W*'s log posterior, where every chain started
+    best_logp: float                # the best log posterior any of its chains reached
+    stopped: str | None = None
+    kept: tuple = ()
+
+    def text(self) -> str:
+        """One line: what was sampled, how fast, and whether the chains rose above W*."""
+        chains, n = self.kept
+        text = (f"sample around W* (posterior.png, posterior_cells.png): {len(chains)} chain(s) x {n} "
+                f"draws x {self.n_inner} kernels from W*, {self.seconds:.1f} s "
+                f"({self.kernels_per_second:,.0f} kernels/s)")
+        rise = self.best_logp - self.start_logp
+        if math.isfinite(rise) and rise > 0.05:
+            text += (f"; its chains reached log posterior {rise:+.1f} above W* (W* is kept: the "
+                     f"search's; docs/sampler.md)")
+        return text
 
 
 @dataclass
@@ -220,6 +255,7 @@ class MapRun:
     starts: list = field(default_factory=list)    # the start world of each chain
     kept: tuple = ()                # (chain numbers, draws per chain) behind summaries and samples
     draw_seconds: tuple = ()        # per chain: seconds inside each draw's kernels in this run
+    spread: SpreadSample | None = None   # the sample around W*, when settings.spread_draws > 0
 
     def timing_text(self) -> str:
         """How long sampling took, and how fast the chains ran inside their draws.
@@ -308,7 +344,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     """
     from semmap_pp.kernels import data_from_frame, default_mix
     from semmap_pp.kernels.data import settings_from_mapping
-    from semmap_pp.resume import keep_common_draws, merge_records
+    from semmap_pp.resume import merge_records
     from semmap_pp.sampling import sample_worlds
 
     model, frame = inputs.model, inputs.frame
@@ -357,18 +393,11 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     new_draws = sum(len(r.stats.get("logp", ())) for r in result.records)
     total_kernels = new_draws * settings.n_inner
     records = merge_records(history, result.records)
-    kept_chains, n_kept, recorded, notes = keep_common_draws(records)
+    # the sample around W* follows unless sampling was stopped early (then the figures use these draws)
+    spread = settings.spread_draws > 0 and not result.stopped and (budget is None or budget > seconds)
+    kept_chains, n_kept, summaries, sample_stats, report, samples, notes = _collect(
+        records, model, figures=not spread)
     notes[:0] = inputs.notes
-    summaries = {"log_posterior": np.stack([records[c].stats["logp"][recorded[c]] for c in kept_chains])}
-    for name in SUMMARIES[1:]:
-        summaries[name] = np.stack([records[c].stats[name][recorded[c]] for c in kept_chains])
-    stat_names = [k for k in records[kept_chains[0]].stats
-                  if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")]
-    sample_stats = {k: np.stack([records[c].stats[k][recorded[c]] for c in kept_chains]).astype(float)
-                    for k in stat_names}
-    report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min)
-    samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
-               "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
 
     post = run_target(inputs)
     best = result.best_world if result.best_world is not None else starts[0]
@@ -398,7 +427,74 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
                  (tuple(kept_chains), n_kept), draw_seconds)
     log(f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
         f"(ROI {inputs.roi_name}); sampling {run.timing_text()}")
+    if spread:
+        left = None if budget is None else max(budget - (time.perf_counter() - t0), 1.0)
+        run.spread = sample_spread(inputs, settings, sm.world, sm.log_posterior, factory, data,
+                                   mix=default_mix(kernel_settings), log=log, stop=stop, budget=left)
+        if run.spread.stopped == "interrupted":
+            run.stopped = "interrupted"
+    elif settings.spread_draws > 0:
+        notes.append("no sample around W*: sampling stopped early; the spread figures use the search's draws")
     return run
+
+
+def _collect(records, model: Model, *, figures: bool = True, draws_option: str = "--draws"):
+    """The draws every kept chain has (:func:`semmap_pp.resume.keep_common_draws`) as arrays:
+    ``(kept chains, draws per chain, summaries, sample_stats, convergence report, samples, notes)``."""
+    from semmap_pp.resume import keep_common_draws
+
+    kept_chains, n_kept, recorded, notes = keep_common_draws(records)
+    summaries = {"log_posterior": np.stack([records[c].stats["logp"][recorded[c]] for c in kept_chains])}
+    for name in SUMMARIES[1:]:
+        summaries[name] = np.stack([records[c].stats[name][recorded[c]] for c in kept_chains])
+    stat_names = [k for k in records[kept_chains[0]].stats
+                  if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")]
+    sample_stats = {k: np.stack([records[c].stats[k][recorded[c]] for c in kept_chains]).astype(float)
+                    for k in stat_names}
+    report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min,
+                         figures=figures, draws_option=draws_option)
+    samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
+               "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
+    return kept_chains, n_kept, summaries, sample_stats, report, samples, notes
+
+
+def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_logp: float, factory,
+                  data, *, mix, log=print, stop=None, budget: float | None = None) -> SpreadSample:
+    """The sample around W* (paper Fig. 7, "starting the Markov chain from the world state W*"):
+    ``settings.chains`` chains, each started at ``wstar``, record ``settings.spread_draws`` draws of
+    ``settings.spread_n_inner`` kernels under the full target (no burn-in; knowledge on from the
+    first draw when W* passes the coverage threshold, as it does once the search has switched it on).
+    The seed is the run's plus one, so the sample's random draws are not the search's."""
+    from semmap_pp.sampling import sample_worlds
+
+    model = inputs.model
+    log(f"sampling around W*: {settings.chains} chains x {settings.spread_draws} draws x "
+        f"{settings.spread_n_inner} kernels, every chain started at W*")
+    t0 = time.perf_counter()
+    result = sample_worlds(factory, data, [wstar], draws=settings.spread_draws, tune=0,
+                           chains=settings.chains, cores=settings.cores, n_inner=settings.spread_n_inner,
+                           seed=settings.seed + 1, anneal=1.0, mix=mix,
+                           cpr_fn=LatticeCPR.from_roi(inputs.frame, inputs.roi),
+                           resolution=inputs.frame.cells.resolution,
+                           knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None,
+                           stop=stop, budget=budget)
+    seconds = time.perf_counter() - t0
+    kept_chains, n_kept, summaries, sample_stats, report, samples, _ = _collect(
+        result.records, model, draws_option="--spread-draws")
+    made = sum(len(r.stats.get("logp", ())) for r in result.records)
+    best = max((float(np.max(r.stats["logp"])) for r in result.records if len(r.stats.get("logp", ()))),
+               default=math.nan)
+    spread = SpreadSample(settings.spread_draws, settings.spread_n_inner, summaries, sample_stats, report,
+                          samples, seconds, made * settings.spread_n_inner / seconds if seconds > 0 else 0.0,
+                          float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept))
+    log(spread.text())
+    return spread
+
+
+def figure_source(run: MapRun):
+    """What the spread figures are drawn from: the sample around W* when the run has one
+    (:class:`SpreadSample`), else the run's own recorded draws. Both have ``samples`` and ``report``."""
+    return run.spread if run.spread is not None else run
 
 
 def _walls_inside_note(sm, post, model) -> str | None:
@@ -419,7 +515,7 @@ def _walls_inside_note(sm, post, model) -> str | None:
             f"explains it best); mark the outside unknown or crop the map to the building")
 
 
-def sampled_worlds(run: MapRun, n: int, chains=None, first: int = 0) -> list[wm.World]:
+def sampled_worlds(run: MapRun | SpreadSample, n: int, chains=None, first: int = 0) -> list[wm.World]:
     """Up to ``n`` recorded worlds, evenly thinned over the draws ``first..`` (from 0) of ``chains``
     (indices from 0 into the recorded chains; all of them when None), types not assigned."""
     rects, active = run.samples["rects"][:, first:], run.samples["active"][:, first:]
@@ -433,7 +529,7 @@ def sampled_worlds(run: MapRun, n: int, chains=None, first: int = 0) -> list[wm.
     return [wm.make(rects[i], active[i], np.full(K, wm.NO_TYPE)) for i in idx]
 
 
-def spread_chains(run: MapRun) -> list[int]:
+def spread_chains(run: MapRun | SpreadSample) -> list[int]:
     """The recorded chains (indices from 0) whose draws the posterior spread is drawn from: those in
     the best chain's mode (:meth:`ConvergenceReport.mode_chains`). A chain whose mean log posterior
     lies thousands of nats below the best chain's carries no posterior mass worth drawing (e^-1000
@@ -441,7 +537,7 @@ def spread_chains(run: MapRun) -> list[int]:
     return [c - 1 for c in run.report.mode_chains()]
 
 
-def spread_first_draw(run: MapRun) -> int:
+def spread_first_draw(run: MapRun | SpreadSample) -> int:
     """The first recorded draw (from 0) the posterior spread uses: the draws before it, in which the
     chains of the best chain's mode were still settling, are left out
     (:func:`semmap_pp.diagnostics.warmup_draws`, :class:`~semmap_pp.diagnostics.ModeReport`)."""

@@ -182,7 +182,8 @@ def write_resume(out_dir, run, inputs_meta: dict) -> Path:
             arrays[f"active_{c}"] = rec.active
     meta = {"format": FORMAT, "inputs": inputs_meta,
             "settings": {k: getattr(settings, k) for k in
-                         ("chains", "cores", "tune", "draws", "n_inner", "anneal", "seed")},
+                         ("chains", "cores", "tune", "draws", "n_inner", "anneal", "seed",
+                          "spread_draws", "spread_n_inner")},
             "capacity": K, "chains": chains, "stopped": run.stopped}
     arrays["meta"] = np.array(json.dumps(_json_safe(meta)))
     buf = io.BytesIO()

@@ -11,7 +11,8 @@ from semmap_pp.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
 RULES = ROOT / "rules"
-TINY = ["--chains", "2", "--cores", "1", "--tune", "2", "--draws", "4", "--n-inner", "5", "--n-worlds", "6"]
+TINY = ["--chains", "2", "--cores", "1", "--tune", "2", "--draws", "4", "--n-inner", "5", "--n-worlds", "6",
+        "--spread-draws", "6"]
 
 
 def test_compare_writes_table_json_and_figure(tmp_path, capsys):
@@ -30,10 +31,11 @@ def test_compare_writes_table_json_and_figure(tmp_path, capsys):
     assert doc["settings"]["seed"] == 4 and doc["settings"]["draws"] == 4
     for r in doc["rule_sets"]:
         assert isinstance(r["defects_best"], int) and r["defects_best"] >= 0
-        # the sampled worlds come from the chains in the best chain's mode, 4 draws each
+        # the sampled worlds come from the sample around W*: its chains in the best one's mode, 6 draws each
+        assert r["around_wstar"] is True
         assert r["spread_chains"] and set(r["spread_chains"]) <= {1, 2}
-        assert 1 <= r["spread_first_draw"] <= 3          # MSER cuts at most half the 4 draws
-        assert r["n_worlds"] == min(6, (5 - r["spread_first_draw"]) * len(r["spread_chains"]))
+        assert 1 <= r["spread_first_draw"] <= 4          # MSER cuts at most half the 6 draws
+        assert r["n_worlds"] == min(6, (7 - r["spread_first_draw"]) * len(r["spread_chains"]))
         assert 0 <= r["cpr"] <= 1 and 0 <= r["wall_spread"] <= 0.25
         assert set(r["rhat"]) >= {"log_posterior", "n_units", "cpr"}
     w, h = Image.open(out / "compare.png").size

@@ -13,7 +13,7 @@ from PIL import Image
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
 SCHEMA = json.loads((ROOT / "docs" / "world.schema.json").read_text())
-FAST = ["--chains", "2", "--cores", "1", "--tune", "4", "--draws", "4", "--n-inner", "20"]
+FAST = ["--chains", "2", "--cores", "1", "--tune", "4", "--draws", "4", "--n-inner", "20", "--spread-draws", "8"]
 
 
 def semmap(*args, cwd=None):
@@ -32,7 +32,7 @@ def first_run(tmp_path_factory):
 def test_map_writes_every_file(first_run):
     out, r = first_run
     names = {p.name for p in out.iterdir()}
-    assert {"diagnostics.txt", "labels.png", "trace.nc", "world.json", "resume.npz"} <= names
+    assert {"diagnostics.txt", "labels.png", "trace.nc", "spread.nc", "world.json", "resume.npz"} <= names
     doc = json.loads((out / "world.json").read_text())
     jsonschema.validate(doc, SCHEMA)
     assert doc["map"]["width"] == 240 and doc["map"]["height"] == 207
@@ -53,13 +53,24 @@ def test_map_writes_every_file(first_run):
     assert f"chains: {verdict} (2 x 4 draws; R-hat and ESS: `semmap diagnose {out}`)" in r.stderr
     note = [x for x in text.splitlines() if x.startswith("chains in separate modes")]
     assert note == [x for x in r.stderr.splitlines() if x.startswith("chains in separate modes")]
-    # the diagnostics within the best chain's mode: heading and verdict in the file, one line in the log
+    # the sample around W* (the spread figures' draws): its line in the log, its report in the file
+    sample = next(x for x in text.splitlines() if x.startswith("sample around W* ("))
+    assert sample in r.stderr and "2 chain(s) x 8 draws x 20 kernels from W*" in sample
+    spread_verdict = next(x for x in text.splitlines()[text.splitlines().index(sample):]
+                          if x in ("converged", "NOT converged"))
+    assert f"sample around W*: {spread_verdict} (2 x 8 draws; `semmap diagnose {out / 'spread.nc'}`)" in r.stderr
+    # the diagnostics within the best chain's mode: heading and verdict in the file (for the search
+    # and for the sample around W*), one line in the log: the sample's, whose draws the figures hold
     lines = text.splitlines()
     heads = [i for i, x in enumerate(lines) if x.startswith("within the best chain's mode (")]
     logged = [x for x in r.stderr.splitlines() if x.startswith("within the best chain's mode (")]
-    assert len(heads) == len(logged) == 1              # n_hall is 0 in every draw: constant there
-    verdict = next(x for x in lines[heads[0]:] if "mixed within the mode" in x)
-    assert logged == [f"{lines[heads[0]]}: {verdict}"]
+    assert len(heads) == 2 and len(logged) == 1      # n_hall is 0 in every draw: constant there
+    assert lines.index(sample) < heads[1]
+    verdict = next(x for x in lines[heads[1]:] if "mixed within the mode" in x)
+    assert logged == [f"{lines[heads[1]]}: {verdict}"]
+    search = next(x for x in lines[heads[0]:] if "mixed within the mode" in x)
+    assert "spread figures" not in search           # the search's draws are not the figures' here
+    assert "(--spread-draws)" in verdict or verdict.startswith("mixed") or "no summary moved" in verdict
     report_html = (out / "report.html").read_text()
     assert "ithin the best chain&#x27;s mode (" in report_html and "mixed within the mode" in report_html
     # the report links every file of the folder, resume.npz (written after it) included
@@ -80,6 +91,41 @@ def test_non_empty_out_dir_is_refused(first_run):
     r = semmap("map", MAP, "--out", out, *FAST)
     assert r.returncode == 2
     assert r.stderr.strip().count("\n") == 0 and "not empty" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_same_seed_same_world_json_with_or_without_the_sample_around_wstar(first_run, tmp_path):
+    """The sample around W* follows the search and never changes W*; without it (--spread-draws 0)
+    there is no spread.nc, and a stale one in a folder written again with --force is removed."""
+    out, _ = first_run
+    b = tmp_path / "b"
+    b.mkdir()
+    (b / "spread.nc").write_bytes((out / "spread.nc").read_bytes())
+    r = semmap("map", MAP, "--out", b, "--seed", 7, *FAST, "--spread-draws", "0", "--force")
+    assert r.returncode == 0, r.stderr
+    assert (b / "world.json").read_bytes() == (out / "world.json").read_bytes()
+    assert not (b / "spread.nc").exists() and "sample around W*" not in r.stderr
+    assert "sample around W*" not in (b / "diagnostics.txt").read_text()
+
+
+def test_diagnose_reports_the_sample_around_wstar(first_run):
+    out, _ = first_run
+    r = semmap("diagnose", out)
+    assert r.returncode in (0, 1), r.stderr
+    head, sep, around = r.stdout.partition("--- the sample around W* (")
+    assert sep and "spread.nc): the draws posterior.png and posterior_cells.png are made of ---" in around
+    assert "draws 4, n_inner 20" in head and "start W*" in around and "draws 8, n_inner 20" in around
+    d = json.loads(semmap("diagnose", out, "--json").stdout)
+    assert d["spread_sample"]["trace"] == str(out / "spread.nc")
+    assert d["spread_sample"]["convergence"]["draws"] == 8 and d["convergence"]["draws"] == 4
+    # the verdicts say which draws the figures hold
+    text = (out / "diagnostics.txt").read_text()
+    assert "(the spread figures from the sample around W*)" in text or "chains in separate modes" not in text
+
+
+@pytest.mark.parametrize("value", ["1", "3"])
+def test_too_few_spread_draws_is_a_usage_error(tmp_path, value):
+    r = semmap("map", MAP, "--out", tmp_path / "o", *FAST, "--spread-draws", value)
+    assert r.returncode == 2 and "--spread-draws must be 0" in r.stderr and not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("bad, needle", [

@@ -102,7 +102,7 @@ def test_summarise_a_tiny_run():
     roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
     inputs = Inputs(g, MODEL, None, f, roi, "default")
     run = run_map(inputs, RunSettings.from_model(MODEL, seed=1, chains=2, cores=1, tune=2, draws=4,
-                                                 n_inner=10), log=lambda m: None)
+                                                 n_inner=10, spread_draws=0), log=lambda m: None)
     worlds = typed_sampled_worlds(run, 5)
     s = summarise(run, "none", "none.lp", worlds)
     kept = len(run.report.mode_chains()) * (4 - run.report.within_mode.first_draw)  # climbing draws out

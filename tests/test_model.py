@@ -117,6 +117,11 @@ def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
     ('colike_scope = "corridor"', "evidence.colike_scope: must be one of unit, space, got 'corridor'"),
     ("space_width_ratio = 0.5", "evidence.space_width_ratio: must be >= 1.0, got 0.5"),
     ("wall_min_cells = 0", "world.wall_min_cells: must be >= 1, got 0"),
+    ("spread_draws = 3", "sampler.spread_draws: must be 0 (no sample around W*) or at least 4 (R-hat and "
+                         "ESS need them)"),
+    ("spread_draws = -1", "sampler.spread_draws: must be >= 0, got -1"),
+    ("spread_draws = 100001", "sampler.spread_draws: must be <= 100000, got 100001"),
+    ("spread_n_inner = 0", "sampler.spread_n_inner: must be >= 1, got 0"),
 ])
 def test_a_bad_value_of_an_optional_key_is_one_line_naming_file_and_key(tmp_path, line, message):
     """The default model with one line replaced ([outside], [evidence] colike keys)."""
@@ -127,6 +132,12 @@ def test_a_bad_value_of_an_optional_key_is_one_line_naming_file_and_key(tmp_path
     with pytest.raises(ModelError) as info:
         load_model(p)
     assert str(info.value) == f"{p}: {message}"
+
+
+def test_model_files_without_the_spread_keys_have_no_sample_around_wstar(tmp_path):
+    m = without_lines(tmp_path, ("spread_draws", "spread_n_inner"), n=2)
+    assert (m.sampler.spread_draws, m.sampler.spread_n_inner) == (0, 20)
+    assert (load_model().sampler.spread_draws, load_model().sampler.spread_n_inner) == (1000, 20)
 
 
 def test_the_wall_band_is_at_least_wall_min_cells_thick(tmp_path):

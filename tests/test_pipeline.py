@@ -193,7 +193,8 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
     good = W.add(W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
     bad = W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60))
     run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=0, draws=6,
-                                                 n_inner=1), log=lambda m: None, starts=[good, bad])
+                                                 n_inner=1, spread_draws=0), log=lambda m: None,
+                  starts=[good, bad])
     lp = run.summaries["log_posterior"]
     assert lp[0].min() - lp[1].max() > 1000          # chain 2 far below: another mode
     assert run.report.mode_chains() == [1] and spread_chains(run) == [0]
@@ -245,3 +246,51 @@ def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():
         assert np.allclose(np.asarray(v["vertices_px"]), np.asarray(u["vertices_px"]) + 500)
     assert b.semantic.labels_image.shape == (60 + 2 * 600, 120 + 2 * 600)
     assert np.array_equal(b.semantic.labels_image[500:-500, 500:-500], a.semantic.labels_image)
+
+
+def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_changes_wstar():
+    """With spread_draws > 0, run_map samples again after the search: every chain starts at W*
+    (paper Fig. 7). W*, its log posterior and the search's draws are those of the run without the
+    sample; the spread figures' worlds come from the sample; a run stopped early has none."""
+    from semmap_pp.outputs.write import posterior_worlds
+    from semmap_pp.pipeline import Inputs, RunSettings, figure_source, run_map
+
+    g = rooms_grid(door=True)
+    f = build_frame(g, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    inputs = Inputs(g, MODEL, None, f, roi, "default")
+    base = dict(seed=3, chains=2, cores=1, tune=2, draws=4, n_inner=10)
+    plain = run_map(inputs, RunSettings.from_model(MODEL, **base, spread_draws=0), log=lambda m: None)
+    logged = []
+    run = run_map(inputs, RunSettings.from_model(MODEL, **base, spread_draws=6, spread_n_inner=5),
+                  log=logged.append)
+    assert plain.spread is None and figure_source(plain) is plain
+    sp = run.spread
+    assert figure_source(run) is sp
+    # W* and the search are untouched by the sample that follows them
+    assert W.canonical_key(run.world) == W.canonical_key(plain.world)
+    assert run.semantic.log_posterior == plain.semantic.log_posterior
+    np.testing.assert_array_equal(run.summaries["log_posterior"], plain.summaries["log_posterior"])
+    # every chain of the sample started at W*: its first draw, 5 kernels on, differs from W* in
+    # at most the units 5 accepted kernels can change
+    assert sp.start_logp == run.semantic.log_posterior
+    assert sp.samples["rects"].shape[:2] == (2, 6) and sp.kept == ((0, 1), 6)
+    assert sp.summaries["log_posterior"].shape == (2, 6) and sp.report.n_draws == 6
+    assert sp.best_logp >= sp.summaries["log_posterior"].max() - 1e-6
+    wstar = set(map(tuple, run.world.rects[run.world.active].tolist()))
+    for c in range(2):
+        first = set(map(tuple, sp.samples["rects"][c, 0][sp.samples["active"][c, 0]].tolist()))
+        assert len(first ^ wstar) <= 2 * 5        # at most 5 accepted kernels, each changing a unit or two
+    assert any(m.startswith("sample around W* (posterior.png") for m in logged)
+    # the spread figures' worlds are the sample's draws after its warm-up cut
+    key = lambda rects, active: str(np.asarray(rects)[np.asarray(active)].tolist())   # noqa: E731
+    cut = sp.report.within_mode.first_draw
+    drawn = {key(w.rects, w.active) for w in posterior_worlds(run, 100)}
+    chains = [c - 1 for c in sp.report.mode_chains()]
+    assert drawn == {key(r, a) for c in chains for r, a in zip(sp.samples["rects"][c, cut:],
+                                                                sp.samples["active"][c, cut:])}
+    # a run stopped early keeps the search's draws for the figures and says so
+    early = run_map(inputs, RunSettings.from_model(MODEL, **(base | dict(draws=50)), spread_draws=6),
+                    log=lambda m: None, budget=1e-6)        # each chain stops after 4 draws
+    assert early.stopped == "budget" and early.spread is None and figure_source(early) is early
+    assert any(n.startswith("no sample around W*: sampling stopped early") for n in early.notes)

@@ -62,12 +62,14 @@ def _quiet(msg: str) -> None:
 
 def find_wstar(inputs, model, seed: int):
     """Phase 1: ``run_map`` with the model file's run lengths; returns the run (its W* is ``run.world``)."""
-    return run_map(inputs, RunSettings.from_model(model, seed=seed), log=_quiet)
+    # this script samples around W* itself (phase 2, with its own run lengths)
+    return run_map(inputs, RunSettings.from_model(model, seed=seed, spread_draws=0), log=_quiet)
 
 
 def sample_from(inputs, model, seed: int, start, draws: int, n_inner: int, chains: int):
     """Phase 2: chains started at ``start`` (a W*), no burn-in, ``draws`` recorded draws each."""
-    settings = RunSettings.from_model(model, seed=seed, tune=0, draws=draws, n_inner=n_inner, chains=chains)
+    settings = RunSettings.from_model(model, seed=seed, tune=0, draws=draws, n_inner=n_inner, chains=chains,
+                                      spread_draws=0)
     return run_map(inputs, settings, log=_quiet, starts=[start])
 
 

@@ -35,6 +35,9 @@ def register(subparsers) -> None:
     p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
     p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
     p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    p.add_argument("--spread-draws", type=_non_negative_int, default=None, metavar="N",
+                   help="draws per chain of each rule set's sample around its W* (paper Fig. 7; model "
+                        "file default; 0: the spread from the search's draws)")
     p.add_argument("--n-worlds", type=_positive_int, default=200,
                    help="sampled worlds for the spread, the defects and compare.png (default 200)")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
@@ -69,9 +72,14 @@ def run(args) -> int:
     inputs = load_inputs(args.map, model_path=args.model, rules_path=paths[0], roi_path=args.roi,
                          map_options=map_options(args))
     settings = RunSettings.from_model(inputs.model, seed=args.seed, chains=args.chains, cores=args.cores,
-                                      tune=args.tune, draws=args.draws, n_inner=args.n_inner)
+                                      tune=args.tune, draws=args.draws, n_inner=args.n_inner,
+                                      spread_draws=args.spread_draws)
     if settings.draws < 4:
         print("semmap compare: error: --draws must be at least 4 (R-hat and ESS need them)", file=sys.stderr)
+        return 2
+    if 0 < settings.spread_draws < 4:
+        print("semmap compare: error: --spread-draws must be 0 or at least 4 (R-hat and ESS need them)",
+              file=sys.stderr)
         return 2
 
     def log(msg: str) -> None:

@@ -6,9 +6,11 @@ and bulk / tail ESS of every label-invariant summary with the verdict, the poste
 each summary (mean, sd, 5 % / 50 % / 95 % quantiles over the draws of the chains in the best
 chain's mode, :meth:`~semmap_pp.diagnostics.ConvergenceReport.mode_chains`, as the run's figures
 use them), the acceptance rates, and any spread numbers stored as trace attributes. The thresholds are the model file's
-``[diagnostics]`` (``rhat_max``, ``ess_min``), as ``semmap map`` uses them.
+``[diagnostics]`` (``rhat_max``, ``ess_min``), as ``semmap map`` uses them. When DIR also holds
+``spread.nc`` (the sample around W* that the spread figures are drawn from), the same report of it
+follows (JSON: ``spread_sample``).
 
-Exit status: 0 converged, 1 not converged (so scripts can write ``semmap diagnose DIR && ...``),
+Exit status (of trace.nc, W*'s search): 0 converged, 1 not converged (so scripts can write ``semmap diagnose DIR && ...``),
 2 when DIR holds no readable trace.
 """
 
@@ -46,11 +48,14 @@ def _clean(v):
     return v
 
 
-def diagnose(tree, rhat_max: float, ess_min: float) -> dict:
-    """Everything ``semmap diagnose`` reports, from a trace DataTree."""
+def diagnose(tree, rhat_max: float, ess_min: float, *, figures: bool = True) -> dict:
+    """Everything ``semmap diagnose`` reports, from a trace DataTree (``figures``: whether the
+    run's spread figures were drawn from this trace's draws)."""
     from semmap_pp.diagnostics import convergence
 
-    report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min)
+    around = tree.attrs.get("start") == "W*"      # spread.nc: the sample around W*
+    report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min, figures=figures,
+                         draws_option="--spread-draws" if around else "--draws")
     post = tree["posterior"]
     # A chain thousands of nats below the best one carries no posterior mass worth summarising;
     # pooled, its draws would report the spread between modes (docs/sampler.md).
@@ -118,15 +123,29 @@ def run(args) -> int:
     path = args.dir / "trace.nc" if args.dir.is_dir() else args.dir
     tree = read_trace(path)
     model = load_model(args.model)
-    try:
-        d = diagnose(tree, model.diagnostics.rhat_max, model.diagnostics.ess_min)
-    except (ValueError, KeyError) as exc:
-        from semmap_pp.errors import SemmapError
-        raise SemmapError(path, f"trace has no usable summaries ({exc})") from None
+    # a run with a sample around W* (spread.nc beside trace.nc) draws its spread figures from it
+    spread_path = args.dir / "spread.nc" if args.dir.is_dir() else None
+    spread_path = spread_path if spread_path is not None and spread_path.is_file() else None
+    d = _diagnose_file(path, tree, model, figures=spread_path is None)
+    around = _diagnose_file(spread_path, read_trace(spread_path), model) if spread_path else None
     if args.json:
         out = {k: v for k, v in d.items() if k != "text"}
         out["trace"] = str(path)
+        if around is not None:
+            out["spread_sample"] = {k: v for k, v in around.items() if k != "text"} | {"trace": str(spread_path)}
         print(json.dumps(_clean(out)))
     else:
         print(format_text(d))
+        if around is not None:
+            print(f"\n--- the sample around W* ({spread_path}): the draws posterior.png and "
+                  f"posterior_cells.png are made of ---\n")
+            print(format_text(around))
     return 0 if d["convergence"]["ok"] else 1
+
+
+def _diagnose_file(path, tree, model, *, figures: bool = True) -> dict:
+    try:
+        return diagnose(tree, model.diagnostics.rhat_max, model.diagnostics.ess_min, figures=figures)
+    except (ValueError, KeyError) as exc:
+        from semmap_pp.errors import SemmapError
+        raise SemmapError(path, f"trace has no usable summaries ({exc})") from None

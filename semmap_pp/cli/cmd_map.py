@@ -55,6 +55,9 @@ def register(subparsers) -> None:
     p.add_argument("--draws", type=_positive_int, default=None,
                    help="recorded draws per chain (with --resume: this many more per chain)")
     p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    p.add_argument("--spread-draws", type=_non_negative_int, default=None, metavar="N",
+                   help="draws per chain of the sample around W* that the spread figures are drawn from "
+                        "(paper Fig. 7; model file default 1000; 0: none, the figures use the search's draws)")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     p.add_argument("--budget", type=_seconds, metavar="SECONDS",
                    help="stop sampling after SECONDS of wall time and keep the draws made "
@@ -97,6 +100,8 @@ def _resume_inputs(args):
     values = dict(state.meta["settings"])
     if args.cores is not None:
         values["cores"] = args.cores
+    if args.spread_draws is not None:
+        values["spread_draws"] = args.spread_draws
     values["cores"] = max(1, min(values["cores"], values["chains"]))
     return inputs, RunSettings(**values), state, Path(m["rules"]) if m["rules"] else None
 
@@ -126,6 +131,8 @@ def run(args) -> int:
     from semmap_pp.step import StopFlag
 
     state, starts = None, None
+    if 0 < (args.spread_draws or 0) < 4:
+        return _usage("--spread-draws must be 0 (no sample around W*) or at least 4 (R-hat and ESS need them)")
     if args.resume is not None:
         fixed = FIXED_WHEN_RESUMING + ("occupied_thresh", "free_thresh", "negate", "resolution", "mode")
         given = [f"--{k.replace('_', '-')}" for k in fixed + ("start",) if getattr(args, k) is not None]
@@ -147,7 +154,7 @@ def run(args) -> int:
                              map_options=map_options(args))
         settings = RunSettings.from_model(inputs.model, seed=args.seed or 0, chains=args.chains,
                                           cores=args.cores, tune=args.tune, draws=args.draws,
-                                          n_inner=args.n_inner)
+                                          n_inner=args.n_inner, spread_draws=args.spread_draws)
         if settings.draws < 4:
             return _usage("--draws must be at least 4 (R-hat and ESS need them)")
         if args.start is not None:
@@ -198,6 +205,10 @@ def run(args) -> int:
     note = rep.separation_note()
     if note:
         log(note)
+    if result.spread is not None:   # the spread figures' draws: the sample around W*
+        rep = result.spread.report
+        log(f"sample around W*: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x "
+            f"{rep.n_draws} draws; `semmap diagnose {out / 'spread.nc'}`)")
     if rep.shows_mode():
         log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
     kept_chains, kept_draws = result.kept

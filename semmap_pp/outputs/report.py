@@ -30,6 +30,7 @@ FILES = {
     "posterior.png": "sampled worlds drawn thin on the classified map (paper Fig. 7)",
     "posterior_cells.png": "per-cell probability of wall and of each unit type over the sampled worlds",
     "trace.nc": "ArviZ trace of the label-invariant summaries and sampler statistics (open with arviz)",
+    "spread.nc": "the same for the sample around W* (the draws posterior.png and posterior_cells.png hold)",
     "diagnostics.txt": "R-hat, ESS and the convergence verdict as text",
     "report.html": "this page",
     "resume.npz": "what `semmap map --resume DIR` needs to continue the run (written last)",
@@ -159,6 +160,20 @@ def spread_text(rep) -> str:
             f"(Convergence).")
 
 
+def spread_section(run) -> str:
+    """Where the spread figures come from: the sample around W* with its own R-hat and ESS
+    (:class:`semmap_pp.pipeline.SpreadSample`), or the search's draws."""
+    sp = getattr(run, "spread", None)
+    if sp is None:
+        return f"<p>{e(spread_text(run.report))}</p>"
+    rep = sp.report
+    chains, n = sp.kept
+    verdict = "converged" if rep.ok else "NOT converged"
+    return (f"<p>{e(sp.text()[0].upper() + sp.text()[1:])}. {e(spread_text(rep))}</p>"
+            f"<p>Its chains: {verdict} ({rep.n_chains} chains × {rep.n_draws} draws, spread.nc).</p>"
+            + convergence_table(rep) + mode_section(rep))
+
+
 def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, int], *, rules_name: str,
                 files: list[str] | None = None) -> str:
     """The page.
@@ -230,7 +245,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
                 "Units joined where the wall between them is open (wider than a door), one colour each: "
                 "the rooms a person would draw."),
         '<h2 id="spread">Posterior spread</h2>',
-        f"<p>{e(spread_text(rep))}</p>",
+        spread_section(run),
         _figure(f("posterior"), "Sampled worlds (posterior.png)",
                 "Each sampled world drawn with very thin lines on the map (paper Fig. 7)."),
         _figure(f("posterior_cells"), "Per-cell probabilities (posterior_cells.png)",
@@ -259,4 +274,4 @@ def write_report(path: str | os.PathLike, text: str) -> Path:
     return Path(path)
 
 
-__all__ = ["FILES", "report_html", "write_report", "units_table", "convergence_table", "data_uri"]
+__all__ = ["FILES", "report_html", "spread_section", "write_report", "units_table", "convergence_table", "data_uri"]

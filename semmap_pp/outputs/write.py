@@ -28,10 +28,13 @@ N_SAMPLED_WORLDS = 1000
 def diagnostics_text(run, rules_path) -> str:
     """diagnostics.txt: provenance, timing, W* in one line, then the convergence table."""
     inputs, settings, sm = run.inputs, run.settings, run.semantic
-    return (f"map: {inputs.grid.source}\nrules: {rules_path}\nmodel: {inputs.model.path}\n"
+    text = (f"map: {inputs.grid.source}\nrules: {rules_path}\nmodel: {inputs.model.path}\n"
             f"seed: {settings.seed}; sampling took {run.timing_text()}\n"
             f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.2f}, "
             f"CPR {sm.cpr:.4f} (ROI {inputs.roi_name})\n\n{run.report.to_text()}\n")
+    if getattr(run, "spread", None) is not None:
+        text += f"\n{run.spread.text()}\n\n{run.spread.report.to_text()}\n"
+    return text
 
 
 def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
@@ -47,19 +50,30 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
                               "chains": settings.chains, "tune": settings.tune, "draws": settings.draws,
                               "n_inner": settings.n_inner})
     written.append(write_trace(tree, out / "trace.nc"))
+    spread_nc = out / "spread.nc"
+    if getattr(run, "spread", None) is not None:
+        sp = run.spread
+        written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs={
+            "map": str(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
+            "chains": settings.chains, "tune": 0, "draws": sp.draws, "n_inner": sp.n_inner,
+            "start": "W*"}), spread_nc))
+    elif spread_nc.exists():      # an earlier run's, in a directory written again with --force
+        spread_nc.unlink()
     atomic.write_text(out / "diagnostics.txt", diagnostics_text(run, rules_path))
     written.append(out / "diagnostics.txt")
     return written, doc
 
 
 def posterior_worlds(run, n: int) -> list:
-    """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode
-    (:func:`semmap_pp.pipeline.spread_chains`), after the draws in which they were still settling
+    """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
+    draws: :func:`semmap_pp.pipeline.figure_source`), from its chains in the best chain's mode
+    (:func:`semmap_pp.pipeline.spread_chains`) after the draws in which they were still settling
     (:func:`semmap_pp.pipeline.spread_first_draw`), typed as the sampler typed them."""
-    from semmap_pp.pipeline import run_target, sampled_worlds, spread_chains, spread_first_draw
+    from semmap_pp.pipeline import figure_source, run_target, sampled_worlds, spread_chains, spread_first_draw
 
+    src = figure_source(run)
     return typed_worlds(run_target(run.inputs),
-                        sampled_worlds(run, n, spread_chains(run), spread_first_draw(run)))
+                        sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))
 
 
 def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
