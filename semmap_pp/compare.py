@@ -123,13 +123,9 @@ def typed_sampled_worlds(run, n: int) -> list:
 
 
 def _accumulate(worlds, shape, wall: int) -> SpreadAccumulator:
-    from semmap_pp.outputs.spread import rasterise, sampled_box
+    from semmap_pp.outputs.spread import accumulate
 
-    box = sampled_box(worlds, shape)
-    acc = SpreadAccumulator((box[2] - box[0], box[3] - box[1]))
-    for w in worlds:
-        acc.add(*rasterise(w, box, wall))
-    return acc
+    return accumulate(worlds, shape, wall)[0]
 
 
 def wall_spread(worlds, shape, wall: int) -> float:
@@ -222,17 +218,13 @@ def compare_dict(rows: list[RuleSetSummary], *, map_path: str, settings: dict) -
 
 def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
     """compare.png: the sampled worlds of each run drawn thin on the map, side by side (paper Fig. 7)."""
-    from matplotlib.collections import LineCollection
-
-    from semmap_pp.outputs.figures import classified_rgb, png, side_by_side, world_outlines
+    from semmap_pp.outputs.figures import classified_rgb, png, side_by_side, world_lines
 
     fig, axes, (y0, y1, x0, x1) = side_by_side([r.semantic for r in runs], extra_h=0.6)
     for ax, run, ws, row in zip(axes, runs, worlds, rows):
         ax.imshow(classified_rgb(run.semantic.grid.classes, light=True)[y0:y1, x0:x1],
                   extent=(x0, x1, y1, y0), interpolation="nearest")
-        alpha = float(np.clip(10.0 / max(len(ws), 1), 0.02, 0.6))
-        ax.add_collection(LineCollection(world_outlines(run.semantic.frame, ws),
-                                         colors=[(0.85, 0.0, 0.1, alpha)], linewidths=0.5))
+        ax.add_collection(world_lines(run.semantic.frame, ws))
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
         ax.set_aspect("equal")

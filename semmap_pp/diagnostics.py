@@ -452,12 +452,13 @@ class SpreadAccumulator:
         self.wall = np.zeros(self.shape, np.int32)
         self.types = np.zeros((len(UNIT_TYPES),) + tuple(self.shape), np.int32)
 
-    def add(self, wall_mask: np.ndarray, type_index: np.ndarray) -> None:
-        """Count one world: its wall cells and, per cell, the type index of its unit (-1 none)."""
-        self.n += 1
-        self.wall += wall_mask
+    def add(self, wall_mask: np.ndarray, type_index: np.ndarray, count: int = 1) -> None:
+        """Count one world ``count`` times: its wall cells and, per cell, the type index of its unit
+        (-1 none)."""
+        self.n += count
+        self.wall += count * wall_mask
         for t in range(len(UNIT_TYPES)):
-            self.types[t] += type_index == t
+            self.types[t] += count * (type_index == t)
 
     def p_wall(self) -> np.ndarray:
         return self.wall / max(self.n, 1)

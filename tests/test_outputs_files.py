@@ -257,6 +257,26 @@ def test_posterior_cells_see_the_spread(hostile_run):
     assert p_type.shape == (4,) + p_wall.shape and p_type.sum(axis=0).max() == 0.0  # untyped worlds
 
 
+def test_repeated_worlds_are_counted_as_often_as_they_occur(hostile_run):
+    """accumulate rasterises a repeated world once and counts it k times: the counts equal those of
+    adding every world one by one."""
+    from semmap_pp.diagnostics import SpreadAccumulator
+    from semmap_pp.outputs.spread import accumulate, rasterise, sampled_box
+    from semmap_pp.pipeline import sampled_worlds
+
+    _, run, _ = hostile_run
+    ws = sampled_worlds(run, 1000)
+    worlds = ws[:3] * 4 + ws[5:7] + ws[:1] * 3     # repeats, in no order
+    shape = run.semantic.frame.shape
+    acc, box = accumulate(worlds, shape, 2)
+    slow = SpreadAccumulator(acc.shape)
+    for w in worlds:
+        slow.add(*rasterise(w, sampled_box(worlds, shape), 2))
+    assert box == sampled_box(worlds, shape) and acc.n == slow.n == len(worlds)
+    np.testing.assert_array_equal(acc.wall, slow.wall)
+    np.testing.assert_array_equal(acc.types, slow.types)
+
+
 def test_report_is_self_contained_and_escapes_inputs(hostile_run):
     out, run, written = hostile_run
     text = (out / "report.html").read_text()

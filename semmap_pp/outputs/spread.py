@@ -79,12 +79,27 @@ def sampled_box(worlds, shape) -> tuple[int, int, int, int]:
             min(int(rects[:, 2].max()), shape[0]), min(int(rects[:, 3].max()), shape[1]))
 
 
-def cell_probabilities(shape, worlds, wall: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-cell p(wall) (H', W') and p(type) (4, H', W') on the lattice over typed ``worlds``."""
+def accumulate(worlds, shape, wall: int) -> tuple[SpreadAccumulator, tuple[int, int, int, int]]:
+    """Typed ``worlds`` counted on the lattice box they lie in (:func:`sampled_box`), and the box.
+    A world repeated in ``worlds`` (a chain that stayed put: most draws near W*) is rasterised once
+    and counted as often as it occurs, which gives the same counts."""
     box = sampled_box(worlds, shape)
     acc = SpreadAccumulator((box[2] - box[0], box[3] - box[1]))
+    counts: dict[bytes, list] = {}
     for w in worlds:
-        acc.add(*rasterise(w, box, wall))
+        key = w.rects.tobytes() + w.active.tobytes() + w.types.tobytes()
+        if key in counts:
+            counts[key][1] += 1
+        else:
+            counts[key] = [w, 1]
+    for w, n in counts.values():
+        acc.add(*rasterise(w, box, wall), count=n)
+    return acc, box
+
+
+def cell_probabilities(shape, worlds, wall: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-cell p(wall) (H', W') and p(type) (4, H', W') on the lattice over typed ``worlds``."""
+    acc, box = accumulate(worlds, shape, wall)
     p_wall = np.zeros(shape)
     p_type = np.zeros((len(UNIT_TYPES),) + tuple(shape))
     if worlds:
