@@ -256,6 +256,13 @@ class MapRun:
     kept: tuple = ()                # (chain numbers, draws per chain) behind summaries and samples
     draw_seconds: tuple = ()        # per chain: seconds inside each draw's kernels in this run
     spread: SpreadSample | None = None   # the sample around W*, when settings.spread_draws > 0
+    search_stopped: str | None = None    # how W*'s search ended early, if it did (``stopped`` may
+                                         # also be set by a Ctrl-C after it: polish, sample around W*)
+
+    @property
+    def search_complete(self) -> bool:
+        """Whether W*'s search made every planned draw."""
+        return self.search_stopped is None
 
     def timing_text(self) -> str:
         """How long sampling took, and how fast the chains ran inside their draws.
@@ -424,14 +431,22 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
                         f"{len(kept_chains)} chain(s) x {n_kept} draws")
     run = MapRun(inputs, settings, sm.world, sm, summaries, sample_stats, report, samples, seconds,
                  rate, best_chain, notes, result.stopped, records, list(first),
-                 (tuple(kept_chains), n_kept), draw_seconds)
+                 (tuple(kept_chains), n_kept), draw_seconds, search_stopped=result.stopped)
     log(f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
         f"(ROI {inputs.roi_name}); sampling {run.timing_text()}")
-    if spread:
+    if spread and stop is not None and stop():      # Ctrl-C while W* was polished
+        run.stopped = "interrupted"
+        notes.append("no sample around W*: interrupted before it began; the spread figures use the "
+                     "search's draws")
+    elif spread:
         left = None if budget is None else max(budget - (time.perf_counter() - t0), 1.0)
-        run.spread = sample_spread(inputs, settings, sm.world, sm.log_posterior, factory, data,
-                                   mix=default_mix(kernel_settings), log=log, stop=stop, budget=left)
-        if run.spread.stopped == "interrupted":
+        try:
+            run.spread = sample_spread(inputs, settings, sm.world, sm.log_posterior, factory, data,
+                                       mix=default_mix(kernel_settings), log=log, stop=stop, budget=left)
+        except SemmapError as exc:       # interrupted before any chain of it had 4 draws: keep W*
+            run.stopped = "interrupted" if stop is not None and stop() else run.stopped
+            notes.append(f"no sample around W*: {exc.message}; the spread figures use the search's draws")
+        if run.spread is not None and run.spread.stopped == "interrupted":
             run.stopped = "interrupted"
     elif settings.spread_draws > 0:
         notes.append("no sample around W*: sampling stopped early; the spread figures use the search's draws")

@@ -293,4 +293,19 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     early = run_map(inputs, RunSettings.from_model(MODEL, **(base | dict(draws=50)), spread_draws=6),
                     log=lambda m: None, budget=1e-6)        # each chain stops after 4 draws
     assert early.stopped == "budget" and early.spread is None and figure_source(early) is early
+    # Ctrl-C as the sample around W* begins (or while W* is polished): W* is kept, the run counts
+    # as interrupted, and the figures use the search's draws
+    from semmap_pp.step import StopFlag
+    for when in ("polishing W*", "sampling around W*"):
+        stop = StopFlag()
+
+        def log(msg, when=when, stop=stop):
+            if msg.startswith(when):
+                stop.set("interrupted")
+
+        cut = run_map(inputs, RunSettings.from_model(MODEL, **base, spread_draws=50), log=log, stop=stop)
+        assert cut.spread is None and cut.stopped == "interrupted" and figure_source(cut) is cut
+        assert cut.search_complete and not early.search_complete and run.search_complete
+        assert W.canonical_key(cut.world) == W.canonical_key(plain.world)
+        assert any(n.startswith("no sample around W*: ") for n in cut.notes)
     assert any(n.startswith("no sample around W*: sampling stopped early") for n in early.notes)

@@ -212,6 +212,11 @@ def run(args) -> int:
     if rep.shows_mode():
         log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
     kept_chains, kept_draws = result.kept
+    if result.stopped == "interrupted" and result.search_complete:   # after W*'s search had ended
+        what = (f"the sample around W* ({len(result.spread.kept[0])} chain(s) x {result.spread.kept[1]} draws)"
+                if result.spread is not None else "the search's draws for the spread figures")
+        log(f"semmap: interrupted after W*'s search had ended: wrote W* and {what} to {out}")
+        return 130
     if result.stopped == "interrupted":
         log(f"semmap: interrupted: wrote partial results ({len(kept_chains)} chain(s) x {kept_draws} draws) "
             f"to {out}; continue with `semmap map --resume {out}`")
