@@ -448,7 +448,10 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
             notes.append(f"no sample around W*: {exc.message}; the spread figures use the search's draws")
         if run.spread is not None and run.spread.stopped == "interrupted":
             run.stopped = "interrupted"
-    elif settings.spread_draws > 0:
+    if spread and run.spread is None:    # the figures fall back on the search's draws: say so
+        run.report = convergence(summaries, rhat_max=model.diagnostics.rhat_max,
+                                 ess_min=model.diagnostics.ess_min)
+    elif settings.spread_draws > 0 and not spread:
         notes.append("no sample around W*: sampling stopped early; the spread figures use the search's draws")
     return run
 

@@ -306,6 +306,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
         cut = run_map(inputs, RunSettings.from_model(MODEL, **base, spread_draws=50), log=log, stop=stop)
         assert cut.spread is None and cut.stopped == "interrupted" and figure_source(cut) is cut
         assert cut.search_complete and not early.search_complete and run.search_complete
+        assert cut.report.within_mode.figures and not run.report.within_mode.figures
         assert W.canonical_key(cut.world) == W.canonical_key(plain.world)
         assert any(n.startswith("no sample around W*: ") for n in cut.notes)
     assert any(n.startswith("no sample around W*: sampling stopped early") for n in early.notes)
