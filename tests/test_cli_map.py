@@ -73,6 +73,10 @@ def test_map_writes_every_file(first_run):
     assert "(--spread-draws)" in verdict or verdict.startswith("mixed") or "no summary moved" in verdict
     report_html = (out / "report.html").read_text()
     assert "ithin the best chain&#x27;s mode (" in report_html and "mixed within the mode" in report_html
+    # its "Posterior spread" section is the sample around W*, with its own verdict
+    spread = report_html[report_html.index('id="spread"'):report_html.index('id="convergence"')]
+    assert "Sample around W* (posterior.png, posterior_cells.png): 2 chain(s) x 8 draws" in spread
+    assert f"Its chains: {spread_verdict} (2 chains × 8 draws, spread.nc)" in spread
     # the report links every file of the folder, resume.npz (written after it) included
     report = (out / "report.html").read_text()
     for name in names:
