@@ -153,3 +153,36 @@ def test_resume_refuses_a_run_written_for_another_lattice(interrupted, tmp_path,
     assert main(["map", "--resume", str(other), "--progress", "none"]) == 2
     err = capsys.readouterr().err
     assert "resume.npz" in err and "written for a lattice of" in err and "Traceback" not in err
+
+
+def test_sigint_during_the_sample_around_wstar_keeps_wstar(floor, tmp_path):
+    """Ctrl-C after W*'s search, while the chains sample around W*: W* and the sample's draws so far
+    are written, the last line says the search had ended, exit status 130."""
+    out = tmp_path / "around"
+    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", str(floor), "--out", str(out),
+                          "--chains", "2", "--cores", "1", "--tune", "0", "--draws", "4", "--n-inner", "5",
+                          "--spread-draws", str(DRAWS), "--progress", "none"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = []
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        line = p.stderr.readline()
+        if not line:
+            break
+        seen.append(line)
+        if line.startswith("sampling around W*"):
+            break
+    assert any(s.startswith("sampling around W*") for s in seen), "".join(seen)
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=300)
+    err = "".join(seen) + err
+    assert p.returncode == 130, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("semmap: interrupted after W*'s search had ended: wrote W* and the sample around W* ("), last
+    assert "Traceback" not in err
+    jsonschema.validate(json.loads((out / "world.json").read_text()), SCHEMA)
+    lp = read_trace(out / "spread.nc")["posterior"]["log_posterior"].values
+    assert 4 <= lp.shape[1] < DRAWS and np.isfinite(lp).all()
+    assert read_trace(out / "trace.nc")["posterior"]["log_posterior"].values.shape[1] == 4   # the whole search
+    assert resume_meta(out)["stopped"] == "interrupted"
