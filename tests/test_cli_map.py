@@ -1,6 +1,7 @@
 """End to end through the command line (subprocesses) on a small real map."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -73,6 +74,9 @@ def test_map_writes_every_file(first_run):
     assert "(--spread-draws)" in verdict or verdict.startswith("mixed") or "no summary moved" in verdict
     report_html = (out / "report.html").read_text()
     assert "ithin the best chain&#x27;s mode (" in report_html and "mixed within the mode" in report_html
+    # chains are numbered from 1 on the page, as in diagnostics.txt
+    chain = re.search(r"<th>W\* from chain</th><td[^>]*>(\d+)</td>", report_html)
+    assert chain and 1 <= int(chain.group(1)) <= 2
     # its "Posterior spread" section is the sample around W*, with its own verdict
     spread = report_html[report_html.index('id="spread"'):report_html.index('id="convergence"')]
     assert "Sample around W* (posterior.png, posterior_cells.png): 2 chain(s) x 8 draws" in spread

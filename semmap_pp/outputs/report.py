@@ -207,7 +207,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         ("chains", f"{s.chains} on {s.cores} core(s)"),
         ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
         ("sampling time", run.timing_text()),
-        ("W* from chain", run.best_chain), ("generator", f"semmap_pp {__version__}"),
+        ("W* from chain", run.best_chain + 1), ("generator", f"semmap_pp {__version__}"),
     ] + ([("stopped early", getattr(run, "stopped"))] if getattr(run, "stopped", None) else [])
       + [("note", n) for n in run.notes])
     world = _kv([
