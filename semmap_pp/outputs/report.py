@@ -166,10 +166,9 @@ def spread_section(run) -> str:
     sp = getattr(run, "spread", None)
     if sp is None:
         return f"<p>{e(spread_text(run.report))}</p>"
-    rep = sp.report
-    chains, n = sp.kept
+    rep, line = sp.report, sp.text()
     verdict = "converged" if rep.ok else "NOT converged"
-    return (f"<p>{e(sp.text()[0].upper() + sp.text()[1:])}. {e(spread_text(rep))}</p>"
+    return (f"<p>{e(line[0].upper() + line[1:])}. {e(spread_text(rep))}</p>"
             f"<p>Its chains: {verdict} ({rep.n_chains} chains × {rep.n_draws} draws, spread.nc).</p>"
             + convergence_table(rep) + mode_section(rep))
 
