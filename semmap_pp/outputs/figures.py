@@ -10,6 +10,7 @@ same bytes are written to a file and embedded in report.html.
 from __future__ import annotations
 
 import io
+import math
 
 import matplotlib
 
@@ -263,8 +264,20 @@ def world_lines(frame, worlds) -> LineCollection:
     return LineCollection(np.concatenate([v, v[:, :1]], axis=1), colors=colours, linewidths=0.5)
 
 
-def posterior_png(sm, worlds) -> bytes:
-    """posterior.png (paper Fig. 7): every sampled world drawn with a very thin, translucent line.
+def independent_text(ess: float | None) -> str:
+    """What the figures' worlds are worth, from the smallest ESS of the draws they come from.
+
+    >>> independent_text(2.4), independent_text(None), independent_text(float("nan"))
+    ('; smallest ESS 2: about 2 independent worlds', '', '')
+    """
+    if ess is None or not math.isfinite(ess):
+        return ""
+    return f"; smallest ESS {ess:.0f}: about {ess:.0f} independent worlds"
+
+
+def posterior_png(sm, worlds, ess: float | None = None) -> bytes:
+    """posterior.png (paper Fig. 7): every sampled world drawn with a very thin, translucent line;
+    the caption gives ``ess`` (:func:`independent_text`), the smallest ESS of the draws behind them.
 
     Each distinct unit outline is drawn once with the opacity of its ``k`` copies laid over each
     other, ``1 - (1 - a)^k`` (a unit that every world shares is as dark as before, at a fraction
@@ -274,14 +287,17 @@ def posterior_png(sm, worlds) -> bytes:
     _show(ax, classified_rgb(sm.grid.classes, light=True), box)
     alpha = world_alpha(len(worlds))
     ax.add_collection(world_lines(sm.frame, worlds))
-    fig.text(0.5, 0.12 / fig.get_figheight(), f"{len(worlds)} sampled worlds, each unit drawn with a thin "
-             f"line (opacity {alpha:.2f}): where lines pile up, the sampled worlds agree", ha="center", fontsize=9)
+    fig.text(0.5, 0.12 / fig.get_figheight(), f"{len(worlds)} sampled worlds{independent_text(ess)}, each unit "
+             f"drawn with a thin line (opacity {alpha:.2f}): where lines pile up, the sampled worlds agree",
+             ha="center", fontsize=9)
     fig.subplots_adjust(0.005, 0.35 / fig.get_figheight(), 0.995, 0.995)
     return png(fig)
 
 
-def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, n_worlds: int) -> bytes:
-    """posterior_cells.png: per-cell probability of wall and of each unit type over sampled worlds.
+def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, n_worlds: int,
+                        ess: float | None = None) -> bytes:
+    """posterior_cells.png: per-cell probability of wall and of each unit type over sampled worlds
+    (the colour bar's label gives ``ess``, as :func:`posterior_png`).
 
     ``p_wall_image`` (H, W) and ``p_type_image`` (4, H, W) in the input image's frame.
     """
@@ -304,7 +320,7 @@ def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, 
                         hspace=0.3 / (fig.get_figheight() / 2))
     cax = fig.add_axes((0.3, 0.2 / fig.get_figheight(), 0.4, 0.12 / fig.get_figheight()))
     fig.colorbar(im, cax=cax, orientation="horizontal").set_label(
-        f"probability over {n_worlds} sampled worlds", fontsize=9)
+        f"probability over {n_worlds} sampled worlds{independent_text(ess)}", fontsize=9)
     return png(fig)
 
 
@@ -343,5 +359,5 @@ def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
 
 
 __all__ = ["png", "classified_rgb", "overlay_rgb", "door_mask_image", "crop_box", "overlay_png",
-           "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "posterior_png", "posterior_cells_png", "roi_png",
+           "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "independent_text", "posterior_png", "posterior_cells_png", "roi_png",
            "regions_preview_png"]

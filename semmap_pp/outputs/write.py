@@ -134,15 +134,19 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     written.append(write_graphml(out / "graph.graphml", graph))
     written.append(write_regions_png(out / "regions.png", region_img))
 
+    from semmap_pp.pipeline import figure_source
+
     worlds = posterior_worlds(run, n_worlds)
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
+    mode = figure_source(run).report.within_mode      # the draws the worlds come from
+    ess = mode.ess if mode is not None and mode.quantities else None
     pngs = {
         "overlay": fig.overlay_png(sm, doc),
         "graph": fig.graph_png(sm, graph),
-        "posterior": fig.posterior_png(sm, worlds),
+        "posterior": fig.posterior_png(sm, worlds, ess),
         "posterior_cells": fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0),
                                                    sm.frame.to_image(p_type.transpose(1, 2, 0), fill=0.0)
-                                                   .transpose(2, 0, 1), len(worlds)),
+                                                   .transpose(2, 0, 1), len(worlds), ess),
     }
     for name, data in pngs.items():
         atomic.write_bytes(out / f"{name}.png", data)
