@@ -31,10 +31,10 @@ def floor(tmp_path_factory):
     return out / "map.yaml"
 
 
-def interrupt(map_path, out, cores):
-    """Start a long `semmap map`, wait until it samples, send SIGINT; return (code, stderr)."""
-    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", str(map_path), "--out", str(out),
-                          "--chains", "2", "--cores", str(cores), *LONG],
+def sigint_after(args, trigger: str, wait: float = 0.5):
+    """Start `semmap map ARGS`, wait for a stderr line holding ``trigger`` and ``wait`` seconds more,
+    send SIGINT; return (exit code, stderr)."""
+    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", *map(str, args)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen = []
     deadline = time.monotonic() + 300
@@ -43,13 +43,18 @@ def interrupt(map_path, out, cores):
         if not line:
             break
         seen.append(line)
-        if "sampling started" in line:
+        if trigger in line:
             break
-    assert any("sampling started" in s for s in seen), "".join(seen)
-    time.sleep(0.5)
+    assert any(trigger in s for s in seen), "".join(seen)
+    time.sleep(wait)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=300)
     return p.returncode, "".join(seen) + err
+
+
+def interrupt(map_path, out, cores):
+    """Start a long `semmap map`, wait until it samples, send SIGINT; return (code, stderr)."""
+    return sigint_after([map_path, "--out", out, "--chains", "2", "--cores", cores, *LONG], "sampling started")
 
 
 def resume_meta(out):
@@ -159,25 +164,10 @@ def test_sigint_during_the_sample_around_wstar_keeps_wstar(floor, tmp_path):
     """Ctrl-C after W*'s search, while the chains sample around W*: W* and the sample's draws so far
     are written, the last line says the search had ended, exit status 130."""
     out = tmp_path / "around"
-    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", str(floor), "--out", str(out),
-                          "--chains", "2", "--cores", "1", "--tune", "0", "--draws", "4", "--n-inner", "5",
-                          "--spread-draws", str(DRAWS), "--progress", "none"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen = []
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:
-        line = p.stderr.readline()
-        if not line:
-            break
-        seen.append(line)
-        if line.startswith("sampling around W*"):
-            break
-    assert any(s.startswith("sampling around W*") for s in seen), "".join(seen)
-    time.sleep(1.0)
-    p.send_signal(signal.SIGINT)
-    _, err = p.communicate(timeout=300)
-    err = "".join(seen) + err
-    assert p.returncode == 130, err
+    code, err = sigint_after([floor, "--out", out, "--chains", "2", "--cores", "1", "--tune", "0", "--draws", "4",
+                              "--n-inner", "5", "--spread-draws", DRAWS, "--progress", "none"],
+                             "sampling around W*", wait=1.0)
+    assert code == 130, err
     last = err.strip().splitlines()[-1]
     assert last.startswith("semmap: interrupted after W*'s search had ended: wrote W* and the sample around W* ("), last
     assert "Traceback" not in err
