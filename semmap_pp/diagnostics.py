@@ -144,6 +144,13 @@ class ConvergenceReport:
     ess_min: float
     within_mode: ModeReport | None = None
 
+    def with_figures(self, figures: bool) -> "ConvergenceReport":
+        """The same report, its texts saying whether the spread figures are drawn from its draws
+        (``ModeReport.figures``; False for W*'s search when the run has a sample around W*)."""
+        if self.within_mode is None:
+            return self
+        return replace(self, within_mode=replace(self.within_mode, figures=figures))
+
     def shows_mode(self) -> bool:
         """Whether the within-mode diagnostics say more than the main table: some chain lies in
         another mode, was still settling, or some summary is constant there."""
@@ -354,7 +361,7 @@ def warmup_draws(x) -> int:
 
 
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,
-                ess_min: float, figures: bool = True, draws_option: str = "--draws") -> ConvergenceReport:
+                ess_min: float, draws_option: str = "--draws") -> ConvergenceReport:
     """Judge convergence of label-invariant summaries.
 
     Parameters
@@ -362,11 +369,11 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
     summaries : mapping of name to (chains, draws) array, or a DataTree from :func:`to_datatree`
     rhat_max, ess_min : float
         Thresholds (the model file's ``[diagnostics]`` section holds the project's values).
-    figures : bool
-        Whether the spread figures are drawn from these draws (the texts say so); False for W*'s
-        search when the run has a sample around W*.
     draws_option : str
         The ``semmap map`` option that lengthens these chains, named by the within-mode verdict.
+
+    The texts say the spread figures are drawn from these draws; :meth:`ConvergenceReport.with_figures`
+    says otherwise.
     """
     if hasattr(summaries, "children"):  # an ArviZ DataTree (itself a Mapping of groups)
         post = summaries["posterior"]
@@ -392,7 +399,7 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
         else:
             moved.append(_diagnose_one(n, a, rhat_max, ess_min))
     return replace(report, within_mode=ModeReport(chains, n_draws, tuple(moved), tuple(constant), first,
-                                                  figures, draws_option))
+                                                  draws_option=draws_option))
 
 
 def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,

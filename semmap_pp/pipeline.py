@@ -400,10 +400,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     new_draws = sum(len(r.stats.get("logp", ())) for r in result.records)
     total_kernels = new_draws * settings.n_inner
     records = merge_records(history, result.records)
-    # the sample around W* follows unless sampling was stopped early (then the figures use these draws)
-    spread = settings.spread_draws > 0 and not result.stopped and (budget is None or budget > seconds)
-    kept_chains, n_kept, summaries, sample_stats, report, samples, notes = _collect(
-        records, model, figures=not spread)
+    kept_chains, n_kept, summaries, sample_stats, report, samples, notes = _collect(records, model)
     notes[:0] = inputs.notes
 
     post = run_target(inputs)
@@ -434,29 +431,40 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
                  (tuple(kept_chains), n_kept), draw_seconds, search_stopped=result.stopped)
     log(f"W*: {sm.units_text()}, log posterior {sm.log_posterior:.1f}, CPR {sm.cpr:.3f} "
         f"(ROI {inputs.roi_name}); sampling {run.timing_text()}")
-    if spread and stop is not None and stop():      # Ctrl-C while W* was polished
-        run.stopped = "interrupted"
-        notes.append("no sample around W*: interrupted before it began; the spread figures use the "
-                     "search's draws")
-    elif spread:
+    if settings.spread_draws > 0:
+        # the sample around W* follows unless sampling was stopped early
+        planned = not result.stopped and (budget is None or budget > seconds)
         left = None if budget is None else max(budget - (time.perf_counter() - t0), 1.0)
-        try:
-            run.spread = sample_spread(inputs, settings, sm.world, sm.log_posterior, factory, data,
-                                       mix=default_mix(kernel_settings), log=log, stop=stop, budget=left)
-        except SemmapError as exc:       # interrupted before any chain of it had 4 draws: keep W*
-            run.stopped = "interrupted" if stop is not None and stop() else run.stopped
-            notes.append(f"no sample around W*: {exc.message}; the spread figures use the search's draws")
-        if run.spread is not None and run.spread.stopped == "interrupted":
-            run.stopped = "interrupted"
-    if spread and run.spread is None:    # the figures fall back on the search's draws: say so
-        run.report = convergence(summaries, rhat_max=model.diagnostics.rhat_max,
-                                 ess_min=model.diagnostics.ess_min)
-    elif settings.spread_draws > 0 and not spread:
-        notes.append("no sample around W*: sampling stopped early; the spread figures use the search's draws")
+        _sample_around(run, factory, data, default_mix(kernel_settings), planned=planned, log=log,
+                       stop=stop, budget=left)
     return run
 
 
-def _collect(records, model: Model, *, figures: bool = True, draws_option: str = "--draws"):
+def _sample_around(run: MapRun, factory, data, mix, *, planned: bool, log, stop, budget) -> None:
+    """Give ``run`` its sample around W* (:func:`sample_spread`) when ``planned`` and not
+    interrupted first, and say on its report that the spread figures are drawn from it; otherwise a
+    note says why there is none (the figures then use the search's draws)."""
+    why = "sampling stopped early"
+    if planned and stop is not None and stop():        # Ctrl-C while W* was polished
+        run.stopped, why = "interrupted", "interrupted before it began"
+    elif planned:
+        try:
+            run.spread = sample_spread(run.inputs, run.settings, run.world, run.semantic.log_posterior,
+                                       factory, data, mix=mix, log=log, stop=stop, budget=budget)
+        except SemmapError as exc:       # interrupted before any chain of it had 4 draws: keep W*
+            why = exc.message
+            if stop is not None and stop():
+                run.stopped = "interrupted"
+        else:
+            if run.spread.stopped == "interrupted":
+                run.stopped = "interrupted"
+    if run.spread is None:
+        run.notes.append(f"no sample around W*: {why}; the spread figures use the search's draws")
+    else:
+        run.report = run.report.with_figures(False)
+
+
+def _collect(records, model: Model, *, draws_option: str = "--draws"):
     """The draws every kept chain has (:func:`semmap_pp.resume.keep_common_draws`) as arrays:
     ``(kept chains, draws per chain, summaries, sample_stats, convergence report, samples, notes)``."""
     from semmap_pp.resume import keep_common_draws
@@ -470,7 +478,7 @@ def _collect(records, model: Model, *, figures: bool = True, draws_option: str =
     sample_stats = {k: np.stack([records[c].stats[k][recorded[c]] for c in kept_chains]).astype(float)
                     for k in stat_names}
     report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min,
-                         figures=figures, draws_option=draws_option)
+                         draws_option=draws_option)
     samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
                "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
     return kept_chains, n_kept, summaries, sample_stats, report, samples, notes

@@ -54,8 +54,8 @@ def diagnose(tree, rhat_max: float, ess_min: float, *, figures: bool = True) -> 
     from semmap_pp.diagnostics import convergence
 
     around = tree.attrs.get("start") == "W*"      # spread.nc: the sample around W*
-    report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min, figures=figures,
-                         draws_option="--spread-draws" if around else "--draws")
+    report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min,
+                         draws_option="--spread-draws" if around else "--draws").with_figures(figures)
     post = tree["posterior"]
     # A chain thousands of nats below the best one carries no posterior mass worth summarising;
     # pooled, its draws would report the spread between modes (docs/sampler.md).
