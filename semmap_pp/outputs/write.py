@@ -139,7 +139,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     worlds = posterior_worlds(run, n_worlds)
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
     mode = figure_source(run).report.within_mode      # the draws the worlds come from
-    ess = mode.ess if mode is not None and mode.quantities else None
+    ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
     pngs = {
         "overlay": fig.overlay_png(sm, doc),
         "graph": fig.graph_png(sm, graph),
