@@ -54,6 +54,13 @@ class LatticeParams:
     angle_bin_deg: float
     refine_window_deg: float
     crop_margin_m: float = 0.0   # the lattice covers the known cells and this much around them; 0: the whole image
+    # walls at another angle (frame.off_axis_walls): blocks of off_axis_block_m whose own orientation
+    # differs from θ0 by more than off_axis_min_deg and stacks their occupied cells off_axis_min_gain
+    # times sharper; a note when they hold off_axis_note_share of the occupied cells (0: no note)
+    off_axis_block_m: float = 8.0
+    off_axis_min_deg: float = 5.0
+    off_axis_min_gain: float = 1.5
+    off_axis_note_share: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -356,7 +363,12 @@ def load_model(path: str | Path | None = None) -> Model:
         identity_below_deg=r.number("lattice.identity_below_deg", lo=0.0, hi=45.0),
         angle_bin_deg=r.number("lattice.angle_bin_deg", positive=True, hi=15.0),
         refine_window_deg=r.number("lattice.refine_window_deg", positive=True, hi=45.0),
-        crop_margin_m=r.optional("lattice.crop_margin_m", 0.0, r.number, lo=0.0, hi=1000.0))
+        crop_margin_m=r.optional("lattice.crop_margin_m", 0.0, r.number, lo=0.0, hi=1000.0),
+        # optional: a model file without them gets no note about walls at another angle
+        off_axis_block_m=r.optional("lattice.off_axis_block_m", 8.0, r.number, positive=True, hi=1000.0),
+        off_axis_min_deg=r.optional("lattice.off_axis_min_deg", 5.0, r.number, positive=True, hi=45.0),
+        off_axis_min_gain=r.optional("lattice.off_axis_min_gain", 1.5, r.number, lo=1.0, hi=1000.0),
+        off_axis_note_share=r.optional("lattice.off_axis_note_share", 0.0, r.number, lo=0.0, hi=1.0))
     # the exterior test is optional (off when its keys are absent: model files written before it)
     exterior = {k: r.number(f"world.{k}", lo=0.0, hi=1.0) for k in
                 ("exterior_max_share", "exterior_seen_min", "exterior_fan_seen_max")

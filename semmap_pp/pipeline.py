@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +28,7 @@ from semmap_pp import world as wm
 from semmap_pp.diagnostics import SUMMARIES, ConvergenceReport, convergence
 from semmap_pp.errors import MapError, ModelError, SemmapError
 from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
-from semmap_pp.frame import Frame, build_frame
+from semmap_pp.frame import Frame, build_frame, off_axis_note
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.ascent import refine_world
 from semmap_pp.init import dispersed_world, start_world
@@ -50,7 +50,8 @@ class Inputs:
     frame: Frame
     roi: np.ndarray           # (H, W) bool, image frame
     roi_name: str
-    notes: tuple[str, ...] = ()  # what loading changed (the outside read as unknown), for the run's notes
+    notes: tuple[str, ...] = ()  # what loading changed or found (the outside read as unknown, walls at
+                                 # another angle), for the run's notes
 
 
 def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path=None,
@@ -65,12 +66,15 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
     rules = load_rules(rules_path) if rules_path is not None else None
     check_model_for_map(grid, model, (map_options or {}).get("max_cells") or MAX_CELLS)
     frame = build_frame(grid, model)
+    off_axis = off_axis_note(grid.classes, frame, model.lattice)
+    if off_axis:   # world.json's map notes too, as the outside's
+        grid = replace(grid, notes=tuple(grid.notes) + (off_axis,))
     if roi_path is not None:
         roi, roi_name = load_roi(roi_path, grid.shape), Path(roi_path).name
     else:
         roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
         roi_name = "default"
-    return Inputs(grid, model, rules, frame, roi, roi_name, (outside_note,) if outside_note else ())
+    return Inputs(grid, model, rules, frame, roi, roi_name, tuple(n for n in (outside_note, off_axis) if n))
 
 
 def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> None:
@@ -220,6 +224,8 @@ class SpreadSample:
     best_logp: float                # the best log posterior any of its chains reached
     stopped: str | None = None
     kept: tuple = ()
+    best_world: wm.World | None = None   # the best world its chains visited (tracked at every kernel,
+                                         # so at least best_logp); reported, never taken as W*
 
     def text(self) -> str:
         """One line: what was sampled, how fast, and whether the chains rose above W*."""
@@ -512,7 +518,8 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
                default=math.nan)
     spread = SpreadSample(settings.spread_draws, settings.spread_n_inner, summaries, sample_stats, report,
                           samples, seconds, made * settings.spread_n_inner / seconds if seconds > 0 else 0.0,
-                          float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept))
+                          float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept),
+                          result.best_world)
     log(spread.text())
     return spread
 

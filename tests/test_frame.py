@@ -1,5 +1,6 @@
 """Tests of semmap_pp.frame: orientation estimate, lattice resampling, coordinate maps."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -7,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame_from_classes, estimate_orientation
+from semmap_pp.frame import build_frame_from_classes, estimate_orientation, off_axis_note, off_axis_walls
 from semmap_pp.model import load_model
 
 MODEL = load_model()
@@ -136,3 +137,76 @@ def test_a_crop_that_would_keep_most_of_the_lattice_is_not_made():
     for deg in (0.0, 12.3):
         f = build_frame_from_classes(c, 0.05, MODEL, theta=math.radians(deg))
         assert f.crop is None
+
+
+# ------------------------------------------------------------------ walls at another angle
+
+def _side_by_side(*floors):
+    """Synthetic floors' classes pasted side by side on unknown cells (one map, several wings)."""
+    h = max(f.shape[0] for f in floors)
+    out = np.full((h, sum(f.shape[1] for f in floors)), UNKNOWN, np.uint8)
+    c0 = 0
+    for f in floors:
+        out[:f.shape[0], c0:c0 + f.shape[1]] = f
+        c0 += f.shape[1]
+    return out
+
+
+@pytest.fixture(scope="module")
+def square_wing():
+    from semmap_pp.synth import generate_floor
+    return generate_floor(3, units=8, rotation_deg=0.0).classes
+
+
+@pytest.mark.parametrize("deg", [10.0, 30.0, 45.0])
+def test_a_wing_at_another_angle_is_found_with_its_angle(square_wing, deg):
+    from semmap_pp.synth import generate_floor
+    wing = generate_floor(5, units=8, rotation_deg=deg).classes
+    both = _side_by_side(square_wing, wing)
+    theta = estimate_orientation(both, MODEL.lattice)
+    assert abs(math.degrees(theta)) < 0.5                      # the larger wall mass: the square wing
+    found = off_axis_walls(both, theta, 0.05, MODEL.lattice)
+    assert found.share > 0.25 and found.blocks >= 3
+    own = math.degrees(estimate_orientation(wing, MODEL.lattice))
+    assert abs(math.remainder(found.angle_deg - own, 90.0)) < 1.0
+    # the wing alone has one orientation: nothing off axis
+    assert off_axis_walls(wing, math.radians(own), 0.05, MODEL.lattice).share == 0.0
+
+
+@pytest.mark.parametrize("seed, deg", [(0, None), (6, None), (11, None), (4, 20.0)])
+def test_a_building_of_one_orientation_has_no_walls_off_axis(seed, deg):
+    """Rotated floors and the axis-aligned rooms: no block is off axis, so no note."""
+    from semmap_pp.synth import generate_floor
+    c = generate_floor(seed, units=10, rotation_deg=deg).classes
+    f = build_frame_from_classes(c, 0.05, MODEL)
+    assert off_axis_walls(c, f.theta, 0.05, MODEL.lattice).share < 0.05
+    assert off_axis_note(c, f, MODEL.lattice) is None
+    assert off_axis_walls(rooms(), 0.0, 0.05, MODEL.lattice).share == 0.0
+
+
+def test_the_note_names_the_share_and_both_angles_and_can_be_switched_off(square_wing):
+    from semmap_pp.synth import generate_floor
+    both = _side_by_side(square_wing, generate_floor(5, units=8, rotation_deg=30.0).classes)
+    f = build_frame_from_classes(both, 0.05, MODEL)
+    note = off_axis_note(both, f, MODEL.lattice)
+    share = off_axis_walls(both, f.theta, 0.05, MODEL.lattice).share
+    assert note.startswith(f"{100 * share:.0f} % of the occupied cells lie where the walls run at about -30 deg, "
+                           f"not along the lattice's 0.0 deg")
+    off = dataclasses.replace(MODEL.lattice, off_axis_note_share=0.0)
+    assert off_axis_note(both, f, off) is None
+    high = dataclasses.replace(MODEL.lattice, off_axis_note_share=min(1.0, share + 0.01))
+    assert off_axis_note(both, f, high) is None
+
+
+def test_the_run_gets_the_note_and_world_json_s_map_notes_too(tmp_path, square_wing):
+    from semmap_pp.grid import write_map
+    from semmap_pp.pipeline import load_inputs
+    from semmap_pp.synth import generate_floor
+    both = _side_by_side(square_wing, generate_floor(5, units=8, rotation_deg=30.0).classes)
+    image = np.where(both == FREE, 254, np.where(both == OCCUPIED, 0, 205)).astype(np.uint8)
+    inputs = load_inputs(write_map(tmp_path / "wings.yaml", image, 0.05))
+    notes = [n for n in inputs.notes if "another angle" in n]
+    assert len(notes) == 1 and notes[0] in inputs.grid.notes      # world.json's map.notes are grid.notes
+    one = write_map(tmp_path / "one.yaml", np.where(square_wing == FREE, 254, np.where(
+        square_wing == OCCUPIED, 0, 205)).astype(np.uint8), 0.05)
+    assert not [n for n in load_inputs(one).notes if "another angle" in n]

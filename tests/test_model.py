@@ -122,6 +122,10 @@ def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
     ("spread_draws = -1", "sampler.spread_draws: must be >= 0, got -1"),
     ("spread_draws = 100001", "sampler.spread_draws: must be <= 100000, got 100001"),
     ("spread_n_inner = 0", "sampler.spread_n_inner: must be >= 1, got 0"),
+    ("off_axis_block_m = 0", "lattice.off_axis_block_m: must be > 0, got 0.0"),
+    ("off_axis_min_deg = 50", "lattice.off_axis_min_deg: must be <= 45.0, got 50.0"),
+    ("off_axis_min_gain = 0.5", "lattice.off_axis_min_gain: must be >= 1.0, got 0.5"),
+    ('off_axis_note_share = "some"', "lattice.off_axis_note_share: expected a number, got str"),
 ])
 def test_a_bad_value_of_an_optional_key_is_one_line_naming_file_and_key(tmp_path, line, message):
     """The default model with one line replaced ([outside], [evidence] colike keys)."""
@@ -138,6 +142,13 @@ def test_model_files_without_the_spread_keys_have_no_sample_around_wstar(tmp_pat
     m = without_lines(tmp_path, ("spread_draws", "spread_n_inner"), n=2)
     assert (m.sampler.spread_draws, m.sampler.spread_n_inner) == (0, 20)
     assert (load_model().sampler.spread_draws, load_model().sampler.spread_n_inner) == (1000, 20)
+
+
+def test_model_files_without_the_off_axis_keys_get_no_note_about_walls_at_another_angle(tmp_path):
+    keys = ("off_axis_block_m", "off_axis_min_deg", "off_axis_min_gain", "off_axis_note_share")
+    m = without_lines(tmp_path, keys, n=4)
+    assert [getattr(m.lattice, k) for k in keys] == [8.0, 5.0, 1.5, 0.0]
+    assert load_model().lattice.off_axis_note_share == 0.1
 
 
 def test_the_wall_band_is_at_least_wall_min_cells_thick(tmp_path):
