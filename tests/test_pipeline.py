@@ -1,4 +1,6 @@
 import dataclasses
+import importlib.util
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +13,7 @@ from semmap_pp.grid import OccupancyGrid
 from semmap_pp.kernels import data_from_frame
 from semmap_pp.model import load_model
 from semmap_pp.outputs import semantic_map
-from semmap_pp.pipeline import DEFAULT_RULES, LatticeCPR, TargetFactory
+from semmap_pp.pipeline import DEFAULT_RULES, LatticeCPR, TargetFactory, run_target
 from semmap_pp.posterior import Posterior
 
 MODEL = load_model()
@@ -277,6 +279,28 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     assert sp.samples["rects"].shape[:2] == (2, 6) and sp.kept == ((0, 1), 6)
     assert sp.summaries["log_posterior"].shape == (2, 6) and sp.report.n_draws == 6
     assert sp.best_logp >= sp.summaries["log_posterior"].max() - 1e-6
+    # the best world its chains visited is kept (bench --spread-best), and it is that good
+    assert sp.best_world is not None
+    assert run_target(inputs).evaluate(sp.best_world).total >= sp.best_logp - 1e-6
+    # bench quality --spread-best scores that world, polished, in W*'s place when it is higher
+    spec = importlib.util.spec_from_file_location("bench_quality", Path(__file__).parents[1] / "bench"
+                                                  / "bench_quality.py")
+    bq = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bq)
+    assert bq.spread_best(plain) is plain
+    assert bq.spread_best(run) is run or sp.best_logp > sp.start_logp
+    # a run whose W* lies below a world its sample visited (here: W* with a unit taken out, and
+    # the real W* as the sample's best) gets that world, polished: at least as high
+    post = run_target(inputs)
+    worse = W.remove(run.world, int(np.flatnonzero(run.world.active)[0]))
+    low = post.evaluate(worse).total
+    assert low < run.semantic.log_posterior
+    climbed = dataclasses.replace(run, world=worse, semantic=semantic_map(g, f, post, worse, roi=roi),
+                                  spread=dataclasses.replace(sp, start_logp=low, best_world=run.world,
+                                                             best_logp=run.semantic.log_posterior))
+    taken = bq.spread_best(climbed)
+    assert taken is not climbed and taken.semantic.log_posterior >= run.semantic.log_posterior - 1e-6
+    assert climbed.semantic.log_posterior == low                           # the run given is not changed
     wstar = set(map(tuple, run.world.rects[run.world.active].tolist()))
     for c in range(2):
         first = set(map(tuple, sp.samples["rects"][c, 0][sp.samples["active"][c, 0]].tolist()))
