@@ -180,7 +180,8 @@ def off_axis_note(classes: np.ndarray, frame: Frame, params: LatticeParams) -> s
     return (f"{100 * found.share:.0f} % of the occupied cells lie where the walls run at about "
             f"{found.angle_deg:.0f} deg, not along the lattice's {math.degrees(frame.theta):.1f} deg (a wing "
             f"built at another angle?): the units there are the lattice's rectangles and fit those "
-            f"walls poorly (docs/robustness.md)")
+            f"walls poorly; a crop of the map to each wing, mapped on its own, gets its own lattice "
+            f"(docs/robustness.md)")
 
 
 @dataclass(frozen=True, eq=False)
