@@ -75,7 +75,8 @@ CONDITIONAL_OFFSET_M = 0.25
 def conditional_wall_sd(post, world, max_offset: int) -> np.ndarray:
     """Posterior standard deviation (cells) of each wall of ``world`` given the rest of it.
 
-    For every active unit and each of its four sides (top, bottom, left, right, in slot order),
+    For every active unit (in slot order) and each of its four sides in the rectangle's order
+    ``(r0, c0, r1, c1)`` (top, left, bottom, right on the lattice),
     the side is moved by ``-max_offset .. max_offset`` cells with everything else fixed; the
     target ``post`` (log posterior, knowledge as configured) weighs each offset, ``p(o) ∝
     exp(log π(W_o))`` (invalid worlds weigh 0), and the standard deviation of ``o`` under ``p``
