@@ -210,3 +210,16 @@ def test_the_run_gets_the_note_and_world_json_s_map_notes_too(tmp_path, square_w
     one = write_map(tmp_path / "one.yaml", np.where(square_wing == FREE, 254, np.where(
         square_wing == OCCUPIED, 0, 205)).astype(np.uint8), 0.05)
     assert not [n for n in load_inputs(one).notes if "another angle" in n]
+
+
+@pytest.mark.parametrize("fill", ["occupied", "noise", "empty", "tiny"])
+def test_degenerate_maps_have_nothing_off_axis(fill):
+    """All occupied (a solid block stacks no sharper at any angle that matters), 30 % random
+    clutter, no occupied cell, a map smaller than a block: share 0, no error."""
+    rng = np.random.default_rng(0)
+    c = {"occupied": np.full((400, 400), OCCUPIED, np.uint8),
+         "noise": np.where(rng.random((400, 400)) < 0.3, OCCUPIED, FREE).astype(np.uint8),
+         "empty": np.full((400, 400), UNKNOWN, np.uint8),
+         "tiny": np.full((10, 10), OCCUPIED, np.uint8)}[fill]
+    found = off_axis_walls(c, 0.0, 0.05, MODEL.lattice)
+    assert found.share == 0.0 and found.blocks == 0 and math.isnan(found.angle_deg)
