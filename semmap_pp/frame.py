@@ -116,6 +116,7 @@ class OffAxis:
     share: float        # of the occupied cells in blocks with enough of them to have an orientation
     angle_deg: float    # orientation of those blocks (the median, weighted by their cells), degrees
     blocks: int         # how many blocks
+    box_px: tuple | None = None   # (x0, y0, x1, y1): the pixels those blocks span (x1, y1 exclusive)
 
 
 def off_axis_walls(classes: np.ndarray, theta: float, resolution: float, params: LatticeParams) -> OffAxis:
@@ -142,7 +143,7 @@ def off_axis_walls(classes: np.ndarray, theta: float, resolution: float, params:
     b = max(16, int(round(params.off_axis_block_m / resolution)))
     need = 2 * b
     seen = off = 0
-    angles, weights = [], []
+    angles, weights, corners = [], [], []
     h, w = classes.shape
     for r0 in range(0, h, b):
         for c0 in range(0, w, b):
@@ -161,12 +162,15 @@ def off_axis_walls(classes: np.ndarray, theta: float, resolution: float, params:
             off += x.size
             angles.append(math.degrees(own))
             weights.append(x.size)
+            corners.append((c0, r0, min(c0 + b, w), min(r0 + b, h)))
     if not off:
         return OffAxis(0.0, math.nan, 0)
     order = np.argsort(angles)
     cum = np.cumsum(np.asarray(weights)[order])
     median = float(np.asarray(angles)[order][np.searchsorted(cum, cum[-1] / 2)])
-    return OffAxis(off / seen, median, len(angles))
+    c = np.asarray(corners)
+    box = (int(c[:, 0].min()), int(c[:, 1].min()), int(c[:, 2].max()), int(c[:, 3].max()))
+    return OffAxis(off / seen, median, len(angles), box)
 
 
 def off_axis_note(classes: np.ndarray, frame: Frame, params: LatticeParams) -> str | None:
@@ -177,11 +181,12 @@ def off_axis_note(classes: np.ndarray, frame: Frame, params: LatticeParams) -> s
     found = off_axis_walls(classes, frame.theta, frame.resolution, params)
     if found.share < params.off_axis_note_share:
         return None
+    x0, y0, x1, y1 = found.box_px
     return (f"{100 * found.share:.0f} % of the occupied cells lie where the walls run at about "
             f"{found.angle_deg:.0f} deg, not along the lattice's {math.degrees(frame.theta):.1f} deg (a wing "
-            f"built at another angle?): the units there are the lattice's rectangles and fit those "
-            f"walls poorly; a crop of the map to each wing, mapped on its own, gets its own lattice "
-            f"(docs/robustness.md)")
+            f"built at another angle?), within pixels x {x0}-{x1}, y {y0}-{y1} of the image: the units "
+            f"there are the lattice's rectangles and fit those walls poorly; a crop of the map to each "
+            f"wing, mapped on its own, gets its own lattice (docs/robustness.md)")
 
 
 @dataclass(frozen=True, eq=False)

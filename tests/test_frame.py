@@ -167,6 +167,10 @@ def test_a_wing_at_another_angle_is_found_with_its_angle(square_wing, deg):
     assert abs(math.degrees(theta)) < 0.5                      # the larger wall mass: the square wing
     found = off_axis_walls(both, theta, 0.05, MODEL.lattice)
     assert found.share > 0.25 and found.blocks >= 3
+    # where: the blocks lie over the turned wing (the right-hand part), give or take a block
+    block = round(MODEL.lattice.off_axis_block_m / 0.05)
+    x0, y0, x1, y1 = found.box_px
+    assert square_wing.shape[1] - block <= x0 < x1 <= both.shape[1] and 0 <= y0 < y1 <= both.shape[0]
     own = math.degrees(estimate_orientation(wing, MODEL.lattice))
     assert abs(math.remainder(found.angle_deg - own, 90.0)) < 1.0
     # the wing alone has one orientation: nothing off axis
@@ -190,8 +194,10 @@ def test_the_note_names_the_share_and_both_angles_and_can_be_switched_off(square
     f = build_frame_from_classes(both, 0.05, MODEL)
     note = off_axis_note(both, f, MODEL.lattice)
     share = off_axis_walls(both, f.theta, 0.05, MODEL.lattice).share
+    x0, y0, x1, y1 = off_axis_walls(both, f.theta, 0.05, MODEL.lattice).box_px
     assert note.startswith(f"{100 * share:.0f} % of the occupied cells lie where the walls run at about -30 deg, "
-                           f"not along the lattice's 0.0 deg")
+                           f"not along the lattice's 0.0 deg (a wing built at another angle?), within pixels "
+                           f"x {x0}-{x1}, y {y0}-{y1} of the image")
     off = dataclasses.replace(MODEL.lattice, off_axis_note_share=0.0)
     assert off_axis_note(both, f, off) is None
     high = dataclasses.replace(MODEL.lattice, off_axis_note_share=min(1.0, share + 0.01))
@@ -222,4 +228,4 @@ def test_degenerate_maps_have_nothing_off_axis(fill):
          "empty": np.full((400, 400), UNKNOWN, np.uint8),
          "tiny": np.full((10, 10), OCCUPIED, np.uint8)}[fill]
     found = off_axis_walls(c, 0.0, 0.05, MODEL.lattice)
-    assert found.share == 0.0 and found.blocks == 0 and math.isnan(found.angle_deg)
+    assert found.share == 0.0 and found.blocks == 0 and math.isnan(found.angle_deg) and found.box_px is None
