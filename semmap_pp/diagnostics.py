@@ -391,13 +391,15 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
     chains = tuple(report.mode_chains())
     lp = arrays.get("log_posterior")
     first = max((warmup_draws(lp[c - 1]) for c in chains), default=0) if lp is not None else 0
+    # the mode over every chain from the first draw: the same arrays, so the same diagnostics
+    whole = dict(zip(names, qs)) if (list(chains) == list(range(1, n_chains + 1)) and first == 0) else {}
     moved, constant = [], []
     for n in names:
         a = arrays[n][[c - 1 for c in chains], first:]
         if _constant(a):
             constant.append((n, float(a.flat[0])))
         else:
-            moved.append(_diagnose_one(n, a, rhat_max, ess_min))
+            moved.append(whole.get(n) or _diagnose_one(n, a, rhat_max, ess_min))
     return replace(report, within_mode=ModeReport(chains, n_draws, tuple(moved), tuple(constant), first,
                                                   draws_option=draws_option))
 

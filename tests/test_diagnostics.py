@@ -194,6 +194,24 @@ def test_within_mode_leaves_out_other_modes_climbing_draws_and_constant_summarie
     assert d["chains"] == [1, 3] and d["first_draw"] == m.first_draw and d["constant"] == {"n_units": 20.0}
 
 
+def test_a_mode_over_every_chain_from_the_first_draw_reuses_the_whole_diagnostics(monkeypatch):
+    """Well-mixed chains: the mode is every chain, nothing cut, so the within-mode quantities are
+    the report's own (ArviZ runs once per summary) and equal what a second run would give."""
+    rng = np.random.default_rng(4)
+    s = {"log_posterior": mixing_chains(rng), "n_units": rng.integers(3, 9, (4, 400)).astype(float)}
+    calls = []
+    real = dg._diagnose_one
+    monkeypatch.setattr(dg, "_diagnose_one", lambda *a: calls.append(a[0]) or real(*a))
+    rep = dg.convergence(s, rhat_max=1.01, ess_min=200)
+    m = rep.within_mode
+    assert m.chains == (1, 2, 3, 4) and m.first_draw == 0
+    assert calls == ["log_posterior", "n_units"]
+    assert m.quantities == rep.quantities
+    again = [real(q.name, s[q.name], 1.01, 200) for q in rep.quantities]
+    assert [(q.rhat, q.ess_bulk, q.ess_tail) for q in again] == [(q.rhat, q.ess_bulk, q.ess_tail)
+                                                                  for q in m.quantities]
+
+
 def test_within_mode_with_nothing_moving_is_not_mixed_and_one_chain_uses_its_halves():
     frozen = dg.convergence({"log_posterior": np.full((2, 30), -10.0)}, rhat_max=1.05, ess_min=10)
     assert not frozen.within_mode.ok and frozen.within_mode.quantities == ()
