@@ -58,3 +58,15 @@ def test_an_existing_crop_is_kept_unless_forced_and_the_out_must_be_a_yaml(tmp_p
     assert load_map(out).classes.shape == (10, 12)
     assert main(["crop", str(path), "--box", "0", "0", "12", "10", "--out", str(tmp_path / "w.pgm")]) == 2
     assert "--out must name a .yaml file" in capsys.readouterr().err
+
+
+def test_a_bare_image_is_cropped_with_the_resolution_loading_assumed_and_says_so(tmp_path, rotated_map, capsys):
+    path, classes = rotated_map
+    bare = path.with_suffix(".pgm")
+    out = tmp_path / "part.yaml"
+    assert main(["crop", str(bare), "--box", "0", "0", "10", "10", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("note: ") and "0.05" in err
+    part = load_map(out)
+    assert part.resolution == 0.05 and part.origin == pytest.approx((0.0, 20 * 0.05, 0.0))
+    np.testing.assert_array_equal(part.classes, classes[:10, :10])

@@ -12,6 +12,7 @@ docs/robustness.md), each part mapped on its own lattice.
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int
@@ -68,6 +69,8 @@ def run(args) -> int:
         written = write_map(out, image, grid.resolution, crop_origin(grid, x0, y1))
     except ValueError as exc:    # a path write_map refuses
         raise OutputError(out, str(exc)) from None
+    for note in grid.notes:    # what loading assumed (a bare image's resolution): now in the YAML
+        print(f"note: {note}", file=sys.stderr)
     print(written)
     print(f"{x1 - x0} x {y1 - y0} cells; pixel (x, y) of the crop is pixel (x + {x0}, y + {y0}) of "
           f"{args.map}, at the same map-frame position")
