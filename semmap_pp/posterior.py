@@ -535,6 +535,28 @@ class Tracker:
                                                     np.where(world.active, geometry, np.int8(-1)))
         return (counts >= self.post.model.evidence.multiple_doors) & world.active, pieces
 
+    def _same_openings(self, world, openings, geometry, changed) -> bool:
+        """Whether :meth:`_muldoor` would see the current world's inputs again: each changed slot
+        keeps its presence and, when present, its geometry class, its rectangle's shorter side
+        (the corridor pieces' width test) and its row of ``openings`` (symmetric: its column too).
+        The MulDoor flags and corridor pieces are then the current ones."""
+        if not self._with_doors:
+            return True
+        cur = self._typ
+        ow, og, oo = cur.world, cur.geometry, self._openings
+        for s in changed.tolist():
+            a = world.active[s]
+            if a != ow.active[s]:
+                return False
+            if not a:
+                continue
+            r, o = world.rects[s], ow.rects[s]
+            if geometry[s] != og[s] or min(r[2] - r[0], r[3] - r[1]) != min(o[2] - o[0], o[3] - o[1]):
+                return False
+            if not np.array_equal(openings[s], oo[s]):
+                return False
+        return True
+
     def _same_evidence(self, world, adj, many, pieces, changed) -> bool:
         """Whether the evidence of the proposed world equals the current world's, checked on
         the changed slots alone (without building it): every part of the evidence is the same
@@ -577,8 +599,11 @@ class Tracker:
                     for t in np.flatnonzero(adj[s]).tolist():
                         p, q = (s, t) if s < t else (t, s)
                         openings[p, q] = openings[q, p] = post.pair_openings(rects[p], rects[q])
-        many, pieces = self._muldoor(world, openings, geometry)
         cur = self._typ
+        if self._same_openings(world, openings, geometry, changed):
+            many, pieces = self._many, self._pieces     # the same inputs as the current world's
+        else:
+            many, pieces = self._muldoor(world, openings, geometry)
         if self._same_evidence(world, adj, many, pieces, changed):
             return cur.world.types, cur.sale, (openings, self._evidence, many, pieces)
         ev = self._knowledge_evidence(world, adj, many, pieces)
