@@ -155,7 +155,7 @@ def knowledge_floor():
 
 
 @pytest.mark.slow
-def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels():
+def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels(monkeypatch):
     """20,000 random kernels with the table3.lp engine: the incremental log posterior, its
     types and its knowledge evidence equal a full evaluation along the way and at the end, and so
     does every 50th proposal (accepted or not). The chain runs at temperature 5 so that it moves
@@ -218,9 +218,15 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels():
         assert tr._evidence == ev.to_knowledge()      # the incremental evidence is the full one
         checked["soft"] += len(ev.soft)
 
+    # the proposals that keep the current MulDoor flags and corridor pieces (Tracker._same_openings)
+    # are among those checked: count them
+    kept = []
+    same = type(tr)._same_openings
+    monkeypatch.setattr(type(tr), "_same_openings", lambda self, *a: kept.append(same(self, *a)) or kept[-1])
     rng = np.random.default_rng(7)
     stats = run_chain(rng, Checked(tr), default_mix(data.settings), 20_000, data, temperature=10.0,
                       callback=check)
+    assert sum(kept) > 1000 and len(kept) - sum(kept) > 1000, (sum(kept), len(kept))
     assert stats.attempted.sum() == 20_000 and stats.accepted.sum() > 100
     assert checked["proposals"] >= 250 and checked["soft"] > 0      # 294 with this seed
     assert checked["other_type_changes"] > 0     # knowledge retyped a unit the kernel left alone
