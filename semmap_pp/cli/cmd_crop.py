@@ -57,9 +57,9 @@ def run(args) -> int:
     x0, y0, x1, y1 = args.box
     if not (x0 < x1 <= grid.width and y0 < y1 <= grid.height):
         raise MapError(grid.source or args.map,
-                          f"--box {x0} {y0} {x1} {y1} is not a non-empty part of the "
-                          f"{grid.width} x {grid.height} pixel map (need X0 < X1 <= {grid.width}, "
-                          f"Y0 < Y1 <= {grid.height})")
+                       f"--box {x0} {y0} {x1} {y1} is not a non-empty part of the "
+                       f"{grid.width} x {grid.height} pixel map (need X0 < X1 <= {grid.width}, "
+                       f"Y0 < Y1 <= {grid.height})")
     if not args.force:
         for p in (out, out.with_suffix(".pgm")):
             if p.exists():
