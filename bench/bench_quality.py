@@ -915,8 +915,8 @@ def run(args) -> dict:
     s = _settings(model, args)
     out = {"settings": {k: getattr(s, k) for k in ("chains", "cores", "tune", "draws", "n_inner", "anneal",
                                                    "spread_draws", "spread_n_inner")}
-           | {"spread_best": args.spread_best, "budget": args.budget, "pool": args.pool, "resolution": args.resolution,
-              "furniture": args.furniture},
+           | {"spread_best": args.spread_best, "budget": args.budget, "pool": args.pool,
+              "resolution": args.resolution, "furniture": args.furniture},
            "published": PUBLISHED, "targets": TARGETS}
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
