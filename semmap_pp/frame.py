@@ -360,6 +360,14 @@ def known_window(classes: np.ndarray, margin: int) -> tuple[int, int, int, int] 
     return None if win == (0, 0, h, w) else win
 
 
+def lattice_orientation(classes: np.ndarray, params: LatticeParams, theta: float | None = None) -> float:
+    """The lattice's θ0 in radians: ``theta`` (estimated by :func:`estimate_orientation` when
+    None), 0.0 when it is below ``identity_below_deg`` (the image itself is the lattice)."""
+    if theta is None:
+        theta = estimate_orientation(classes, params)
+    return 0.0 if abs(math.degrees(theta)) < params.identity_below_deg else float(theta)
+
+
 def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Model,
                              origin=(0.0, 0.0, 0.0), theta: float | None = None) -> Frame:
     """Estimate θ0 (unless given) and resample ``classes`` onto the lattice.
@@ -378,10 +386,7 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
         Use this orientation instead of estimating one (radians).
     """
     classes = np.asarray(classes, dtype=np.uint8)
-    if theta is None:
-        theta = estimate_orientation(classes, model.lattice)
-    if abs(math.degrees(theta)) < model.lattice.identity_below_deg:
-        theta = 0.0
+    theta = lattice_orientation(classes, model.lattice, theta)
     h, w = classes.shape
     cells = model.cells(resolution)
     origin = tuple(float(v) for v in origin)

@@ -154,3 +154,46 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
             f"sys.exit(main(['info', {str(DATA / 'tiny.yaml')!r}]))\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 141 and "Traceback" not in r.stderr, r.stderr
+
+
+def test_orientation_gives_the_lattices_theta_and_the_walls_at_another_angle(tmp_path, capsys):
+    """`--orientation`: θ0 as `semmap map` finds it (cartesium −24.0°, nothing off axis), and a
+    wing at another angle with its share, angle and pixels, as the run's note gives them."""
+    from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+    from semmap_pp.synth import generate_floor
+
+    assert main(["info", str(REAL / "ubremen-cartesium.yaml"), "--orientation"]) == 0
+    out = capsys.readouterr().out
+    assert "orientation -24.0 deg (the lattice's" in out and "off axis    no part of the map" in out
+    a = generate_floor(3, units=8, rotation_deg=0.0).classes
+    b = generate_floor(5, units=8, rotation_deg=30.0).classes
+    both = np.full((max(a.shape[0], b.shape[0]), a.shape[1] + b.shape[1]), UNKNOWN, np.uint8)
+    both[:a.shape[0], :a.shape[1]] = a
+    both[:b.shape[0], a.shape[1]:] = b
+    image = np.where(both == FREE, 254, np.where(both == OCCUPIED, 0, 205)).astype(np.uint8)
+    path = write_map(tmp_path / "wings.yaml", image, 0.05)
+    assert main(["info", str(path), "--orientation", "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    off = facts["off_axis"]
+    assert abs(facts["orientation_deg"]) < 0.5 and off["share"] > 0.25 and off["note"]
+    assert abs(off["angle_deg"] + 30.0) < 1.0 and off["box_px"][0] >= a.shape[1] - 160
+    assert main(["info", str(path), "--orientation"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("off axis"))
+    x0, y0, x1, y1 = off["box_px"]
+    assert line == (f"off axis    {100 * off['share']:.0f} % of the occupied cells run at about -30 deg, "
+                    f"within pixels x {x0}-{x1}, y {y0}-{y1} (a note in `semmap map`: `semmap crop` cuts "
+                    f"such a wing out)")
+    assert "orientation_deg" not in json.loads(_info_json(path, capsys))      # only when asked
+
+
+def _info_json(path, capsys) -> str:
+    assert main(["info", str(path), "--json"]) == 0
+    return capsys.readouterr().out
+
+
+def test_orientation_with_a_bad_model_file_is_one_line(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[lattice\n")
+    assert main(["info", str(DATA / "tiny.yaml"), "--orientation", "--model", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"semmap: error: {bad}: not valid TOML") and err.count("\n") == 1

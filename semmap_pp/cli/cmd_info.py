@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 
 from semmap_pp.cells import INPUT_CLASSES, known_box
 from semmap_pp.cli.argtypes import positive_int as _positive_int
@@ -50,6 +51,11 @@ def register(subparsers) -> None:
         description="Load a map (map_server YAML, .png, .pgm or .npy) and describe it.")
     parser.add_argument("map", help="map file: .yaml/.yml (map_server), .png, .pgm or .npy")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--orientation", action="store_true",
+                        help="also the lattice's orientation θ0 and the walls at another angle, as "
+                             "`semmap map` finds them (seconds on a large map)")
+    parser.add_argument("--model", metavar="FILE",
+                        help="model file for --orientation (default models/default.toml)")
     add_map_options(parser)
     parser.set_defaults(func=run)
 
@@ -111,12 +117,42 @@ def format_text(facts: dict) -> str:
         share = (r1 - r0) * (c1 - c0) / max(facts["width"] * facts["height"], 1)
         lines.append(f"known part  {c1 - c0} x {r1 - r0} cells from column {c0}, row {r0} "
                      f"({100.0 * share:.1f} % of the image)")
+    if "orientation_deg" in facts:
+        lines.append(f"orientation {facts['orientation_deg']:.1f} deg (the lattice's: every unit's walls "
+                     f"run along it or across it)")
+        off = facts["off_axis"]
+        if off["share"] > 0:
+            x0, y0, x1, y1 = off["box_px"]
+            lines.append(f"off axis    {100.0 * off['share']:.0f} % of the occupied cells run at about "
+                         f"{off['angle_deg']:.0f} deg, within pixels x {x0}-{x1}, y {y0}-{y1}"
+                         + (" (a note in `semmap map`: `semmap crop` cuts such a wing out)"
+                            if off["note"] else ""))
+        else:
+            lines.append("off axis    no part of the map runs at another angle")
     lines += [f"note        {note}" for note in facts["notes"]]
     return "\n".join(lines)
+
+
+def orientation(grid: OccupancyGrid, model) -> dict:
+    """θ0 of the lattice ``semmap map`` would build (degrees) and the walls at another angle
+    (:func:`semmap_pp.frame.off_axis_walls`; ``note``: whether the run would say so)."""
+    from semmap_pp.frame import lattice_orientation, off_axis_walls
+
+    params = model.lattice
+    theta = lattice_orientation(grid.classes, params)
+    off = off_axis_walls(grid.classes, theta, grid.resolution, params)
+    share = float(off.share)
+    return {"orientation_deg": math.degrees(theta),
+            "off_axis": {"share": share, "angle_deg": None if off.blocks == 0 else off.angle_deg,
+                         "box_px": None if off.box_px is None else list(off.box_px),
+                         "note": bool(0 < params.off_axis_note_share <= share)}}
 
 
 def run(args: argparse.Namespace) -> int:
     grid = load_map(args.map, **map_options(args))
     facts = describe(grid)
+    if args.orientation:
+        from semmap_pp.model import load_model
+        facts |= orientation(grid, load_model(args.model))
     print(json.dumps(facts) if args.json else format_text(facts))
     return 0
