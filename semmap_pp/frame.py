@@ -83,12 +83,22 @@ def estimate_orientation(classes: np.ndarray, params: LatticeParams) -> float:
     float
         θ0; 0.0 when the map holds fewer than two occupied cells.
     """
+    x, y = _occupied_points(classes)
+    return _orientation_of_points(x, y, params) if x.size >= 2 else 0.0
+
+
+def _occupied_points(classes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` of the occupied cells, centred on their integer mean: at theta = 0 every cell sits
+    on a bin centre (no interpolation spread)."""
     y, x = np.nonzero(np.asarray(classes) == OCCUPIED)
-    if x.size < 2:
-        return 0.0
-    # integer centring: at theta = 0 every cell sits on a bin centre (no interpolation spread)
-    x = (x - round(float(x.mean()))).astype(np.float64)
-    y = (y - round(float(y.mean()))).astype(np.float64)
+    if x.size == 0:
+        return x.astype(np.float64), y.astype(np.float64)
+    return ((x - round(float(x.mean()))).astype(np.float64),
+            (y - round(float(y.mean()))).astype(np.float64))
+
+
+def _orientation_of_points(x: np.ndarray, y: np.ndarray, params: LatticeParams) -> float:
+    """:func:`estimate_orientation` of the centred points ``(x, y)`` (at least two)."""
     period = math.pi / 2
     step = math.radians(params.angle_bin_deg)
     coarse = -period / 2 + step * np.arange(int(math.ceil(period / step)))
@@ -147,16 +157,13 @@ def off_axis_walls(classes: np.ndarray, theta: float, resolution: float, params:
     h, w = classes.shape
     for r0 in range(0, h, b):
         for c0 in range(0, w, b):
-            block = classes[r0:r0 + b, c0:c0 + b]
-            y, x = np.nonzero(block == OCCUPIED)
+            x, y = _occupied_points(classes[r0:r0 + b, c0:c0 + b])
             if x.size < need:
                 continue
             seen += x.size
-            own = estimate_orientation(block, params)
+            own = _orientation_of_points(x, y, params)
             if abs(math.degrees(math.remainder(own - theta, math.pi / 2))) <= params.off_axis_min_deg:
                 continue
-            x = (x - round(float(x.mean()))).astype(np.float64)
-            y = (y - round(float(y.mean()))).astype(np.float64)
             if projection_sharpness(x, y, own) < params.off_axis_min_gain * projection_sharpness(x, y, theta):
                 continue
             off += x.size
@@ -173,13 +180,19 @@ def off_axis_walls(classes: np.ndarray, theta: float, resolution: float, params:
     return OffAxis(off / seen, median, len(angles), box)
 
 
+def off_axis_noted(share: float, params: LatticeParams) -> bool:
+    """Whether walls at another angle holding ``share`` of the occupied cells get a note: from
+    ``off_axis_note_share`` on, never when that is 0."""
+    return 0 < params.off_axis_note_share <= share
+
+
 def off_axis_note(classes: np.ndarray, frame: Frame, params: LatticeParams) -> str | None:
     """A note for the run when walls at another angle hold ``off_axis_note_share`` or more of the
-    occupied cells (:func:`off_axis_walls`), else None (and always None when the share is 0)."""
-    if params.off_axis_note_share <= 0:
+    occupied cells (:func:`off_axis_walls`, :func:`off_axis_noted`), else None."""
+    if params.off_axis_note_share <= 0:     # no note whatever the share: skip the blocks
         return None
     found = off_axis_walls(classes, frame.theta, frame.resolution, params)
-    if found.share < params.off_axis_note_share:
+    if not off_axis_noted(found.share, params):
         return None
     x0, y0, x1, y1 = found.box_px
     return (f"{100 * found.share:.0f} % of the occupied cells lie where the walls run at about "

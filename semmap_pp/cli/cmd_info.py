@@ -136,7 +136,7 @@ def format_text(facts: dict) -> str:
 def orientation(grid: OccupancyGrid, model) -> dict:
     """θ0 of the lattice ``semmap map`` would build (degrees) and the walls at another angle
     (:func:`semmap_pp.frame.off_axis_walls`; ``note``: whether the run would say so)."""
-    from semmap_pp.frame import lattice_orientation, off_axis_walls
+    from semmap_pp.frame import lattice_orientation, off_axis_noted, off_axis_walls
 
     params = model.lattice
     theta = lattice_orientation(grid.classes, params)
@@ -145,7 +145,7 @@ def orientation(grid: OccupancyGrid, model) -> dict:
     return {"orientation_deg": math.degrees(theta),
             "off_axis": {"share": share, "angle_deg": None if off.blocks == 0 else off.angle_deg,
                          "box_px": None if off.box_px is None else list(off.box_px),
-                         "note": bool(0 < params.off_axis_note_share <= share)}}
+                         "note": off_axis_noted(share, params)}}
 
 
 def run(args: argparse.Namespace) -> int:
