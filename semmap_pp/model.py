@@ -45,6 +45,13 @@ MAX_MODEL_BYTES = 1 << 20
 MAX_K = 100_000
 #: Most draws per chain of the sample around W* (each records a world: memory grows with it).
 MAX_SPREAD_DRAWS = 100_000
+#: What ``spread_draws`` must be (:func:`spread_draws_ok`), as the model file and the options say it.
+SPREAD_DRAWS_RULE = "must be 0 (no sample around W*) or at least 4 (R-hat and ESS need them)"
+
+
+def spread_draws_ok(n: int) -> bool:
+    """Whether ``n`` draws per chain make a sample around W*: none, or enough for R-hat and ESS."""
+    return n == 0 or n >= 4
 MAX_CELLS_PER_LENGTH = 2**31 - 1
 
 
@@ -437,9 +444,8 @@ def load_model(path: str | Path | None = None) -> Model:
         start_factor=r.integer("sampler.start_factor", lo=1),
         spread_draws=r.optional("sampler.spread_draws", 0, r.integer, lo=0, hi=MAX_SPREAD_DRAWS),
         spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1))
-    if 0 < sampler.spread_draws < 4:
-        raise r.error("sampler.spread_draws", "must be 0 (no sample around W*) or at least 4 "
-                      "(R-hat and ESS need them)")
+    if not spread_draws_ok(sampler.spread_draws):
+        raise r.error("sampler.spread_draws", SPREAD_DRAWS_RULE)
     r.raw("diagnostics")                   # a missing table is named as such
     defect_tol = r.optional("diagnostics.defect_tolerance_m", 2.0 * prior.sale_sigma_m, r.number, lo=0.0)
     walls_inside_max = r.optional("diagnostics.walls_inside_max", 0.5, r.number, lo=0.0, hi=1.0)

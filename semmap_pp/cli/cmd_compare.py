@@ -18,6 +18,7 @@ from pathlib import Path
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
+from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
 
 
 def register(subparsers) -> None:
@@ -77,9 +78,8 @@ def run(args) -> int:
     if settings.draws < 4:
         print("semmap compare: error: --draws must be at least 4 (R-hat and ESS need them)", file=sys.stderr)
         return 2
-    if 0 < settings.spread_draws < 4:
-        print("semmap compare: error: --spread-draws must be 0 or at least 4 (R-hat and ESS need them)",
-              file=sys.stderr)
+    if not spread_draws_ok(settings.spread_draws):
+        print(f"semmap compare: error: --spread-draws {SPREAD_DRAWS_RULE}", file=sys.stderr)
         return 2
 
     def log(msg: str) -> None:

@@ -21,6 +21,7 @@ from pathlib import Path
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
 
 
 def _seconds(text: str) -> float:
@@ -131,8 +132,8 @@ def run(args) -> int:
     from semmap_pp.step import StopFlag
 
     state, starts = None, None
-    if 0 < (args.spread_draws or 0) < 4:
-        return _usage("--spread-draws must be 0 (no sample around W*) or at least 4 (R-hat and ESS need them)")
+    if not spread_draws_ok(args.spread_draws or 0):
+        return _usage(f"--spread-draws {SPREAD_DRAWS_RULE}")
     if args.resume is not None:
         fixed = FIXED_WHEN_RESUMING + ("occupied_thresh", "free_thresh", "negate", "resolution", "mode")
         given = [f"--{k.replace('_', '-')}" for k in fixed + ("start",) if getattr(args, k) is not None]
