@@ -1,14 +1,9 @@
 """bench_quality.error_breakdown and door_breakdown: each unmatched unit and each missed or extra
 door lands in exactly one class (docs/quality.md, "Where unit and door F1 are lost")."""
-import importlib.util
-from pathlib import Path
 
 from semmap_pp.evaluate import score_world
 
-_spec = importlib.util.spec_from_file_location(
-    "bench_quality", Path(__file__).parents[1] / "bench" / "bench_quality.py")
-bq = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bq)
+from benchmod import bench_quality as bq
 
 SHAPE = (100, 100)
 

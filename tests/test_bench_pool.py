@@ -1,7 +1,5 @@
 """bench_quality.pooled_floor: the synthetic floors as maps of coarser cells (the 0.1 m rows of
 docs/quality.md come from it)."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 
@@ -9,10 +7,7 @@ from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.evaluate import polygon_mask
 from semmap_pp.synth import generate_floor
 
-_spec = importlib.util.spec_from_file_location(
-    "bench_quality", Path(__file__).parents[1] / "bench" / "bench_quality.py")
-bq = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bq)
+from benchmod import bench_quality as bq
 
 
 def test_a_pooled_floor_is_the_same_floor_in_coarser_cells():

@@ -1,6 +1,4 @@
 import dataclasses
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -283,10 +281,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     assert sp.best_world is not None
     assert run_target(inputs).evaluate(sp.best_world).total >= sp.best_logp - 1e-6
     # bench quality --spread-best scores that world, polished, in W*'s place when it is higher
-    spec = importlib.util.spec_from_file_location("bench_quality", Path(__file__).parents[1] / "bench"
-                                                  / "bench_quality.py")
-    bq = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bq)
+    from benchmod import bench_quality as bq
     assert bq.spread_best(plain) is plain
     assert bq.spread_best(run) is run or sp.best_logp > sp.start_logp
     # a run whose W* lies below a world its sample visited (here: W* with a unit taken out, and
