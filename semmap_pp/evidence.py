@@ -30,6 +30,7 @@ Examples
 
 from __future__ import annotations
 
+import bisect
 import functools
 from dataclasses import dataclass, field
 from typing import Mapping, Protocol
@@ -94,42 +95,39 @@ def geometry_class_compiled(rect, resolution, measure, hall_min_size,
 @numba.njit(cache=True, nogil=True)
 def _muldoor_counts(openings, colike, out):  # pragma: no cover - compiled
     n = openings.shape[0]
-    comp = np.full(n, -1, np.int64)
-    stack = np.empty(n, np.int64)
+    joined = np.zeros(n, np.bool_)          # has an open passage to some unit
     for i in range(n):
         own = 0
         for j in range(n):
             own += openings[i, j, 0]
+            if openings[i, j, 1] > 0:
+                joined[i] = True
         out[i] = own
-    for s in range(n):                      # components of the passage graph
-        if comp[s] >= 0:
+    seen = np.zeros(n, np.bool_)
+    members = np.empty(n, np.int64)
+    for s in range(n):                      # components of the passage graph (singletons: no change)
+        if not joined[s] or seen[s]:
             continue
-        comp[s] = s
-        stack[0] = s
-        top = 1
-        while top > 0:
-            top -= 1
-            u = stack[top]
+        seen[s] = True
+        members[0] = s
+        m, head = 1, 0
+        while head < m:                     # breadth first over the passages
+            u = members[head]
+            head += 1
             for v in range(n):
-                if comp[v] < 0 and openings[u, v, 1] > 0:
-                    comp[v] = s
-                    stack[top] = v
-                    top += 1
-    for s in range(n):
-        if comp[s] != s:
-            continue
-        total, size = 0, 0
-        for u in range(n):
-            if comp[u] == s:
-                size += 1
-                total += out[u]
-                for v in range(u + 1, n):
-                    if comp[v] == s:
-                        total -= openings[u, v, 0]   # a door between two members, counted once
-        if size > 1:
-            for u in range(n):
-                if comp[u] == s and colike[u]:
-                    out[u] = total
+                if not seen[v] and openings[u, v, 1] > 0:
+                    seen[v] = True
+                    members[m] = v
+                    m += 1
+        total = 0
+        for a in range(m):
+            u = members[a]
+            total += out[u]
+            for b in range(a + 1, m):
+                total -= openings[u, members[b], 0]   # a door between two members, counted once
+        for a in range(m):
+            if colike[members[a]]:
+                out[members[a]] = total
 
 
 def muldoor_counts(openings: np.ndarray, colike: np.ndarray) -> np.ndarray:
@@ -183,16 +181,34 @@ def _space_colike(openings, short, classes, ratio, out):  # pragma: no cover - c
         if classes[u] == 1:                  # COLIKE
             member[u] = True
             width[u] = short[u]
+    # the room-like units with open passages, and their passage neighbours (flat lists)
+    cand = np.empty(n, np.int64)
+    start = np.zeros(n + 1, np.int64)
+    nbr = np.empty(n * n, np.int64)
+    k = 0
+    e = 0
+    for u in range(n):
+        if classes[u] != 0:                  # ROLIKE only
+            continue
+        first = e
+        for v in range(n):
+            if openings[u, v, 1] > 0:
+                nbr[e] = v
+                e += 1
+        if e > first:
+            cand[k] = u
+            start[k] = first
+            k += 1
+            start[k] = e
     changed = True
     while changed:                          # the least fixpoint: members and widths only grow
         changed = False
-        for u in range(n):
-            if classes[u] != 0:              # ROLIKE only
-                continue
+        for i in range(k):
+            u = cand[i]
             best = width[u]
-            for v in range(n):
-                if member[v] and openings[u, v, 1] > 0 and short[u] <= ratio * width[v] \
-                        and width[v] > best:
+            for j in range(start[i], start[i + 1]):
+                v = nbr[j]
+                if member[v] and short[u] <= ratio * width[v] and width[v] > best:
                     best = width[v]
             if best > width[u]:
                 width[u] = best
@@ -241,7 +257,7 @@ def space_colike(openings: np.ndarray, short: np.ndarray, classes: np.ndarray,
     if openings.dtype != np.int32:
         openings = openings.astype(np.int32)
     out = np.zeros(len(openings), np.bool_)
-    if len(openings) and openings[..., 1].any():     # no passage: no piece
+    if len(openings):                # (no passage: no piece; the compiled loop finds none)
         _space_colike(openings, np.asarray(short, np.float64), np.asarray(classes, np.int8),
                       float(ratio), out)
     return out
@@ -473,6 +489,72 @@ def knowledge_evidence(units, items, muldoor, adj):
 
 
 _KEvidence = None   # semmap_pp.knowledge.evidence.Evidence, imported on first use (clingo)
+
+
+def _put(entries: tuple, unit: int, new: tuple) -> tuple:
+    """``entries`` (sorted ``(unit, ...)`` tuples, at most one per unit) with ``unit``'s entry
+    replaced by ``new`` (a tuple of 0 or 1 entries), by slicing: the untouched parts are copied
+    as they are."""
+    i = bisect.bisect_left(entries, (unit,))
+    j = i + 1 if i < len(entries) and entries[i][0] == unit else i
+    if j == i and not new:
+        return entries
+    return entries[:i] + new + entries[j:]
+
+
+def _unary_entries(item) -> tuple:
+    """``(rolike, colike, halike)`` probabilities of a geometry item (None: no unit), as
+    :func:`knowledge_evidence` lists them (probability 0 left out)."""
+    if item is None:
+        return (0.0, 0.0, 0.0)
+    c, soft = item
+    if soft is None:
+        return tuple(1.0 if k == c else 0.0 for k in (ROLIKE, COLIKE, HALIKE))
+    return soft
+
+
+def patch_knowledge_evidence(ev, items: Mapping, muldoor: Mapping, adj_drop, adj_add):
+    """:func:`knowledge_evidence` of a world that differs from ``ev``'s in a few units, built by
+    editing ``ev`` instead of the whole world (the sampler's proposals change one to three units
+    of up to hundreds).
+
+    ``items`` maps a unit to its new :func:`unit_geometry` item (None: the unit is gone);
+    ``muldoor`` a unit to whether it now has MulDoor (a unit that goes and had it: False);
+    ``adj_drop`` and ``adj_add`` are the
+    adjacent pairs ``(p, q)``, ``p < q``, that go and come. Every other part of ``ev`` is kept.
+    Equal to the evidence built in full (tests/test_evidence.py); the parts of ``ev`` that do not
+    change are the same objects, so comparing and hashing them stays cheap.
+
+    Examples
+    --------
+    >>> ev = knowledge_evidence([0, 1, 2], [(ROLIKE, None)] * 3, [1], [(0, 1), (1, 2)])
+    >>> new = patch_knowledge_evidence(ev, {2: None, 3: (COLIKE, None)}, {1: False, 3: True},
+    ...                                [(1, 2)], [(1, 3)])
+    >>> new == knowledge_evidence([0, 1, 3], [(ROLIKE, None)] * 2 + [(COLIKE, None)], [3],
+    ...                           [(0, 1), (1, 3)])
+    True
+    """
+    units, lists = ev.units, [ev.rolike, ev.colike, ev.halike]
+    for u, item in items.items():
+        i = bisect.bisect_left(units, u)
+        has = i < len(units) and units[i] == u
+        if has != (item is not None):
+            units = units[:i] + units[i + 1:] if has else units[:i] + (u,) + units[i:]
+        for k, p in enumerate(_unary_entries(item)):
+            lists[k] = _put(lists[k], u, ((u, p),) if p > 0.0 else ())
+    md = ev.muldoor
+    for u, flag in muldoor.items():
+        md = _put(md, u, ((u, 1.0),) if flag else ())
+    pairs = ev.adj
+    for pq in adj_drop:
+        i = bisect.bisect_left(pairs, pq)
+        if i < len(pairs) and pairs[i] == pq:
+            pairs = pairs[:i] + pairs[i + 1:]
+    for pq in adj_add:
+        i = bisect.bisect_left(pairs, pq)
+        if i == len(pairs) or pairs[i] != pq:
+            pairs = pairs[:i] + (pq,) + pairs[i:]
+    return type(ev)(units, lists[0], lists[1], lists[2], md, pairs)
 
 
 class Result(Protocol):

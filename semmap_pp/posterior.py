@@ -37,7 +37,8 @@ from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.derive.doors import opening_counts
 from semmap_pp.evidence import (COLIKE, GEOMETRY_TYPE, PIECE_ITEM, FixedProvider, GeometryTable,
                                 build_evidence, geometry_class, geometry_class_compiled,
-                                knowledge_evidence, muldoor_counts, space_colike)
+                                knowledge_evidence, muldoor_counts, patch_knowledge_evidence,
+                                space_colike)
 from semmap_pp.likelihood import (covered_free, enclosure_loglik, full_tallies,
                                   loglik_from_tallies, prepare, tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
@@ -150,7 +151,7 @@ class Posterior:
         colike_scope = "space"`` :func:`semmap_pp.evidence.space_colike` (pieces of a corridor
         space), none with ``"unit"``. ``classes`` are the Table 4 classes (-1: no unit)."""
         e = self.model.evidence
-        if e.colike_scope != "space" or len(rects) == 0 or not openings[..., 1].any():
+        if e.colike_scope != "space" or len(rects) == 0:
             return np.zeros(len(classes), dtype=bool)
         r = np.asarray(rects)
         short = np.minimum(r[:, 2] - r[:, 0], r[:, 3] - r[:, 1])
@@ -523,6 +524,36 @@ class Tracker:
         return knowledge_evidence(units, items, muldoor,
                                   list(zip(iu[up].tolist(), ju[up].tolist())))
 
+    def _patched_evidence(self, world, adj, many, pieces, changed):
+        """:meth:`_knowledge_evidence` of a proposed world, by editing the current world's
+        evidence (:func:`~semmap_pp.evidence.patch_knowledge_evidence`): the changed slots and the
+        slots whose corridor-piece or MulDoor flag changed get their entries anew, and the
+        changed slots' adjacency rows their pairs. Equal to the evidence built in full
+        (tests/test_posterior.py)."""
+        cur = self._typ
+        get = self.post._geometry.get
+        active, rects = world.active, world.rects
+        slots = set(changed.tolist())
+        slots.update(np.flatnonzero(pieces != self._pieces).tolist())
+        items = {}
+        for s in slots:
+            if not active[s]:
+                items[s] = None
+            elif pieces[s]:
+                items[s] = PIECE_ITEM
+            else:
+                r = rects[s]
+                items[s] = get(int(r[2] - r[0]), int(r[3] - r[1]))
+        muldoor = {s: bool(many[s]) for s in np.flatnonzero(many != self._many).tolist()}
+        drop, add = set(), set()
+        oadj = cur.adj
+        for s in changed.tolist():
+            for t in np.flatnonzero(oadj[s] & ~adj[s]).tolist():
+                drop.add((s, t) if s < t else (t, s))
+            for t in np.flatnonzero(adj[s] & ~oadj[s]).tolist():
+                add.add((s, t) if s < t else (t, s))
+        return patch_knowledge_evidence(self._evidence, items, muldoor, sorted(drop), sorted(add))
+
     def _muldoor(self, world, openings, geometry):
         """``(many, pieces)``: the slots with multiple doors (bool (K,), the MulDoor evidence) and
         the room-like slots that are corridor pieces (:meth:`Posterior.corridor_pieces`), from the
@@ -606,7 +637,7 @@ class Tracker:
             many, pieces = self._muldoor(world, openings, geometry)
         if self._same_evidence(world, adj, many, pieces, changed):
             return cur.world.types, cur.sale, (openings, self._evidence, many, pieces)
-        ev = self._knowledge_evidence(world, adj, many, pieces)
+        ev = self._patched_evidence(world, adj, many, pieces, changed)
         patch = (openings, ev, many, pieces)
         if ev.key == self._evidence.key:
             return cur.world.types, cur.sale, (openings, self._evidence, many, pieces)

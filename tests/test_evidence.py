@@ -186,3 +186,60 @@ def test_corridor_pieces_equal_their_definition_whatever_the_order_of_the_units(
         assert again.tolist() == got[perm].tolist()
         found += int(got.sum())
     assert found > 50
+
+
+def test_patched_knowledge_evidence_equals_the_evidence_built_anew():
+    """patch_knowledge_evidence: random worlds edited at random (units gone and new, items
+    changed between hard and soft, MulDoor flags, pairs dropped and added) give the evidence
+    knowledge_evidence builds from the edited world itself; the parts not edited are kept as
+    the same objects."""
+    from semmap_pp.evidence import knowledge_evidence, patch_knowledge_evidence
+
+    rng = np.random.default_rng(2)
+
+    def item():
+        c = int(rng.integers(0, 3))
+        if rng.random() < 0.5:
+            return c, None
+        p = rng.dirichlet([1, 1, 1]).round(2)
+        p[rng.random(3) < 0.3] = 0.0
+        return c, tuple(float(v) for v in p)
+
+    def build(units, md, pairs):
+        us = sorted(units)
+        return knowledge_evidence(us, [units[u] for u in us], sorted(u for u in md if u in units),
+                                  sorted(pairs))
+
+    edits = 0
+    for _ in range(300):
+        k = int(rng.integers(1, 12))
+        units = {int(u): item() for u in rng.choice(k + 4, k, replace=False)}
+        md = {u for u in units if rng.random() < 0.3}
+        pairs = {(p, q) for p in units for q in units if p < q and rng.random() < 0.3}
+        ev = build(units, md, pairs)
+        new_units, new_md, new_pairs = dict(units), set(md), set(pairs)
+        items, flags = {}, {}
+        for u in rng.choice(k + 6, int(rng.integers(0, 4)), replace=False).tolist():
+            items[u] = None if (u in units and rng.random() < 0.4) else item()
+            if items[u] is None:
+                new_units.pop(u, None)
+                new_pairs = {pq for pq in new_pairs if u not in pq}
+            else:
+                new_units[u] = items[u]
+        for u in new_units:
+            if rng.random() < 0.2:
+                flags[u] = u not in new_md
+                (new_md.add if flags[u] else new_md.discard)(u)
+        for u in new_md - set(new_units):       # a unit that goes loses its flag (the caller's part)
+            flags[u] = False
+        new_md &= set(new_units)
+        drop = sorted(pq for pq in pairs if pq not in new_pairs or rng.random() < 0.2)
+        new_pairs -= set(drop)
+        add = sorted({(p, q) for p in new_units for q in new_units if p < q and rng.random() < 0.1})
+        new_pairs |= set(add)
+        got = patch_knowledge_evidence(ev, items, flags, drop, add)
+        assert got == build(new_units, new_md, new_pairs)
+        edits += bool(items or flags or drop or add)
+        if not items:
+            assert got.rolike is ev.rolike and got.units is ev.units
+    assert edits > 250
