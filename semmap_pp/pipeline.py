@@ -221,11 +221,11 @@ class SpreadSample:
     seconds: float
     kernels_per_second: float
     start_logp: float               # W*'s log posterior, where every chain started
-    best_logp: float                # the best log posterior any of its chains reached
+    best_logp: float                # the log posterior of best_world (NaN without one)
     stopped: str | None = None
     kept: tuple = ()
-    best_world: wm.World | None = None   # the best world its chains visited (tracked at every kernel,
-                                         # so at least best_logp); reported, never taken as W*
+    best_world: wm.World | None = None   # the best world its chains visited (tracked at every
+                                         # kernel, W* included); reported, never taken as W*
 
     def text(self) -> str:
         """One line: what was sampled, how fast, and whether the chains rose above W*."""
@@ -514,8 +514,8 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     kept_chains, n_kept, summaries, sample_stats, report, samples, _ = _collect(
         result.records, model, draws_option="--spread-draws")
     made = sum(len(r.stats.get("logp", ())) for r in result.records)
-    best = max((float(np.max(r.stats["logp"])) for r in result.records if len(r.stats.get("logp", ()))),
-               default=math.nan)
+    # the best world's log posterior, tracked at every kernel (a recorded draw is every n_inner-th)
+    best = result.best_logp if result.best_world is not None else math.nan
     spread = SpreadSample(settings.spread_draws, settings.spread_n_inner, summaries, sample_stats, report,
                           samples, seconds, made * settings.spread_n_inner / seconds if seconds > 0 else 0.0,
                           float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept),
