@@ -461,8 +461,9 @@ class Tracker:
 
     A proposal re-derives the geometry class and adjacency row of the changed slots only, the
     types of every unit from the provider (with the fixed provider only the changed slots can
-    change type; with knowledge the evidence is rebuilt from per-size and per-pair caches and the
-    provider is asked only when it differs from the current world's), the likelihood tallies
+    change type; with knowledge the current evidence is edited at the changed slots and at the
+    slots whose MulDoor or corridor-piece flag changed, from per-size and per-pair caches, and
+    the provider is asked only when it differs from the current world's), the likelihood tallies
     from the units whose rectangle, presence or corridor flag changed, and the prior's validity
     and SaLe sum over the slots (compiled).
     """
