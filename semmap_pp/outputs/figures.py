@@ -358,6 +358,42 @@ def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
     return png(fig)
 
 
+
+#: stability.png: a unit found with its type in every other seed's W*, in some or with another
+#: type, in none
+AGREEMENT_COLOURS = {"every seed": "#1a9850", "some seeds": "#f39c12", "no other seed": "#d73027"}
+
+
+def agreement_class(found: int, same_type: int, others: int) -> str:
+    """The :data:`AGREEMENT_COLOURS` key of a unit found in ``found`` of ``others`` W*s, with
+    the same type in ``same_type``."""
+    if found == others and same_type == others:
+        return "every seed"
+    return "some seeds" if found else "no other seed"
+
+
+def stability_png(sm, agreement, seeds) -> bytes:
+    """stability.png: the reference W* (``sm``) on the light classified map, each unit filled in
+    the colour of how many other seeds' W*s hold it (:func:`agreement_class`), with its id and
+    ``found/others``; ``agreement`` are :class:`~semmap_pp.stability.UnitAgreement` rows."""
+    box = crop_box(sm)
+    fig, (ax,) = _axes(box, extra_h=0.7)
+    _show(ax, classified_rgb(sm.grid.classes, light=True), box)
+    for u in agreement:
+        v = sm.frame.rect_vertices_px(sm.world.rects[sm.slot_of(u.id)])
+        colour = AGREEMENT_COLOURS[agreement_class(u.found, u.same_type, u.others)]
+        ax.add_patch(Polygon(v, closed=True, fc=colour, ec=colour, alpha=0.35, lw=1.5, zorder=3))
+        ax.add_patch(Polygon(v, closed=True, fill=False, ec=colour, lw=1.8, zorder=4))
+        x, y = np.asarray(v, float).mean(axis=0)
+        ax.text(x, y, f"{TYPE_LETTER[u.type]}{u.id}\n{u.found}/{u.others}", ha="center", va="center",
+                fontsize=9, fontweight="bold", zorder=5,
+                bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85))
+    fig.suptitle(f"W* of seed {seeds[0]} against the W*s of seeds {', '.join(map(str, seeds[1:]))}: "
+                 "units found (IoU >= 0.5) / other seeds", fontsize=11, y=0.998, va="top")
+    _legend(fig, [Patch(fc=c, ec=c, alpha=0.6, label=k) for k, c in AGREEMENT_COLOURS.items()])
+    fig.subplots_adjust(0.005, 0.4 / fig.get_figheight(), 0.995, 1 - 0.3 / fig.get_figheight())
+    return png(fig)
+
 __all__ = ["png", "classified_rgb", "overlay_rgb", "door_mask_image", "crop_box", "overlay_png",
            "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "independent_text", "posterior_png", "posterior_cells_png", "roi_png",
-           "regions_preview_png"]
+           "regions_preview_png", "AGREEMENT_COLOURS", "agreement_class", "stability_png"]

@@ -1,0 +1,121 @@
+"""``semmap stability MAP [--seeds N N ...] [--out DIR]``: is W* the same plan whatever the seed?
+
+Runs ``semmap map``'s search once per seed (default 0 1 2) with the same map, model, rules and run
+lengths, without the sample around W* (it never changes W*), and compares the W*s
+(:mod:`semmap_pp.stability`): the unit F1 between every two of them, and for each unit of the
+best one (highest log posterior) in how many of the others it is found (IoU >= 0.5) and with which
+type. Prints a Markdown table; with ``--out DIR`` also writes ``stability.md``, ``stability.json``
+and ``stability.png`` (the best W*'s units coloured by agreement), each atomically. Ctrl-C stops
+and writes nothing (exit 130).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+
+from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
+from semmap_pp.cli.argtypes import positive_int as _positive_int
+from semmap_pp.cli.cmd_info import add_map_options, map_options
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("stability", help="search one map with several seeds and compare the W*s",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("--seeds", type=_non_negative_int, nargs="+", default=[0, 1, 2], metavar="N",
+                   help="the seeds, at least two different ones (default 0 1 2)")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="also write stability.md, stability.json, stability.png")
+    p.add_argument("--rules", metavar="FILE", default=None, help="rule file (default rules/table3.lp)")
+    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
+    p.add_argument("--roi", metavar="MASK", default=None, help="region-of-interest mask for the CPR")
+    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
+    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
+    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
+    p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
+    p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
+    add_map_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from semmap_pp import atomic
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.outputs.figures import stability_png
+    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
+    from semmap_pp.stability import Plan, Stability
+    from semmap_pp.step import StopFlag
+
+    seeds = list(dict.fromkeys(args.seeds))
+    if len(seeds) < 2:
+        print("semmap stability: error: give at least two different --seeds", file=sys.stderr)
+        return 2
+    if args.out is not None:
+        check_out_dir(args.out, args.force)
+    rules = Path(args.rules) if args.rules else DEFAULT_RULES
+    inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
+                         map_options=map_options(args))
+    settings = RunSettings.from_model(inputs.model, seed=seeds[0], chains=args.chains, cores=args.cores,
+                                      tune=args.tune, draws=args.draws, n_inner=args.n_inner,
+                                      spread_draws=0)
+    if settings.draws < 4:
+        print("semmap stability: error: --draws must be at least 4 (R-hat and ESS need them)",
+              file=sys.stderr)
+        return 2
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    for note in inputs.notes:
+        log(f"note: {note}")
+    stop = StopFlag()
+
+    def on_sigint(signum, frame):
+        stop.set("interrupted")
+        log("semmap stability: interrupted: stopping; nothing will be written")
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    plans, semantic = [], []
+    try:
+        for seed in seeds:
+            log(f"--- seed {seed} ---")
+            t0 = time.perf_counter()
+            try:
+                r = run_map(inputs, dataclasses.replace(settings, seed=seed), log=log, stop=stop)
+            except SemmapError:
+                if stop():      # interrupted before any chain had 4 draws
+                    return 130
+                raise
+            if stop():
+                return 130
+            plans.append(Plan.from_semantic(seed, r.semantic, time.perf_counter() - t0))
+            semantic.append(r.semantic)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    result = Stability.of(plans)
+    table = result.table()
+    print(table)
+    if args.out is not None:
+        out = args.out
+        out.mkdir(parents=True, exist_ok=True)
+        head = (f"# W* of {inputs.grid.source} with {len(seeds)} seeds\n\nSame map, model "
+                f"({inputs.model.path.name}) and rules ({rules.name}); "
+                f"{settings.chains} chains x ({settings.tune} burn-in + {settings.draws} draws) x "
+                f"{settings.n_inner} kernels per seed, no sample around W*.\n\n")
+        doc = result.to_dict()
+        doc.update(map=str(inputs.grid.source), model=str(inputs.model.path),
+                   rules=str(rules),
+                   settings={k: getattr(settings, k) for k in ("chains", "tune", "draws", "n_inner", "anneal")})
+        order = [result.reference.seed] + [p.seed for k, p in enumerate(plans) if k != result.ref]
+        atomic.write_text(out / "stability.md", head + table + "\n")
+        atomic.write_text(out / "stability.json", json.dumps(doc, indent=1) + "\n")
+        atomic.write_bytes(out / "stability.png", stability_png(semantic[result.ref], result.units, order))
+        for n in ("stability.md", "stability.json", "stability.png"):
+            print(out / n)
+    return 0
