@@ -124,3 +124,15 @@ def test_stability_user_errors_write_nothing(tmp_path, capsys, args, needle):
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
     assert not out.exists()
+
+
+def test_stability_of_an_all_unknown_map_is_two_empty_plans(tmp_path, capsys):
+    """A legal but degenerate map: every W* is empty, the seeds agree (F1 1), CPR is null."""
+    img = tmp_path / "unknown.png"
+    Image.fromarray(np.full((60, 60), 205, np.uint8)).save(img)
+    out = tmp_path / "stab"
+    assert main(["stability", str(img), "--seeds", "0", "1", "--out", str(out), *TINY]) == 0
+    doc = json.loads((out / "stability.json").read_text())
+    assert [r["units"] for r in doc["runs"]] == [0, 0] and all(r["cpr"] is None for r in doc["runs"])
+    assert doc["units"] == [] and doc["mean_unit_f1"] == 1.0 and doc["stable_units"] == 0
+    assert "0 of 0 units" in capsys.readouterr().out
