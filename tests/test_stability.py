@@ -136,3 +136,36 @@ def test_stability_of_an_all_unknown_map_is_two_empty_plans(tmp_path, capsys):
     assert [r["units"] for r in doc["runs"]] == [0, 0] and all(r["cpr"] is None for r in doc["runs"])
     assert doc["units"] == [] and doc["mean_unit_f1"] == 1.0 and doc["stable_units"] == 0
     assert "0 of 0 units" in capsys.readouterr().out
+
+
+def test_ctrl_c_stops_semmap_stability_and_writes_nothing(tmp_path):
+    """SIGINT while the first seed samples: exit 130, the message, no traceback, no output folder."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    floor = tmp_path / "f"
+    assert main(["synth", "--seed", "3", "--units", "4", "--out", str(floor)]) == 0
+    out = tmp_path / "stab"
+    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "stability", str(floor / "map.yaml"), "--seeds",
+                          "0", "1", "--out", str(out), "--chains", "2", "--cores", "1", "--tune", "2",
+                          "--draws", "100000", "--n-inner", "5"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = []
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        line = p.stderr.readline()
+        if not line:
+            break
+        seen.append(line)
+        if line.startswith("sampling:"):
+            break
+    assert any(s.startswith("sampling:") for s in seen), "".join(seen)
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    stdout, err = p.communicate(timeout=300)
+    err = "".join(seen) + err
+    assert p.returncode == 130, err
+    assert "interrupted: stopping; nothing will be written" in err and "Traceback" not in err
+    assert stdout == "" and not out.exists()
