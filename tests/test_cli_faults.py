@@ -31,10 +31,10 @@ def floor(tmp_path_factory):
     return out / "map.yaml"
 
 
-def sigint_after(args, trigger: str, wait: float = 0.5):
-    """Start `semmap map ARGS`, wait for a stderr line holding ``trigger`` and ``wait`` seconds more,
-    send SIGINT; return (exit code, stderr)."""
-    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", *map(str, args)],
+def sigint_after(args, trigger: str, wait: float = 0.5, command: str = "map", out: list | None = None):
+    """Start `semmap COMMAND ARGS`, wait for a stderr line holding ``trigger`` and ``wait`` seconds
+    more, send SIGINT; return (exit code, stderr); its stdout is appended to ``out``."""
+    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", command, *map(str, args)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen = []
     deadline = time.monotonic() + 300
@@ -48,7 +48,9 @@ def sigint_after(args, trigger: str, wait: float = 0.5):
     assert any(trigger in s for s in seen), "".join(seen)
     time.sleep(wait)
     p.send_signal(signal.SIGINT)
-    _, err = p.communicate(timeout=300)
+    stdout, err = p.communicate(timeout=300)
+    if out is not None:
+        out.append(stdout)
     return p.returncode, "".join(seen) + err
 
 

@@ -140,32 +140,14 @@ def test_stability_of_an_all_unknown_map_is_two_empty_plans(tmp_path, capsys):
 
 def test_ctrl_c_stops_semmap_stability_and_writes_nothing(tmp_path):
     """SIGINT while the first seed samples: exit 130, the message, no traceback, no output folder."""
-    import signal
-    import subprocess
-    import sys
-    import time
+    from test_cli_faults import sigint_after
 
     floor = tmp_path / "f"
     assert main(["synth", "--seed", "3", "--units", "4", "--out", str(floor)]) == 0
-    out = tmp_path / "stab"
-    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "stability", str(floor / "map.yaml"), "--seeds",
-                          "0", "1", "--out", str(out), "--chains", "2", "--cores", "1", "--tune", "2",
-                          "--draws", "100000", "--n-inner", "5"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen = []
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:
-        line = p.stderr.readline()
-        if not line:
-            break
-        seen.append(line)
-        if line.startswith("sampling:"):
-            break
-    assert any(s.startswith("sampling:") for s in seen), "".join(seen)
-    time.sleep(1.0)
-    p.send_signal(signal.SIGINT)
-    stdout, err = p.communicate(timeout=300)
-    err = "".join(seen) + err
-    assert p.returncode == 130, err
+    out, stdout = tmp_path / "stab", []
+    code, err = sigint_after([floor / "map.yaml", "--seeds", "0", "1", "--out", out, "--chains", "2",
+                              "--cores", "1", "--tune", "2", "--draws", "100000", "--n-inner", "5"],
+                             "sampling:", wait=1.0, command="stability", out=stdout)
+    assert code == 130, err
     assert "interrupted: stopping; nothing will be written" in err and "Traceback" not in err
-    assert stdout == "" and not out.exists()
+    assert stdout == [""] and not out.exists()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import signal
 import sys
 from pathlib import Path
 
@@ -57,10 +56,9 @@ def _names(paths: list[Path]) -> list[str]:
 def run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.compare import compare_dict, compare_png, compare_table, summarise, typed_sampled_worlds
-    from semmap_pp.errors import SemmapError
+    from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.pipeline import RunSettings, check_out_dir, load_inputs, run_map
-    from semmap_pp.step import StopFlag
+    from semmap_pp.pipeline import RunSettings, check_out_dir, load_inputs
 
     if len(args.rules) < 2:
         print("semmap compare: error: give --rules at least twice (the knowledge sets to compare)",
@@ -82,36 +80,16 @@ def run(args) -> int:
         print(f"semmap compare: error: --spread-draws {SPREAD_DRAWS_RULE}", file=sys.stderr)
         return 2
 
-    def log(msg: str) -> None:
-        print(msg, file=sys.stderr, flush=True)
-
-    for note in inputs.notes:       # what loading changed, e.g. the outside read as unknown
-        log(f"note: {note}")
-    stop = StopFlag()
-
-    def on_sigint(signum, frame):
-        stop.set("interrupted")
-        log("semmap compare: interrupted: stopping; nothing will be written")
-
-    previous = signal.signal(signal.SIGINT, on_sigint)
+    done = run_each("compare", inputs, [(f"rules {path}", dataclasses.replace(inputs, rules=rs), settings)
+                                        for path, rs in zip(paths, rule_sets)])
+    if done is None:
+        return 130
     runs, worlds, rows = [], [], []
-    try:
-        for name, path, rs in zip(_names(paths), paths, rule_sets):
-            log(f"--- rules {path} ---")
-            try:
-                r = run_map(dataclasses.replace(inputs, rules=rs), settings, log=log, stop=stop)
-            except SemmapError:
-                if stop():      # interrupted before any chain had 4 draws
-                    return 130
-                raise
-            if stop():
-                return 130
-            ws = typed_sampled_worlds(r, args.n_worlds)
-            runs.append(r)
-            worlds.append(ws)
-            rows.append(summarise(r, name, path.name, ws))
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    for name, path, (r, _seconds) in zip(_names(paths), paths, done):
+        ws = typed_sampled_worlds(r, args.n_worlds)
+        runs.append(r)
+        worlds.append(ws)
+        rows.append(summarise(r, name, path.name, ws))
     table = compare_table(rows)
     print(table)
     if args.out is not None:

@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import signal
 import sys
-import time
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
@@ -46,11 +44,10 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.errors import SemmapError
+    from semmap_pp.cli.runs import run_each
     from semmap_pp.outputs.figures import stability_png
-    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
+    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs
     from semmap_pp.stability import Plan, Stability
-    from semmap_pp.step import StopFlag
 
     seeds = list(dict.fromkeys(args.seeds))
     if len(seeds) < 2:
@@ -69,35 +66,12 @@ def run(args) -> int:
               file=sys.stderr)
         return 2
 
-    def log(msg: str) -> None:
-        print(msg, file=sys.stderr, flush=True)
-
-    for note in inputs.notes:
-        log(f"note: {note}")
-    stop = StopFlag()
-
-    def on_sigint(signum, frame):
-        stop.set("interrupted")
-        log("semmap stability: interrupted: stopping; nothing will be written")
-
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    plans, semantic = [], []
-    try:
-        for seed in seeds:
-            log(f"--- seed {seed} ---")
-            t0 = time.perf_counter()
-            try:
-                r = run_map(inputs, dataclasses.replace(settings, seed=seed), log=log, stop=stop)
-            except SemmapError:
-                if stop():      # interrupted before any chain had 4 draws
-                    return 130
-                raise
-            if stop():
-                return 130
-            plans.append(Plan.from_semantic(seed, r.semantic, time.perf_counter() - t0))
-            semantic.append(r.semantic)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    done = run_each("stability", inputs, [(f"seed {seed}", inputs, dataclasses.replace(settings, seed=seed))
+                                          for seed in seeds])
+    if done is None:
+        return 130
+    plans = [Plan.from_semantic(seed, r.semantic, seconds) for seed, (r, seconds) in zip(seeds, done)]
+    semantic = [r.semantic for r, _ in done]
     result = Stability.of(plans)
     table = result.table()
     print(table)

@@ -1,0 +1,49 @@
+"""Several searches of one map in a row, for the commands that compare them (``semmap compare``,
+``semmap stability``): one Ctrl-C handler over all of them, and nothing written when it fires."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+
+
+def log(msg: str) -> None:
+    """A progress or log line, on stderr (results go to stdout)."""
+    print(msg, file=sys.stderr, flush=True)
+
+
+def run_each(command: str, inputs, jobs) -> list | None:
+    """``run_map`` once per ``(title, inputs, settings)`` of ``jobs``, in order, after printing
+    the notes of ``inputs`` (what loading changed) once: ``[(run, seconds), ...]``, or None when
+    Ctrl-C stopped them (the caller then writes nothing and exits 130)."""
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.pipeline import run_map
+    from semmap_pp.step import StopFlag
+
+    for note in inputs.notes:
+        log(f"note: {note}")
+    stop = StopFlag()
+
+    def on_sigint(signum, frame):
+        stop.set("interrupted")
+        log(f"semmap {command}: interrupted: stopping; nothing will be written")
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    runs = []
+    try:
+        for title, job_inputs, settings in jobs:
+            log(f"--- {title} ---")
+            t0 = time.perf_counter()
+            try:
+                run = run_map(job_inputs, settings, log=log, stop=stop)
+            except SemmapError:
+                if stop():      # interrupted before any chain had 4 draws
+                    return None
+                raise
+            if stop():
+                return None
+            runs.append((run, time.perf_counter() - t0))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return runs
