@@ -94,8 +94,10 @@ def _budget(text: str) -> str | float:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all",
-                        choices=["synthetic", "truth", "surgery", "real", "ipa", "types", "all"])
+                        choices=["synthetic", "truth", "surgery", "real", "ipa", "types", "stability", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
+    parser.add_argument("--seeds", default="0,1,2",
+                        help="sampler seeds of --subset stability, comma-separated (default 0,1,2)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
     parser.add_argument("--furniture", action="store_true",
                         help="ipa: the plans with furniture drawn in (NAME_furnitures.png), same truth")
@@ -769,6 +771,55 @@ def bench_surgery(args, model, rules) -> dict:
     return {"rows": rows, "by_class": by_class}
 
 
+def bench_stability(args, model, rules) -> dict:
+    """The synthetic floors searched with each of ``--seeds`` (``semmap stability``'s comparison,
+    :mod:`semmap_pp.stability`), and whether seed agreement tells right from wrong: the best W*'s
+    units found with their type under every seed, and the others, each counted with how many of
+    them match a true unit (IoU >= 0.5, as the synthetic subset scores them)."""
+    from semmap_pp.outputs import world_dict
+    from semmap_pp.stability import Plan, Stability
+    seeds = [int(v) for v in str(args.seeds).split(",") if v.strip()]
+    if len(set(seeds)) < 2:
+        raise SystemExit("--seeds needs at least two different seeds")
+    rows = []
+    tally = {"stable": [0, 0], "unstable": [0, 0]}     # [units, of them matching a true unit]
+    for f in range(args.first_floor, args.first_floor + args.floors):
+        floor, _grid, inputs = _floor(f, model, rules, args.pool, args.resolution)
+        plans, sms = [], []
+        for seed in dict.fromkeys(seeds):
+            settings = dataclasses.replace(_settings(model, args), seed=seed)
+            try:
+                run, clock = _run(inputs, settings, args.quiet)
+            except MapFailed as exc:
+                _log(args, f"synth {f:3d} seed {seed}: FAILED {exc}")
+                break
+            plans.append(Plan.from_semantic(seed, run.semantic, clock[-1][0]))
+            sms.append(run.semantic)
+        if len(plans) < len(set(seeds)):
+            rows.append({"floor": f, "error": "a seed failed"})
+            continue
+        res = Stability.of(plans)
+        pred = world_dict(sms[res.ref])
+        pc = unit_classes(pred, floor.truth, floor.classes.shape)[0]
+        right = {u["id"]: c is None for u, c in zip(pred["units"], pc)}
+        stable = [u.found == u.others and u.same_type == u.others for u in res.units]
+        for u, st in zip(res.units, stable):
+            t = tally["stable" if st else "unstable"]
+            t[0] += 1
+            t[1] += right[u.id]
+        rows.append({"floor": f, "reference_seed": res.reference.seed, "units": [len(p.ids) for p in plans],
+                     "log_posterior": [round(p.log_posterior, 1) for p in plans],
+                     "mean_unit_f1": round(res.mean_f1(), 4), "stable_units": res.stable_units()})
+        _log(args, f"synth {f:3d}: units {rows[-1]['units']}, F1 between seeds {res.mean_f1():.3f}, "
+                   f"{res.stable_units()}/{len(res.units)} stable")
+    ok = [r for r in rows if "error" not in r]
+    return {"seeds": seeds, "rows": rows,
+            "floors_one_plan": sum(r["mean_unit_f1"] == 1.0 for r in ok),
+            "mean_unit_f1": round(float(np.mean([r["mean_unit_f1"] for r in ok])), 4) if ok else None,
+            "units": {k: {"units": v[0], "match_truth": v[1],
+                          "share": round(v[1] / v[0], 4) if v[0] else None} for k, v in tally.items()}}
+
+
 def real_maps(bundled: Path, shared: Path) -> list[tuple[Path, bool]]:
     """The real maps of ``--subset real``: ``(yaml path, bundled)``, the maps bundled in ``bundled``
     (the paper's two, with CPR targets) first, then those of ``shared`` that are not bundled (the
@@ -920,7 +971,7 @@ def run(args) -> dict:
            "published": PUBLISHED, "targets": TARGETS}
     subsets = ["synthetic", "real", "ipa", "types"] if args.subset == "all" else [args.subset]
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
-           "real": bench_real, "ipa": bench_ipa, "types": bench_types}
+           "real": bench_real, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
     for name in subsets:
         t0 = time.perf_counter()
         out[name] = fns[name](args, model, rules)

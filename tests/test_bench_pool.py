@@ -49,3 +49,28 @@ def test_a_floor_scanned_at_another_resolution_is_the_same_building():
     assert len(floor.truth["units"]) == len(fine.truth["units"])
     for u, v in zip(fine.truth["units"], floor.truth["units"]):
         assert u["type"] == v["type"] and np.allclose(u["size_m"], v["size_m"], atol=0.1)
+
+
+def test_bench_stability_counts_every_unit_of_the_best_wstar_once():
+    """bench quality --subset stability on one small floor with short runs: the best W*'s units
+    are split into those every seed agrees on and the others, each with its matches to the truth."""
+    import argparse
+
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.model import load_model
+    from semmap_pp.pipeline import DEFAULT_RULES
+
+    parser = argparse.ArgumentParser()
+    bq.add_arguments(parser)
+    args = parser.parse_args(["--subset", "stability", "--floors", "1", "--first-floor", "1", "--seeds", "0,1",
+                              "--chains", "1", "--cores", "1", "--tune", "2", "--draws", "4", "--n-inner", "10",
+                              "--quiet"])
+    out = bq.bench_stability(args, load_model(), load_rules(DEFAULT_RULES))
+    (row,) = out["rows"]
+    assert out["seeds"] == [0, 1] and len(row["units"]) == 2
+    best = row["units"][int(np.argmax(row["log_posterior"]))]
+    units = out["units"]
+    assert units["stable"]["units"] + units["unstable"]["units"] == best
+    assert units["stable"]["units"] == row["stable_units"]
+    assert all(0 <= v["match_truth"] <= v["units"] for v in units.values())
+    assert out["floors_one_plan"] == int(row["mean_unit_f1"] == 1.0)
