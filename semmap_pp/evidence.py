@@ -182,9 +182,15 @@ def _space_colike(openings, short, classes, ratio, out):  # pragma: no cover - c
             member[u] = True
             width[u] = short[u]
     # the room-like units with open passages, and their passage neighbours (flat lists)
+    total = 0
+    for u in range(n):
+        if classes[u] == 0:
+            for v in range(n):
+                if openings[u, v, 1] > 0:
+                    total += 1
     cand = np.empty(n, np.int64)
     start = np.zeros(n + 1, np.int64)
-    nbr = np.empty(n * n, np.int64)
+    nbr = np.empty(total, np.int64)
     k = 0
     e = 0
     for u in range(n):
@@ -520,8 +526,8 @@ def patch_knowledge_evidence(ev, items: Mapping, muldoor: Mapping, adj_drop, adj
 
     ``items`` maps a unit to its new :func:`unit_geometry` item (None: the unit is gone);
     ``muldoor`` a unit to whether it now has MulDoor (a unit that goes and had it: False);
-    ``adj_drop`` and ``adj_add`` are the
-    adjacent pairs ``(p, q)``, ``p < q``, that go and come. Every other part of ``ev`` is kept.
+    ``adj_drop`` and ``adj_add`` are the adjacent pairs ``(p, q)``, ``p < q``, that go and come.
+    Every other part of ``ev`` is kept.
     Equal to the evidence built in full (tests/test_evidence.py); the parts of ``ev`` that do not
     change are the same objects, so comparing and hashing them stays cheap.
 
