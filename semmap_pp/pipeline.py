@@ -307,8 +307,22 @@ class MapRun:
 SLOW_DRAW_FACTOR = 50.0
 
 
-def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[wm.World]:
-    """One start world per chain: the greedy data-driven world, then dispersed variants of it.
+def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm.World | None = None
+                 ) -> list[wm.World]:
+    """One start world per chain: the greedy data-driven world (:func:`data_start_world`, or
+    ``base`` when given: it does not depend on the seed), then dispersed variants of it drawn
+    with ``rng``."""
+    clean = data_start_world(inputs) if base is None else base
+    c = inputs.frame.cells
+    worlds = [clean]
+    for _ in range(1, chains):
+        worlds.append(dispersed_world(rng, clean, inputs.frame.shape, min_side=c.min_side))
+    return worlds
+
+
+def data_start_world(inputs: Inputs) -> wm.World:
+    """The greedy data-driven start world of chain 1, refined by the knowledge-free ascent
+    (deterministic: the same for every seed).
 
     The greedy cover has ``[prior] k_max`` slots (its smallest pieces are left out when they do not
     fit); the start ascent doubles the world's capacity when a split or a birth finds no empty slot
@@ -330,14 +344,12 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator) -> list[
     if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/ascent.py)
         clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
                              rounds=ks.start_rounds)
-    worlds = [clean]
-    for _ in range(1, chains):
-        worlds.append(dispersed_world(rng, clean, frame.shape, min_side=c.min_side))
-    return worlds
+    return clean
 
 
 def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,
-            budget: float | None = None, resume=None, starts: list | None = None) -> MapRun:
+            budget: float | None = None, resume=None, starts: list | None = None,
+            base_start: wm.World | None = None) -> MapRun:
     """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report.
 
     Parameters
@@ -354,6 +366,9 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     starts : list of World, optional
         Start worlds of the chains (repeated cyclically) instead of the data-driven ones, e.g. the
         W* of an earlier run, as the paper's Fig. 7 does; not with ``resume``.
+    base_start : World, optional
+        :func:`data_start_world` of ``inputs``, made earlier (it does not depend on the seed:
+        ``semmap stability`` makes it once for all its seeds); the run is the same as without.
     """
     from semmap_pp.kernels import data_from_frame, default_mix
     from semmap_pp.kernels.data import settings_from_mapping
@@ -371,8 +386,9 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         if starts is None:   # minutes on a large map: say so before, and how long after
             log(f"{head}; building the start worlds")
             t_start = time.perf_counter()
-            starts = start_worlds(inputs, settings.chains, rng)
-            log(f"start world: {wm.n_units(starts[0])} units ({time.perf_counter() - t_start:.1f} s)")
+            starts = start_worlds(inputs, settings.chains, rng, base=base_start)
+            made = "shared" if base_start is not None else f"{time.perf_counter() - t_start:.1f} s"
+            log(f"start world: {wm.n_units(starts[0])} units ({made})")
         else:
             starts = [starts[i % len(starts)] for i in range(settings.chains)]
             log(f"{head}; start world: {wm.n_units(starts[0])} units (given)")

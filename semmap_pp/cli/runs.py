@@ -16,7 +16,11 @@ def log(msg: str) -> None:
 def run_each(command: str, inputs, jobs) -> list | None:
     """``run_map`` once per ``(title, inputs, settings)`` of ``jobs``, in order, after printing
     the notes of ``inputs`` (what loading changed) once: ``[(run, seconds), ...]``, or None when
-    Ctrl-C stopped them (the caller then writes nothing and exits 130)."""
+    Ctrl-C stopped them (the caller then writes nothing and exits 130).
+
+    The jobs share one map and model, so chain 1's data-driven start world, which depends on
+    neither the seed nor the rules (:func:`semmap_pp.pipeline.data_start_world`), is built by
+    the first run and handed to the others (``base_start``): the same runs, built once."""
     from semmap_pp.errors import SemmapError
     from semmap_pp.pipeline import run_map
     from semmap_pp.step import StopFlag
@@ -30,13 +34,13 @@ def run_each(command: str, inputs, jobs) -> list | None:
         log(f"semmap {command}: interrupted: stopping; nothing will be written")
 
     previous = signal.signal(signal.SIGINT, on_sigint)
-    runs = []
+    runs, base = [], None
     try:
         for title, job_inputs, settings in jobs:
             log(f"--- {title} ---")
             t0 = time.perf_counter()
             try:
-                run = run_map(job_inputs, settings, log=log, stop=stop)
+                run = run_map(job_inputs, settings, log=log, stop=stop, base_start=base)
             except SemmapError:
                 if stop():      # interrupted before any chain had 4 draws
                     return None
@@ -44,6 +48,7 @@ def run_each(command: str, inputs, jobs) -> list | None:
             if stop():
                 return None
             runs.append((run, time.perf_counter() - t0))
+            base = run.starts[0] if base is None and run.starts else base
     finally:
         signal.signal(signal.SIGINT, previous)
     return runs
