@@ -83,14 +83,17 @@ class Plan:
     log_posterior: float
     cpr: float
     seconds: float = float("nan")
+    vertices_m: tuple = ()   # per unit, its four corners in the map frame (metres), as world.json
 
     @classmethod
     def from_semantic(cls, seed: int, sm, seconds: float = float("nan")) -> "Plan":
         """The plan of a :class:`~semmap_pp.outputs.semantic.SemanticMap` (exterior units left out)."""
         ids = sm.unit_ids
         rects = tuple(tuple(int(v) for v in sm.world.rects[sm.slot_of(u)]) for u in ids)
+        corners = tuple(tuple((round(float(x), 4), round(float(y), 4)) for x, y in sm.frame.rect_vertices_m(r))
+                        for r in rects)
         return cls(seed, tuple(ids), rects, tuple(sm.type_of(u) for u in ids),
-                   float(sm.log_posterior), float(sm.cpr), float(seconds))
+                   float(sm.log_posterior), float(sm.cpr), float(seconds), corners)
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,7 @@ class Stability:
         """Every number, JSON-ready (NaN as None)."""
         def num(v):
             return None if isinstance(v, float) and np.isnan(v) else v
+        ref_m = self.reference.vertices_m
         return {
             "format": "semmap_pp.stability/1",
             "match_iou": MATCH_IOU,
@@ -197,9 +201,10 @@ class Stability:
             "unit_f1": [[float(v) for v in row] for row in self.f1],
             "mean_unit_f1": self.mean_f1(),
             "stable_units": self.stable_units(),
-            "units": [{"id": u.id, "type": u.type, "rect_cells": list(r), "found": u.found,
+            "units": [{"id": u.id, "type": u.type, "rect_cells": list(r),
+                       "vertices_m": [list(v) for v in ref_m[k]] if ref_m else None, "found": u.found,
                        "same_type": u.same_type, "others": u.others, "mean_iou": num(u.mean_iou)}
-                      for u, r in zip(self.units, self.reference.rects)],
+                      for k, (u, r) in enumerate(zip(self.units, self.reference.rects))],
         }
 
 

@@ -102,13 +102,18 @@ def test_stability_runs_each_seed_and_writes_table_json_and_figure(tmp_path, cap
     f1 = np.array(doc["unit_f1"])
     assert f1.shape == (2, 2) and f1[0, 1] == f1[1, 0] == doc["mean_unit_f1"]
     assert doc["stable_units"] == sum(u["found"] == u["same_type"] == 1 for u in doc["units"])
-    # each seed's W* is the one `semmap map --seed N` writes with the same run lengths
-    one = tmp_path / "one"
-    assert main(["map", str(MAP), "--out", str(one), "--seed", "5", "--spread-draws", "0", *TINY,
-                 "--progress", "none"]) == 0
-    world = json.loads((one / "world.json").read_text())
-    run5 = next(r for r in doc["runs"] if r["seed"] == 5)
-    assert world["log_posterior"] == pytest.approx(run5["log_posterior"], abs=1e-6)
+    # each seed's W* is the one `semmap map --seed N` writes with the same run lengths (seed 5's
+    # search took chain 1's start world from seed 3's), and the reference's units are its units
+    for seed in (3, 5):
+        one = tmp_path / f"one{seed}"
+        assert main(["map", str(MAP), "--out", str(one), "--seed", str(seed), "--spread-draws", "0", *TINY,
+                     "--progress", "none"]) == 0
+        world = json.loads((one / "world.json").read_text())
+        run = next(r for r in doc["runs"] if r["seed"] == seed)
+        assert world["log_posterior"] == pytest.approx(run["log_posterior"], abs=1e-6)
+        if seed == doc["reference_seed"]:
+            assert [(u["id"], u["type"], u["vertices_m"]) for u in world["units"]] == \
+                [(u["id"], u["type"], u["vertices_m"]) for u in doc["units"]]
     assert (out / "stability.md").read_text().startswith("# W* of ")
     assert Image.open(out / "stability.png").size[0] > 100
 
