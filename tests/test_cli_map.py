@@ -51,7 +51,8 @@ def test_map_writes_every_file(first_run):
     assert line[line.index("W*:"):line.index(", log posterior")] in text
     # the verdict of the chains, as diagnostics.txt gives it, and where to read more
     verdict = "converged" if "\nconverged\n" in text else "NOT converged"
-    assert f"chains: {verdict} (2 x 4 draws; R-hat and ESS: `semmap diagnose {out}`)" in r.stderr
+    hint = "" if verdict == "converged" else f"; whether other seeds find the same plan: `semmap stability {MAP}`"
+    assert f"chains: {verdict} (2 x 4 draws; R-hat and ESS: `semmap diagnose {out}`{hint})" in r.stderr
     note = [x for x in text.splitlines() if x.startswith("chains in separate modes")]
     assert note == [x for x in r.stderr.splitlines() if x.startswith("chains in separate modes")]
     # the sample around W* (the spread figures' draws): its line in the log, its report in the file

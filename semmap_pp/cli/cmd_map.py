@@ -202,7 +202,9 @@ def run(args) -> int:
         print(path)
     rep = result.report
     log(f"chains: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x {rep.n_draws} draws; "
-        f"R-hat and ESS: `semmap diagnose {out}`)")
+        f"R-hat and ESS: `semmap diagnose {out}`"
+        + ("" if rep.ok else f"; whether other seeds find the same plan: "
+           f"`semmap stability {result.inputs.grid.source}`") + ")")
     note = rep.separation_note()
     if note:
         log(note)
