@@ -141,6 +141,15 @@ def test_stability_of_an_all_unknown_map_is_two_empty_plans(tmp_path, capsys):
     assert [r["units"] for r in doc["runs"]] == [0, 0] and all(r["cpr"] is None for r in doc["runs"])
     assert doc["units"] == [] and doc["mean_unit_f1"] == 1.0 and doc["stable_units"] == 0
     assert "0 of 0 units" in capsys.readouterr().out
+    # --json: the same object on stdout, one line, and nothing else
+    assert main(["stability", str(img), "--seeds", "0", "1", "--json", *TINY]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    again = json.loads(printed[0])
+    assert len(printed) == 1 and again.keys() == doc.keys()
+
+    def untimed(d):
+        return dict(d, runs=[{k: v for k, v in r.items() if k != "seconds"} for r in d["runs"]])
+    assert untimed(again) == untimed(doc)
 
 
 def test_ctrl_c_stops_semmap_stability_and_writes_nothing(tmp_path):

@@ -38,6 +38,8 @@ def register(subparsers) -> None:
     p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
     p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
+    p.add_argument("--json", action="store_true",
+                   help="print stability.json's object (one line) instead of the table")
     add_map_options(p)
     p.set_defaults(func=run)
 
@@ -74,7 +76,10 @@ def run(args) -> int:
     semantic = [r.semantic for r, _ in done]
     result = Stability.of(plans)
     table = result.table()
-    print(table)
+    doc = result.to_dict()
+    doc.update(map=str(inputs.grid.source), model=str(inputs.model.path), rules=str(rules),
+               settings={k: getattr(settings, k) for k in ("chains", "tune", "draws", "n_inner", "anneal")})
+    print(json.dumps(doc) if args.json else table)
     if args.out is not None:
         out = args.out
         out.mkdir(parents=True, exist_ok=True)
@@ -82,10 +87,6 @@ def run(args) -> int:
                 f"({inputs.model.path.name}) and rules ({rules.name}); "
                 f"{settings.chains} chains x ({settings.tune} burn-in + {settings.draws} draws) x "
                 f"{settings.n_inner} kernels per seed, no sample around W*.\n\n")
-        doc = result.to_dict()
-        doc.update(map=str(inputs.grid.source), model=str(inputs.model.path),
-                   rules=str(rules),
-                   settings={k: getattr(settings, k) for k in ("chains", "tune", "draws", "n_inner", "anneal")})
         order = [result.reference.seed] + [p.seed for k, p in enumerate(plans) if k != result.ref]
         atomic.write_text(out / "stability.md", head + table + "\n")
         atomic.write_text(out / "stability.json", json.dumps(doc, indent=1) + "\n")
