@@ -70,3 +70,19 @@ def test_compare_says_once_that_the_outside_was_read_as_unknown(tmp_path, capsys
     err = capsys.readouterr().err
     assert err.count("note: ") == 1 and "read as unknown" in err
     assert err.index("note: ") < err.index("--- rules ")
+
+
+def test_each_rule_set_gets_the_wstar_semmap_map_gives_it(tmp_path):
+    """The rule sets share chain 1's start world (built by the first run: it depends on no rules),
+    and each W* is still the one `semmap map --rules FILE` finds with the same seed and lengths."""
+    out = tmp_path / "cmp"
+    assert main(["compare", str(MAP), "--rules", str(RULES / "table3.lp"), "--rules", str(RULES / "none.lp"),
+                 "--out", str(out), "--seed", "4", *TINY]) == 0
+    doc = json.loads((out / "compare.json").read_text())
+    one = tmp_path / "none"
+    assert main(["map", str(MAP), "--rules", str(RULES / "none.lp"), "--out", str(one), "--seed", "4",
+                 "--progress", "none", *TINY[:TINY.index("--n-worlds")], *TINY[TINY.index("--n-worlds") + 2:]]) == 0
+    world = json.loads((one / "world.json").read_text())
+    none = next(r for r in doc["rule_sets"] if r["name"] == "none")
+    assert none["log_posterior"] == pytest.approx(world["log_posterior"], abs=1e-6)
+    assert none["n_units"] == len(world["units"])
