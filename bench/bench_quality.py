@@ -802,9 +802,8 @@ def bench_stability(args, model, rules) -> dict:
         pred = world_dict(sms[res.ref])
         pc = unit_classes(pred, floor.truth, floor.classes.shape)[0]
         right = {u["id"]: c is None for u, c in zip(pred["units"], pc)}
-        stable = [u.found == u.others and u.same_type == u.others for u in res.units]
-        for u, st in zip(res.units, stable):
-            t = tally["stable" if st else "unstable"]
+        for u in res.units:
+            t = tally["stable" if u.agreed else "unstable"]
             t[0] += 1
             t[1] += right[u.id]
         rows.append({"floor": f, "reference_seed": res.reference.seed, "units": [len(p.ids) for p in plans],

@@ -43,6 +43,7 @@ OUTSIDE_MODES = ("auto", "unknown", "keep")
 # up front, so k_max bounds memory; a length in cells must fit the int32 arrays of the samples.
 MAX_MODEL_BYTES = 1 << 20
 MAX_K = 100_000
+MAX_CELLS_PER_LENGTH = 2**31 - 1
 #: Most draws per chain of the sample around W* (each records a world: memory grows with it).
 MAX_SPREAD_DRAWS = 100_000
 #: What ``spread_draws`` must be (:func:`spread_draws_ok`), as the model file and the options say it.
@@ -52,7 +53,6 @@ SPREAD_DRAWS_RULE = "must be 0 (no sample around W*) or at least 4 (R-hat and ES
 def spread_draws_ok(n: int) -> bool:
     """Whether ``n`` draws per chain make a sample around W*: none, or enough for R-hat and ESS."""
     return n == 0 or n >= 4
-MAX_CELLS_PER_LENGTH = 2**31 - 1
 
 
 @dataclass(frozen=True)

@@ -108,6 +108,11 @@ class UnitAgreement:
     others: int
     mean_iou: float
 
+    @property
+    def agreed(self) -> bool:
+        """Whether every other W* holds this unit, with its type."""
+        return self.found == self.others and self.same_type == self.others
+
 
 def unit_agreement(ref: Plan, others: list[Plan]) -> list[UnitAgreement]:
     """:class:`UnitAgreement` of every unit of ``ref`` against the plans ``others``."""
@@ -145,16 +150,21 @@ class Stability:
         if len(plans) < 2:
             raise ValueError("stability needs the W*s of at least two seeds")
         ref = int(np.argmax([p.log_posterior for p in plans]))
-        others = [p for k, p in enumerate(plans) if k != ref]
+        others = plans[:ref] + plans[ref + 1:]
         return cls(tuple(plans), ref, tuple(unit_agreement(plans[ref], others)), pairwise_f1(plans))
 
     @property
     def reference(self) -> Plan:
         return self.plans[self.ref]
 
+    @property
+    def others(self) -> tuple:
+        """The plans other than the reference, in seed order."""
+        return self.plans[:self.ref] + self.plans[self.ref + 1:]
+
     def stable_units(self) -> int:
         """Units of the reference W* found, with the same type, in every other W*."""
-        return sum(u.found == u.others and u.same_type == u.others for u in self.units)
+        return sum(u.agreed for u in self.units)
 
     def mean_f1(self) -> float:
         """Mean unit F1 over the pairs of different seeds."""

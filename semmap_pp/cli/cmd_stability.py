@@ -87,7 +87,7 @@ def run(args) -> int:
                 f"({inputs.model.path.name}) and rules ({rules.name}); "
                 f"{settings.chains} chains x ({settings.tune} burn-in + {settings.draws} draws) x "
                 f"{settings.n_inner} kernels per seed, no sample around W*.\n\n")
-        order = [result.reference.seed] + [p.seed for k, p in enumerate(plans) if k != result.ref]
+        order = [p.seed for p in (result.reference, *result.others)]
         atomic.write_text(out / "stability.md", head + table + "\n")
         atomic.write_text(out / "stability.json", json.dumps(doc, indent=1) + "\n")
         atomic.write_bytes(out / "stability.png", stability_png(semantic[result.ref], result.units, order))

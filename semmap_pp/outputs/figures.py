@@ -358,18 +358,16 @@ def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
     return png(fig)
 
 
-
 #: stability.png: a unit found with its type in every other seed's W*, in some or with another
 #: type, in none
 AGREEMENT_COLOURS = {"every seed": "#1a9850", "some seeds": "#f39c12", "no other seed": "#d73027"}
 
 
-def agreement_class(found: int, same_type: int, others: int) -> str:
-    """The :data:`AGREEMENT_COLOURS` key of a unit found in ``found`` of ``others`` W*s, with
-    the same type in ``same_type``."""
-    if found == others and same_type == others:
+def agreement_class(u) -> str:
+    """The :data:`AGREEMENT_COLOURS` key of a :class:`~semmap_pp.stability.UnitAgreement`."""
+    if u.agreed:
         return "every seed"
-    return "some seeds" if found else "no other seed"
+    return "some seeds" if u.found else "no other seed"
 
 
 def stability_png(sm, agreement, seeds) -> bytes:
@@ -381,7 +379,7 @@ def stability_png(sm, agreement, seeds) -> bytes:
     _show(ax, classified_rgb(sm.grid.classes, light=True), box)
     for u in agreement:
         v = sm.frame.rect_vertices_px(sm.world.rects[sm.slot_of(u.id)])
-        colour = AGREEMENT_COLOURS[agreement_class(u.found, u.same_type, u.others)]
+        colour = AGREEMENT_COLOURS[agreement_class(u)]
         ax.add_patch(Polygon(v, closed=True, fc=colour, ec=colour, alpha=0.35, lw=1.5, zorder=3))
         ax.add_patch(Polygon(v, closed=True, fill=False, ec=colour, lw=1.8, zorder=4))
         x, y = np.asarray(v, float).mean(axis=0)
@@ -393,6 +391,7 @@ def stability_png(sm, agreement, seeds) -> bytes:
     _legend(fig, [Patch(fc=c, ec=c, alpha=0.6, label=k) for k, c in AGREEMENT_COLOURS.items()])
     fig.subplots_adjust(0.005, 0.4 / fig.get_figheight(), 0.995, 1 - 0.3 / fig.get_figheight())
     return png(fig)
+
 
 __all__ = ["png", "classified_rgb", "overlay_rgb", "door_mask_image", "crop_box", "overlay_png",
            "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "independent_text", "posterior_png", "posterior_cells_png", "roi_png",
