@@ -11,15 +11,14 @@ import time
 
 import numpy as np
 import pytest
-from test_knowledge_inference import oracle
+from test_knowledge_inference import _map_tuple, oracle, oracle_map
 
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
-from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.layouts import dense_floor
 from semmap_pp.knowledge.lbp import BPSettings, cluster, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import separate
-from semmap_pp.knowledge.map import map_pairwise_rc2, map_rc2
+from semmap_pp.knowledge.map import map_pairwise_rc2
 
 # Largest LBP error against exact marginals on random floors of 3..6 units with 70 % of the
 # pairs adjacent (types and SaLe, rules/table3.lp): measured 0.0072 over 300 floors.
@@ -187,7 +186,8 @@ def test_lbp_close_to_enumeration_on_loopy_floors():
         err = max([np.abs(r.types[u] - types[u]).max() for u in ev.units]
                   + [abs(r.sale[pq] - sale[pq]) for pq in ev.adj])
         assert 0 < err < TABLE3_TOL
-        assert abs(r.map_cost * 1000 - best) < 1e-6     # the MAP stays exact
+        map_best, map_types = oracle_map(rules, ev)     # the MAP stays exact
+        assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
 
 
 def random_dense_floor(rng):
@@ -235,7 +235,9 @@ def test_auto_picks_exact_on_small_floors_and_agrees_with_enumeration(rule_file)
             np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
         for pq in ev.adj:
             assert abs(r.sale[pq] - sale[pq]) < 1e-9
-        assert abs(r.log_z - log_z) < 1e-9 and abs(r.map_cost * 1000 - best) < 1e-6
+        assert abs(r.log_z - log_z) < 1e-9
+        map_best, map_types = oracle_map(rules, ev)
+        assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
 
 
 def test_general_path_falls_back_to_factor_bp():
@@ -305,8 +307,9 @@ def test_dense_floors_that_used_to_raise_get_marginals_in_time(n):
     r = engine.infer(ev)            # templates built here
     assert r.method == "lbp"
     check_valid(r, ev)
-    # the MAP is exact: the ground network's RC2 optimum
-    assert abs(r.map_cost * 1000 - map_rc2(ground(rules, ev).network)[1]) < 1e-6
+    # the MAP is exact: RC2's optimum of the ground network, soft evidence summed out
+    rc2 = KnowledgeEngine(rules, map_method="rc2", method="lbp").infer(ev)
+    assert rc2.map_method == "rc2" and abs(r.map_cost - rc2.map_cost) < 1e-5
     best = np.inf
     for _ in range(3):
         engine._cache.clear()

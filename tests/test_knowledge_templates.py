@@ -176,7 +176,7 @@ def test_the_map_side_updated_along_edits_equals_the_one_built_from_scratch(tmp_
     pairwise-local rule sets of rules/, one with pair terms that depend on a neighbour's
     evidence, and one whose pair rule couples room pairs: the MAP side updated from the previous
     evidence equals, table for table and bit for bit, the one built from scratch; both are None
-    exactly when a pair couples its units; the MAP types are those of the full inference; and
+    exactly when a pair couples its units (or reads a unit's soft atoms); the MAP types are those of the full inference; and
     ``map_types(ev, base=...)`` equals the full inference's."""
     from semmap_pp.knowledge.local import map_net, map_net_update
     coupled = tmp_path / "coupled.lp"
@@ -219,6 +219,8 @@ def test_the_map_side_updated_along_edits_equals_the_one_built_from_scratch(tmp_
         if path == str(coupled):
             assert coupled_nets > 60    # the general path (junction tree) for most
         elif path == str(neighbourly):
-            assert nets > 60 and coupled_nets == 0
+            # a unit whose soft atom a pair reads keeps it: summing it out for the MAP couples
+            # the pair, so those evidences take the general path; the others are updated
+            assert nets > 15 and coupled_nets > 30
         else:
             assert nets > 60 and coupled_nets == 0

@@ -25,7 +25,8 @@ def register(subparsers) -> None:
                        help="marginals: auto (exact junction tree when small, else loopy BP), "
                             "exact, lbp (loopy belief propagation) or mcsat (default: auto)")
     query.add_argument("--map", dest="map_method", choices=("jt", "clingo", "rc2"), default="jt",
-                       help="MAP by junction-tree max-product, clingo optimisation or RC2")
+                       help="MAP (types and SaLe, soft evidence summed out) by junction-tree "
+                            "max-product, RC2, or clingo optimisation (no soft evidence)")
     query.add_argument("--json", action="store_true", help="print one JSON object")
     query.set_defaults(func=_query)
 

@@ -25,12 +25,12 @@ from semmap_pp.errors import RuleError
 from semmap_pp.knowledge.dialect import RuleSet, load_rules
 from semmap_pp.knowledge.evidence import Evidence
 from semmap_pp.knowledge.exact import (MAX_CLIQUE_STATES, JunctionTree, TooDense, calibrate,
-                                       calibrate_flat, decode_max, merged_potentials)
+                                       calibrate_flat, decode_max, merged_potentials, sum_out)
 from semmap_pp.knowledge.ground import ground
 from semmap_pp.knowledge.lbp import BPSettings, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import (LocalModel, default_store, is_pairwise, map_net,
                                        map_net_update)
-from semmap_pp.knowledge.map import map_clingo, map_pairwise_rc2, map_rc2
+from semmap_pp.knowledge.map import map_clingo, map_pairwise_rc2, map_rc2, map_tables_rc2
 from semmap_pp.knowledge.mcsat import mcsat_marginals
 from semmap_pp.knowledge.mcsat_local import LocalClauses, mcsat_local
 
@@ -52,9 +52,12 @@ class InferenceResult:
     sale : dict (p, q) -> float
         ``P(sale(p,q))`` for each adjacent pair, ``p < q``.
     map_types : dict int -> str
-        Types of the most probable world (a ``cells.UNIT_TYPES`` name per unit).
+        The most probable types (a ``cells.UNIT_TYPES`` name per unit), maximised jointly with
+        SaLe, the soft evidence atoms summed out.
     map_cost : float
-        Weight of the soft rules the MAP world violates (MLN units, i.e. thousandths / 1000).
+        ``-log`` of the MAP's unnormalised weight (MLN units): without soft evidence the weight
+        of the soft rules the MAP world violates; with it, summed over the soft atoms' states,
+        so it can be negative.
     log_z : float or None
         Log partition function over types and SaLe (exact marginals only).
     method : str
@@ -86,7 +89,9 @@ class KnowledgeEngine:
         The MAP stays exact: when its own junction tree is too large (``auto``/``lbp``: above
         ``auto_max_states``) RC2 solves it.
     map_method : {"jt", "clingo", "rc2"}
-        MAP by max-product on the junction tree, clingo optimisation, or RC2 MaxSAT.
+        MAP by max-product on the junction tree, clingo optimisation, or RC2 MaxSAT. The MAP
+        maximises the types and SaLe with the soft evidence atoms summed out (``_map_ground``);
+        clingo, which optimises whole worlds, refuses evidence with soft atoms.
     n_chains, n_iter, burn_in : int
         MC-SAT settings (see :func:`~semmap_pp.knowledge.mcsat.mcsat_marginals`).
     cache_size : int
@@ -210,7 +215,15 @@ class KnowledgeEngine:
             self._map_cache.move_to_end(ev.key)
             return hit
         tn = self.local.type_network(ev)
-        x, best, map_method = self._map_local(tn, self.rules.path)
+        if any(tn.shift):
+            # a pair rule reads some unit's soft evidence atoms, so they stay in its variable;
+            # summing them out couples the pair: the ground network's MAP does it exactly
+            g = ground(self.rules, ev)
+            xg, cost, map_method = self._map_ground(g, merged_potentials(g.network), None)
+            x = np.array([int(xg[i]) << tn.shift[i] for i in range(len(ev.units))], dtype=np.int64)
+            best = -cost
+        else:
+            x, best, map_method = self._map_local(tn, self.rules.path)
         hit = self._map_cache[ev.key] = (tn, x, best, map_method)
         if len(self._map_cache) > 256:
             self._map_cache.popitem(last=False)
@@ -257,17 +270,7 @@ class KnowledgeEngine:
         jt = None if self.method == "lbp" and self.map_method != "jt" else \
             self._tree(net.card, scopes, net.path)
         # MAP first: it is exact and raises when the hard rules admit no world
-        map_method = self.map_method
-        if self.map_method == "jt" and jt is not None:
-            x, best = decode_max(jt, pots)
-            if not np.isfinite(best):
-                raise RuleError(net.path, "the hard rules admit no world for this evidence")
-            cost = net.cost(x)
-        elif self.map_method == "clingo":
-            x, cost = map_clingo(g)
-        else:
-            x, cost = map_rc2(net)
-            map_method = "rc2"
+        x, cost, map_method = self._map_ground(g, pots, jt)
         log_z, method = None, self.method
         if self.method == "mcsat":
             rng = np.random.default_rng(self.signature_seed(ev))
@@ -292,20 +295,58 @@ class KnowledgeEngine:
         for p_, q_ in ev.adj:
             v = net.sale.get((p_, q_))
             sale[(p_, q_)] = float(marg[v][1]) if v is not None else 0.0
-        return InferenceResult(types, sale, map_types, float(cost) / 1000.0, log_z, method,
-                               map_method)
+        return InferenceResult(types, sale, map_types, float(cost), log_z, method, map_method)
 
-    def _compute_local_mcsat(self, ev: Evidence) -> InferenceResult:
-        card, sum_pots, max_pots, softs, conds = self.local.reduced(ev)
-        path = self.rules.path
-        jt = JunctionTree(card, [s for s, _ in sum_pots], path)
-        x, best = decode_max(jt, max_pots)
+    def _map_ground(self, g, pots, jt):
+        """MAP of a ground network ``g.network`` with log potentials ``pots`` (merged) and its
+        junction tree ``jt`` (None: too large): ``(assignment, cost in MLN units, method)``.
+
+        The MAP maximises the query atoms (types, SaLe) with the soft evidence atoms summed out
+        (:func:`~semmap_pp.knowledge.exact.sum_out`): the most probable types given uncertain
+        evidence. Maximising the evidence atoms as well would let a unit with soft geometry
+        take *no* geometry class, which no rule reads, and get a type by tie-breaking. clingo
+        optimises the ground program, so it maximises them: it is refused with soft evidence.
+        """
+        net = g.network
+        path = net.path
+        sale_vars = set(net.sale.values())
+        soft = [v for v in range(len(net.units), net.n_vars) if v not in sale_vars]
+        if self.map_method == "clingo":
+            if soft:
+                raise RuleError(path, "MAP by clingo maximises the soft evidence atoms instead "
+                                      "of summing them out; with soft evidence use the MAP method "
+                                      "'jt' or 'rc2'")
+            x, cost = map_clingo(g)
+            return x, cost / 1000.0, "clingo"
+        if not soft:
+            if self.map_method == "jt" and jt is not None:
+                x, best = decode_max(jt, pots)
+                if not np.isfinite(best):
+                    raise RuleError(path, "the hard rules admit no world for this evidence")
+                return x, net.cost(x) / 1000.0, "jt"
+            x, cost = map_rc2(net)
+            return x, cost / 1000.0, "rc2"
+        mpots, const = sum_out(net.card, pots, soft, path)
+        tree = self._tree(net.card, [s for s, _ in mpots], path) if self.map_method == "jt" else None
+        if tree is not None:
+            x, best = decode_max(tree, mpots)
+            method = "jt"
+        else:
+            x, best = map_tables_rc2(net.card, mpots, path)
+            method = "rc2"
         if not np.isfinite(best):
             raise RuleError(path, "the hard rules admit no world for this evidence")
+        return x, -(best + const) + net.offset / 1000.0, method
+
+    def _compute_local_mcsat(self, ev: Evidence) -> InferenceResult:
+        card, sum_pots, _max_pots, _softs, _conds = self.local.reduced(ev)
+        tn, x, best, map_method = self._local_map(ev)
+        jt = JunctionTree(card, [s for s, _ in sum_pots], self.rules.path)
         rng = np.random.default_rng(self.signature_seed(ev))
         types, sale = mcsat_local(self.local_clauses, ev, rng, *self.mcsat_settings, jt=jt)
-        map_types = {u: UNIT_TYPES[int(x[i]) >> softs[i]] for i, u in enumerate(ev.units)}
-        return InferenceResult(types, sale, map_types, -float(best) + 0.0, None, self.method)
+        map_types = {u: UNIT_TYPES[int(x[i]) >> tn.shift[i]] for i, u in enumerate(ev.units)}
+        return InferenceResult(types, sale, map_types, -float(best) + 0.0, None, self.method,
+                               map_method)
 
     def _map_local(self, tn, path):
         """Exact MAP of a type network: per unit, junction tree, or RC2 when the tree is large."""

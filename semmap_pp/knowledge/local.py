@@ -365,14 +365,15 @@ class LocalModel:
         return hit
 
     def unit_types(self, key, cut):
-        """Sum-out and max-out unit tables of pattern ``key`` with its low ``cut`` soft bits
-        (all or none of them) summed / maximised out (cached; do not modify)."""
+        """Unit tables of pattern ``key`` for the marginals and for the MAP, with its low ``cut``
+        soft bits (all or none of them) summed out in both: the MAP maximises the types, not
+        the soft evidence atoms (engine ``_map_ground``) (cached; do not modify)."""
         hit = self._unit_types.get((key, cut))
         if hit is None:
             table = self.unit(key)[0]
             if cut:
-                t = table.reshape(-1, 1 << cut)
-                hit = (_lse(t, 1), t.max(axis=1))
+                t = _lse(table.reshape(-1, 1 << cut), 1)
+                hit = (t, t)
             else:
                 hit = (table, table)
             for t in hit:
@@ -686,6 +687,8 @@ def map_net(model: "LocalModel", ev: Evidence, path=None) -> MapNet | None:
     nbrs = {u: tuple(n) for u, n in nbrs.items()}
     cut, shift, umax, x = {}, {}, {}, {}
     _recut(model, keys, nbrs, units, cut, shift)
+    if any(shift.values()):    # soft atoms a pair reads: summing them out couples the pair
+        return None
     if not _refold(model, keys, nbrs, cut, units, umax, x, path):
         return None
     return MapNet(ev, keys, nbrs, cut, shift, umax, x)
@@ -743,6 +746,8 @@ def map_net_update(model: "LocalModel", base: MapNet, ev: Evidence, path=None,
     for u in dirty:
         ring1.update(nbrs[u])
     _recut(model, keys, nbrs, ring1, cut, shift)
+    if any(shift[u] for u in ring1):
+        return None
     # a table changes with the unit's pattern, neighbours or cut, or a neighbour's pattern or cut
     changed = dirty | {u for u in ring1 - dirty if cut[u] != base.cut[u]}
     ring2 = set(changed)

@@ -1,10 +1,13 @@
 """MAP worlds: by clingo optimisation and by python-sat's RC2 weighted MaxSAT.
 
-Both minimise the same cost as the network (integer thousandths): clingo solves the ground
-program itself (its weak constraints are the soft rules), RC2 solves a WCNF encoding of the
-network (one Boolean per type state with exactly-one clauses, one per binary atom; each
-violating assignment of a hard factor is a hard clause; a soft factor gets an indicator ``y``
-forced by its violating assignments and a soft clause ``¬y`` of its weight).
+:func:`map_clingo` and :func:`map_rc2` minimise the cost of a whole world of the network
+(integer thousandths): clingo solves the ground program itself (its weak constraints are the
+soft rules), RC2 solves a WCNF encoding of the network (one Boolean per type state with
+exactly-one clauses, one per binary atom; each violating assignment of a hard factor is a hard
+clause; a soft factor gets an indicator ``y`` forced by its violating assignments and a soft
+clause ``¬y`` of its weight). The engine uses them only for evidence without soft atoms: its MAP
+sums those out first (:func:`semmap_pp.knowledge.exact.sum_out`) and hands the resulting log
+tables to :func:`map_tables_rc2` when the junction tree is too large.
 """
 
 from __future__ import annotations
@@ -94,15 +97,36 @@ def map_rc2(net: Network) -> tuple[np.ndarray, int]:
 
 
 def map_pairwise_rc2(unary, pairs, path) -> tuple[np.ndarray, float]:
-    """Exact MAP of a pairwise log-potential network by RC2 (one Boolean per variable state).
+    """Exact MAP of a pairwise log-potential network by RC2: :func:`map_tables_rc2` with a
+    variable per unary table (its length the number of states) and the pair tables over two
+    of them. Log tables hold ``-inf`` for forbidden states.
+
+    Returns
+    -------
+    (ndarray of int, float)
+        An optimal assignment and its log potential (``-cost``, MLN units).
+    """
+    pots = [((v,), u) for v, u in enumerate(unary)] + [((i, j), t) for i, j, t in pairs]
+    return map_tables_rc2([len(u) for u in unary], pots, path)
+
+
+#: Log potentials are rounded to multiples of 1 / COST_SCALE for RC2's integer weights: the
+#: rule files' thousandths exactly, and log-sums of them (soft evidence summed out) to 1e-6.
+COST_SCALE = 1_000_000
+
+
+def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
+    """MAP of a network of log tables by RC2 weighted MaxSAT (one Boolean per variable state,
+    exactly one per variable; each table entry above its table's minimum cost a soft clause
+    against that joint state, each ``-inf`` entry a hard one).
 
     Parameters
     ----------
-    unary : list of ndarray
-        Log tables whose finite entries are multiples of 1/1000 (negated costs of soft rules),
-        ``-inf`` for forbidden states.
-    pairs : list of (i, j, ndarray)
-        Log pair tables of the same kind.
+    card : list of int
+        States of each variable.
+    potentials : list of (scope, ndarray)
+        Log tables over sorted scopes (axes in scope order). Exact when their finite entries are
+        multiples of 1 / :data:`COST_SCALE`, else to that rounding.
     path : str
         Named in the error when no assignment is allowed.
 
@@ -111,22 +135,23 @@ def map_pairwise_rc2(unary, pairs, path) -> tuple[np.ndarray, float]:
     (ndarray of int, float)
         An optimal assignment and its log potential (``-cost``, MLN units).
     """
-    if any(not np.isfinite(t).any() for t in list(unary) + [p[2] for p in pairs]):
+    if any(not np.isfinite(t).any() for _, t in potentials):
         raise RuleError(path, _NO_WORLD)
     wcnf = WCNF()
     ids, top = [], 0
-    for u in unary:
-        ids.append(list(range(top + 1, top + 1 + len(u))))
-        top += len(u)
+    for c in card:
+        ids.append(list(range(top + 1, top + 1 + int(c))))
+        top += int(c)
+    for row in ids:
+        wcnf.append(list(row))
+        for a in range(len(row)):
+            for b in range(a + 1, len(row)):
+                wcnf.append([-row[a], -row[b]])
     base = 0
-    for v, u in enumerate(unary):
-        wcnf.append(list(ids[v]))
-        for a in range(len(u)):
-            for b in range(a + 1, len(u)):
-                wcnf.append([-ids[v][a], -ids[v][b]])
-        base += _add_costs(wcnf, u.reshape(-1), [[ids[v][a]] for a in range(len(u))])
-    for i, j, t in pairs:
-        lits = [[ids[i][a], ids[j][b]] for a in range(t.shape[0]) for b in range(t.shape[1])]
+    for scope, t in potentials:
+        t = np.asarray(t)
+        lits = [[ids[v][int(k)] for v, k in zip(scope, states)]
+                for states in np.ndindex(*t.shape)]
         base += _add_costs(wcnf, t.reshape(-1), lits)
     with RC2(wcnf) as rc2:
         model = rc2.compute()
@@ -135,14 +160,14 @@ def map_pairwise_rc2(unary, pairs, path) -> tuple[np.ndarray, float]:
         cost = int(rc2.cost)
     true = {m for m in model if m > 0}
     x = np.array([next(k for k, i in enumerate(row) if i in true) for row in ids], dtype=np.int64)
-    return x, -(cost + base) / 1000.0
+    return x, -(cost + base) / COST_SCALE
 
 
 def _add_costs(wcnf, table, lits) -> int:
     """Soft clauses ``¬(conjunction)`` weighted by each entry's cost above the table's minimum;
-    hard clauses for ``-inf``. Returns the minimum cost (thousandths)."""
+    hard clauses for ``-inf``. Returns the minimum cost (1 / :data:`COST_SCALE` units)."""
     fin = np.isfinite(table)
-    cost = np.where(fin, np.rint(-1000.0 * np.where(fin, table, 0.0)), 0).astype(np.int64)
+    cost = np.where(fin, np.rint(-COST_SCALE * np.where(fin, table, 0.0)), 0).astype(np.int64)
     low = int(cost[fin].min())
     for k, conj in enumerate(lits):
         if not fin[k]:
