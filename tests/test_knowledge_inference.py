@@ -164,9 +164,14 @@ def test_a_unit_on_the_corridor_ratio_boundary_gets_its_most_probable_type():
     # multiple doors. Maximising the three soft atoms too would pick "no class" (0.525^2 0.95,
     # the likeliest atom state), which no rule reads, and type the unit by tie-breaking (room,
     # the first). Summed out, the MAP is the marginals' argmax, corridor (aces' corridor pieces).
+    from semmap_pp.evidence import soft_probabilities
+    from semmap_pp.model import load_model
+    # a 1.15 x 3.45 m unit at 0.05 m (23 x 69 cells: aces' piece east of its roundabout)
+    p = soft_probabilities(np.array([[0, 0, 23, 69]]), 0.05, load_model().evidence)[0]
+    np.testing.assert_allclose(p, [0.475, 0.475, 0.05])
     rules = load_rules("rules/table3.lp")
-    ev = Evidence.build([1], rolike={1: 0.475}, colike={1: 0.475}, halike={1: 0.05},
-                        muldoor={1})
+    ev = Evidence.build([1], rolike={1: float(p[0])}, colike={1: float(p[1])},
+                        halike={1: float(p[2])}, muldoor={1})
     for engine in (KnowledgeEngine(rules), KnowledgeEngine(rules, fast=False),
                    KnowledgeEngine(rules, map_method="rc2"), KnowledgeEngine(rules, method="mcsat")):
         r = engine.infer(ev)
