@@ -408,3 +408,27 @@ def test_auto_is_exact_below_its_clique_bound_and_bitwise_equal_to_exact():
         assert a.method == "exact"
         assert all(np.array_equal(a.types[u], e.types[u]) for u in ev.units)
         assert a.sale == e.sale and a.map_types == e.map_types and a.log_z == e.log_z
+
+
+def test_a_soft_atom_tied_to_many_units_is_summed_out_exactly_or_kept_and_maximised(tmp_path):
+    # a pair rule reads the hub's soft corridor-likeness against each neighbour's type: summing
+    # the atom out joins the hub's factors into one over every neighbour's type
+    f = tmp_path / "hub.lp"
+    f.write_text(":~ colike(U), adj(U,V), room(V). [700@0, cr, U, V]\n"
+                 ":~ rolike(U), not room(U). [1500@0, r, U]\n")
+    rules = load_rules(f)
+
+    def star(n):
+        return Evidence.build(list(range(1, n + 2)), colike={1: 0.6},
+                              rolike={u: 0.7 for u in range(2, n + 2)},
+                              adj=[(1, u) for u in range(2, n + 2)])
+
+    small = star(3)                       # 2 x 4^3 states: summed out exactly
+    r = KnowledgeEngine(rules).infer(small)
+    best, types = oracle_map(rules, small)
+    assert r.map_method == "jt" and abs(r.map_cost * 1000 - best) < 1e-6
+    assert _map_tuple(r, small) in types
+    big = star(11)                        # 2 x 4^11 = 8.4M > 4M states: kept, maximised
+    r = KnowledgeEngine(rules).infer(big)
+    assert r.map_method == "jt+max"
+    assert set(r.map_types) == set(big.units) and all(np.isfinite(r.types[u]).all() for u in big.units)

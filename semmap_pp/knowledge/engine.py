@@ -306,6 +306,9 @@ class KnowledgeEngine:
         evidence. Maximising the evidence atoms as well would let a unit with soft geometry
         take *no* geometry class, which no rule reads, and get a type by tie-breaking. clingo
         optimises the ground program, so it maximises them: it is refused with soft evidence.
+        A soft atom whose factors would join into a table above the junction tree's limit (a
+        rule tying it to many units) is maximised with the types; the method then ends in
+        ``+max``.
         """
         net = g.network
         path = net.path
@@ -326,7 +329,7 @@ class KnowledgeEngine:
                 return x, net.cost(x) / 1000.0, "jt"
             x, cost = map_rc2(net)
             return x, cost / 1000.0, "rc2"
-        mpots, const = sum_out(net.card, pots, soft, path)
+        mpots, const, kept = sum_out(net.card, pots, soft)
         tree = self._tree(net.card, [s for s, _ in mpots], path) if self.map_method == "jt" else None
         if tree is not None:
             x, best = decode_max(tree, mpots)
@@ -336,7 +339,8 @@ class KnowledgeEngine:
             method = "rc2"
         if not np.isfinite(best):
             raise RuleError(path, "the hard rules admit no world for this evidence")
-        return x, -(best + const) + net.offset / 1000.0, method
+        # a soft atom tied to too many units to sum out exactly is maximised with the types
+        return x, -(best + const) + net.offset / 1000.0, method + ("+max" if kept else "")
 
     def _compute_local_mcsat(self, ev: Evidence) -> InferenceResult:
         card, sum_pots, _max_pots, _softs, _conds = self.local.reduced(ev)

@@ -258,36 +258,40 @@ def scope_marginal(jt: JunctionTree, full, scope):
     return pm / pm.sum()
 
 
-def sum_out(card, potentials, drop, path=None, max_states=MAX_CLIQUE_STATES):
+def sum_out(card, potentials, drop, max_states=MAX_CLIQUE_STATES):
     """Log potentials with the variables ``drop`` summed out, one at a time (variable
     elimination): the factors holding a variable are added over the union of their scopes and
-    ``log Σ exp`` is taken over it. Exact. Returns ``(potentials, constant)``: the factors
-    grouped by scope (sorted tuples) and the log constant of those left with no variable.
+    ``log Σ exp`` is taken over it. Exact. A variable whose factors would join into more than
+    ``max_states`` joint states (a soft atom that rules tie to many units) is kept instead.
 
     The MAP engines take it before maximising, so that soft evidence atoms are summed out and
-    only the query atoms (types, SaLe) are maximised (:mod:`semmap_pp.knowledge.engine`). A
-    factor above ``max_states`` joint states raises :class:`TooDense`.
+    only the query atoms (types, SaLe) are maximised (:mod:`semmap_pp.knowledge.engine`).
+
+    Returns
+    -------
+    (list of (scope, ndarray), float, list of int)
+        The factors grouped by scope (sorted tuples), the log constant of those left with no
+        variable, and the variables of ``drop`` that were kept.
 
     >>> t = np.log(np.array([[1.0, 3.0], [2.0, 2.0]]))   # over (type 0, soft atom 1)
-    >>> pots, const = sum_out([2, 2], [((0, 1), t)], [1])
-    >>> [(s, np.exp(p).round(6).tolist()) for s, p in pots], const
-    ([((0,), [4.0, 4.0])], 0.0)
+    >>> pots, const, kept = sum_out([2, 2], [((0, 1), t)], [1])
+    >>> [(s, np.exp(p).round(6).tolist()) for s, p in pots], const, kept
+    ([((0,), [4.0, 4.0])], 0.0, [])
     """
     pots = [(tuple(s), np.asarray(t, dtype=np.float64)) for s, t in potentials]
+    kept = []
     for v in drop:
         holding = [(s, t) for s, t in pots if v in s]
         if not holding:
             continue
-        pots = [(s, t) for s, t in pots if v not in s]
         scope = tuple(sorted(set().union(*(s for s, _ in holding))))
-        states = int(np.prod([int(card[u]) for u in scope]))
-        if states > max_states:
-            raise TooDense(path, f"summing out a soft evidence atom makes a factor of {states} "
-                                 f"joint states (limit {max_states})")
+        if int(np.prod([int(card[u]) for u in scope])) > max_states:
+            kept.append(v)
+            continue
+        pots = [(s, t) for s, t in pots if v not in s]
         total = np.zeros(tuple(int(card[u]) for u in scope))
         for s, t in holding:
-            shape = [int(card[u]) if u in s else 1 for u in scope]
-            total = total + t.reshape(shape)
+            total = total + t.reshape([int(card[u]) if u in s else 1 for u in scope])
         pots.append((tuple(u for u in scope if u != v), _lse(total, scope.index(v))))
     groups: dict = {}
     const = 0.0
@@ -296,7 +300,7 @@ def sum_out(card, potentials, drop, path=None, max_states=MAX_CLIQUE_STATES):
             const += float(t)
         else:
             groups[s] = groups[s] + t if s in groups else t
-    return list(groups.items()), const
+    return list(groups.items()), const, kept
 
 
 def decode_max(jt: JunctionTree, potentials):
