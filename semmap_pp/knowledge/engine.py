@@ -63,8 +63,9 @@ class InferenceResult:
     method : str
         How the marginals were computed: ``"exact"``, ``"lbp"`` or ``"mcsat"``.
     map_method : str
-        How the MAP world was found: ``"jt"`` (max-product on a junction tree, or per unit when
-        no pair couples the MAP), ``"rc2"`` or ``"clingo"``; all exact.
+        How the MAP was found: ``"jt"`` (max-product on a junction tree, or per unit when
+        no pair couples the MAP), ``"rc2"`` or ``"clingo"``; all exact. ``"jt+max"`` /
+        ``"rc2+max"``: a soft atom tied to too many units was maximised, not summed out.
     """
 
     types: dict
