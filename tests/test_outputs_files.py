@@ -226,11 +226,40 @@ def test_write_all_writes_every_file_once(hostile_run):
     assert names[:4] == ["world.json", "labels.png", "trace.nc", "diagnostics.txt"]
     # exactly the outputs: the killed run's temporary file is gone too
     assert sorted(names) == sorted(p.name for p in out.iterdir()) and len(set(names)) == len(names)
-    assert {"world.geojson", "graph.graphml", "regions.png", "overlay.png", "graph.png", "posterior.png",
-            "posterior_cells.png", "report.html"} <= set(names)
+    assert {"world.geojson", "graph.graphml", "regions.png", "types.pgm", "types.yaml", "overlay.png",
+            "graph.png", "posterior.png", "posterior_cells.png", "report.html"} <= set(names)
     doc = world_dict(run.semantic, rules="<b>rules</b>.lp", model=MODEL.path.name, seed=4, roi_name="default")
     assert (out / "world.json").read_text() == dumps(doc)     # world.json as before write_all existed
     assert (out / "diagnostics.txt").read_text().startswith(f"map: /maps/{HOSTILE}\nrules: <b>rules</b>.lp\n")
+
+
+def test_the_types_layer_is_a_raw_map_server_map_of_the_units_types_and_doors(hostile_run):
+    import yaml
+
+    from semmap_pp.grid import load_map
+    from semmap_pp.outputs.types_layer import DOOR_CODE, TYPE_CODES
+
+    out, run, _ = hostile_run
+    meta = yaml.safe_load((out / "types.yaml").read_text())
+    grid = run.semantic.grid
+    assert meta == {"image": "types.pgm", "resolution": grid.resolution, "origin": [-1.0, 0.5, 0.0],
+                    "negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "raw"}
+    codes = np.asarray(Image.open(out / "types.pgm"))
+    labels = np.asarray(Image.open(out / "labels.png"))
+    assert codes.shape == labels.shape == grid.classes.shape and codes.dtype == np.uint8
+    doc = json.loads((out / "world.json").read_text())
+    for d in doc["doors"]:                  # the door A|B: its centre pixel is a door pixel
+        x, y = (int(v) for v in d["center_px"])
+        assert codes[y, x] == DOOR_CODE
+    door = codes == DOOR_CODE
+    assert 0 < door.sum() < 3 * 22 * len(doc["doors"])
+    for u in doc["units"]:                  # every other pixel of a unit holds its type's code
+        mine = (labels == u["id"]) & ~door
+        assert mine.any() and (codes[mine] == TYPE_CODES[u["type"]]).all()
+    assert (codes[(labels == 0) & ~door] == 0).all()
+    # map_server reads it back in the input's frame (semmap's own loader, raw mode)
+    back = load_map(out / "types.yaml")
+    assert back.shape == grid.classes.shape and back.origin == (-1.0, 0.5, 0.0)
 
 
 def test_figures_are_pngs_of_sane_size(hostile_run):

@@ -18,6 +18,7 @@ from semmap_pp import atomic
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.errors import OutputError
 from semmap_pp.grid.meta import DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH
+from semmap_pp.grid.pixels import MODES
 
 # map_saver's grey levels for the three classes (ROS map_saver writes exactly these).
 GREY_FREE = 254
@@ -71,7 +72,7 @@ def write_map(yaml_path: str | os.PathLike, image: np.ndarray, resolution: float
               origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
               occupied_thresh: float = DEFAULT_OCCUPIED_THRESH,
               free_thresh: float = DEFAULT_FREE_THRESH,
-              negate: int = 0) -> Path:
+              negate: int = 0, mode: str = "trinary") -> Path:
     """Write ``NAME.yaml`` and ``NAME.pgm`` as ROS map_server reads them.
 
     Parameters
@@ -87,6 +88,8 @@ def write_map(yaml_path: str | os.PathLike, image: np.ndarray, resolution: float
     occupied_thresh, free_thresh : float
         Thresholds written to the YAML (``0 <= free < occupied <= 1``).
     negate : {0, 1}
+    mode : {"trinary", "scale", "raw"}
+        How map_server reads the grey values (``raw``: each value is the cell's value itself).
 
     Returns
     -------
@@ -118,6 +121,8 @@ def write_map(yaml_path: str | os.PathLike, image: np.ndarray, resolution: float
         raise ValueError(f"need 0 <= free_thresh < occupied_thresh <= 1, got {free}, {occ}")
     if int(negate) not in (0, 1):
         raise ValueError(f"negate must be 0 or 1, got {negate!r}")
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
 
     image_path = yaml_path.with_suffix(".pgm")
     if image_path == yaml_path:
@@ -129,7 +134,7 @@ def write_map(yaml_path: str | os.PathLike, image: np.ndarray, resolution: float
         "negate": int(negate),
         "occupied_thresh": occ,
         "free_thresh": free,
-        "mode": "trinary",
+        "mode": mode,
     }
     text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
     try:

@@ -23,6 +23,9 @@ FILES = {
                   "adjacency, unexplored areas, CPR (schema: docs/world.schema.json)",
     "labels.png": "16-bit unit id per pixel of the input image (walls included), 0 = none",
     "regions.png": "16-bit region id per pixel: units joined through open walls (rooms as drawn by a person)",
+    "types.yaml": "the place types as a map layer for ROS map_server (mode raw; codes: 0 none, "
+                  "1 room, 2 corridor, 3 hall, 4 other, 5 door), the input map's resolution and origin",
+    "types.pgm": "its image: the input image's size, one code per pixel",
     "world.geojson": "W* as GeoJSON in the map's local metric frame (metres, ROS map frame, not WGS84)",
     "graph.graphml": "the abstract model (paper Fig. 5b) for networkx, Gephi or yEd",
     "overlay.png": "W* on the classified map (paper Fig. 5c)",

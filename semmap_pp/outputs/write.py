@@ -19,6 +19,7 @@ from semmap_pp.outputs.graphml import world_graph, write_graphml
 from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
+from semmap_pp.outputs.types_layer import write_types_layer
 from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
 
 #: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
@@ -133,6 +134,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     written.append(write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)))
     written.append(write_graphml(out / "graph.graphml", graph))
     written.append(write_regions_png(out / "regions.png", region_img))
+    written.extend(write_types_layer(out, sm, doc))
 
     from semmap_pp.pipeline import figure_source
 
