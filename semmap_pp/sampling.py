@@ -181,7 +181,9 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     SampleResult
     """
     import pymc as pm
+    from pymc.sampling.parallel import ParallelSamplingError
 
+    from semmap_pp.errors import SemmapError
     from semmap_pp.step import WorldStep, world_model, world_to_point
 
     starts = list(starts)
@@ -212,6 +214,13 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
                               initvals=initvals, random_seed=seed, compute_convergence_checks=False,
                               return_inferencedata=False, discard_tuned_samples=False,
                               progressbar=progressbar, mp_ctx=mp_ctx, callback=recorder)
+        except ParallelSamplingError as exc:
+            # a chain in another process failed: the project's own error (a rule file too dense
+            # for this map, say) is raised as itself, so the command prints its one line
+            if isinstance(exc.__cause__, SemmapError):
+                raise exc.__cause__ from None
+            if stop is None or not stop():
+                raise
         except (EOFError, BrokenPipeError, ConnectionError, RuntimeError):
             # A worker that saw the Ctrl-C itself can close its pipe before the main process ends
             # the run: what the recorder received is still complete and consistent.

@@ -147,3 +147,19 @@ def test_bad_inputs_one_line_no_output(tmp_path, bad, needle):
     assert r.returncode == 2, r.stderr
     assert needle in r.stderr and r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize("cores", [1, 2])
+def test_a_rule_file_failing_inside_the_chains_is_one_line_on_any_number_of_cores(tmp_path, cores):
+    # hard rules that admit no world: the knowledge engine raises in the chains, which run in
+    # other processes on 2 cores (pymc wraps the error); the command says it in one line
+    bad = tmp_path / "no_world.lp"
+    bad.write_text(":- unit(U).\n")
+    out = tmp_path / "o"
+    fast = list(FAST)
+    fast[fast.index("--cores") + 1] = str(cores)
+    r = semmap("map", MAP, "--out", out, *fast, "--rules", bad)
+    assert r.returncode == 2, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("semmap: error:") and "no_world.lp" in last and "admit no world" in last
+    assert "Traceback" not in r.stderr and not out.exists()
