@@ -432,3 +432,33 @@ def test_a_soft_atom_tied_to_many_units_is_summed_out_exactly_or_kept_and_maximi
     r = KnowledgeEngine(rules).infer(big)
     assert r.map_method == "jt+max"
     assert set(r.map_types) == set(big.units) and all(np.isfinite(r.types[u]).all() for u in big.units)
+
+
+def test_a_derived_atom_over_many_units_is_a_chain_with_the_same_distribution(monkeypatch):
+    # halls_to_corridors.lp's nextcorr(U) :- adj(U,V), corr(V). is the OR over U's neighbours'
+    # types; read inline, hall(U), not nextcorr(U) at a corridor with eight neighbours is one
+    # table of 4 x 4^8 states, above the limit: cartesium under this file failed. As a chain of
+    # auxiliary variables it is exact: with the chain forced on every derived atom of two or
+    # more bodies, marginals, log Z and the MAP equal brute force
+    import semmap_pp.knowledge.ground as ground_module
+
+    rules = load_rules("rules/halls_to_corridors.lp")
+    star = Evidence.build(list(range(1, 11)), halike={1}, rolike=set(range(2, 11)),
+                          adj=[(1, u) for u in range(2, 11)])
+    g = ground(rules, star)
+    assert len(g.network.aux) == 9 and KnowledgeEngine(rules).infer(star).map_types[1] == "hall"
+    monkeypatch.setattr(ground_module, "CHAIN_STATES", 4)
+    engine = KnowledgeEngine(rules, method="exact")
+    chained = 0
+    for ev in cases(5, 8):
+        chained += len(ground(rules, ev).network.aux) > 0
+        types, sale, _, log_z, _ = oracle(rules, ev)
+        r = engine.infer(ev)
+        for u in ev.units:
+            np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
+        for pq in ev.adj:
+            assert abs(r.sale[pq] - sale[pq]) < 1e-9
+        assert abs(r.log_z - log_z) < 1e-9
+        map_best, map_types = oracle_map(rules, ev)
+        assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
+    assert chained >= 4

@@ -313,8 +313,8 @@ class KnowledgeEngine:
         """
         net = g.network
         path = net.path
-        sale_vars = set(net.sale.values())
-        soft = [v for v in range(len(net.units), net.n_vars) if v not in sale_vars]
+        other = set(net.sale.values()) | set(net.aux)
+        soft = [v for v in range(len(net.units), net.n_vars) if v not in other]
         if self.map_method == "clingo":
             if soft:
                 raise RuleError(path, "MAP by clingo maximises the soft evidence atoms instead "

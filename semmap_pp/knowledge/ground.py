@@ -34,6 +34,11 @@ FRAME = "\n".join(
 ) + "\n"
 
 MAX_SCOPE_STATES = 1 << 16   # a ground rule whose scope has more joint states is refused
+#: A derived atom whose bodies together span more joint states than this is not read inline but
+#: as a chain of auxiliary variables (``Network.aux``): inline, a rule that also reads another
+#: atom would multiply its table again (``hall(U), not nextcorr(U)`` at a corridor with eight
+#: neighbours: 4 x 4^8 states).
+CHAIN_STATES = 1 << 10
 _TYPE_INDEX = {p: k for k, p in enumerate(TYPE_PREDICATES)}
 _ONE_HOT = [np.eye(4, dtype=bool)[k] for k in range(4)]
 _BINARY = np.array([False, True])
@@ -67,6 +72,11 @@ class Network:
         Violation table and weight (thousandths).
     offset : int
         Constant cost (thousandths) of weak constraints violated by the evidence alone.
+    aux : tuple of int
+        Auxiliary binary variables: a derived atom whose bodies together couple too many open
+        atoms to be read inline is a chain of them, each the OR of the previous and one body
+        (hard factors; a deterministic function of the other variables, so no distribution
+        changes). Neither query nor evidence atoms.
     """
 
     path: str
@@ -77,6 +87,7 @@ class Network:
     hard: list
     soft: list
     offset: int = 0
+    aux: tuple = ()
 
     @property
     def n_vars(self) -> int:
@@ -123,10 +134,12 @@ def _align(scope, arr, union):
 class _Evaluator:
     """Truth tables of ground atoms and bodies over the network variables."""
 
-    def __init__(self, path, card, facts, var_of_atom, defs):
-        self.path, self.card = path, card
+    def __init__(self, path, card, facts, var_of_atom, defs, max_states=None):
+        self.path, self.card = path, list(card)
         self.facts, self.var_of_atom, self.defs = facts, var_of_atom, defs
         self.memo = {}
+        self.max_states = MAX_SCOPE_STATES if max_states is None else int(max_states)
+        self.aux_hard, self.aux_names = [], []
 
     def atom(self, a):
         hit = self.memo.get(a)
@@ -143,7 +156,11 @@ class _Evaluator:
         elif a in self.defs:
             self.memo[a] = False
             parts = [self.body(b) for b in self.defs[a]]
-            out = self.combine(parts, np.logical_or)
+            if len(parts) > 1 and self._states(set().union(*(s for s, _ in parts))) > min(
+                    CHAIN_STATES, self.max_states):
+                out = self._chain_or(a, parts)
+            else:
+                out = self.combine(parts, np.logical_or)
         else:
             out = ((), _FALSE)
         self.memo[a] = out
@@ -166,15 +183,42 @@ class _Evaluator:
             total = total + w * _align(s, t, union)
         return union, total >= lower
 
+    def _states(self, scope) -> int:
+        return int(np.prod([self.card[v] for v in scope], dtype=np.int64))
+
     def union(self, scopes):
         if len(scopes) == 1:
             return scopes[0]
         union = tuple(sorted(set().union(*scopes)))
-        if int(np.prod([self.card[v] for v in union], dtype=np.int64)) > MAX_SCOPE_STATES:
+        if self._states(union) > self.max_states:
             raise RuleError(self.path, f"a ground rule couples {len(union)} open atoms (more than "
-                            f"{MAX_SCOPE_STATES} joint states); split the rule or use helpers "
+                            f"{self.max_states} joint states); split the rule or use helpers "
                             "that depend on fewer units")
         return union
+
+    def _chain_or(self, a, parts):
+        """A derived atom whose bodies together couple too many open atoms (``nextcorr(U) :-
+        adj(U,V), corr(V).`` at a unit with many neighbours): auxiliary binary variables
+        ``o_1 .. o_n``, ``o_1 = body_1`` and ``o_k = o_(k-1) or body_k``, each tied by a hard
+        factor over its own few atoms; the atom is ``o_n``. The same truth function as the
+        inline OR, so the distribution over the other variables is unchanged."""
+        prev = None
+        for k, (s, t) in enumerate(parts, 1):
+            o = len(self.card)
+            self.card.append(2)
+            self.aux_names.append(f"__or{k}({a})")
+            scope = tuple(sorted(set(s) | {o} | ({prev} if prev is not None else set())))
+            if self._states(scope) > self.max_states:
+                raise RuleError(self.path, f"a ground rule couples {len(scope)} open atoms (more "
+                                f"than {self.max_states} joint states); split the rule or use "
+                                "helpers that depend on fewer units")
+            value = _align(s, t, scope)
+            if prev is not None:
+                value = value | _align((prev,), _BINARY, scope)
+            viol = _align((o,), _BINARY, scope) != value
+            self.aux_hard.append((scope, np.broadcast_to(viol, self.shape(scope)).copy()))
+            prev = o
+        return (prev,), _BINARY
 
     def shape(self, union):
         return tuple(int(self.card[v]) for v in union)
@@ -198,7 +242,8 @@ class Grounding:
     control: clingo.Control
 
 
-def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False) -> Grounding:
+def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
+           max_states: int | None = None) -> Grounding:
     """Ground ``rules`` with evidence ``ev`` into a :class:`Network`.
 
     Parameters
@@ -207,6 +252,9 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False) -> Groundin
     ev : Evidence
     keep_control : bool
         Keep the clingo control (for MAP by clingo optimisation).
+    max_states : int, optional
+        Largest joint state count of one factor (default :data:`MAX_SCOPE_STATES`); a derived
+        atom above it becomes a chain of auxiliary variables (``Network.aux``).
 
     Raises
     ------
@@ -225,11 +273,11 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False) -> Groundin
     except RuntimeError:
         raise RuleError(rules.path, "grounding failed: " + " ".join(
             " ".join(m.split()) for m in messages)) from None
-    net = _build(rules.path, ev, obs)
+    net = _build(rules.path, ev, obs, max_states)
     return Grounding(net, ctl if keep_control else None)
 
 
-def _build(path: str, ev: Evidence, obs: _Observer) -> Network:
+def _build(path: str, ev: Evidence, obs: _Observer, max_states: int | None = None) -> Network:
     units = ev.units
     unit_index = {u: i for i, u in enumerate(units)}
     facts, choice = set(), set()
@@ -276,8 +324,8 @@ def _build(path: str, ev: Evidence, obs: _Observer) -> Network:
                 sale[(args[0].number, args[1].number)] = len(card)
             card.append(2)
             names.append(str(sym))
-    card = np.array(card, dtype=np.int64)
-    ev_ = _Evaluator(path, card, facts, var_of_atom, defs)
+    n_base = len(card)
+    ev_ = _Evaluator(path, card, facts, var_of_atom, defs, max_states)
     hard, soft, offset = [], [], 0
     for b in constraints:
         scope, viol = ev_.body(b)
@@ -294,4 +342,7 @@ def _build(path: str, ev: Evidence, obs: _Observer) -> Network:
                 offset += int(w) if bool(t) else 0
             elif t.any() and w != 0:
                 soft.append((scope, t, int(w)))
-    return Network(path, tuple(units), card, names, sale, hard, soft, offset)
+    hard += ev_.aux_hard
+    card = np.array(ev_.card, dtype=np.int64)
+    return Network(path, tuple(units), card, names + ev_.aux_names, sale, hard, soft, offset,
+                   tuple(range(n_base, len(card))))
