@@ -40,7 +40,7 @@ import numpy as np
 
 from semmap_pp import world as W
 from semmap_pp.derive.defects import count_defects
-from semmap_pp.diagnostics import SpreadAccumulator
+from semmap_pp.diagnostics import SpreadAccumulator, format_rhat
 
 
 @dataclass(frozen=True)
@@ -196,7 +196,7 @@ def compare_table(rows: list[RuleSetSummary]) -> str:
          f"{'around W*' if r.around_wstar else 'search'})" for r in rows])
     names = list(rows[0].rhat)
     for n in names:
-        add(f"R-hat {n}", [_fmt(r.rhat.get(n, math.nan), ".3f") for r in rows])
+        add(f"R-hat {n}", [format_rhat(r.rhat.get(n, math.nan)) for r in rows])
     for n in names:
         add(f"ESS bulk / tail {n}", [f"{_fmt(r.ess_bulk.get(n, math.nan), '.0f')} / "
                                      f"{_fmt(r.ess_tail.get(n, math.nan), '.0f')}" for r in rows])

@@ -258,11 +258,26 @@ def _constant(a: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(a)) and np.all(a == a.flat[0]))
 
 
+def format_rhat(rhat: float) -> str:
+    """R-hat as the tables print it: three decimals, or three significant digits from 1000 on
+    (a chain that barely moves beside one stuck at another value gives ArviZ numbers like
+    5.77e+15), ``inf`` and ``nan`` as such.
+
+    >>> [format_rhat(x) for x in (1.0123, 5768652578615959.0, float("inf"), float("nan"))]
+    ['1.012', '5.77e+15', 'inf', 'nan']
+    """
+    if math.isnan(rhat):
+        return "nan"
+    if math.isinf(rhat):
+        return "inf"
+    return f"{rhat:.3g}" if abs(rhat) >= 1000 else f"{rhat:.3f}"
+
+
 def _table_lines(quantities) -> list[str]:
     lines = [f"{'quantity':<16}{'mean':>12}{'sd':>10}{'R-hat':>8}{'ESS bulk':>10}{'ESS tail':>10}  verdict"]
     for q in quantities:
         verdict = "ok" if q.ok else f"FAIL: {q.reason}"
-        lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{q.rhat:>8.3f}"
+        lines.append(f"{q.name:<16}{q.mean:>12.4g}{q.sd:>10.3g}{format_rhat(q.rhat):>8}"
                      f"{q.ess_bulk:>10.0f}{q.ess_tail:>10.0f}  {verdict}")
     return lines
 
@@ -285,8 +300,15 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
             # ArviZ gives NaN for one chain: judge its two halves as two chains instead.
             half = a.shape[1] // 2
             rhat = float(az.rhat(a if a.shape[0] > 1 else a[:, :2 * half].reshape(2, half)))
+            stuck = ""
             if a.shape[0] > 1 and np.all(np.ptp(a, axis=1) == 0) and np.ptp(a[:, 0]) > 0:
-                rhat = math.inf     # each chain constant at its own value (ArviZ: a huge finite number)
+                stuck = "each chain stuck at its own value"
+            elif a.shape[0] > 1 and half >= 2:
+                halves = np.concatenate([a[:, :half], a[:, a.shape[1] - half:]])
+                if np.all(np.ptp(halves, axis=1) == 0) and np.ptp(halves[:, 0]) > 0:
+                    stuck = "each half of every chain stuck at one value: a chain jumped once"
+            if stuck:
+                rhat = math.inf     # ArviZ: a huge finite number (split R-hat, no variance within)
             ess_b = float(az.ess(a, method="bulk"))
             ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
@@ -294,12 +316,12 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
         chain_sds = tuple(float(v) for v in np.nanstd(a, axis=1))
     reasons = []
     if math.isinf(rhat):
-        reasons.append("R-hat is infinite (each chain stuck at its own value)")
+        reasons.append(f"R-hat is infinite ({stuck or 'each chain stuck at its own value'})")
     elif not math.isfinite(rhat):
         same = _constant(a)
         reasons.append("R-hat is NaN (" + ("summary never moved in any chain" if same else "NaN values") + ")")
     elif rhat > rhat_max:
-        reasons.append(f"R-hat {rhat:.3f} > {rhat_max}")
+        reasons.append(f"R-hat {format_rhat(rhat)} > {rhat_max}")
     if math.isfinite(rhat) and not (math.isfinite(ess_b) and math.isfinite(ess_t)):
         reasons.append("ESS is NaN")
     elif math.isfinite(ess_b) and min(ess_b, ess_t) < ess_min:

@@ -231,3 +231,14 @@ def test_chains_each_constant_at_their_own_value_give_an_infinite_rhat():
     a = np.r_[np.full(20, -777_734.6), np.full(20, -777_735.1)].reshape(2, 20)
     q = dg.convergence({"log_posterior": a}, rhat_max=1.05, ess_min=10).quantities[0]
     assert q.rhat == np.inf and "each chain stuck at its own value" in q.reason
+
+
+def test_a_chain_that_jumped_once_has_an_infinite_rhat_not_twenty_digits():
+    # chain 1 at 0 throughout, chain 2 at 1 then at 0 from its middle: every half-chain is
+    # constant, so split R-hat has no variance within; ArviZ returns a huge finite number
+    # (3.0e15), which the tables printed in twenty digits
+    a = np.zeros((2, 200))
+    a[1, :100] = 1.0
+    q = dg.convergence({"n_other": a}, rhat_max=1.05, ess_min=100).quantities[0]
+    assert q.rhat == np.inf and "a chain jumped once" in q.reason and not q.ok
+    assert dg.format_rhat(3017531479833410.5) == "3.02e+15" and dg.format_rhat(1.01234) == "1.012"

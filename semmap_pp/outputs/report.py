@@ -118,11 +118,14 @@ def units_table(doc: dict, regions: dict[int, int]) -> str:
 
 
 def convergence_table(report) -> str:
+    from semmap_pp.diagnostics import format_rhat
+
     rows, classes = [], []
     for q in report.quantities:
         rows.append([_td(q.name), _td(_num(q.mean, ".4g"), True),
                      _td(" / ".join(_num(m, ".4g") for m in q.chain_means), True), _td(_num(q.sd, ".3g"), True),
-                     _td(_num(q.rhat, ".3f"), True), _td(_num(q.ess_bulk, ".0f"), True),
+                     _td(format_rhat(q.rhat) if math.isfinite(q.rhat) else "–", True),
+                     _td(_num(q.ess_bulk, ".0f"), True),
                      _td(_num(q.ess_tail, ".0f"), True), _td("ok" if q.ok else q.reason, cls="v")])
         classes.append("ok" if q.ok else "fail")
     return _table(["quantity", "mean", "mean per chain", "sd", "R-hat", "ESS bulk", "ESS tail", "verdict"],
