@@ -81,6 +81,19 @@ def _map_tuple(r, ev):
                  for u in ev.units)
 
 
+def assert_matches_brute_force(r, rules, ev):
+    """``r`` (an exact InferenceResult of ``ev``) against enumeration: type and SaLe marginals,
+    log Z, and the MAP (its cost and types among the optimal ones)."""
+    types, sale, _, log_z, _ = oracle(rules, ev)
+    for u in ev.units:
+        np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
+    for pq in ev.adj:
+        assert abs(r.sale[pq] - sale[pq]) < 1e-9
+    assert abs(r.log_z - log_z) < 1e-9
+    map_best, map_types = oracle_map(rules, ev)
+    assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
+
+
 def random_evidence(rng, max_worlds=2 ** 13):
     while True:
         n = int(rng.integers(1, 7))
@@ -384,17 +397,11 @@ def test_pairs_reading_soft_atoms_keep_them_in_the_unit_variable(tmp_path):
     engine = KnowledgeEngine(rules, method="exact")
     tn = engine.local.type_network(ev)
     assert tn.shift == [1, 0, 0] and tn.card == [8, 4, 4]
-    types, sale, best, log_z, _ = oracle(rules, ev)
+    types = oracle(rules, ev)[0]
     r = engine.infer(ev)
-    for u in ev.units:
-        np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
-    for pq in ev.adj:
-        assert abs(r.sale[pq] - sale[pq]) < 1e-9
-    assert abs(r.log_z - log_z) < 1e-9
     # the MAP sums unit 1's MulDoor atom out, which couples it to its neighbours: the ground
     # network's junction tree gives it
-    map_best, map_types = oracle_map(rules, ev)
-    assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
+    assert_matches_brute_force(r, rules, ev)
     lbp = KnowledgeEngine(rules, method="lbp").infer(ev)
     assert max(np.abs(lbp.types[u] - types[u]).max() for u in ev.units) < 0.02
     assert lbp.map_types == r.map_types
@@ -452,13 +459,5 @@ def test_a_derived_atom_over_many_units_is_a_chain_with_the_same_distribution(mo
     chained = 0
     for ev in cases(5, 8):
         chained += len(ground(rules, ev).network.aux) > 0
-        types, sale, _, log_z, _ = oracle(rules, ev)
-        r = engine.infer(ev)
-        for u in ev.units:
-            np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
-        for pq in ev.adj:
-            assert abs(r.sale[pq] - sale[pq]) < 1e-9
-        assert abs(r.log_z - log_z) < 1e-9
-        map_best, map_types = oracle_map(rules, ev)
-        assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
+        assert_matches_brute_force(engine.infer(ev), rules, ev)
     assert chained >= 4

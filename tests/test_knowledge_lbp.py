@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from test_knowledge_inference import _map_tuple, oracle, oracle_map
+from test_knowledge_inference import _map_tuple, assert_matches_brute_force, oracle, oracle_map
 
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
@@ -228,16 +228,9 @@ def test_auto_picks_exact_on_small_floors_and_agrees_with_enumeration(rule_file)
     engine = KnowledgeEngine(rules)   # the default is auto
     assert engine.method == "auto"
     for ev in loopy_floors():
-        types, sale, best, log_z, _ = oracle(rules, ev)
         r = engine.infer(ev)
         assert r.method == "exact"
-        for u in ev.units:
-            np.testing.assert_allclose(r.types[u], types[u], atol=1e-9)
-        for pq in ev.adj:
-            assert abs(r.sale[pq] - sale[pq]) < 1e-9
-        assert abs(r.log_z - log_z) < 1e-9
-        map_best, map_types = oracle_map(rules, ev)
-        assert abs(r.map_cost * 1000 - map_best) < 1e-6 and _map_tuple(r, ev) in map_types
+        assert_matches_brute_force(r, rules, ev)
 
 
 def test_general_path_falls_back_to_factor_bp():
