@@ -864,6 +864,7 @@ def bench_real(args, model, rules) -> dict:
 
 
 def bench_ipa(args, model, rules) -> dict:
+    from semmap_pp.cells import FREE
     from semmap_pp.evaluate import read_ipa_gt, segmentation_scores
     from semmap_pp.grid import load_map
     base = SHARED / "ipa-segmentation"
@@ -891,10 +892,14 @@ def bench_ipa(args, model, rules) -> dict:
         seg, _ = regions_of(sm)
         pub = segmentation_scores(gt, seg, restrict_to_gt=False)
         res = segmentation_scores(gt, seg, restrict_to_gt=True)
+        # the published protocol on segments of the map's free cells only, as ipa's and ROSE2's
+        # methods label them (regions.png labels wall cells too); no ground truth used for it
+        free = segmentation_scores(gt, np.where(grid.classes == FREE, seg, 0), restrict_to_gt=False)
         units = segmentation_scores(gt, sm.labels_image.astype(np.int64), restrict_to_gt=False)
         row = {"map": name, "units": len(sm.unit_ids), "regions": int(len(np.unique(seg)) - (seg == 0).any()),
                "precision": round(pub.precision, 4), "recall": round(pub.recall, 4),
                "precision_restricted": round(res.precision, 4), "recall_restricted": round(res.recall, 4),
+               "precision_free": round(free.precision, 4), "recall_free": round(free.recall, 4),
                "precision_units": round(units.precision, 4), "recall_units": round(units.recall, 4),
                "log_posterior": round(float(sm.log_posterior), 1),
                "run_s": round(run.seconds, 1), "knowledge": run.notes[0]}
@@ -902,7 +907,8 @@ def bench_ipa(args, model, rules) -> dict:
         _save(args, name, sm)
         _log(args, f"ipa {name}: P {row['precision']:.3f} R {row['recall']:.3f} (restricted "
                    f"{row['precision_restricted']:.3f}/{row['recall_restricted']:.3f}), {row['units']} units")
-    keys = ("precision", "recall", "precision_restricted", "recall_restricted", "precision_units", "recall_units")
+    keys = ("precision", "recall", "precision_restricted", "recall_restricted", "precision_free",
+            "recall_free", "precision_units", "recall_units")
     return {"rows": rows, "means": {k: _mean(rows, k) for k in keys},
             "published_real_maps": {"rose2_average_11": PUBLISHED["rose2_real"]["average_11_maps"],
                                     **PUBLISHED["bormann_real_average"]},
