@@ -235,11 +235,13 @@ def test_auto_picks_exact_on_small_floors_and_agrees_with_enumeration(rule_file)
 
 def test_general_path_falls_back_to_factor_bp():
     # halls_to_corridors.lp is not pairwise-local: BP runs on the ground network (SaLe atoms
-    # and soft atoms as variables); a clique bound of 1 forces the fallback on a small floor
+    # and soft atoms as variables); a ground-network clique bound of 1 forces the fallback on a
+    # small floor
     rules = load_rules("rules/halls_to_corridors.lp")
     ev = next(loopy_floors())
     types, sale, best, _, _ = oracle(rules, ev)
-    r = KnowledgeEngine(rules, auto_max_states=1).infer(ev)
+    assert KnowledgeEngine(rules).infer(ev).method == "exact"      # a small tree: exact
+    r = KnowledgeEngine(rules, auto_max_states_ground=1).infer(ev)
     assert r.method == "lbp" and r.map_method == "rc2"
     assert abs(r.map_cost * 1000 - best) < 1e-6
     err = max([np.abs(r.types[u] - types[u]).max() for u in ev.units]

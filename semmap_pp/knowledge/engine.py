@@ -39,6 +39,11 @@ MAP_METHODS = ("jt", "clingo", "rc2")
 #: ``method="auto"`` runs the junction tree when its largest clique has at most this many joint
 #: states, loopy BP otherwise (docs/benchmarks.md, "Knowledge engine", for the measurement).
 AUTO_MAX_STATES = 1 << 10
+#: The same bound for a rule set's ground network (the general path, rules that are not
+#: pairwise-local): there loopy BP runs over general factors in Python and the junction tree is
+#: faster up to cliques of this size (docs/benchmarks.md, "Knowledge engine": 86 against 267 ms
+#: at 2^18 states under rules/halls_to_corridors.lp).
+AUTO_MAX_STATES_GROUND = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,9 @@ class KnowledgeEngine:
         function of (rules, evidence, settings).
     auto_max_states : int
         Largest clique ``auto`` hands to the junction tree.
+    auto_max_states_ground : int
+        The same for a ground network (rules that are not pairwise-local), where loopy BP is
+        slower and the tree pays up to larger cliques.
     bp : BPSettings
         Damping, iteration cap and tolerance of loopy BP.
     fast : bool
@@ -119,7 +127,7 @@ class KnowledgeEngine:
                  n_chains: int = 768, n_iter: int = 38, burn_in: int = 12,
                  cache_size: int = 4096, seed: int = 0, fast: bool = True,
                  auto_max_states: int = AUTO_MAX_STATES, bp: BPSettings = BPSettings(),
-                 template_store=True):
+                 template_store=True, auto_max_states_ground: int = AUTO_MAX_STATES_GROUND):
         if method not in METHODS:
             raise RuleError(rules.path, f"unknown inference method {method!r}; use one of {METHODS}")
         if map_method not in MAP_METHODS:
@@ -129,6 +137,7 @@ class KnowledgeEngine:
         self.mcsat_settings = (int(n_chains), int(n_iter), int(burn_in))
         self.cache_size, self.seed = int(cache_size), int(seed)
         self.auto_max_states, self.bp = int(auto_max_states), bp
+        self.auto_max_states_ground = int(auto_max_states_ground)
         self._cache: OrderedDict = OrderedDict()
         store = (default_store() if template_store is True
                  else (template_store or None))
@@ -235,21 +244,27 @@ class KnowledgeEngine:
         text = repr((self.rules.digest, evidence.key, self.mcsat_settings, self.seed))
         return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
 
-    def _limit(self) -> int:
-        """Largest clique the junction tree may have for the marginals and the MAP."""
-        return MAX_CLIQUE_STATES if self.method in ("exact", "mcsat") else self.auto_max_states
+    def _limit(self, grounded: bool = False) -> int:
+        """Largest clique the junction tree may have for the marginals and the MAP
+        (``grounded``: of a ground network, where ``auto`` allows :data:`AUTO_MAX_STATES_GROUND`)."""
+        if self.method in ("exact", "mcsat"):
+            return MAX_CLIQUE_STATES
+        if grounded and self.method == "auto":
+            return self.auto_max_states_ground
+        return self.auto_max_states
 
-    def _tree(self, card, scopes, path):
+    def _tree(self, card, scopes, path, grounded: bool = False):
         """A junction tree within :meth:`_limit`, or None when ``auto``/``lbp`` must fall back
-        (cached by cardinalities and scopes: a tree is a pure function of them, and the
-        sampler's networks keep their structure across most evidence changes)."""
-        key = (tuple(int(c) for c in card), tuple(scopes))
+        (cached by cardinalities, scopes and the limit: a tree is a pure function of them, and
+        the sampler's networks keep their structure across most evidence changes)."""
+        limit = self._limit(grounded)
+        key = (tuple(int(c) for c in card), tuple(scopes), limit)
         hit = self._trees.get(key, False)
         if hit is not False:
             self._trees.move_to_end(key)
             return hit
         try:
-            jt = JunctionTree(card, scopes, path, max_states=self._limit())
+            jt = JunctionTree(card, scopes, path, max_states=limit)
         except TooDense:
             if self.method in ("exact", "mcsat"):
                 raise
@@ -269,7 +284,7 @@ class KnowledgeEngine:
         pots = merged_potentials(net)
         scopes = [s for s, _ in pots]
         jt = None if self.method == "lbp" and self.map_method != "jt" else \
-            self._tree(net.card, scopes, net.path)
+            self._tree(net.card, scopes, net.path, grounded=True)
         # MAP first: it is exact and raises when the hard rules admit no world
         x, cost, map_method = self._map_ground(g, pots, jt)
         log_z, method = None, self.method
@@ -331,7 +346,8 @@ class KnowledgeEngine:
             x, cost = map_rc2(net)
             return x, cost / 1000.0, "rc2"
         mpots, const, kept = sum_out(net.card, pots, soft)
-        tree = self._tree(net.card, [s for s, _ in mpots], path) if self.map_method == "jt" else None
+        tree = (self._tree(net.card, [s for s, _ in mpots], path, grounded=True)
+                if self.map_method == "jt" else None)
         if tree is not None:
             x, best = decode_max(tree, mpots)
             method = "jt"
