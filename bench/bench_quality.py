@@ -981,4 +981,20 @@ def run(args) -> dict:
         t0 = time.perf_counter()
         out[name] = fns[name](args, model, rules)
         out[name]["wall_s"] = round(time.perf_counter() - t0, 1)
+        off = knowledge_off(out[name])
+        if off:    # said at the top of the subset: its rows measured the geometry's fixed types
+            out[name]["knowledge_off"] = off
+            _log(args, f"{name}: knowledge off (engine failed) on {len(off)} row(s): {', '.join(off)}")
     return out
+
+
+def knowledge_off(result: dict) -> list[str]:
+    """The rows of a subset's result that ran without knowledge because the engine failed
+    (:func:`_run`'s fallback), by map name or seed.
+
+    >>> knowledge_off({"rows": [{"map": "a", "knowledge": "knowledge: on"},
+    ...                         {"seed": 3, "knowledge": "knowledge: off (engine failed: ...)"}]})
+    ['3']
+    """
+    return [str(r.get("map", r.get("seed"))) for r in result.get("rows", [])
+            if isinstance(r, dict) and str(r.get("knowledge", "")).startswith("knowledge: off")]

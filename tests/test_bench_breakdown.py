@@ -104,3 +104,13 @@ def test_the_real_subset_scores_the_bundled_maps_then_the_shared_ones_not_bundle
                                              (bundled / "ubremen-cartesium.yaml", True),
                                              (shared / "aces.yaml", False),
                                              (shared / "freiburg-079.yaml", False)]
+
+
+def test_rows_that_fell_back_to_knowledge_off_are_listed():
+    # a row whose knowledge engine failed was run with the geometry's fixed types: the subset's
+    # result lists it (knowledge_off), so its numbers are not read as the rules' (session 24)
+    rows = [{"seed": 0, "knowledge": "knowledge: on"},
+            {"seed": 4, "knowledge": "knowledge: off (engine failed: RuleError: x.lp: ...)"},
+            {"map": "NLB", "knowledge": "knowledge: off (engine failed: ...)"}, {"seed": 5, "error": "e"}]
+    assert bq.knowledge_off({"rows": rows}) == ["4", "NLB"]
+    assert bq.knowledge_off({"skipped": "no data"}) == []
