@@ -5,7 +5,9 @@ records the ground program. Its variables are one 4-state type variable per unit
 assignments of ``room/corr/hall/other``), one binary variable per open ``sale`` atom and one per
 soft evidence atom. Every other atom is a fact, false, or derived by rules; a derived atom is read
 as the disjunction of its rule bodies (Clark completion), which is exact for the acyclic
-programs the dialect allows (a recursive definition through open atoms is an error). Each ground
+programs the dialect allows (a recursive definition through open atoms is an error); when its
+bodies span many open atoms, the disjunction is a chain of auxiliary variables instead
+(:data:`CHAIN_STATES`). Each ground
 integrity constraint becomes a hard factor (the set of assignments of its scope that violate
 it) and each ground weak-constraint tuple a soft factor (a violation indicator with its weight),
 exactly as clingo itself counts them (one cost per distinct tuple).
@@ -253,8 +255,9 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
     keep_control : bool
         Keep the clingo control (for MAP by clingo optimisation).
     max_states : int, optional
-        Largest joint state count of one factor (default :data:`MAX_SCOPE_STATES`); a derived
-        atom above it becomes a chain of auxiliary variables (``Network.aux``).
+        Largest joint state count of one factor (default :data:`MAX_SCOPE_STATES`). A derived
+        atom whose bodies span more than :data:`CHAIN_STATES` (or ``max_states`` when smaller)
+        becomes a chain of auxiliary variables (``Network.aux``).
 
     Raises
     ------
