@@ -219,8 +219,7 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
             # for this map, say) is raised as itself, so the command prints its one line
             if isinstance(exc.__cause__, SemmapError):
                 raise exc.__cause__ from None
-            if stop is None or not stop():
-                raise
+            raise
         except (EOFError, BrokenPipeError, ConnectionError, RuntimeError):
             # A worker that saw the Ctrl-C itself can close its pipe before the main process ends
             # the run: what the recorder received is still complete and consistent.

@@ -296,7 +296,7 @@ def test_dense_floors_that_used_to_raise_get_marginals_in_time(n):
     rules = load_rules("rules/table3.lp")
     ev = corridor_rows_floor(n)
     engine = KnowledgeEngine(rules)
-    card, sum_pots, _, _, _ = engine.local.reduced(ev)     # the network inference used to run on
+    card, sum_pots = engine.local.reduced(ev)     # the network inference used to run on
     with pytest.raises(TooDense, match="too densely connected"):
         JunctionTree(card, [s for s, _ in sum_pots], rules.path, max_states=MAX_CLIQUE_STATES)
     r = engine.infer(ev)            # templates built here

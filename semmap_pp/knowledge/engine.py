@@ -360,7 +360,7 @@ class KnowledgeEngine:
         return x, -(best + const) + net.offset / 1000.0, method + ("+max" if kept else "")
 
     def _compute_local_mcsat(self, ev: Evidence) -> InferenceResult:
-        card, sum_pots, _max_pots, _softs, _conds = self.local.reduced(ev)
+        card, sum_pots = self.local.reduced(ev)
         tn, x, best, map_method = self._local_map(ev)
         jt = JunctionTree(card, [s for s, _ in sum_pots], self.rules.path)
         rng = np.random.default_rng(self.signature_seed(ev))

@@ -188,15 +188,18 @@ class _Evaluator:
     def _states(self, scope) -> int:
         return int(np.prod([self.card[v] for v in scope], dtype=np.int64))
 
+    def _within(self, scope):
+        """``scope``, or the error of a ground rule whose scope has too many joint states."""
+        if self._states(scope) > self.max_states:
+            raise RuleError(self.path, f"a ground rule couples {len(scope)} open atoms (more than "
+                            f"{self.max_states} joint states); split the rule or use helpers "
+                            "that depend on fewer units")
+        return scope
+
     def union(self, scopes):
         if len(scopes) == 1:
             return scopes[0]
-        union = tuple(sorted(set().union(*scopes)))
-        if self._states(union) > self.max_states:
-            raise RuleError(self.path, f"a ground rule couples {len(union)} open atoms (more than "
-                            f"{self.max_states} joint states); split the rule or use helpers "
-                            "that depend on fewer units")
-        return union
+        return self._within(tuple(sorted(set().union(*scopes))))
 
     def _chain_or(self, a, parts):
         """A derived atom whose bodies together couple too many open atoms (``nextcorr(U) :-
@@ -209,11 +212,8 @@ class _Evaluator:
             o = len(self.card)
             self.card.append(2)
             self.aux_names.append(f"__or{k}({a})")
-            scope = tuple(sorted(set(s) | {o} | ({prev} if prev is not None else set())))
-            if self._states(scope) > self.max_states:
-                raise RuleError(self.path, f"a ground rule couples {len(scope)} open atoms (more "
-                                f"than {self.max_states} joint states); split the rule or use "
-                                "helpers that depend on fewer units")
+            linked = {o} if prev is None else {o, prev}
+            scope = self._within(tuple(sorted(set(s) | linked)))
             value = _align(s, t, scope)
             if prev is not None:
                 value = value | _align((prev,), _BINARY, scope)

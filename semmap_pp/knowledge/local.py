@@ -420,25 +420,21 @@ class LocalModel:
         return _type_network(self, ev)
 
     def reduced(self, ev: Evidence):
-        """Cardinalities, sum potentials, max potentials and pair info for ``ev``."""
+        """``(cardinalities, sum potentials)`` of ``ev``'s network over one super-state variable
+        per unit (type times soft bits), SaLe summed out in the pair tables: the network the
+        local MC-SAT's junction tree is built on."""
         maps = {name: dict(ev.unary(name)) for name in SOFT_PREDICATES}
         keys = [_unit_key(maps, u) for u in ev.units]
         index = {u: i for i, u in enumerate(ev.units)}
-        card, sum_pots, max_pots, softs = [], [], [], []
+        card, sum_pots = [], []
         for i, key in enumerate(keys):
-            table, k = self.unit(key)
+            table, _k = self.unit(key)
             card.append(len(table))
-            softs.append(k)
             sum_pots.append(((i,), table))
-            max_pots.append(((i,), table))
-        conds = {}
         for p, q in ev.adj:
             i, j = index[p], index[q]
-            lse, mx, cond = self.pair(keys[i], keys[j])
-            sum_pots.append(((i, j), lse))
-            max_pots.append(((i, j), mx))
-            conds[(p, q)] = cond
-        return card, sum_pots, max_pots, softs, conds
+            sum_pots.append(((i, j), self.pair(keys[i], keys[j])[0]))
+        return card, sum_pots
 
 
 # ---- the type network: private atoms summed out, uninformative pairs factored out ------------
