@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 
+import semmap_pp.knowledge.engine as engine_module
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.local import LocalModel
 
@@ -75,6 +76,40 @@ def test_map_types_equal_the_full_inference():
         assert third.infer(ev).map_types == third.map_types(ev)   # from the result cache
     mcsat = KnowledgeEngine(rules, method="mcsat")
     assert not mcsat.has_map_only
+
+
+def test_map_types_of_the_general_path_equal_the_full_inference(monkeypatch):
+    """The same on the general path (rules that are not pairwise-local: every evidence grounded
+    by clingo): ``map_types`` grounds and decodes the MAP without marginals, equal to a fresh
+    engine's ``infer``; ``infer`` afterwards reuses that grounding (no second one) and gives the
+    same result as without it, with exact and with loopy-BP marginals."""
+    rules = load_rules("rules/halls_to_corridors.lp")
+    rng = np.random.default_rng(8)
+    grounds = []
+    real_ground = engine_module.ground
+    monkeypatch.setattr(engine_module, "ground",
+                        lambda *a, **k: grounds.append(1) or real_ground(*a, **k))
+    for method in ("auto", "lbp"):
+        for _ in range(12):
+            n = int(rng.integers(1, 7))
+            units = list(range(n))
+            pairs = [(p, q) for p in units for q in units if p < q and rng.random() < 0.5]
+            kw = {name: {u: float(rng.choice(PROBS)) for u in units}
+                  for name in ("rolike", "colike", "halike", "muldoor")}
+            ev = Evidence.build(units, adj=pairs, **kw)
+            first, second = (KnowledgeEngine(rules, method=method) for _ in range(2))
+            assert first.local is None and first.has_map_only
+            grounds.clear()
+            m = first.map_types(ev)
+            assert len(grounds) == 1
+            r1 = first.infer(ev)
+            assert len(grounds) == 1          # the MAP's grounding reused
+            r = second.infer(ev)
+            assert m == r.map_types == r1.map_types and r1.map_cost == r.map_cost
+            assert r1.method == r.method and r1.sale == r.sale
+            assert all(np.array_equal(r1.types[u], r.types[u]) for u in units)
+            assert first.map_types(ev) == m   # from the result cache
+            assert len(grounds) == 2
 
 
 def _evidences(n, seed):

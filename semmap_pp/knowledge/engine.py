@@ -149,6 +149,8 @@ class KnowledgeEngine:
         self._map_cache: OrderedDict = OrderedDict()   # evidence key -> (type network, MAP)
         self._map_nets: OrderedDict = OrderedDict()    # evidence key -> MapNet, None: general path
         self._trees: OrderedDict = OrderedDict()       # (card, scopes) -> JunctionTree or None
+        self._ground_maps: OrderedDict = OrderedDict()  # evidence key -> ground network and MAP
+        self._groundings: OrderedDict = OrderedDict()   # evidence structure -> its network
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, method: str = "auto", **settings
@@ -176,9 +178,10 @@ class KnowledgeEngine:
 
     @property
     def has_map_only(self) -> bool:
-        """Whether :meth:`map_types` can find the MAP types without the marginals (the fast
-        path with exact or ``auto`` marginals: the MAP is decoded before them anyway)."""
-        return self.local is not None and self.local_clauses is None
+        """Whether :meth:`map_types` can find the MAP types without the marginals: the fast
+        path with exact or ``auto`` marginals, and the general path (a ground network's MAP is
+        decoded before its marginals, which :meth:`infer` then adds to the same grounding)."""
+        return self.local is None or self.local_clauses is None
 
     def map_types(self, evidence: Evidence, base: Evidence | None = None) -> dict:
         """``infer(evidence).map_types`` without computing the marginals when they are not
@@ -192,7 +195,10 @@ class KnowledgeEngine:
         hit = self._cache.get(evidence.key)
         if hit is not None:
             return hit.map_types
-        if base is not None and self.local is not None:
+        if self.local is None:
+            g, _pots, _jt, x, _cost, _method = self._ground_map(evidence)
+            return {u: UNIT_TYPES[int(x[i])] for i, u in enumerate(g.network.units)}
+        if base is not None:
             net = self._map_net(evidence, base)
             if net is not None:
                 return net.map_types()
@@ -228,7 +234,7 @@ class KnowledgeEngine:
         if any(tn.shift):
             # a pair rule reads some unit's soft evidence atoms, so they stay in its variable;
             # summing them out couples the pair: the ground network's MAP does it exactly
-            g = ground(self.rules, ev)
+            g = ground(self.rules, ev, cache=self._groundings)
             xg, cost, map_method = self._map_ground(g, merged_potentials(g.network), None)
             x = np.array([int(xg[i]) << tn.shift[i] for i in range(len(ev.units))], dtype=np.int64)
             best = -cost
@@ -274,12 +280,17 @@ class KnowledgeEngine:
             self._trees.popitem(last=False)
         return jt
 
-    def _compute(self, ev: Evidence) -> InferenceResult:
-        if self.local is not None:
-            if self.local_clauses is not None:
-                return self._compute_local_mcsat(ev)
-            return self._compute_local(ev)
-        g = ground(self.rules, ev, keep_control=self.map_method == "clingo")
+    def _ground_map(self, ev: Evidence):
+        """The ground network of ``ev``, its merged potentials, junction tree (None: too large
+        or not wanted) and exact MAP ``(g, pots, jt, x, cost, map_method)``, cached by evidence
+        (small LRU) until :meth:`infer` adds the marginals: :meth:`map_types` of the general
+        path grounds and decodes once for both."""
+        hit = self._ground_maps.get(ev.key)
+        if hit is not None:
+            self._ground_maps.move_to_end(ev.key)
+            return hit
+        g = ground(self.rules, ev, keep_control=self.map_method == "clingo",
+                   cache=self._groundings)
         net = g.network
         pots = merged_potentials(net)
         scopes = [s for s, _ in pots]
@@ -287,6 +298,19 @@ class KnowledgeEngine:
             self._tree(net.card, scopes, net.path, grounded=True)
         # MAP first: it is exact and raises when the hard rules admit no world
         x, cost, map_method = self._map_ground(g, pots, jt)
+        hit = self._ground_maps[ev.key] = (g, pots, jt, x, cost, map_method)
+        if len(self._ground_maps) > 64:
+            self._ground_maps.popitem(last=False)
+        return hit
+
+    def _compute(self, ev: Evidence) -> InferenceResult:
+        if self.local is not None:
+            if self.local_clauses is not None:
+                return self._compute_local_mcsat(ev)
+            return self._compute_local(ev)
+        g, pots, jt, x, cost, map_method = self._ground_map(ev)
+        self._ground_maps.pop(ev.key, None)   # the full result is cached from now on
+        net = g.network
         log_z, method = None, self.method
         if self.method == "mcsat":
             rng = np.random.default_rng(self.signature_seed(ev))

@@ -126,15 +126,19 @@ def soft_weight(p: float) -> int:
     return int(round(WEIGHT_SCALE * math.log(p / (1.0 - p))))
 
 
-def ground_facts(ev: Evidence) -> str:
-    """The facts the engine grounds with: hard facts plus ``__softw(atom, W)`` for soft ones."""
+def ground_facts(ev: Evidence, weights: bool = True) -> str:
+    """The facts the engine grounds with: hard facts plus ``__softw(atom, W)`` for soft ones.
+
+    ``weights=False`` writes every soft atom with ``W = 0`` (open, no weak constraint): the
+    evidence's *structure*, which :func:`~semmap_pp.knowledge.ground.ground` grounds once for
+    every evidence that differs only in its soft probabilities."""
     parts = [f"unit({u})." for u in ev.units]
     for name in SOFT_PREDICATES:
         for u, p in ev.unary(name):
             if p >= 1.0:
                 parts.append(f"{name}({u}).")
             else:
-                parts.append(f"__softw({name}({u}),{soft_weight(p)}).")
+                parts.append(f"__softw({name}({u}),{soft_weight(p) if weights else 0}).")
     parts.extend(f"adj({p},{q})." for p, q in ev.adj)
     return " ".join(parts)
 

@@ -11,19 +11,25 @@ bodies span many open atoms, the disjunction is a chain of auxiliary variables i
 integrity constraint becomes a hard factor (the set of assignments of its scope that violate
 it) and each ground weak-constraint tuple a soft factor (a violation indicator with its weight),
 exactly as clingo itself counts them (one cost per distinct tuple).
+
+Soft evidence only opens its atom and puts a unit weight on it (:data:`FRAME`), so the ground
+program depends on the evidence's *structure* alone (units, adjacency, each evidence atom absent,
+hard or soft): :func:`ground` grounds the structure (every soft weight 0) and adds each soft
+atom's weight as a unary factor, and with a ``cache`` grounds each structure once (the sampler's
+proposals mostly move walls, which change soft probabilities, not structures).
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
-from dataclasses import dataclass
+from collections import OrderedDict, defaultdict
+from dataclasses import dataclass, replace
 
 import clingo
 import numpy as np
 
 from semmap_pp.errors import RuleError
 from semmap_pp.knowledge.dialect import SOFT_PREDICATES, TYPE_PREDICATES, RuleSet
-from semmap_pp.knowledge.evidence import Evidence, ground_facts
+from semmap_pp.knowledge.evidence import Evidence, ground_facts, soft_weight
 
 #: The engine's frame: exactly one type per unit, SaLe open between adjacent units, soft evidence
 #: atoms open with a unit weak constraint of weight ``log(p / (1 - p))`` (thousandths).
@@ -244,8 +250,12 @@ class Grounding:
     control: clingo.Control
 
 
+#: Structures a :func:`ground` cache keeps (least recently used dropped).
+CACHE_SIZE = 256
+
+
 def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
-           max_states: int | None = None) -> Grounding:
+           max_states: int | None = None, cache: OrderedDict | None = None) -> Grounding:
     """Ground ``rules`` with evidence ``ev`` into a :class:`Network`.
 
     Parameters
@@ -253,11 +263,14 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
     rules : RuleSet
     ev : Evidence
     keep_control : bool
-        Keep the clingo control (for MAP by clingo optimisation).
+        Keep the clingo control (for MAP by clingo optimisation), grounded with the soft weights.
     max_states : int, optional
         Largest joint state count of one factor (default :data:`MAX_SCOPE_STATES`). A derived
         atom whose bodies span more than :data:`CHAIN_STATES` (or ``max_states`` when smaller)
         becomes a chain of auxiliary variables (``Network.aux``).
+    cache : OrderedDict, optional
+        The networks of the structures grounded so far (one per rule set: the key is the
+        structure's facts), filled and used here; the soft weights are added to a copy.
 
     Raises
     ------
@@ -265,19 +278,53 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
         If the rule set's hard rules are violated by the evidence alone, or a construct falls
         outside what the network can represent.
     """
+    if keep_control:
+        obs, ctl = _clingo_ground(rules, ground_facts(ev))
+        return Grounding(_build(rules.path, ev, obs, max_states), ctl)
+    key = (ground_facts(ev, weights=False), max_states)
+    net = cache.get(key) if cache is not None else None
+    if net is None:
+        obs, _ctl = _clingo_ground(rules, key[0])
+        net = _build(rules.path, ev, obs, max_states)
+        if cache is not None:
+            cache[key] = net
+            if len(cache) > CACHE_SIZE:
+                cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return Grounding(_with_soft_weights(net, ev), None)
+
+
+def _clingo_ground(rules: RuleSet, facts: str):
+    """clingo's ground program of the frame, the rules and ``facts``: (observer, control)."""
     obs = _Observer()
     messages = []
     ctl = clingo.Control(["--warn=none"], logger=lambda c, m: messages.append(m),
                          message_limit=3)
     ctl.register_observer(obs)
     try:
-        ctl.add("base", [], FRAME + rules.program + ground_facts(ev))
+        ctl.add("base", [], FRAME + rules.program + facts)
         ctl.ground([("base", [])])
     except RuntimeError:
         raise RuleError(rules.path, "grounding failed: " + " ".join(
             " ".join(m.split()) for m in messages)) from None
-    net = _build(rules.path, ev, obs, max_states)
-    return Grounding(net, ctl if keep_control else None)
+    return obs, ctl
+
+
+def _with_soft_weights(net: Network, ev: Evidence) -> Network:
+    """``net`` (the structure's network, every soft weight 0) with each soft atom's weak
+    constraint of :data:`FRAME` as a unary factor: weight ``W`` when the atom is false (``W >
+    0``), ``-W`` when it is true (``W < 0``), none when ``W = 0``."""
+    extra = []
+    var = None
+    for name in SOFT_PREDICATES:
+        for u, p in ev.unary(name):
+            w = soft_weight(p) if p < 1.0 else 0
+            if w:
+                if var is None:
+                    var = {n: v for v, n in enumerate(net.names)}
+                extra.append(((var[f"{name}({u})"],), ~_BINARY if w > 0 else _BINARY, abs(w)))
+    return replace(net, soft=net.soft + extra) if extra else net
 
 
 def _build(path: str, ev: Evidence, obs: _Observer, max_states: int | None = None) -> Network:
