@@ -4,6 +4,8 @@ The oracle is independent of the factor network: clingo enumerates every stable 
 of frame + rules + evidence with its cost, and marginals are sums of exp(-cost) over worlds.
 """
 
+from collections import OrderedDict
+
 import clingo
 import numpy as np
 import pytest
@@ -461,3 +463,31 @@ def test_a_derived_atom_over_many_units_is_a_chain_with_the_same_distribution(mo
         chained += len(ground(rules, ev).network.aux) > 0
         assert_matches_brute_force(engine.infer(ev), rules, ev)
     assert chained >= 4
+
+
+def test_one_grounding_per_structure_with_any_soft_values(monkeypatch):
+    """The ground program depends on the evidence's structure alone (soft atoms only open and
+    weigh): a cache grounds each structure once, and every evidence of that structure, whatever
+    its soft probabilities, gets the network of a grounding with its own weights (each
+    assignment's cost equal) and, through the engine, the brute-force marginals, log Z and MAP."""
+    import semmap_pp.knowledge.ground as ground_module
+    rules = load_rules("rules/halls_to_corridors.lp")
+    calls = []
+    real = ground_module._clingo_ground
+    monkeypatch.setattr(ground_module, "_clingo_ground", lambda *a: calls.append(1) or real(*a))
+    cache = OrderedDict()
+    engine = KnowledgeEngine(rules, method="exact")
+    rng = np.random.default_rng(17)
+    for probs in ((0.3, 0.8), (0.05, 0.95), (0.62, 0.5), (0.3, 0.8)):
+        ev = Evidence.build([1, 2, 3], rolike={1: probs[0], 2: 1.0}, colike={3: probs[1]},
+                            muldoor={2: 0.7}, adj=[(1, 2), (2, 3)])
+        net = ground(rules, ev, cache=cache).network
+        with_weights = ground(rules, ev, keep_control=True).network
+        assert list(net.names) == list(with_weights.names)
+        for _ in range(200):
+            x = [int(rng.integers(c)) for c in net.card]
+            assert net.cost(x) == with_weights.cost(x)
+        assert_matches_brute_force(engine.infer(ev), rules, ev)
+    # one structure: the cache grounded once, the keep_control groundings 4 times, the engine
+    # (its own cache) once
+    assert len(calls) == 1 + 4 + 1
