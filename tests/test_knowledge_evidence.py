@@ -1,6 +1,7 @@
 """Evidence values, the facts syntax and the `semmap rules` command."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,3 +91,34 @@ def test_cli_check_and_query(tmp_path, capsys):
     ev.write_text("unit(1). wall(1).\n")
     assert main(["rules", "query", "rules/table3.lp", "--evidence", str(ev)]) == 2
     assert "unknown evidence predicate" in capsys.readouterr().err
+
+
+def test_cli_check_says_how_the_engine_runs_the_rules(tmp_path, capsys):
+    """``rules check`` says whether a file runs on unit and pair templates or on the general
+    path, and for the latter quotes the first statement that puts it there, with the reason;
+    what it says agrees with the engine's own choice."""
+    from semmap_pp.knowledge.local import pairwise_obstacle
+    table3 = (Path("rules/table3.lp")).read_text()
+    cases = {
+        "table3.lp": (table3, None),
+        "helper.lp": (table3 + "nextcorr(U) :- adj(U,V), corr(V).\n"
+                      ":~ hall(U), not nextcorr(U). [800@0, hall_next_corr, U]\n",
+                      "defines a helper atom"),
+        "three.lp": (table3 + ":~ corr(P), corr(Q), corr(R), adj(P,Q), adj(Q,R). "
+                     "[300@0, three, P, Q, R]\n", "reads more than two units"),
+        "ids.lp": (":~ room(U), rolike(U). [100@0, same, U]\n"
+                   ":~ corr(U), colike(U). [100@0, same, U]\n", "an id of its own"),
+    }
+    for name, (text, reason) in cases.items():
+        path = tmp_path / name
+        path.write_text(text)
+        assert main(["rules", "check", str(path)]) == 0
+        out = capsys.readouterr().out.splitlines()
+        assert out[0].startswith(f"{path}: ok (")
+        engine = KnowledgeEngine.from_file(path)
+        if reason is None:
+            assert out[1] == "  inference: unit and pair templates (the rules are pairwise-local)"
+            assert engine.local is not None and pairwise_obstacle(engine.rules) is None
+        else:
+            assert out[1].startswith("  inference: the general path") and reason in out[1]
+            assert engine.local is None

@@ -14,7 +14,8 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("rules", help="check rule files and query the knowledge engine")
     sub = parser.add_subparsers(dest="rules_command", metavar="ACTION")
     sub.required = True
-    check = sub.add_parser("check", help="validate rule files (prints ok or the errors)")
+    check = sub.add_parser("check", help="validate rule files (prints ok and how the engine will "
+                                         "run them, or the errors)")
     check.add_argument("files", nargs="+", metavar="FILE")
     check.set_defaults(func=_check)
     query = sub.add_parser("query", help="marginals and MAP types for an evidence file")
@@ -33,6 +34,7 @@ def register(subparsers) -> None:
 
 def _check(args) -> int:
     from semmap_pp.knowledge import load_rules
+    from semmap_pp.knowledge.local import pairwise_obstacle
 
     failed = 0
     for f in args.files:
@@ -44,6 +46,12 @@ def _check(args) -> int:
             continue
         print(f"{f}: ok ({rs.n_hard} hard, {rs.n_soft} soft rules"
               + (f", helpers {', '.join(rs.helpers)}" if rs.helpers else "") + ")")
+        obstacle = pairwise_obstacle(rs)
+        print("  inference: " + ("unit and pair templates (the rules are pairwise-local)"
+                                 if obstacle is None else
+                                 "the general path, every evidence grounded whole (several times "
+                                 "slower than unit and pair templates; docs/rules.md): "
+                                 + obstacle))
     return 1 if failed else 0
 
 

@@ -93,6 +93,19 @@ def _body_ok(body):
 
 def is_pairwise(rules: RuleSet) -> bool:
     """Whether ``rules`` is in the pairwise-local fragment (see the module docstring)."""
+    return pairwise_obstacle(rules) is None
+
+
+def pairwise_obstacle(rules: RuleSet) -> str | None:
+    """The first statement of ``rules`` that keeps it out of the pairwise-local fragment (see
+    the module docstring), quoted with the reason, or None when the rule set is pairwise-local.
+
+    >>> from semmap_pp.knowledge import load_rules
+    >>> pairwise_obstacle(load_rules("rules/table3.lp")) is None
+    True
+    >>> print(pairwise_obstacle(load_rules("rules/halls_to_corridors.lp")))
+    `nextcorr(U) :- adj(U,V); corr(V).` defines a helper atom (only `adj(Q,P) :- adj(P,Q).` may)
+    """
     ids = set()
     for st in parse_text(rules.program, rules.path):
         t = st.ast_type
@@ -102,27 +115,30 @@ def is_pairwise(rules: RuleSet) -> bool:
             head = st.head
             if head.atom.ast_type == _T.BooleanConstant:
                 if _body_ok(st.body) is None:
-                    return False
+                    return f"`{st}` {_BODY}"
                 continue
             if str(st) != "adj(Q,P) :- adj(P,Q)." and not (
                     head.atom.ast_type == _T.SymbolicAtom and _is_adj_closure(st)):
-                return False
+                return f"`{st}` defines a helper atom (only `adj(Q,P) :- adj(P,Q).` may)"
             continue
         if t == _T.Minimize:
             variables = _body_ok(st.body)
-            if variables is None or not st.terms:
-                return False
-            first, rest = st.terms[0], st.terms[1:]
-            if first.ast_type != _T.SymbolicTerm or str(first) in ids:
-                return False
+            if variables is None:
+                return f"`{st}` {_BODY}"
+            first, rest = (st.terms[0], st.terms[1:]) if st.terms else (None, ())
+            if (first is None or first.ast_type != _T.SymbolicTerm or str(first) in ids
+                    or not all(r.ast_type == _T.Variable for r in rest)
+                    or sorted(r.name for r in rest) != sorted(variables)):
+                return (f"`{st}`: a weak constraint's terms must be an id of its own followed by "
+                        "exactly its unit variables")
             ids.add(str(first))
-            if not all(r.ast_type == _T.Variable for r in rest):
-                return False
-            if sorted(r.name for r in rest) != sorted(variables):
-                return False
             continue
-        return False
-    return True
+        return f"`{st}` is not a rule, constraint or weak constraint"
+    return None
+
+
+_BODY = ("reads more than two units, or two not linked by a positive adj/sale literal, or "
+         "something other than plain literals and comparisons of variables")
 
 
 def _is_adj_closure(st) -> bool:
