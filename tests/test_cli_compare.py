@@ -86,3 +86,28 @@ def test_each_rule_set_gets_the_wstar_semmap_map_gives_it(tmp_path):
     none = next(r for r in doc["rule_sets"] if r["name"] == "none")
     assert none["log_posterior"] == pytest.approx(world["log_posterior"], abs=1e-6)
     assert none["n_units"] == len(world["units"])
+
+
+def test_a_rule_set_off_the_fast_path_is_named_once_before_the_runs(monkeypatch, capsys):
+    """``run_each`` (compare, stability) notes each rule set that takes the knowledge engine's
+    general path once, before the first run; a pairwise-local one gets no note."""
+    import types
+
+    import semmap_pp.pipeline as pipeline
+    from semmap_pp.cli.runs import run_each
+    from semmap_pp.knowledge import load_rules
+
+    calls = []
+    monkeypatch.setattr(pipeline, "run_map",
+                        lambda inputs, settings, **kw: calls.append(inputs.rules) or
+                        types.SimpleNamespace(starts=[]))
+    base = types.SimpleNamespace(notes=(), rules=None)
+    table3, halls = load_rules(RULES / "table3.lp"), load_rules(RULES / "halls_to_corridors.lp")
+    jobs = [(name, types.SimpleNamespace(**{**vars(base), "rules": rs}), None)
+            for name, rs in (("a", table3), ("b", halls), ("c", halls))]
+    runs = run_each("compare", base, jobs)
+    assert len(runs) == 3 and calls == [table3, halls, halls]
+    err = capsys.readouterr().err
+    notes = [line for line in err.splitlines() if "not pairwise-local" in line]
+    assert len(notes) == 1 and "halls_to_corridors.lp" in notes[0]
+    assert err.index(notes[0]) < err.index("--- a ---")

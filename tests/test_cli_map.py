@@ -163,3 +163,17 @@ def test_a_rule_file_failing_inside_the_chains_is_one_line_on_any_number_of_core
     last = r.stderr.strip().splitlines()[-1]
     assert last.startswith("semmap: error:") and "no_world.lp" in last and "admit no world" in last
     assert "Traceback" not in r.stderr and not out.exists()
+
+
+def test_a_rule_file_off_the_fast_path_is_named_at_the_start(first_run, tmp_path):
+    """A rule file that is not pairwise-local runs (the general path) and the run says so
+    before it starts, naming the command that finds the statement; table3.lp gets no such note."""
+    out = tmp_path / "halls"
+    r = semmap("map", MAP, "--out", out, "--seed", 7, *FAST, "--spread-draws", "0",
+               "--rules", ROOT / "rules" / "halls_to_corridors.lp")
+    assert r.returncode == 0, r.stderr
+    notes = [line for line in r.stderr.splitlines() if "is not pairwise-local" in line]
+    assert len(notes) == 1 and notes[0].startswith("note: ") and "semmap rules check" in notes[0]
+    assert r.stderr.index(notes[0]) < r.stderr.index("sampling")
+    assert json.loads((out / "world.json").read_text())["rules"].endswith("halls_to_corridors.lp")
+    assert "pairwise-local" not in first_run[1].stderr

@@ -124,6 +124,7 @@ def _install_sigint(stop):
 
 def run(args) -> int:
     from semmap_pp.cli.progress import Progress
+    from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
     from semmap_pp.outputs.write import write_all
     from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
@@ -165,6 +166,9 @@ def run(args) -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
+    note = general_path_note(inputs.rules, rules)
+    if note:
+        log(note)
     if state is None:
         left = settings.chains * (settings.tune + settings.draws)
     else:

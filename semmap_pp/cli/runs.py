@@ -13,6 +13,17 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def general_path_note(rules, shown) -> str | None:
+    """The note for a rule set (:class:`~semmap_pp.knowledge.dialect.RuleSet`, shown as
+    ``shown``) that is not pairwise-local: its runs take the knowledge engine's general path."""
+    from semmap_pp.knowledge.local import is_pairwise
+    if rules is None or is_pairwise(rules):
+        return None
+    return (f"note: {shown} is not pairwise-local: the knowledge engine grounds every new evidence "
+            "whole, which takes several times longer than unit and pair templates (`semmap rules "
+            f"check {shown}` says which statement)")
+
+
 def run_each(command: str, inputs, jobs) -> list | None:
     """``run_map`` once per ``(title, inputs, settings)`` of ``jobs``, in order, after printing
     the notes of ``inputs`` (what loading changed) once: ``[(run, seconds), ...]``, or None when
@@ -27,6 +38,14 @@ def run_each(command: str, inputs, jobs) -> list | None:
 
     for note in inputs.notes:
         log(f"note: {note}")
+    noted = set()
+    for _title, job_inputs, _settings in jobs:
+        rules = job_inputs.rules
+        if rules is not None and rules.digest not in noted:
+            noted.add(rules.digest)
+            note = general_path_note(rules, rules.path)
+            if note:
+                log(note)
     stop = StopFlag()
 
     def on_sigint(signum, frame):
