@@ -52,6 +52,16 @@ def test_soft_values_share_one_grounding_per_structure():
     assert fast.local.groundings <= 3 + 6
 
 
+def _random_evidence(rng, max_units, p_adj):
+    """Up to ``max_units`` units, each pair adjacent with probability ``p_adj``, every evidence
+    atom drawn from :data:`PROBS` (absent, hard or soft)."""
+    units = list(range(int(rng.integers(1, max_units + 1))))
+    pairs = [(p, q) for p in units for q in units if p < q and rng.random() < p_adj]
+    kw = {name: {u: float(rng.choice(PROBS)) for u in units}
+          for name in ("rolike", "colike", "halike", "muldoor")}
+    return Evidence.build(units, adj=pairs, **kw)
+
+
 def test_map_types_equal_the_full_inference():
     """``map_types`` on a fresh engine (no marginals computed) equals ``infer().map_types``
     of another fresh engine, and ``infer`` after ``map_types`` gives the same result as
@@ -59,12 +69,8 @@ def test_map_types_equal_the_full_inference():
     rules = load_rules(RULES)
     rng = np.random.default_rng(5)
     for _ in range(30):
-        n = int(rng.integers(1, 8))
-        units = list(range(n))
-        pairs = [(p, q) for p in units for q in units if p < q and rng.random() < 0.4]
-        kw = {name: {u: float(rng.choice(PROBS)) for u in units}
-              for name in ("rolike", "colike", "halike", "muldoor")}
-        ev = Evidence.build(units, adj=pairs, **kw)
+        ev = _random_evidence(rng, 7, 0.4)
+        units = ev.units
         first, second, third = (KnowledgeEngine(rules) for _ in range(3))
         assert first.has_map_only
         m = first.map_types(ev)
@@ -91,12 +97,8 @@ def test_map_types_of_the_general_path_equal_the_full_inference(monkeypatch):
                         lambda *a, **k: grounds.append(1) or real_ground(*a, **k))
     for method in ("auto", "lbp"):
         for _ in range(12):
-            n = int(rng.integers(1, 7))
-            units = list(range(n))
-            pairs = [(p, q) for p in units for q in units if p < q and rng.random() < 0.5]
-            kw = {name: {u: float(rng.choice(PROBS)) for u in units}
-                  for name in ("rolike", "colike", "halike", "muldoor")}
-            ev = Evidence.build(units, adj=pairs, **kw)
+            ev = _random_evidence(rng, 6, 0.5)
+            units = ev.units
             first, second = (KnowledgeEngine(rules, method=method) for _ in range(2))
             assert first.local is None and first.has_map_only
             grounds.clear()
