@@ -280,6 +280,37 @@ def test_pairwise_rc2_reaches_the_brute_force_optimum():
                    + sum(t[x[i], x[j]] for i, j, t in pairs) - best) < 1e-9
 
 
+def test_rc2_clauses_are_one_per_table_entry_above_its_minimum():
+    """``map._add_costs`` (vectorised) writes, in C order over each table, a hard clause for
+    every ``-inf`` entry and a soft clause weighted by the entry's cost above the table's
+    minimum for every costlier one: the definition, entry by entry, on random tables over
+    variables of 2 to 4 states (so the MAP's MaxSAT instance, hence its tie-breaking, is the
+    one the definition gives)."""
+    from pysat.formula import WCNF
+
+    from semmap_pp.knowledge.map import COST_SCALE, _add_costs
+    rng = np.random.default_rng(12)
+    for _ in range(40):
+        shape = tuple(int(c) for c in rng.integers(2, 5, int(rng.integers(1, 4))))
+        table = -rng.integers(0, 4, shape) / 2.0
+        table[rng.random(shape) < 0.15] = -np.inf
+        if not np.isfinite(table).any():
+            continue
+        first = [int(f) for f in rng.integers(1, 50, len(shape))]
+        fast, slow = WCNF(), WCNF()
+        low = _add_costs(fast, table, first)
+        costs = [round(-COST_SCALE * v) for v in table.reshape(-1) if np.isfinite(v)]
+        assert low == min(costs)
+        for states in itertools.product(*(range(c) for c in shape)):
+            clause = [-(f + k) for f, k in zip(first, states)]
+            v = table[states]
+            if not np.isfinite(v):
+                slow.append(clause)
+            elif round(-COST_SCALE * v) > low:
+                slow.append(clause, weight=round(-COST_SCALE * v) - low)
+        assert fast.hard == slow.hard and fast.soft == slow.soft and fast.wght == slow.wght
+
+
 corridor_rows_floor = dense_floor  # the benchmark's dense layout (semmap_pp/knowledge/layouts.py)
 
 

@@ -147,12 +147,10 @@ def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
         for a in range(len(row)):
             for b in range(a + 1, len(row)):
                 wcnf.append([-row[a], -row[b]])
+    first = [row[0] for row in ids]
     base = 0
     for scope, t in potentials:
-        t = np.asarray(t)
-        lits = [[ids[v][int(k)] for v, k in zip(scope, states)]
-                for states in np.ndindex(*t.shape)]
-        base += _add_costs(wcnf, t.reshape(-1), lits)
+        base += _add_costs(wcnf, np.asarray(t), [first[v] for v in scope])
     with RC2(wcnf) as rc2:
         model = rc2.compute()
         if model is None:
@@ -163,15 +161,23 @@ def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
     return x, -(cost + base) / COST_SCALE
 
 
-def _add_costs(wcnf, table, lits) -> int:
-    """Soft clauses ``¬(conjunction)`` weighted by each entry's cost above the table's minimum;
-    hard clauses for ``-inf``. Returns the minimum cost (1 / :data:`COST_SCALE` units)."""
-    fin = np.isfinite(table)
-    cost = np.where(fin, np.rint(-COST_SCALE * np.where(fin, table, 0.0)), 0).astype(np.int64)
+def _add_costs(wcnf, table, first) -> int:
+    """Soft clauses ``¬(conjunction of the entry's states)`` weighted by each entry's cost above
+    the table's minimum; hard clauses for ``-inf``; entries in C order (the table's axes are its
+    scope's variables, whose state ``k`` is literal ``first[axis] + k``). Returns the minimum
+    cost (1 / :data:`COST_SCALE` units)."""
+    flat = table.reshape(-1)
+    fin = np.isfinite(flat)
+    cost = np.where(fin, np.rint(-COST_SCALE * np.where(fin, flat, 0.0)), 0).astype(np.int64)
     low = int(cost[fin].min())
-    for k, conj in enumerate(lits):
-        if not fin[k]:
-            wcnf.append([-lit for lit in conj])
-        elif cost[k] > low:
-            wcnf.append([-lit for lit in conj], weight=int(cost[k] - low))
+    need = np.flatnonzero(~fin | (cost > low))      # the entries that get a clause, in order
+    if need.size:
+        states = np.unravel_index(need, table.shape)
+        clauses = -np.stack([f + k for f, k in zip(first, states)], axis=1)
+        weights = (cost[need] - low).tolist()
+        for clause, hard, w in zip(clauses.tolist(), (~fin[need]).tolist(), weights):
+            if hard:
+                wcnf.append(clause)
+            else:
+                wcnf.append(clause, weight=w)
     return low
