@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -513,3 +514,36 @@ def test_a_short_piece_of_a_corridor_is_corridor_like_as_part_of_its_space(scope
     tr.accept(back)
     assert tr.logp == pytest.approx(post.evaluate(world).total, rel=1e-12)
     assert tr._pieces[6] == (scope == "space")
+
+
+def test_the_map_types_bound_under_a_rule_set_off_the_fast_path():
+    """Under rules that are not pairwise-local (the engine's general path) the tracker asks the
+    engine for MAP types alone first: along a chain from the data-driven start world of a small
+    real map, every proposal that this second bound skips has a true log posterior below its
+    floor, the bound does skip some, and the tracked log posterior stays the full evaluation."""
+    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.pipeline import data_start_world, load_inputs, run_target
+
+    root = Path(__file__).resolve().parents[1]
+    inputs = load_inputs(root / "tests/data/maps/intel_corner.yaml",
+                         rules_path=root / "rules/halls_to_corridors.lp")
+    post = run_target(inputs)
+    assert post.knowledge.local is None and post.knowledge.has_map_only
+    post.knowledge_on = True
+    data = data_from_frame(post.frame)
+    mix = default_mix(data.settings)
+    tr = post.start(data_start_world(inputs))
+    rng = np.random.default_rng(5)
+    for _ in range(4000):
+        _, proposal = mix(rng, tr.world, data)
+        if proposal is None:
+            continue
+        floor = tr.logp + math.log(rng.random()) - proposal.log_ratio
+        before = tr.skipped[1]
+        prop = tr.propose(proposal.world, proposal.changed_slots, floor=floor)
+        if tr.skipped[1] > before:
+            assert post.evaluate(proposal.world).total < floor
+        if not prop.bounded and prop.logp >= floor:
+            tr.accept(prop)
+    assert tr.skipped[1] >= 1
+    assert tr.logp == pytest.approx(post.evaluate(tr.world).total, rel=1e-9, abs=0)
