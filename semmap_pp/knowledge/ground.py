@@ -21,6 +21,7 @@ proposals mostly move walls, which change soft probabilities, not structures).
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict, defaultdict
 from dataclasses import dataclass, replace
 
@@ -192,7 +193,8 @@ class _Evaluator:
         return union, total >= lower
 
     def _states(self, scope) -> int:
-        return int(np.prod([self.card[v] for v in scope], dtype=np.int64))
+        card = self.card
+        return math.prod(int(card[v]) for v in scope)
 
     def _within(self, scope):
         """``scope``, or the error of a ground rule whose scope has too many joint states."""
