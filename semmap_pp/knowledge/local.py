@@ -248,7 +248,7 @@ class LocalModel:
         self._pairs: dict = {}
         self._flags: dict = {}
         self._reduced: dict = {}
-        self._unit_types: dict = {}
+        self._unit_tables: dict = {}
         self._structures: dict = {}
         self._raw_flags: dict = {}     # pair_flags / reduced_pair by the units' own keys
         self._raw_reduced: dict = {}
@@ -380,21 +380,17 @@ class LocalModel:
                                            all(_invariant(t, 1, k2) for t in tables))
         return hit
 
-    def unit_types(self, key, cut):
-        """Unit tables of pattern ``key`` for the marginals and for the MAP, with its low ``cut``
-        soft bits (all or none of them) summed out in both: the MAP maximises the types, not
-        the soft evidence atoms (engine ``_map_ground``) (cached; do not modify)."""
-        hit = self._unit_types.get((key, cut))
+    def unit_table(self, key, cut):
+        """Unit table of pattern ``key`` with its low ``cut`` soft bits (all or none of them)
+        summed out. The marginals and the MAP both use it: the MAP maximises the types, not the
+        soft evidence atoms (engine ``_map_ground``) (cached; do not modify)."""
+        hit = self._unit_tables.get((key, cut))
         if hit is None:
-            table = self.unit(key)[0]
+            hit = self.unit(key)[0]
             if cut:
-                t = _lse(table.reshape(-1, 1 << cut), 1)
-                hit = (t, t)
-            else:
-                hit = (table, table)
-            for t in hit:
-                t.setflags(write=False)
-            self._unit_types[(key, cut)] = hit
+                hit = _lse(hit.reshape(-1, 1 << cut), 1)
+            hit.setflags(write=False)
+            self._unit_tables[(key, cut)] = hit
         return hit
 
     def reduced_pair(self, kp, kq, cut_p, cut_q):
@@ -579,11 +575,11 @@ def _type_network(model: "LocalModel", ev: Evidence) -> TypeNetwork:
         pairs.append((p, q, i, j))
     cuts = [softs[i] if collapse[i] else 0 for i in range(len(keys))]
     shift, usum, umax = [], [], []
-    unit_types = model.unit_types
+    unit_table = model.unit_table
     for i, key in enumerate(keys):
-        s_tab, m_tab = unit_types(key, cuts[i])
-        usum.append(s_tab)
-        umax.append(m_tab)
+        table = unit_table(key, cuts[i])
+        usum.append(table)
+        umax.append(table)
         shift.append(softs[i] - cuts[i])
     sum_pairs, max_pairs, sale = [], [], {}
     add_sum, add_max = [], []
@@ -670,7 +666,7 @@ def _refold(model: "LocalModel", keys: dict, nbrs: dict, cut: dict, units, umax:
     reduced_of = model._raw_reduced
     for u in units:
         ku, cu = keys[u], cut[u]
-        table = np.array(model.unit_types(ku, cu)[1], dtype=np.float64)
+        table = np.array(model.unit_table(ku, cu), dtype=np.float64)
         for v in nbrs[u]:
             rk = (ku, keys[v], cu, cut[v]) if u < v else (keys[v], ku, cut[v], cu)
             red = reduced_of.get(rk)
