@@ -52,7 +52,28 @@ def _check(args) -> int:
                                  "the general path, every evidence grounded whole (several times "
                                  "slower than unit and pair templates; docs/rules.md): "
                                  + obstacle))
+        if obstacle is not None:    # templates ground one unit or one pair at a time
+            print("  grounding: " + _grounding_line(rs))
     return 1 if failed else 0
+
+
+def _grounding_line(rs) -> str:
+    """How large the file's grounding can get (:mod:`semmap_pp.knowledge.size`)."""
+    from semmap_pp.knowledge.size import FLOOR_UNITS, MAX_GROUND_STATEMENTS, NEIGHBOURS, Sizes
+
+    floor = Sizes.floor(FLOOR_UNITS)
+    text = (f"up to {rs.bound.total(floor):,.0f} ground statements for a floor of {FLOOR_UNITS} "
+            f"units with up to {NEIGHBOURS} neighbours each; ")
+    at = rs.bound.limit_units()
+    if at is None:
+        return text + f"within the limit of {MAX_GROUND_STATEMENTS:,} up to 100,000 units"
+    st = rs.bound.largest(Sizes.floor(at))
+    try:
+        where = Path(st.path).relative_to(Path.cwd())
+    except ValueError:
+        where = st.path
+    return text + (f"the limit of {MAX_GROUND_STATEMENTS:,} is reached at {at:,} units (worlds "
+                   f"that large stop with an error), most of it from {where}:{st.line}:{st.col}")
 
 
 def _query(args) -> int:

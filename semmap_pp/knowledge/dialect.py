@@ -27,7 +27,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import clingo
@@ -72,6 +72,9 @@ class RuleSet:
         Number of integrity and weak constraints.
     helpers : tuple of str
         Helper predicates ``name/arity`` defined by the files.
+    bound : GroundingBound
+        An upper bound on the ground statements of any evidence
+        (:class:`~semmap_pp.knowledge.size.GroundingBound`; not part of the identity).
     """
 
     path: str
@@ -81,6 +84,7 @@ class RuleSet:
     n_hard: int
     n_soft: int
     helpers: tuple[str, ...]
+    bound: object = field(default=None, compare=False, repr=False)
 
 
 def _pos(text: str, index: int) -> tuple[int, int]:
@@ -499,6 +503,11 @@ def load_rules(path: str | os.PathLike) -> RuleSet:
                  and st.head.ast_type == cast.ASTType.Literal
                  and st.head.atom.ast_type == cast.ASTType.BooleanConstant)
     n_soft = sum(1 for _p, st in kept if st.ast_type == cast.ASTType.Minimize)
+    from semmap_pp.knowledge import size       # imported here: size reads this module's walk
+    bound = size.GroundingBound(kept)
+    bound.check(size.Sizes.floor(size.FLOOR_UNITS), what=f"a floor of {size.FLOOR_UNITS} units "
+                f"with up to {size.NEIGHBOURS} neighbours each")
     return RuleSet(path=str(top), files=tuple(str(p) for p, _ in files), program=program,
                    digest=hashlib.sha256(program.encode()).hexdigest(), n_hard=n_hard,
-                   n_soft=n_soft, helpers=tuple(sorted(f"{n}/{a}" for n, a in helpers)))
+                   n_soft=n_soft, helpers=tuple(sorted(f"{n}/{a}" for n, a in helpers)),
+                   bound=bound)

@@ -31,6 +31,7 @@ import numpy as np
 from semmap_pp.errors import RuleError
 from semmap_pp.knowledge.dialect import SOFT_PREDICATES, TYPE_PREDICATES, RuleSet
 from semmap_pp.knowledge.evidence import Evidence, ground_facts, soft_weight
+from semmap_pp.knowledge.size import Sizes
 
 #: The engine's frame: exactly one type per unit, SaLe open between adjacent units, soft evidence
 #: atoms open with a unit weak constraint of weight ``log(p / (1 - p))`` (thousandths).
@@ -277,15 +278,18 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
     Raises
     ------
     RuleError
-        If the rule set's hard rules are violated by the evidence alone, or a construct falls
-        outside what the network can represent.
+        If the rule set's hard rules are violated by the evidence alone, a construct falls
+        outside what the network can represent, or the grounding could exceed
+        :data:`~semmap_pp.knowledge.size.MAX_GROUND_STATEMENTS` (checked before clingo runs).
     """
     if keep_control:
+        _check_size(rules, ev)
         obs, ctl = _clingo_ground(rules, ground_facts(ev))
         return Grounding(_build(rules.path, ev, obs, max_states), ctl)
     key = (ground_facts(ev, weights=False), max_states)
     net = cache.get(key) if cache is not None else None
     if net is None:
+        _check_size(rules, ev)
         obs, _ctl = _clingo_ground(rules, key[0])
         net = _build(rules.path, ev, obs, max_states)
         if cache is not None:
@@ -295,6 +299,13 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
     else:
         cache.move_to_end(key)
     return Grounding(_with_soft_weights(net, ev), None)
+
+
+def _check_size(rules: RuleSet, ev: Evidence) -> None:
+    """Refuse an evidence whose grounding could exceed
+    :data:`~semmap_pp.knowledge.size.MAX_GROUND_STATEMENTS` (RuleError naming the statement)."""
+    if rules.bound is not None:
+        rules.bound.check(Sizes.of(ev))
 
 
 def _clingo_ground(rules: RuleSet, facts: str):
