@@ -124,6 +124,18 @@ def test_priority_other_than_zero_is_rejected(tmp_path):
     rejects(tmp_path, ":~ rolike(U), room(U). [100@1, r, U]\n", "priority must be 0")
 
 
+@pytest.mark.parametrize("text", ["adj(q,P) :- adj(P,Q).\n",   # found by bench/fuzz.py
+                                  "adj(P,7) :- unit(P).\n"])
+def test_adj_derived_over_values_that_are_not_units_is_a_rule_error(tmp_path, text):
+    """The frame opens sale(P,Q) for every adj(P,Q); a derived pair holding a constant crashed
+    the network reader (clingo's symbol access: a RuntimeError), one holding an id the evidence
+    does not have opened a SaLe atom between units that do not exist."""
+    rs = check(tmp_path, text)
+    with pytest.raises(RuleError, match=r"r\.lp: adj/2 must pair two units of the evidence, but "
+                                        r"the rules derive adj\("):
+        ground(rs, Evidence.build([1, 2], adj=[(1, 2)]))
+
+
 def test_contradictory_hard_rules_name_the_file(tmp_path):
     rs = check(tmp_path, ":- unit(U), rolike(U).\n")
     with pytest.raises(RuleError, match=r"r\.lp: the hard rules admit no world"):

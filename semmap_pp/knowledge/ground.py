@@ -384,6 +384,10 @@ def _build(path: str, ev: Evidence, obs: _Observer, max_states: int | None = Non
         else:
             var_of_atom[atom] = (len(card), None)
             if name == "sale":
+                if not all(a.type == clingo.SymbolType.Number and a.number in unit_index
+                           for a in args):
+                    raise RuleError(path, f"adj/2 must pair two units of the evidence, but the "
+                                    f"rules derive adj({args[0]},{args[1]})")
                 sale[(args[0].number, args[1].number)] = len(card)
             card.append(2)
             names.append(str(sym))
