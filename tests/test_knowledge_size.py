@@ -13,6 +13,7 @@ import random
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from semmap_pp.cli import main
 from semmap_pp.errors import RuleError
@@ -165,3 +166,87 @@ def test_a_run_whose_world_grows_over_the_limit_stops_with_one_line_and_no_outpu
     assert code == 2, err
     assert err[-1].startswith(f"semmap: error: {path}:1:1: grounding a world of "), err
     assert "over the limit of 40;" in err[-1] and not out.exists()
+
+
+# --- random programs ------------------------------------------------------------------------
+
+_UNARY = ("unit", "rolike", "colike", "halike", "muldoor", "room", "corr", "hall", "other", "h1")
+_BINARY = ("adj", "sale", "h2")
+
+
+@st.composite
+def _body(draw, want=()):
+    """A safe random body: positive atoms binding some of A..D (and the variables ``want``),
+    then negated atoms, a comparison and an aggregate over variables already bound."""
+    names = ["A", "B", "C", "D"]
+    lits, bound = [], set()
+    for v in want:                                   # the head's variables occur positively
+        lits.append(f"{draw(st.sampled_from(_UNARY))}({v})")
+        bound.add(v)
+    for _ in range(draw(st.integers(1, 4))):
+        if draw(st.booleans()):
+            x, y = draw(st.sampled_from(names)), draw(st.sampled_from(names))
+            if x == y:
+                continue
+            lits.append(f"{draw(st.sampled_from(_BINARY))}({x},{y})")
+            bound |= {x, y}
+        else:
+            x = draw(st.sampled_from(names))
+            lits.append(f"{draw(st.sampled_from(_UNARY))}({x})")
+            bound.add(x)
+    if not bound:
+        lits.append("unit(A)")
+        bound.add("A")
+    b = sorted(bound)
+    for _ in range(draw(st.integers(0, 2))):
+        x = draw(st.sampled_from(b))
+        lits.append(f"not {draw(st.sampled_from(_UNARY))}({x})")
+    if len(b) > 1 and draw(st.booleans()):
+        lits.append(f"{b[0]} {draw(st.sampled_from(['<', '!=', '=']))} {b[1]}")
+    if draw(st.booleans()):
+        x = draw(st.sampled_from(b))
+        kind = draw(st.sampled_from(["guard", "assign", "cond"]))
+        inner = f"adj({x},Y), {draw(st.sampled_from(_UNARY))}(Y)"
+        lits.append({"guard": f"#count {{ Y : {inner} }} >= 2",
+                     "assign": f"N = #count {{ Y : {inner} }}, N > 1",
+                     "cond": f"corr(Y) : {inner}"}[kind])
+    return ", ".join(lits), b
+
+
+@st.composite
+def _program(draw):
+    lines = ["adj(Q,P) :- adj(P,Q)."]
+    body, _ = draw(_body(want=("A",)))
+    lines.append(f"h1(A) :- {body}.")
+    body, _ = draw(_body(want=("A", "B")))
+    lines.append(f"h2(A,B) :- {body}.")
+    if draw(st.booleans()):                          # recursion through evidence
+        lines.append("h2(A,C) :- h2(A,B), adj(B,C).")
+    for k in range(draw(st.integers(1, 3))):
+        body, b = draw(_body())
+        if "N = #count" in body:
+            b = b + ["N"]
+        lines.append(f":~ {body}. [1@0, w{k}, {', '.join(b)}]" if draw(st.booleans())
+                     else f":- {body}.")
+    return "\n".join(lines) + "\n"
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+@given(_program(), st.integers(0, 2**32 - 1))
+def test_the_bound_holds_for_random_programs(text, seed):
+    """Random safe programs over evidence, query and helper atoms (adj and sale links, negation,
+    comparisons, count aggregates, conditional literals, recursion through adj): clingo never
+    grounds more statements than the bound says."""
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        try:
+            rules = load_rules(_write(Path(d), "random", text))
+        except RuleError as exc:                     # over the limit at a floor of 64 units
+            assert "over the limit" in str(exc), (text, exc)
+            return
+        none = load_rules(ROOT / "rules" / "none.lp")
+        rng = random.Random(seed)
+        for _ in range(3):
+            ev = _random_evidence(rng, rng.randint(1, 12))
+            made = _statements(rules, ev) - _statements(none, ev)
+            assert made <= rules.bound.total(Sizes.of(ev)), (text, ev)
