@@ -215,6 +215,9 @@ CASES = [
      "intervals"),
     ("rules-recursion-without-end", lambda d: rules(d, "c(X) :- unit(X).\nc(X+1) :- c(X).\n"),
      "must be a variable or a constant"),
+    ("rules-six-free-unit-variables", lambda d: rules(
+        d, ":~ unit(A), unit(B), unit(C), unit(D), unit(E), unit(F), room(A). [1@0, m, A, B, C, D, E, F]\n"),
+     "over the limit of 2,000,000"),     # ran without end before session 26's grounding bound
     ("rules-binary-file", lambda d: rules_bytes(d, bytes(range(256))), "cannot read rule file"),
     ("rules-non-ascii-character", lambda d: rules(d, ":- room(U) \u00e9.\n"),
      "not allowed outside comments and strings"),

@@ -128,7 +128,7 @@ def test_an_evidence_over_the_limit_is_refused_before_clingo_runs(tmp_path, monk
     n = round((MAX_GROUND_STATEMENTS / 2) ** (1 / 3)) + 1     # n^3 tuples, two statements each
     ev = Evidence.build(range(n), adj=[(i, i + 1) for i in range(n - 1)])
     with pytest.raises(RuleError, match=rf"product\.lp:1:1: grounding a world of {n} units could "
-                                        r"make up to .* over the limit"):
+                                        r"take up to .* over the limit"):
         ground_mod.ground(rules, ev)
     # just below the limit the check passes (clingo is not run here: the bound alone)
     rules.bound.check(Sizes.of(Evidence.build(range(n - 2))))
@@ -165,7 +165,7 @@ def test_a_run_whose_world_grows_over_the_limit_stops_with_one_line_and_no_outpu
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2, err
     assert err[-1].startswith(f"semmap: error: {path}:1:1: grounding a world of "), err
-    assert "over the limit of 40;" in err[-1] and not out.exists()
+    assert "over the limit of 40," in err[-1] and not out.exists()
 
 
 # --- random programs ------------------------------------------------------------------------

@@ -506,7 +506,7 @@ def load_rules(path: str | os.PathLike) -> RuleSet:
     from semmap_pp.knowledge import size       # imported here: size reads this module's walk
     bound = size.GroundingBound(kept)
     bound.check(size.Sizes.floor(size.FLOOR_UNITS), what=f"a floor of {size.FLOOR_UNITS} units "
-                f"with up to {size.NEIGHBOURS} neighbours each")
+                f"({size.NEIGHBOURS} neighbours each)")
     return RuleSet(path=str(top), files=tuple(str(p) for p, _ in files), program=program,
                    digest=hashlib.sha256(program.encode()).hexdigest(), n_hard=n_hard,
                    n_soft=n_soft, helpers=tuple(sorted(f"{n}/{a}" for n, a in helpers)),

@@ -258,11 +258,11 @@ class GroundingBound:
             return
         worst, st = max(costs, key=lambda cs: cs[0])
         what = what or f"a world of {z.units} units"
-        raise RuleError(st.path, f"grounding {what} could make up to {total:.3g} ground "
-                        f"statements, over the limit of {limit:,}; this statement makes up to "
-                        f"{worst:.3g} of them: `{st.text}` (use fewer unit variables, or link "
-                        "them by adj/2; docs/rules.md, \"Inference and its limits\")",
-                        st.line, st.col)
+        text = st.text if len(st.text) <= 60 else st.text[:57] + "..."
+        raise RuleError(st.path, f"grounding {what} could take up to {total:.3g} ground "
+                        f"statements, over the limit of {limit:,}, {worst:.3g} of them from "
+                        f"`{text}`: use fewer unit variables or link them by adj/2 "
+                        "(docs/rules.md)", st.line, st.col)
 
     def limit_units(self, limit: int | None = None, most: int = 100_000) -> int | None:
         """The fewest units of a :meth:`Sizes.floor` whose bound exceeds ``limit`` (default
