@@ -17,8 +17,10 @@ files outside the folder of the top-level file, choice rules, disjunctions, ``#m
 ``#heuristic``, ``#project``, ``#edge``, theory atoms, classical negation. So is what could make
 grounding endless or clingo misbehave: intervals ``a..b``, derived atoms whose arguments are not
 constants or variables of positive body atoms (``c(X+1) :- c(X).``), integer literals beyond 32 bits
-(clingo wraps them silently) and non-ASCII characters outside comments and strings (clingo aborts
-the process on them). Every problem is a :class:`~semmap_pp.errors.RuleError`
+(clingo wraps them silently), non-ASCII characters outside comments and strings (clingo aborts
+the process on them), and statements whose grounding could exceed
+:data:`~semmap_pp.knowledge.size.MAX_GROUND_STATEMENTS` on a floor of 64 units (many free unit
+variables; :mod:`semmap_pp.knowledge.size`). Every problem is a :class:`~semmap_pp.errors.RuleError`
 ``file:line:col: message`` (docs/robustness.md lists the cases).
 """
 
