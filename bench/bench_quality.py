@@ -219,7 +219,7 @@ def spread_best(run):
     W* is (``[kernels] polish_rounds`` of the ascent), in place of W* when that world is higher;
     otherwise ``run`` itself. ``semmap map`` never does this (W* is the search's, docs/sampler.md):
     the benchmark measures what taking it would give (``--spread-best``)."""
-    from semmap_pp.ascent import refine_world
+    from semmap_pp.ascent import polish
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import settings_from_mapping
     from semmap_pp.outputs.semantic import semantic_map
@@ -230,8 +230,7 @@ def spread_best(run):
     inputs = run.inputs
     ks = settings_from_mapping(inputs.model.kernels, source=f"{inputs.model.path} [kernels]")
     post = run_target(inputs)
-    world = refine_world(post, sp.best_world, data_from_frame(inputs.frame, ks), rounds=ks.polish_rounds,
-                         recuts=True, shared_walls=True)
+    world = polish(post, sp.best_world, data_from_frame(inputs.frame, ks), ks.polish_rounds)
     sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi)
     return dataclasses.replace(run, world=sm.world, semantic=sm)
 

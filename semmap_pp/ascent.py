@@ -536,10 +536,11 @@ class _Ascent:
                 out.append((a, b))
         return out
 
-    def splits(self) -> bool:
+    def splits(self, double: bool = True) -> bool:
         """Split a unit at its strongest interior wall line when that helps (pieces share the
-        wall); when no single cut helps, cut one of the two pieces again (a room inside an L of
-        walls needs both cuts: each alone leaves a wall-less band across open floor)."""
+        wall); when no single cut helps and ``double``, cut one of the two pieces again (a room
+        inside an L of walls needs both cuts: each alone leaves a wall-less band across open
+        floor)."""
         changed = False
         for s in self.units():
             free = self.free(2)
@@ -553,7 +554,7 @@ class _Ascent:
                 self.wall_moves(s)
                 self.wall_moves(f)
                 continue
-            if free.size < 2 or not singles:
+            if not double or free.size < 2 or not singles:
                 continue
             f2 = int(free[1])
             doubles = [wm.add(wm.replace(w1, piece, a), f2, b)
@@ -585,11 +586,13 @@ class _Ascent:
 
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
-                 merges: bool = True, recuts: bool = False, shared_walls: bool = False) -> wm.World:
+                 merges: bool = True, recuts: bool = False, shared_walls: bool = False,
+                 double_cuts: bool = True) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
     L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
-    (:meth:`_Ascent.shared_wall_moves`); W*'s polish uses both.
+    (:meth:`_Ascent.shared_wall_moves`), ``double_cuts=False`` the second cut of a piece when no
+    single cut helps (:meth:`_Ascent.splits`); W*'s polish is :func:`polish`.
 
     Parameters
     ----------
@@ -628,7 +631,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             changed |= asc.bridges()
         if recuts:
             changed |= asc.recuts()
-        changed |= asc.splits()
+        changed |= asc.splits(double_cuts)
         if births:
             changed |= asc.births()
         return changed
@@ -660,6 +663,16 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
         out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots
     return out
+
+
+def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
+    """W*'s polish: :func:`refine_world` of the full target with the recuts and the whole-wall
+    moves, without double cuts. The knowledge-free start ascent cuts rooms out of L-shaped walls
+    with two cuts already; in the polish the second cuts took two thirds of its time under a rule
+    file off the fast path, and leaving them out changed no W* of the 30 synthetic floors, the ipa
+    types plans, cartesium, aces or freiburg-079 (docs/quality.md, What changed 35)."""
+    return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
+                        double_cuts=False)
 
 
 def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:

@@ -30,7 +30,7 @@ from semmap_pp.errors import MapError, ModelError, SemmapError
 from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
 from semmap_pp.frame import Frame, build_frame, off_axis_note
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
-from semmap_pp.ascent import refine_world
+from semmap_pp.ascent import polish, refine_world
 from semmap_pp.init import dispersed_world, start_world
 from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
 from semmap_pp.model import Model, load_model
@@ -434,8 +434,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
         log(f"polishing W* ({wm.n_units(best)} units) by greedy ascent of the full target")
         t_polish, before = time.perf_counter(), post.evaluate(best).total
-        best = refine_world(post, best, data, rounds=kernel_settings.polish_rounds, recuts=True,
-                            shared_walls=True)
+        best = polish(post, best, data, kernel_settings.polish_rounds)
         polished = (before, time.perf_counter() - t_polish)
     sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
     if polished is not None:            # sm.log_posterior is W*'s, evaluated once

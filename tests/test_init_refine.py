@@ -621,3 +621,24 @@ def test_after_whole_walls_moved_the_joining_moves_run_again(monkeypatch):
     assert len(calls) == 2          # the merges again after the (reported) wall move ...
     assert len(cuts) == 1           # ... but not the splits
     assert post.evaluate(out).total >= post.evaluate(polished).total - 1e-6
+
+
+def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
+    """The room inside an L of walls needs two cuts at once: the start ascent (refine_world, as
+    the pipeline's knowledge-free start runs it) makes them, W*'s polish does not try them
+    (ascent.polish; docs/quality.md What changed 35) and keeps what single moves give."""
+    from semmap_pp.ascent import polish
+
+    m = l_of_walls()
+    model = load_model()
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    post, data = Posterior(frame, model, None), data_from_frame(frame)
+    start = wm.add(wm.empty(8), 0, (2, 2, m.shape[0] - 2, m.shape[1] - 2))
+
+    def rects(w):
+        return sorted(tuple(int(v) for v in w.rects[s]) for s in wm.active_slots(w))
+
+    assert (54, 2, 138, 46) in rects(refine_world(post, start, data, rounds=1))
+    polished = polish(post, start, data, rounds=1)
+    assert (54, 2, 138, 46) not in rects(polished)
+    assert post.evaluate(polished).total >= post.evaluate(start).total
