@@ -13,7 +13,8 @@ the birth table where free space is left uncovered (ADD), split a unit at a wall
 one compound move no single kernel makes, *bridging* two collinear pieces of a corridor across the
 unit between them (:meth:`_Ascent.bridges`); in W*'s polish also two more, recutting an L-shaped
 pair the other way (:meth:`_Ascent.recuts`) and moving every edge on one wall together
-(:meth:`_Ascent.shared_wall_moves`).
+(:meth:`_Ascent.shared_wall_moves`), and one fewer: the start ascent cuts a unit twice at once when
+no single cut helps (a room inside an L of walls), W*'s polish cuts once (:func:`polish`).
 
 After sampling, the same ascent under the full target (knowledge on) polishes W*, the best sampled
 world: a short chain at T = 1 leaves it a few wall moves or one merge short of the nearest local
