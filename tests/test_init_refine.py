@@ -602,7 +602,7 @@ def test_after_whole_walls_moved_the_joining_moves_run_again(monkeypatch):
     calls, cuts = [], []
     merges, splits = ascent._Ascent.merges, ascent._Ascent.splits
     monkeypatch.setattr(ascent._Ascent, "merges", lambda self: calls.append(1) or merges(self))
-    monkeypatch.setattr(ascent._Ascent, "splits", lambda self: cuts.append(1) or splits(self))
+    monkeypatch.setattr(ascent._Ascent, "splits", lambda self, *a: cuts.append(1) or splits(self, *a))
     refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
     assert len(calls) == len(cuts) == 1          # a local maximum: nothing moves, one pass
     reported = []
