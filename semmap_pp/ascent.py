@@ -13,8 +13,9 @@ the birth table where free space is left uncovered (ADD), split a unit at a wall
 one compound move no single kernel makes, *bridging* two collinear pieces of a corridor across the
 unit between them (:meth:`_Ascent.bridges`); in W*'s polish also two more, recutting an L-shaped
 pair the other way (:meth:`_Ascent.recuts`) and moving every edge on one wall together
-(:meth:`_Ascent.shared_wall_moves`), and one fewer: the start ascent cuts a unit twice at once when
-no single cut helps (a room inside an L of walls), W*'s polish cuts once (:func:`polish`).
+(:meth:`_Ascent.shared_wall_moves`), and two fewer: the start ascent cuts a unit twice at once when
+no single cut helps (a room inside an L of walls) and adds units over uncovered free space (births),
+W*'s polish cuts once and adds none (:func:`polish`).
 
 After sampling, the same ascent under the full target (knowledge on) polishes W*, the best sampled
 world: a short chain at T = 1 leaves it a few wall moves or one merge short of the nearest local
@@ -668,12 +669,14 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
 
 def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     """W*'s polish: :func:`refine_world` of the full target with the recuts and the whole-wall
-    moves, without double cuts. The knowledge-free start ascent cuts rooms out of L-shaped walls
-    with two cuts already; in the polish the second cuts took two thirds of its time under a rule
-    file off the fast path, and leaving them out changed no W* of the 30 synthetic floors, the ipa
-    types plans, cartesium, aces or freiburg-079 (docs/quality.md, What changed 35)."""
+    moves, without double cuts and births. The knowledge-free start ascent cuts rooms out of
+    L-shaped walls with two cuts and covers free space by births already; in the polish, under a
+    rule file off the fast path, the second cuts took two thirds of its time on cartesium and the
+    births a third on aces. Without the double cuts no W* of the 30 synthetic floors, the ipa
+    types plans, cartesium, aces or freiburg-079 changed (docs/quality.md, What changed 35);
+    without the births too, no W* measured changed at all (What changed 36)."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
-                        double_cuts=False)
+                        double_cuts=False, births=False)
 
 
 def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:

@@ -642,3 +642,22 @@ def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
     polished = polish(post, start, data, rounds=1)
     assert (54, 2, 138, 46) not in rects(polished)
     assert post.evaluate(polished).total >= post.evaluate(start).total
+
+
+def test_w_stars_polish_leaves_the_births_to_the_start_ascent(monkeypatch):
+    """The start ascent (refine_world) tries births, the boxes of the birth table over free space
+    no unit covers; W*'s polish does not (ascent.polish; docs/quality.md What changed 36)."""
+    from semmap_pp import ascent
+
+    post, data = knowledge_free(two_rooms())
+    left_only = wm.add(wm.empty(8), 0, (2, 2, 82, 72))      # the left room on its walls
+    tried = []
+    births = ascent._Ascent.births
+    monkeypatch.setattr(ascent._Ascent, "births",
+                        lambda self, *a, **k: tried.append(1) or births(self, *a, **k))
+    refine_world(post, left_only, data, rounds=1)
+    assert tried
+    tried.clear()
+    polished = ascent.polish(post, left_only, data, rounds=1)
+    assert not tried
+    assert post.evaluate(polished).total >= post.evaluate(left_only).total
