@@ -31,11 +31,15 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import clingo
 import clingo.ast as cast
 
 from semmap_pp.errors import RuleError
+
+if TYPE_CHECKING:                  # size reads this module's walk: imported where it is needed
+    from semmap_pp.knowledge.size import GroundingBound
 
 EVIDENCE_PREDICATES = {("unit", 1), ("rolike", 1), ("colike", 1), ("halike", 1),
                        ("muldoor", 1), ("adj", 2)}
@@ -86,7 +90,7 @@ class RuleSet:
     n_hard: int
     n_soft: int
     helpers: tuple[str, ...]
-    bound: object = field(default=None, compare=False, repr=False)
+    bound: GroundingBound = field(compare=False, repr=False)
 
 
 def _pos(text: str, index: int) -> tuple[int, int]:

@@ -304,8 +304,7 @@ def ground(rules: RuleSet, ev: Evidence, keep_control: bool = False,
 def _check_size(rules: RuleSet, ev: Evidence) -> None:
     """Refuse an evidence whose grounding could exceed
     :data:`~semmap_pp.knowledge.size.MAX_GROUND_STATEMENTS` (RuleError naming the statement)."""
-    if rules.bound is not None:
-        rules.bound.check(Sizes.of(ev))
+    rules.bound.check(Sizes.of(ev))
 
 
 def _clingo_ground(rules: RuleSet, facts: str):

@@ -185,6 +185,9 @@ class GroundingBound:
                                               _join(st.body)))
         self.constants = len(constants)
         self._helpers = {s.head for s in self.statements if s.head is not None}
+        # the helpers each helper's rules read (the order in which their counts are known)
+        self._deps = {h: {(a.name, len(a.args)) for st in self.statements if st.head == h
+                          for a in _all_atoms(st.body)} & self._helpers for h in self._helpers}
 
     # ------------------------------------------------------------------ counting
 
@@ -195,11 +198,9 @@ class GroundingBound:
         cards.update({(p, 1): n for p in _TYPES})
         cards.update({(p, 1): k for p, k in zip(_UNARY_EVIDENCE, z.unary)})
         dom = float(n + self.constants)
-        deps = {h: {(a.name, len(a.args)) for st in self.statements if st.head == h
-                    for a in _all_atoms(st.body)} & self._helpers for h in self._helpers}
         pending = set(self._helpers)
         while pending:
-            ready = [h for h in pending if not deps[h] & pending]
+            ready = [h for h in pending if not self._deps[h] & pending]
             if not ready:        # recursion through helpers: as many atoms as there can be
                 cards.update({h: dom ** h[1] for h in pending})
                 break
@@ -227,8 +228,9 @@ class GroundingBound:
         todo = list(join.atoms)
         inst = 1.0
         while todo:
-            k = min(range(len(todo)), key=lambda i: self._fan(todo[i], bound, cards, z))
-            inst *= self._fan(todo[k], bound, cards, z)
+            fans = [self._fan(a, bound, cards, z) for a in todo]
+            k = min(range(len(todo)), key=fans.__getitem__)
+            inst *= fans[k]
             bound.update(v for v in todo.pop(k).args if v is not None)
             if inst == 0:
                 return 0.0, 0.0
@@ -269,13 +271,12 @@ class GroundingBound:
         """The fewest units of a :meth:`Sizes.floor` whose bound exceeds ``limit`` (default
         :data:`MAX_GROUND_STATEMENTS`), or None when ``most`` units stay within it."""
         limit = MAX_GROUND_STATEMENTS if limit is None else limit
-        neighbours = NEIGHBOURS
-        if self.total(Sizes.floor(most, neighbours)) <= limit:
+        if self.total(Sizes.floor(most)) <= limit:
             return None
         lo, hi = 0, most                      # total(lo) <= limit < total(hi)
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            if self.total(Sizes.floor(mid, neighbours)) <= limit:
+            if self.total(Sizes.floor(mid)) <= limit:
                 lo = mid
             else:
                 hi = mid
