@@ -16,7 +16,7 @@ from test_knowledge_inference import _map_tuple, assert_matches_brute_force, ora
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.layouts import dense_floor
-from semmap_pp.knowledge.lbp import BPSettings, cluster, factor_bp, pairwise_bp
+from semmap_pp.knowledge.lbp import BPSettings, _exp_tables, _factor_messages, cluster, factor_bp, pairwise_bp
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2
 
@@ -110,6 +110,52 @@ def test_factor_bp_is_exact_on_a_tree_of_factors():
     w /= w.sum()
     for v, c in enumerate(card):
         np.testing.assert_allclose(res.marginals[v], np.bincount(states[:, v], w, c), atol=1e-9)
+
+
+def _messages_in_log_space(tables, ins_log, shape):
+    """Reference for :func:`_factor_messages`: message to position p = log Σ over the other
+    positions of (table + their incoming log messages), normalised (uniform when nothing is
+    possible), one factor at a time by broadcasting."""
+    out = []
+    for t, vin in zip(tables, ins_log):
+        row = []
+        for p, c in enumerate(shape):
+            s = np.asarray(t, dtype=float)
+            for q, m in enumerate(vin):
+                if q != p:
+                    sh = [1] * len(shape)
+                    sh[q] = shape[q]
+                    s = s + m.reshape(sh)
+            other = tuple(q for q in range(len(shape)) if q != p)
+            with np.errstate(divide="ignore"):
+                top = np.max(s)
+                lse = np.log(np.exp(s - top).sum(axis=other)) + top if np.isfinite(top) else np.full(c, -np.inf)
+            w = np.exp(lse - np.max(lse)) if np.isfinite(np.max(lse)) else np.zeros(c)
+            row.append(w / w.sum() if w.sum() > 0 else np.full(c, 1.0 / c))
+        out.append(np.concatenate(row))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (4, 2, 2), (4, 4, 4), (2, 3, 4, 2), (4, 4, 4, 4, 4)])
+def test_compiled_factor_messages_equal_the_log_space_sums(shape):
+    # random log tables with forbidden (-inf) entries, one factor forbidding everything, and
+    # incoming messages with zero entries (a variable that rules a value out)
+    rng = np.random.default_rng(sum(shape))
+    n = 7
+    tables = rng.normal(0, 3, (n,) + shape)
+    tables[rng.random(tables.shape) < 0.2] = -np.inf
+    tables[3] = -np.inf
+    ins_log = [[rng.normal(0, 2, c) for c in shape] for _ in range(n)]
+    for k in range(n):
+        ins_log[k][0][rng.random(shape[0]) < 0.3] = -np.inf
+    dims = np.array(shape, dtype=np.int64)
+    offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
+    ins = np.array([np.concatenate([np.exp(m - np.max(m)) if np.isfinite(np.max(m)) else np.zeros(len(m))
+                                    for m in vin]) for vin in ins_log])
+    got = _factor_messages(_exp_tables(list(tables)), ins, dims, offs)
+    want = _messages_in_log_space(tables, ins_log, shape)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    assert np.allclose(got[3], np.concatenate([np.full(c, 1.0 / c) for c in shape]))
 
 
 def test_cluster_keeps_the_joint_and_merges_tight_overlaps():

@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from semmap_pp.knowledge.exact import _lse
 
 _LOG_FLOOR = -690.0   # log of the smallest message entry kept (exp(-690) ~ 1e-300)
 
@@ -241,8 +240,10 @@ def cluster(card, potentials, max_states):
 def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult:
     """Sum-product on a factor network ``P(x) ∝ exp(Σ_f table_f(x_scope_f))``.
 
-    Factors are first merged by :func:`cluster`; factors of one shape then move together as
-    arrays (one numpy operation per shape and scope position per iteration).
+    Factors are first merged by :func:`cluster`; factors of one shape then move together: each
+    iteration computes every message of the shape's factors in one compiled pass
+    (:func:`_factor_messages`, in probability space: each table exponentiated once, shifted by
+    its largest finite entry, so an entry more than ~745 nats below it counts as impossible).
 
     Parameters
     ----------
@@ -278,9 +279,10 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
     blocks = []
     for shape, items in sorted(groups.items()):
         scopes = np.array([s for s, _ in items], dtype=np.int64)
-        T = np.stack([t for _, t in items])
+        dims = np.array(shape, dtype=np.int64)
+        offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
         msgs = [np.full((len(items), c), 1.0 / c) for c in shape]
-        blocks.append((shape, scopes, T, msgs))
+        blocks.append((shape, scopes, _exp_tables([t for _, t in items]), msgs, dims, offs))
     a, b = 1.0 - settings.damping, settings.damping
 
     def log_of(m):
@@ -288,7 +290,7 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
 
     def beliefs():
         logb = {c: u.copy() for c, u in U.items()}
-        for shape, scopes, _T, msgs in blocks:
+        for shape, scopes, _e, msgs, _d, _o in blocks:
             for pos, c in enumerate(shape):
                 np.add.at(logb[c], local[scopes[:, pos]], log_of(msgs[pos]))
         return logb
@@ -299,31 +301,17 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
         logb = beliefs()
         delta = 0.0
         new_all = []
-        for shape, scopes, T, msgs in blocks:
-            r = len(shape)
-            ins = []
-            for pos, c in enumerate(shape):
+        for shape, scopes, etab, msgs, dims, offs in blocks:
+            ins = np.empty((len(scopes), int(dims.sum())))
+            for pos, c in enumerate(shape):   # what each variable sends in, as probabilities
                 vin = logb[c][local[scopes[:, pos]]] - log_of(msgs[pos])
                 top = vin.max(axis=1, keepdims=True)
-                vin = vin - np.where(np.isfinite(top), top, 0.0)
-                sh = [len(scopes)] + [1] * r
-                sh[pos + 1] = c
-                ins.append(vin.reshape(sh))
-            news = []
-            for pos, c in enumerate(shape):
-                t = T
-                for q, vin in enumerate(ins):
-                    if q != pos:
-                        t = t + vin
-                flat = np.moveaxis(t, pos + 1, 1).reshape(len(scopes), c, -1)
-                new = _norm_exp(_lse(flat, 2), axis=1)
-                empty = ~new.any(axis=1)
-                if empty.any():
-                    new[empty] = 1.0 / c
-                delta = max(delta, float(np.abs(new - msgs[pos]).max()))
-                news.append(new)
+                ins[:, offs[pos]:offs[pos] + c] = np.exp(vin - np.where(np.isfinite(top), top, 0.0))
+            new = _factor_messages(etab, ins, dims, offs)
+            news = [new[:, offs[pos]:offs[pos] + c] for pos, c in enumerate(shape)]
+            delta = max([delta] + [float(np.abs(nw - m).max()) for nw, m in zip(news, msgs)])
             new_all.append(news)
-        for (_s, _sc, _T, msgs), news in zip(blocks, new_all):
+        for (_s, _sc, _e, msgs, _d, _o), news in zip(blocks, new_all):
             for pos, new in enumerate(news):
                 msgs[pos] = a * new + b * msgs[pos]
         if delta < settings.tol:
@@ -332,3 +320,61 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
     logb = beliefs()
     marg = [_norm_exp(logb[c][local[v]]) for v, c in enumerate(card)]
     return BPResult(marg, {}, it, converged or not blocks)
+
+
+def _exp_tables(tables) -> np.ndarray:
+    """(n, S) ``exp`` of each log table flattened (C order), shifted by its largest finite entry
+    (``-inf`` gives 0; a table with none stays all 0)."""
+    t = np.stack([np.asarray(x, dtype=np.float64) for x in tables]).reshape(len(tables), -1)
+    top = np.max(np.where(np.isfinite(t), t, -np.inf), axis=1, keepdims=True)
+    return np.ascontiguousarray(np.exp(t - np.where(np.isfinite(top), top, 0.0)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _factor_messages(etab, ins, dims, offs):  # pragma: no cover - compiled
+    """The new messages of ``n`` factors of one shape ``dims`` to each variable of their scopes.
+
+    ``etab`` (n, S): each factor's table in probability space (:func:`_exp_tables`); ``ins``
+    (n, Σ dims): the messages the variables send in, position ``q``'s at ``offs[q]``, as
+    probabilities of any scale. Message to position ``p``, entry ``x``: the sum over the joint
+    states with ``x_p = x`` of the table times the other positions' incoming entries (the
+    product of all positions but ``p`` from prefix and suffix products), then normalised; a
+    message whose sum is 0 is uniform. Returns (n, Σ dims) in the layout of ``ins``."""
+    n, S = etab.shape
+    r = dims.shape[0]
+    out = np.zeros((n, ins.shape[1]))
+    col = np.empty((S, r), np.int64)       # column of each joint state's entry per position
+    digit = np.zeros(r, np.int64)
+    for j in range(S):                     # C order: the last position varies fastest
+        for q in range(r):
+            col[j, q] = offs[q] + digit[q]
+        q = r - 1
+        while q >= 0:
+            digit[q] += 1
+            if digit[q] < dims[q]:
+                break
+            digit[q] = 0
+            q -= 1
+    pre = np.empty(r + 1)
+    suf = np.empty(r + 1)
+    for i in range(n):
+        for j in range(S):
+            e = etab[i, j]
+            if e == 0.0:
+                continue
+            pre[0] = 1.0
+            for q in range(r):
+                pre[q + 1] = pre[q] * ins[i, col[j, q]]
+            suf[r] = 1.0
+            for q in range(r - 1, -1, -1):
+                suf[q] = suf[q + 1] * ins[i, col[j, q]]
+            for p in range(r):
+                out[i, col[j, p]] += e * pre[p] * suf[p + 1]
+        for p in range(r):
+            o, c = offs[p], dims[p]
+            tot = 0.0
+            for x in range(c):
+                tot += out[i, o + x]
+            for x in range(c):
+                out[i, o + x] = out[i, o + x] / tot if tot > 0 else 1.0 / c
+    return out
