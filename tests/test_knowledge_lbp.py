@@ -16,7 +16,8 @@ from test_knowledge_inference import _map_tuple, assert_matches_brute_force, ora
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.layouts import dense_floor
-from semmap_pp.knowledge.lbp import BPSettings, _exp_tables, _factor_messages, cluster, factor_bp, pairwise_bp
+from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _factor_messages, cluster, factor_bp,
+                                     pairwise_bp)
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2
 
@@ -127,9 +128,10 @@ def _messages_in_log_space(tables, ins_log, shape):
                     sh[q] = shape[q]
                     s = s + m.reshape(sh)
             other = tuple(q for q in range(len(shape)) if q != p)
+            top = np.max(s)
             with np.errstate(divide="ignore"):
-                top = np.max(s)
-                lse = np.log(np.exp(s - top).sum(axis=other)) + top if np.isfinite(top) else np.full(c, -np.inf)
+                lse = (np.log(np.exp(s - top).sum(axis=other)) + top if np.isfinite(top)
+                       else np.full(c, -np.inf))
             w = np.exp(lse - np.max(lse)) if np.isfinite(np.max(lse)) else np.zeros(c)
             row.append(w / w.sum() if w.sum() > 0 else np.full(c, 1.0 / c))
         out.append(np.concatenate(row))
@@ -150,8 +152,8 @@ def test_compiled_factor_messages_equal_the_log_space_sums(shape):
         ins_log[k][0][rng.random(shape[0]) < 0.3] = -np.inf
     dims = np.array(shape, dtype=np.int64)
     offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
-    ins = np.array([np.concatenate([np.exp(m - np.max(m)) if np.isfinite(np.max(m)) else np.zeros(len(m))
-                                    for m in vin]) for vin in ins_log])
+    ins = np.array([np.concatenate([np.exp(m - np.max(m)) if np.isfinite(np.max(m))
+                                    else np.zeros(len(m)) for m in vin]) for vin in ins_log])
     got = _factor_messages(_exp_tables(list(tables)), ins, dims, offs)
     want = _messages_in_log_space(tables, ins_log, shape)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
