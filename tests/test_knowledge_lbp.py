@@ -16,8 +16,8 @@ from test_knowledge_inference import _map_tuple, assert_matches_brute_force, ora
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.layouts import dense_floor
-from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _factor_messages, cluster, factor_bp,
-                                     pairwise_bp)
+from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _factor_messages, _joint_columns, cluster,
+                                     factor_bp, pairwise_bp)
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2
 
@@ -154,7 +154,7 @@ def test_compiled_factor_messages_equal_the_log_space_sums(shape):
     offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
     ins = np.array([np.concatenate([np.exp(m - np.max(m)) if np.isfinite(np.max(m))
                                     else np.zeros(len(m)) for m in vin]) for vin in ins_log])
-    got = _factor_messages(_exp_tables(list(tables)), ins, dims, offs)
+    got = _factor_messages(_exp_tables(list(tables)), ins, _joint_columns(dims, offs), dims, offs)
     want = _messages_in_log_space(tables, ins_log, shape)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
     assert np.allclose(got[3], np.concatenate([np.full(c, 1.0 / c) for c in shape]))

@@ -282,7 +282,8 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
         dims = np.array(shape, dtype=np.int64)
         offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
         msgs = [np.full((len(items), c), 1.0 / c) for c in shape]
-        blocks.append((shape, scopes, _exp_tables([t for _, t in items]), msgs, dims, offs))
+        blocks.append((shape, scopes, _exp_tables([t for _, t in items]), msgs, dims, offs,
+                       _joint_columns(dims, offs)))
     a, b = 1.0 - settings.damping, settings.damping
 
     def log_of(m):
@@ -290,7 +291,7 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
 
     def beliefs():
         logb = {c: u.copy() for c, u in U.items()}
-        for shape, scopes, _e, msgs, _d, _o in blocks:
+        for shape, scopes, _e, msgs, _d, _o, _c in blocks:
             for pos, c in enumerate(shape):
                 np.add.at(logb[c], local[scopes[:, pos]], log_of(msgs[pos]))
         return logb
@@ -301,17 +302,17 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
         logb = beliefs()
         delta = 0.0
         new_all = []
-        for shape, scopes, etab, msgs, dims, offs in blocks:
+        for shape, scopes, etab, msgs, dims, offs, cols in blocks:
             ins = np.empty((len(scopes), int(dims.sum())))
             for pos, c in enumerate(shape):   # what each variable sends in, as probabilities
                 vin = logb[c][local[scopes[:, pos]]] - log_of(msgs[pos])
                 top = vin.max(axis=1, keepdims=True)
                 ins[:, offs[pos]:offs[pos] + c] = np.exp(vin - np.where(np.isfinite(top), top, 0.0))
-            new = _factor_messages(etab, ins, dims, offs)
+            new = _factor_messages(etab, ins, cols, dims, offs)
             news = [new[:, offs[pos]:offs[pos] + c] for pos, c in enumerate(shape)]
             delta = max([delta] + [float(np.abs(nw - m).max()) for nw, m in zip(news, msgs)])
             new_all.append(news)
-        for (_s, _sc, _e, msgs, _d, _o), news in zip(blocks, new_all):
+        for (_s, _sc, _e, msgs, _d, _o, _c), news in zip(blocks, new_all):
             for pos, new in enumerate(news):
                 msgs[pos] = a * new + b * msgs[pos]
         if delta < settings.tol:
@@ -330,31 +331,27 @@ def _exp_tables(tables) -> np.ndarray:
     return np.ascontiguousarray(np.exp(t - np.where(np.isfinite(top), top, 0.0)))
 
 
+def _joint_columns(dims, offs) -> np.ndarray:
+    """(S, r) int64: for each joint state of a factor of shape ``dims`` (C order, the last
+    position fastest), the column of its entry of each position in the messages' layout
+    (position ``q``'s entries start at ``offs[q]``). Made once per shape of a network."""
+    digits = np.indices(tuple(int(d) for d in dims)).reshape(len(dims), -1).T
+    return np.ascontiguousarray(digits + np.asarray(offs, dtype=np.int64), dtype=np.int64)
+
+
 @numba.njit(cache=True, nogil=True)
-def _factor_messages(etab, ins, dims, offs):  # pragma: no cover - compiled
+def _factor_messages(etab, ins, col, dims, offs):  # pragma: no cover - compiled
     """The new messages of ``n`` factors of one shape ``dims`` to each variable of their scopes.
 
     ``etab`` (n, S): each factor's table in probability space (:func:`_exp_tables`); ``ins``
     (n, Σ dims): the messages the variables send in, position ``q``'s at ``offs[q]``, as
-    probabilities of any scale. Message to position ``p``, entry ``x``: the sum over the joint
+    probabilities of any scale; ``col`` (S, r): :func:`_joint_columns`. Message to position ``p``, entry ``x``: the sum over the joint
     states with ``x_p = x`` of the table times the other positions' incoming entries (the
     product of all positions but ``p`` from prefix and suffix products), then normalised; a
     message whose sum is 0 is uniform. Returns (n, Σ dims) in the layout of ``ins``."""
     n, S = etab.shape
     r = dims.shape[0]
     out = np.zeros((n, ins.shape[1]))
-    col = np.empty((S, r), np.int64)       # column of each joint state's entry per position
-    digit = np.zeros(r, np.int64)
-    for j in range(S):                     # C order: the last position varies fastest
-        for q in range(r):
-            col[j, q] = offs[q] + digit[q]
-        q = r - 1
-        while q >= 0:
-            digit[q] += 1
-            if digit[q] < dims[q]:
-                break
-            digit[q] = 0
-            q -= 1
     pre = np.empty(r + 1)
     suf = np.empty(r + 1)
     for i in range(n):
