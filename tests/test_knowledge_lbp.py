@@ -16,8 +16,8 @@ from test_knowledge_inference import _map_tuple, assert_matches_brute_force, ora
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.layouts import dense_floor
-from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _factor_messages, _joint_columns, cluster,
-                                     factor_bp, pairwise_bp)
+from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _factor_messages, _sparse_factor,
+                                     _sparse_plan, cluster, factor_bp, pairwise_bp)
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2
 
@@ -151,13 +151,135 @@ def test_compiled_factor_messages_equal_the_log_space_sums(shape):
     for k in range(n):
         ins_log[k][0][rng.random(shape[0]) < 0.3] = -np.inf
     dims = np.array(shape, dtype=np.int64)
-    offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
     ins = np.array([np.concatenate([np.exp(m - np.max(m)) if np.isfinite(np.max(m))
                                     else np.zeros(len(m)) for m in vin]) for vin in ins_log])
-    got = _factor_messages(_exp_tables(list(tables)), ins, _joint_columns(dims, offs), dims, offs)
+    got = _factor_messages(_exp_tables(list(tables)), ins, dims)
     want = _messages_in_log_space(tables, ins_log, shape)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
     assert np.allclose(got[3], np.concatenate([np.full(c, 1.0 / c) for c in shape]))
+
+
+def _sparse_messages(table, ins, shape):
+    """:func:`_sparse_factor` on one probability-space table through :func:`_sparse_plan`;
+    None when the plan keeps the table dense."""
+    flat = np.ascontiguousarray(table, dtype=float).ravel()
+    mode, soff, sidx, sval = _sparse_plan(flat, np.array([0, flat.size], dtype=np.int64))
+    if mode[0] < 0:
+        return None
+    r = len(shape)
+    out = np.empty(len(ins))
+    _sparse_factor(mode[0], sidx[soff[0]:soff[1]], sval[soff[0]:soff[1]], ins, out,
+                   np.array(shape, dtype=np.int64), np.empty(r + 1), np.empty(r + 1),
+                   np.empty(r, dtype=np.int64), np.empty(r, dtype=np.int64))
+    return out
+
+
+@pytest.mark.parametrize("shape", [(4, 4, 4), (4, 2, 2, 4), (4, 4, 4, 4, 4)])
+@pytest.mark.parametrize("common", [1.0, 0.0, 0.37])
+def test_sparse_factor_messages_equal_the_dense_pass(shape, common):
+    # a table that is one value but at a few states (as a soft rule's factor over a unit and
+    # its neighbours is), with zero incoming entries: the constant-plus-correction pass gives
+    # the dense pass's messages; common 0 (mostly forbidden) keeps its zeros exact
+    rng = np.random.default_rng(len(shape) + int(10 * common))
+    dims = np.array(shape, dtype=np.int64)
+    S = int(np.prod(shape))
+    for _ in range(5):
+        table = np.full(S, common)
+        few = rng.choice(S, size=S // 8, replace=False)
+        table[few] = rng.uniform(0.05, 2.0, len(few))
+        ins = rng.random(int(dims.sum()))
+        ins[rng.random(len(ins)) < 0.2] = 0.0
+        got = _sparse_messages(table, ins, shape)
+        assert got is not None
+        want = _factor_messages(table[None, :], ins[None, :], dims)[0]
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+        if common == 0.0:
+            assert np.array_equal(got == 0, want == 0)
+
+
+def test_sparse_plan_keeps_dense_what_the_correction_could_wipe_out():
+    shape = (4, 4, 4)
+    table = np.ones(64)
+    table[:8] = 0.5
+    assert _sparse_messages(table, np.ones(12), shape) is not None
+    table[9] = 1e-9        # far below the common value: subtracting could lose it
+    assert _sparse_messages(table, np.ones(12), shape) is None
+    table = np.ones(64)
+    table[:20] = 0.5       # more than a quarter differ
+    assert _sparse_messages(table, np.ones(12), shape) is None
+    assert _sparse_messages(np.ones(32), np.ones(10), (4, 4, 2)) is None   # too small
+
+
+def _cluster_plain(card, potentials, max_states):
+    """Reference for :func:`cluster`: the same passes without skipping a factor whose
+    neighbourhood did not change."""
+    facs = {k: (tuple(s), np.asarray(t, dtype=np.float64)) for k, (s, t) in
+            enumerate(potentials) if len(s) >= 2}
+    rest = [(tuple(s), t) for s, t in potentials if len(s) < 2]
+    changed = True
+    while changed:
+        changed = False
+        for f in sorted(facs):
+            if f not in facs:
+                continue
+            sf, tf = facs[f]
+            for g in sorted(k for k in facs if k != f and set(facs[k][0]) & set(sf)):
+                sg, tg = facs[g]
+                union = tuple(sorted(set(sf) | set(sg)))
+                if len(sf) + len(sg) - len(union) < 2 or np.prod([card[v] for v in union]) > max_states:
+                    continue
+                shape = [card[v] for v in union]
+                ea = np.broadcast_to(tf.reshape([card[v] if v in sf else 1 for v in union]), shape)
+                eb = np.broadcast_to(tg.reshape([card[v] if v in sg else 1 for v in union]), shape)
+                del facs[g]
+                facs[f] = sf, tf = union, ea + eb
+                changed = True
+    return rest + [facs[k] for k in sorted(facs)]
+
+
+def test_cluster_equals_the_plain_passes():
+    # random networks of many overlapping factors, where merges in one pass open new ones in the
+    # next: skipping factors whose neighbourhood did not change must not change the result
+    rng = np.random.default_rng(12)
+    passes = 0
+    for trial in range(40):
+        n = int(rng.integers(6, 14))
+        card = [int(c) for c in rng.choice([2, 3, 4], n)]
+        pots = []
+        for _ in range(int(rng.integers(n, 3 * n))):
+            scope = tuple(sorted(int(v) for v in rng.choice(n, int(rng.integers(1, 4)), replace=False)))
+            pots.append((scope, rng.normal(0, 1, [card[v] for v in scope])))
+        limit = int(rng.choice([16, 64, 256]))
+        got, want = cluster(card, pots, limit), _cluster_plain(card, pots, limit)
+        assert [s for s, _ in got] == [s for s, _ in want]
+        assert all(np.array_equal(np.asarray(a), np.asarray(b)) for (_, a), (_, b) in zip(got, want))
+        passes += sum(len(s) > 3 for s, _ in got)
+    assert passes > 20     # merges did chain across passes
+    # (0, 1) is tried first and refused by both (0, 2, 3) and (1, 2, 3); once those two merge,
+    # the next pass must try (0, 1) again, which now absorbs them (it comes first)
+    card = [2] * 7
+    pots = [((0, 1), rng.normal(0, 1, (2, 2))), ((5, 6), rng.normal(0, 1, (2, 2))),
+            ((0, 2, 3), rng.normal(0, 1, (2, 2, 2))), ((1, 2, 3), rng.normal(0, 1, (2, 2, 2)))]
+    assert [s for s, _ in cluster(card, pots, 64)] == [s for s, _ in _cluster_plain(card, pots, 64)] \
+        == [(0, 1, 2, 3), (5, 6)]
+
+
+def test_factor_bp_is_exact_on_a_tree_with_a_sparse_factor():
+    # a 4^4 factor that is constant but at a few states takes the sparse pass
+    rng = np.random.default_rng(13)
+    card = [4, 4, 4, 4, 3]
+    big = np.zeros((4, 4, 4, 4))
+    big[0, :, 1, :] = -0.8
+    big[2, 3, 3, 3] = 1.5
+    pots = [((0, 1, 2, 3), big), ((3, 4), rng.normal(0, 1, (4, 3))), ((0,), rng.normal(0, 1, 4)),
+            ((2,), rng.normal(0, 1, 4))]
+    res = factor_bp(card, pots, BPSettings(tol=1e-13, max_iter=500))
+    states = np.array(list(itertools.product(*[range(c) for c in card])))
+    logp = sum(t[tuple(states[:, v] for v in s)] for s, t in pots)
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    for v, c in enumerate(card):
+        np.testing.assert_allclose(res.marginals[v], np.bincount(states[:, v], w, c), atol=1e-9)
 
 
 def test_cluster_keeps_the_joint_and_merges_tight_overlaps():

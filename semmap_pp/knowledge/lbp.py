@@ -15,6 +15,7 @@ weak, symmetric couplings of ``rules/table3.lp`` the error against enumeration i
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -202,14 +203,24 @@ def cluster(card, potentials, max_states):
     the merged scope has at most ``max_states`` joint states. Exact (the product of the factors
     is unchanged); BP on the merged network no longer runs around the short, tight loops that
     e.g. a SaLe atom, its mirror and their hard symmetry rule make between two types.
-    Deterministic: factors are visited in a fixed order."""
+
+    Deterministic: passes over the factors in a fixed order until one merges nothing; each
+    factor tries its partners of the pass's start in index order. A factor is skipped in a pass
+    when neither its scope nor the scope of any factor sharing a variable with it changed since
+    it was last tried: its pairs would be refused again (``tests/test_knowledge_lbp.py`` checks
+    the result against the plain passes)."""
     facs = {k: (tuple(s), np.asarray(t, dtype=np.float64)) for k, (s, t) in
             enumerate(potentials) if len(s) >= 2}
     rest = [(tuple(s), t) for s, t in potentials if len(s) < 2]
+    sets = {k: frozenset(s) for k, (s, _t) in facs.items()}
     by_var: dict = {}
     for k, (s, _t) in facs.items():
         for v in s:
             by_var.setdefault(v, set()).add(k)
+    clock = 0
+    grown: dict = {}       # factor -> clock when its scope last grew
+    touched: dict = {}     # variable -> clock when a factor holding it last grew
+    tried: dict = {}       # factor -> clock when its partners were last tried
     changed = True
     while changed:
         changed = False
@@ -217,22 +228,33 @@ def cluster(card, potentials, max_states):
             if f not in facs:
                 continue
             sf, tf = facs[f]
-            partners = sorted(set().union(*(by_var[v] for v in sf)) - {f})
-            for g in partners:
+            last = tried.get(f)
+            if last is not None and grown.get(f, 0) < last and \
+                    all(touched.get(v, 0) < last for v in sf):
+                continue
+            clock += 1
+            tried[f] = clock
+            set_f = sets[f]
+            for g in sorted(set().union(*(by_var[v] for v in sf)) - {f}):
+                set_g = sets[g]
+                if len(set_f & set_g) < 2:   # every factor here has two or more variables
+                    continue
+                union = tuple(sorted(set_f | set_g))
+                if math.prod([card[v] for v in union]) > max_states:
+                    continue
                 sg, tg = facs[g]
-                union = tuple(sorted(set(sf) | set(sg)))
-                shared = len(sf) + len(sg) - len(union)
-                if shared < min(2, len(sf), len(sg)):
-                    continue
-                if int(np.prod([card[v] for v in union])) > max_states:
-                    continue
                 table = _expand(sf, tf, union, card) + _expand(sg, tg, union, card)
-                del facs[g]
+                del facs[g], sets[g]
                 for v in sg:
                     by_var[v].discard(g)
                 for v in union:
                     by_var.setdefault(v, set()).add(f)
                 facs[f] = sf, tf = union, table
+                sets[f] = set_f = frozenset(union)
+                clock += 1
+                grown[f] = clock
+                for v in union:
+                    touched[v] = clock
                 changed = True
     return rest + [facs[k] for k in sorted(facs)]
 
@@ -240,10 +262,12 @@ def cluster(card, potentials, max_states):
 def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult:
     """Sum-product on a factor network ``P(x) ∝ exp(Σ_f table_f(x_scope_f))``.
 
-    Factors are first merged by :func:`cluster`; factors of one shape then move together: each
-    iteration computes every message of the shape's factors in one compiled pass
-    (:func:`_factor_messages`, in probability space: each table exponentiated once, shifted by
-    its largest finite entry, so an entry more than ~745 nats below it counts as impossible).
+    Factors are first merged by :func:`cluster`, then ordered by their shape. The flooding
+    schedule runs compiled (:func:`_factor_flood`): each iteration sums every variable's
+    incoming log messages into its belief (in that fixed order), then computes every factor's
+    messages (:func:`_one_factor`, in probability space: each table exponentiated once,
+    shifted by its largest finite entry, so an entry more than ~745 nats below it counts as
+    impossible).
 
     Parameters
     ----------
@@ -269,58 +293,48 @@ def factor_bp(card, potentials, settings: BPSettings = BPSettings()) -> BPResult
             unary[scope[0]] = unary[scope[0]] + table
         else:
             groups.setdefault(table.shape, []).append((scope, table))
-    # variables of one cardinality share a belief array
-    local, by_card = [0] * len(card), {}
-    for v, c in enumerate(card):
-        local[v] = len(by_card.setdefault(c, []))
-        by_card[c].append(v)
-    U = {c: np.array([unary[v] for v in vs]) for c, vs in by_card.items()}
-    local = np.array(local, dtype=np.int64)
-    blocks = []
+    voff = np.zeros(len(card) + 1, dtype=np.int64)
+    np.cumsum(card, out=voff[1:])
+    U = np.concatenate(unary) if card else np.zeros(0)
+    fvars: list = []
+    fstart, toff, moff = [0], [0], [0]
+    etabs, edge_var, edge_msg = [], [], []
     for shape, items in sorted(groups.items()):
-        scopes = np.array([s for s, _ in items], dtype=np.int64)
-        dims = np.array(shape, dtype=np.int64)
-        offs = np.concatenate(([0], np.cumsum(dims)[:-1])).astype(np.int64)
-        msgs = [np.full((len(items), c), 1.0 / c) for c in shape]
-        blocks.append((shape, scopes, _exp_tables([t for _, t in items]), msgs, dims, offs,
-                       _joint_columns(dims, offs)))
-    a, b = 1.0 - settings.damping, settings.damping
+        first = len(fstart) - 1
+        etabs.append(_exp_tables([t for _, t in items]).ravel())
+        for scope, table in items:
+            fvars.extend(scope)
+            fstart.append(len(fvars))
+            toff.append(toff[-1] + table.size)
+            moff.append(moff[-1] + sum(shape))
+        offs = np.concatenate(([0], np.cumsum(shape)[:-1]))
+        for pos in range(len(shape)):     # beliefs sum the messages in this order
+            for i, (scope, _t) in enumerate(items):
+                edge_var.append(scope[pos])
+                edge_msg.append(moff[first + i] + int(offs[pos]))
+    logb = U.copy()
+    it, converged = 0, True
+    if len(fstart) > 1:
+        i64 = np.int64
+        fcard = np.array(card, dtype=i64)[np.array(fvars, dtype=i64)]
+        m = np.repeat(1.0 / fcard, fcard)     # uniform messages, in the layout of moff
+        it, converged = _factor_flood(
+            U, voff, np.array(card, dtype=i64), np.array(fvars, dtype=i64),
+            np.array(fstart, dtype=i64), np.concatenate(etabs), np.array(toff, dtype=i64),
+            np.array(moff, dtype=i64), np.array(edge_var, dtype=i64),
+            np.array(edge_msg, dtype=i64), float(settings.damping), int(settings.max_iter),
+            float(settings.tol), m, logb)
+    marg = np.split(_norm_exp_runs(logb, voff), voff[1:-1]) if card else []
+    return BPResult(marg, {}, int(it), bool(converged))
 
-    def log_of(m):
-        return np.maximum(np.log(np.maximum(m, 1e-300)), _LOG_FLOOR)
 
-    def beliefs():
-        logb = {c: u.copy() for c, u in U.items()}
-        for shape, scopes, _e, msgs, _d, _o, _c in blocks:
-            for pos, c in enumerate(shape):
-                np.add.at(logb[c], local[scopes[:, pos]], log_of(msgs[pos]))
-        return logb
-
-    it, converged = 0, False
-    while blocks and it < settings.max_iter:
-        it += 1
-        logb = beliefs()
-        delta = 0.0
-        new_all = []
-        for shape, scopes, etab, msgs, dims, offs, cols in blocks:
-            ins = np.empty((len(scopes), int(dims.sum())))
-            for pos, c in enumerate(shape):   # what each variable sends in, as probabilities
-                vin = logb[c][local[scopes[:, pos]]] - log_of(msgs[pos])
-                top = vin.max(axis=1, keepdims=True)
-                ins[:, offs[pos]:offs[pos] + c] = np.exp(vin - np.where(np.isfinite(top), top, 0.0))
-            new = _factor_messages(etab, ins, cols, dims, offs)
-            news = [new[:, offs[pos]:offs[pos] + c] for pos, c in enumerate(shape)]
-            delta = max([delta] + [float(np.abs(nw - m).max()) for nw, m in zip(news, msgs)])
-            new_all.append(news)
-        for (_s, _sc, _e, msgs, _d, _o, _c), news in zip(blocks, new_all):
-            for pos, new in enumerate(news):
-                msgs[pos] = a * new + b * msgs[pos]
-        if delta < settings.tol:
-            converged = True
-            break
-    logb = beliefs()
-    marg = [_norm_exp(logb[c][local[v]]) for v, c in enumerate(card)]
-    return BPResult(marg, {}, it, converged or not blocks)
+def _norm_exp_runs(logb, voff) -> np.ndarray:
+    """:func:`_norm_exp` of each run ``logb[voff[v]:voff[v + 1]]`` (every run non-empty)."""
+    top = np.maximum.reduceat(logb, voff[:-1])
+    top = np.where(np.isfinite(top), top, 0.0)
+    p = np.exp(logb - np.repeat(top, np.diff(voff)))
+    s = np.add.reduceat(p, voff[:-1])
+    return p / np.repeat(np.where(s > 0, s, 1.0), np.diff(voff))
 
 
 def _exp_tables(tables) -> np.ndarray:
@@ -331,47 +345,240 @@ def _exp_tables(tables) -> np.ndarray:
     return np.ascontiguousarray(np.exp(t - np.where(np.isfinite(top), top, 0.0)))
 
 
-def _joint_columns(dims, offs) -> np.ndarray:
-    """(S, r) int64: for each joint state of a factor of shape ``dims`` (C order, the last
-    position fastest), the column of its entry of each position in the messages' layout
-    (position ``q``'s entries start at ``offs[q]``). Made once per shape of a network."""
-    digits = np.indices(tuple(int(d) for d in dims)).reshape(len(dims), -1).T
-    return np.ascontiguousarray(digits + np.asarray(offs, dtype=np.int64), dtype=np.int64)
+@numba.njit(cache=True, nogil=True)
+def _one_factor(etab, ins, out, dims, pre, suf, digit, col):  # pragma: no cover - compiled
+    """The new messages of one factor of shape ``dims`` to each variable of its scope.
+
+    ``etab`` (S,): the table in probability space, flattened in C order (:func:`_exp_tables`);
+    ``ins`` (Σ dims,): the messages the variables send in, position ``q``'s entries after those
+    of positions ``< q``, as probabilities of any scale. Message to position ``p``, entry ``x``:
+    the sum over the joint states with ``x_p = x`` of the table times the other positions'
+    incoming entries (the product of all positions but ``p`` from prefix and suffix products),
+    then normalised; a message whose sum is 0 is uniform. Written into ``out`` (layout of
+    ``ins``); ``pre``, ``suf`` (r + 1,), ``digit`` and ``col`` (r,) are scratch."""
+    r = dims.shape[0]
+    for t in range(out.shape[0]):
+        out[t] = 0.0
+    for q in range(r):
+        digit[q] = 0
+    for j in range(etab.shape[0]):
+        if j > 0:                       # the next joint state, last position fastest
+            q = r - 1
+            digit[q] += 1
+            while digit[q] == dims[q] and q > 0:
+                digit[q] = 0
+                q -= 1
+                digit[q] += 1
+        e = etab[j]
+        if e == 0.0:
+            continue
+        o = 0
+        for q in range(r):
+            col[q] = o + digit[q]
+            o += dims[q]
+        pre[0] = 1.0
+        for q in range(r):
+            pre[q + 1] = pre[q] * ins[col[q]]
+        suf[r] = 1.0
+        for q in range(r - 1, -1, -1):
+            suf[q] = suf[q + 1] * ins[col[q]]
+        for p in range(r):
+            out[col[p]] += e * pre[p] * suf[p + 1]
+    o = 0
+    for p in range(r):
+        c = dims[p]
+        tot = 0.0
+        for x in range(c):
+            tot += out[o + x]
+        for x in range(c):
+            out[o + x] = out[o + x] / tot if tot > 0 else 1.0 / c
+        o += c
+
+
+def _factor_messages(etab, ins, dims):
+    """:func:`_one_factor` on each of ``n`` factors of one shape: ``etab`` (n, S), ``ins``
+    (n, Σ dims); returns (n, Σ dims)."""
+    dims = np.asarray(dims, dtype=np.int64)
+    r = len(dims)
+    out = np.zeros(ins.shape)
+    pre, suf = np.empty(r + 1), np.empty(r + 1)
+    digit, col = np.empty(r, dtype=np.int64), np.empty(r, dtype=np.int64)
+    for i in range(len(etab)):
+        _one_factor(np.ascontiguousarray(etab[i]), np.ascontiguousarray(ins[i]), out[i], dims,
+                    pre, suf, digit, col)
+    return out
+
+
+#: a table of at least this many joint states whose entries mostly share one value is handled as
+#: that value plus a sparse correction (:func:`_sparse_plan`)
+_SPARSE_MIN_STATES = 64
 
 
 @numba.njit(cache=True, nogil=True)
-def _factor_messages(etab, ins, col, dims, offs):  # pragma: no cover - compiled
-    """The new messages of ``n`` factors of one shape ``dims`` to each variable of their scopes.
-
-    ``etab`` (n, S): each factor's table in probability space (:func:`_exp_tables`); ``ins``
-    (n, Σ dims): the messages the variables send in, position ``q``'s at ``offs[q]``, as
-    probabilities of any scale; ``col`` (S, r): :func:`_joint_columns`. Message to position ``p``, entry ``x``: the sum over the joint
-    states with ``x_p = x`` of the table times the other positions' incoming entries (the
-    product of all positions but ``p`` from prefix and suffix products), then normalised; a
-    message whose sum is 0 is uniform. Returns (n, Σ dims) in the layout of ``ins``."""
-    n, S = etab.shape
-    r = dims.shape[0]
-    out = np.zeros((n, ins.shape[1]))
-    pre = np.empty(r + 1)
-    suf = np.empty(r + 1)
-    for i in range(n):
+def _sparse_plan(etab, toff):  # pragma: no cover - compiled
+    """For each factor, whether its table (probability space) is its most common value ``c``
+    plus a few entries that differ: at least :data:`_SPARSE_MIN_STATES` states, at most a
+    quarter of them differ from ``c``, and no entry is below ``1e-6 c`` unless ``c`` is 0 (so
+    the subtraction of the correction cannot wipe out a small entry). Returns the common values
+    (n,), the offsets (n + 1,) into the differing entries' flat indices and ``e - c``, and
+    those two arrays; a dense factor has no entries there."""
+    n = toff.shape[0] - 1
+    mode = np.zeros(n)
+    soff = np.zeros(n + 1, dtype=np.int64)
+    sidx = np.empty(etab.shape[0], dtype=np.int64)
+    sval = np.empty(etab.shape[0])
+    at = 0
+    for k in range(n):
+        soff[k] = at
+        t = etab[toff[k]:toff[k + 1]]
+        S = t.shape[0]
+        mode[k] = -1.0
+        if S < _SPARSE_MIN_STATES:
+            continue
+        v = np.sort(t)
+        best, best_n, run = v[0], 1, 1
+        for j in range(1, S):
+            run = run + 1 if v[j] == v[j - 1] else 1
+            if run > best_n:
+                best, best_n = v[j], run
+        if 4 * (S - best_n) > S or (best > 0.0 and v[0] < 1e-6 * best):
+            continue
+        mode[k] = best
         for j in range(S):
-            e = etab[i, j]
-            if e == 0.0:
-                continue
-            pre[0] = 1.0
-            for q in range(r):
-                pre[q + 1] = pre[q] * ins[i, col[j, q]]
-            suf[r] = 1.0
-            for q in range(r - 1, -1, -1):
-                suf[q] = suf[q + 1] * ins[i, col[j, q]]
-            for p in range(r):
-                out[i, col[j, p]] += e * pre[p] * suf[p + 1]
+            if t[j] != best:
+                sidx[at] = j
+                sval[at] = t[j] - best
+                at += 1
+    soff[n] = at
+    return mode, soff, sidx[:at], sval[:at]
+
+
+@numba.njit(cache=True, nogil=True)
+def _sparse_factor(c, sidx, sval, ins, out, dims, pre, suf, start, col):  # pragma: no cover
+    """:func:`_one_factor` for a table that is ``c`` everywhere but at the flat joint indices
+    ``sidx``, where it is ``c + sval``: the constant part's message to position ``p`` is ``c``
+    times the product of the other positions' incoming sums (prefix and suffix products); the
+    correction is summed over the listed states alone. An entry that rounding leaves below 0
+    is 0. ``pre``, ``suf`` (r + 1,), ``start`` and ``col`` (r,) are scratch."""
+    r = dims.shape[0]
+    o = 0
+    for q in range(r):
+        start[q] = o
+        tot = 0.0
+        for x in range(dims[q]):
+            tot += ins[o + x]
+        suf[q] = tot
+        o += dims[q]
+    pre[0] = 1.0
+    for q in range(r):
+        pre[q + 1] = pre[q] * suf[q]
+    suf[r] = 1.0
+    for q in range(r - 1, -1, -1):
+        suf[q] = suf[q + 1] * suf[q]
+    for p in range(r):
+        base = c * pre[p] * suf[p + 1]
+        for x in range(dims[p]):
+            out[start[p] + x] = base
+    for t in range(sidx.shape[0]):
+        j = sidx[t]
+        for q in range(r - 1, -1, -1):
+            col[q] = start[q] + j % dims[q]
+            j //= dims[q]
+        pre[0] = 1.0
+        for q in range(r):
+            pre[q + 1] = pre[q] * ins[col[q]]
+        suf[r] = 1.0
+        for q in range(r - 1, -1, -1):
+            suf[q] = suf[q + 1] * ins[col[q]]
+        d = sval[t]
         for p in range(r):
-            o, c = offs[p], dims[p]
-            tot = 0.0
-            for x in range(c):
-                tot += out[i, o + x]
-            for x in range(c):
-                out[i, o + x] = out[i, o + x] / tot if tot > 0 else 1.0 / c
-    return out
+            out[col[p]] += d * pre[p] * suf[p + 1]
+    for p in range(r):
+        cdim = dims[p]
+        tot = 0.0
+        for x in range(cdim):
+            v = max(out[start[p] + x], 0.0)
+            out[start[p] + x] = v
+            tot += v
+        for x in range(cdim):
+            out[start[p] + x] = out[start[p] + x] / tot if tot > 0 else 1.0 / cdim
+
+
+@numba.njit(cache=True, nogil=True)
+def _log_of(x):  # pragma: no cover - compiled
+    return max(np.log(max(x, 1e-300)), _LOG_FLOOR)
+
+
+@numba.njit(cache=True, nogil=True)
+def _factor_beliefs(U, voff, card, edge_var, edge_msg, logm, logb):  # pragma: no cover
+    for t in range(U.shape[0]):
+        logb[t] = U[t]
+    for e in range(edge_var.shape[0]):
+        v, at = edge_var[e], edge_msg[e]
+        for x in range(card[v]):
+            logb[voff[v] + x] += logm[at + x]
+
+
+@numba.njit(cache=True, nogil=True)
+def _factor_flood(U, voff, card, fvars, fstart, etab, toff, moff, edge_var, edge_msg, damping,
+                  max_iter, tol, m, logb):  # pragma: no cover - compiled
+    """The flooding schedule of :func:`factor_bp` in place on the messages ``m`` (factor ``k``'s
+    to its positions at ``moff[k]``, in scope order); leaves the final beliefs in ``logb``.
+    Factor ``k`` has the variables ``fvars[fstart[k]:fstart[k + 1]]`` and the table
+    ``etab[toff[k]:toff[k + 1]]``; edge ``e`` adds the message at ``edge_msg[e]`` to variable
+    ``edge_var[e]``'s belief. Returns (iterations, converged)."""
+    n_msg = m.shape[0]
+    logm = np.empty(n_msg)
+    for t in range(n_msg):
+        logm[t] = _log_of(m[t])
+    new = np.empty(n_msg)
+    ins = np.empty(n_msg)
+    r_max = 0
+    for k in range(fstart.shape[0] - 1):
+        r_max = max(r_max, fstart[k + 1] - fstart[k])
+    pre, suf = np.empty(r_max + 1), np.empty(r_max + 1)
+    digit = np.empty(r_max, dtype=np.int64)
+    col = np.empty(r_max, dtype=np.int64)
+    dims = np.empty(r_max, dtype=np.int64)
+    mode, soff, sidx, sval = _sparse_plan(etab, toff)
+    it = 0
+    converged = False
+    while it < max_iter:
+        it += 1
+        _factor_beliefs(U, voff, card, edge_var, edge_msg, logm, logb)
+        for k in range(fstart.shape[0] - 1):
+            at = moff[k]
+            for t in range(fstart[k], fstart[k + 1]):   # what each variable sends in
+                v = fvars[t]
+                c = card[v]
+                top = -np.inf
+                for x in range(c):
+                    ins[at + x] = logb[voff[v] + x] - logm[at + x]
+                    top = max(top, ins[at + x])
+                if not np.isfinite(top):
+                    top = 0.0
+                for x in range(c):
+                    ins[at + x] = np.exp(ins[at + x] - top)
+                at += c
+            r = fstart[k + 1] - fstart[k]
+            for q in range(r):
+                dims[q] = card[fvars[fstart[k] + q]]
+            if mode[k] >= 0.0:
+                _sparse_factor(mode[k], sidx[soff[k]:soff[k + 1]], sval[soff[k]:soff[k + 1]],
+                               ins[moff[k]:moff[k + 1]], new[moff[k]:moff[k + 1]], dims[:r],
+                               pre[:r + 1], suf[:r + 1], digit[:r], col[:r])
+            else:
+                _one_factor(etab[toff[k]:toff[k + 1]], ins[moff[k]:moff[k + 1]],
+                            new[moff[k]:moff[k + 1]], dims[:r], pre[:r + 1], suf[:r + 1],
+                            digit[:r], col[:r])
+        delta = 0.0
+        for t in range(n_msg):
+            delta = max(delta, abs(new[t] - m[t]))
+        for t in range(n_msg):
+            m[t] = (1.0 - damping) * new[t] + damping * m[t]
+            logm[t] = _log_of(m[t])
+        if delta < tol:
+            converged = True
+            break
+    _factor_beliefs(U, voff, card, edge_var, edge_msg, logm, logb)
+    return it, converged
