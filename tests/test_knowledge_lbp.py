@@ -450,35 +450,81 @@ def test_pairwise_rc2_reaches_the_brute_force_optimum():
                    + sum(t[x[i], x[j]] for i, j, t in pairs) - best) < 1e-9
 
 
-def test_rc2_clauses_are_one_per_table_entry_above_its_minimum():
-    """``map._add_costs`` (vectorised) writes, in C order over each table, a hard clause for
-    every ``-inf`` entry and a soft clause weighted by the entry's cost above the table's
-    minimum for every costlier one: the definition, entry by entry, on random tables over
-    variables of 2 to 4 states (so the MAP's MaxSAT instance, hence its tie-breaking, is the
-    one the definition gives)."""
-    from pysat.formula import WCNF
+def _violated_cost(hard, soft, wght, first, x):
+    """(any hard clause false, summed weight of the false soft clauses) when axis ``a`` of the
+    table takes state ``x[a]``: a clause is false when none of its literals is a true state."""
+    true = {f + k for f, k in zip(first, x)}
 
+    def false(clause):
+        return not any(lit in true for lit in clause)
+    return any(false(c) for c in hard), sum(w for c, w in zip(soft, wght) if false(c))
+
+
+def test_rc2_clauses_charge_every_assignment_its_entrys_cost():
+    """``map._add_costs`` covers a table by boxes: for every joint state, the soft clauses it
+    falsifies weigh its cost above the table's minimum and a hard clause is falsified exactly
+    when the entry is ``-inf``. Random tables over 1-5 variables of 2-4 states, with values
+    from a few levels (so that boxes of several entries form) and, in some, entries that
+    depend on one axis only."""
     from semmap_pp.knowledge.map import COST_SCALE, _add_costs
     rng = np.random.default_rng(12)
-    for _ in range(40):
-        shape = tuple(int(c) for c in rng.integers(2, 5, int(rng.integers(1, 4))))
-        table = -rng.integers(0, 4, shape) / 2.0
-        table[rng.random(shape) < 0.15] = -np.inf
+    for case in range(60):
+        shape = tuple(int(c) for c in rng.integers(2, 5, int(rng.integers(1, 6))))
+        table = -rng.integers(0, 3, shape) / 2.0
+        if case % 3 == 0:    # a term in the last axis alone, added everywhere
+            table = table + (-rng.integers(0, 3, shape[-1]) / 4.0)
+        table[rng.random(shape) < 0.1] = -np.inf
         if not np.isfinite(table).any():
             continue
-        first = [int(f) for f in rng.integers(1, 50, len(shape))]
-        fast, slow = WCNF(), WCNF()
-        low = _add_costs(fast, table, first)
-        costs = [round(-COST_SCALE * v) for v in table.reshape(-1) if np.isfinite(v)]
-        assert low == min(costs)
-        for states in itertools.product(*(range(c) for c in shape)):
-            clause = [-(f + k) for f, k in zip(first, states)]
-            v = table[states]
-            if not np.isfinite(v):
-                slow.append(clause)
-            elif round(-COST_SCALE * v) > low:
-                slow.append(clause, weight=round(-COST_SCALE * v) - low)
-        assert fast.hard == slow.hard and fast.soft == slow.soft and fast.wght == slow.wght
+        first = [int(f) for f in np.cumsum([1] + list(shape[:-1]))]
+        hard, soft, wght = [], [], []
+        low = _add_costs(hard, soft, wght, table, first)
+        assert low == min(round(-COST_SCALE * v) for v in table.reshape(-1) if np.isfinite(v))
+        assert all(w > 0 for w in wght)
+        for x in itertools.product(*(range(c) for c in shape)):
+            forbidden, cost = _violated_cost(hard, soft, wght, first, x)
+            v = table[x]
+            assert forbidden == (not np.isfinite(v)), (case, x)
+            if np.isfinite(v):
+                assert cost == round(-COST_SCALE * v) - low, (case, x)
+        assert len(hard) + len(soft) <= int((table < table.max()).sum())
+
+
+def test_rc2_a_rule_over_all_neighbours_is_one_clause():
+    """"A hall none of whose four neighbours is a corridor costs 0.8" is 3⁴ entries of one
+    cost: one clause of 7 literals (the unit is not a hall, or some neighbour is a corridor),
+    where one clause per entry made 81."""
+    from semmap_pp.knowledge.map import _add_costs
+    hall, corridor = 2, 1
+    table = np.zeros((4,) * 5)
+    none_corridor = [k for k in range(4) if k != corridor]
+    table[np.ix_([hall], none_corridor, none_corridor, none_corridor, none_corridor)] = -0.8
+    first = [1, 5, 9, 13, 17]
+    hard, soft, wght = [], [], []
+    assert _add_costs(hard, soft, wght, table, first) == 0
+    assert hard == [] and wght == [800_000]
+    assert sorted(soft[0]) == [1, 2, 4] + [f + corridor for f in first[1:]]
+
+
+def test_rc2_map_of_random_table_networks_equals_enumeration():
+    """``map_tables_rc2`` on networks of 2-4-ary tables over 5 variables: the optimum equals
+    the enumerated one, and the returned assignment attains it."""
+    from semmap_pp.knowledge.map import map_tables_rc2
+    rng = np.random.default_rng(5)
+    card = [4, 2, 4, 3, 2]
+    states = np.array(list(itertools.product(*(range(c) for c in card))))
+    for _ in range(25):
+        pots = []
+        for scope in [(0,), (0, 1), (1, 2, 3), (0, 2, 3, 4), (3, 4)]:
+            t = -rng.integers(0, 3, [card[v] for v in scope]) / 4.0
+            t[rng.random(t.shape) < 0.08] = -np.inf
+            pots.append((scope, t))
+        logp = sum(t[tuple(states[:, v] for v in scope)] for scope, t in pots)
+        if not np.isfinite(logp).any():
+            continue
+        x, best = map_tables_rc2(card, pots, "test")
+        assert abs(best - logp.max()) < 1e-9
+        assert abs(sum(t[tuple(x[list(scope)])] for scope, t in pots) - best) < 1e-9
 
 
 corridor_rows_floor = dense_floor  # the benchmark's dense layout (semmap_pp/knowledge/layouts.py)

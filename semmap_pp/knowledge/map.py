@@ -12,6 +12,8 @@ tables to :func:`map_tables_rc2` when the junction tree is too large.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from pysat.examples.rc2 import RC2
 from pysat.formula import WCNF
@@ -117,8 +119,9 @@ COST_SCALE = 1_000_000
 
 def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
     """MAP of a network of log tables by RC2 weighted MaxSAT (one Boolean per variable state,
-    exactly one per variable; each table entry above its table's minimum cost a soft clause
-    against that joint state, each ``-inf`` entry a hard one).
+    exactly one per variable; each table's entries above its minimum cost are covered by
+    disjoint boxes of equal cost, each a soft clause against the box, and its ``-inf`` entries
+    by hard clauses: :func:`_table_boxes`).
 
     Parameters
     ----------
@@ -133,24 +136,27 @@ def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
     Returns
     -------
     (ndarray of int, float)
-        An optimal assignment and its log potential (``-cost``, MLN units).
+        An optimal assignment and its log potential (``-cost``, MLN units). Among assignments of
+        equal cost the solver's search picks one, the same one for the same input.
     """
     if any(not np.isfinite(t).any() for _, t in potentials):
         raise RuleError(path, _NO_WORLD)
-    wcnf = WCNF()
     ids, top = [], 0
     for c in card:
         ids.append(list(range(top + 1, top + 1 + int(c))))
         top += int(c)
+    hard, soft, wght = [], [], []
     for row in ids:
-        wcnf.append(list(row))
+        hard.append(list(row))
         for a in range(len(row)):
             for b in range(a + 1, len(row)):
-                wcnf.append([-row[a], -row[b]])
-    first = [row[0] for row in ids]
+                hard.append([-row[a], -row[b]])
     base = 0
     for scope, t in potentials:
-        base += _add_costs(wcnf, np.asarray(t), [first[v] for v in scope])
+        base += _add_costs(hard, soft, wght, t, [ids[v][0] for v in scope])
+    wcnf = WCNF()               # filled directly: WCNF.append costs a Python call per clause
+    wcnf.hard, wcnf.soft, wcnf.wght, wcnf.nv = hard, soft, wght, top
+    wcnf.topw = sum(wght) + 1
     with RC2(wcnf) as rc2:
         model = rc2.compute()
         if model is None:
@@ -161,23 +167,74 @@ def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
     return x, -(cost + base) / COST_SCALE
 
 
-def _add_costs(wcnf, table, first) -> int:
-    """Soft clauses ``¬(conjunction of the entry's states)`` weighted by each entry's cost above
-    the table's minimum; hard clauses for ``-inf``; entries in C order (the table's axes are its
-    scope's variables, whose state ``k`` is literal ``first[axis] + k``). Returns the minimum
-    cost (1 / :data:`COST_SCALE` units)."""
-    flat = table.reshape(-1)
-    fin = np.isfinite(flat)
-    cost = np.where(fin, np.rint(-COST_SCALE * np.where(fin, flat, 0.0)), 0).astype(np.int64)
-    low = int(cost[fin].min())
-    need = np.flatnonzero(~fin | (cost > low))      # the entries that get a clause, in order
-    if need.size:
-        states = np.unravel_index(need, table.shape)
-        clauses = -np.stack([f + k for f, k in zip(first, states)], axis=1)
-        weights = (cost[need] - low).tolist()
-        for clause, hard, w in zip(clauses.tolist(), (~fin[need]).tolist(), weights):
-            if hard:
-                wcnf.append(clause)
-            else:
-                wcnf.append(clause, weight=w)
+_HARD = -1   # marks a forbidden entry in the integer cost tables of _table_boxes
+_CACHED_ENTRIES = 4096   # larger tables are not cached (at most 1,024 of 32 kB keys)
+
+
+def _add_costs(hard, soft, wght, table, first) -> int:
+    """Clauses for one log table (:func:`_table_boxes`); returns its minimum cost
+    (1 / :data:`COST_SCALE` units), which the clauses leave out.
+
+    Parameters
+    ----------
+    hard, soft, wght : list
+        Appended to: hard clauses, soft clauses and their weights.
+    table : ndarray
+        Log table, axes in scope order, ``-inf`` for forbidden entries, not all forbidden.
+    first : list of int
+        Per axis, the literal of the variable's state 0 (state ``k`` is ``first + k``).
+    """
+    table = np.ascontiguousarray(table, dtype=np.float64)
+    boxes_of = _table_boxes if table.size <= _CACHED_ENTRIES else _table_boxes.__wrapped__
+    low, boxes = boxes_of(table.shape, table.tobytes())
+    for w, template in boxes:
+        clause = [first[a] + k for a, k in template]
+        if w == _HARD:
+            hard.append(clause)
+        else:
+            soft.append(clause)
+            wght.append(w)
     return low
+
+
+@functools.lru_cache(maxsize=1024)
+def _table_boxes(shape, data) -> tuple[int, tuple]:
+    """A table's minimum cost and its clauses as ``(weight or _HARD, ((axis, state), ...))``,
+    cached by content: a sampler's networks repeat a few dozen tables thousands of times.
+
+    The entries above the minimum cost are covered by disjoint boxes (a set of states per
+    axis) of one cost each: the states of the first axis whose sub-tables are equal form one
+    side of a box, the sub-table is split the same way on the next axis, and so on. A box
+    becomes the clause "some variable lies outside its set": the literals of the states
+    outside it (none for an axis whose set is all its states). Under exactly one state per
+    variable such a clause is false just on the box, so an assignment's violated soft weights
+    sum to its entry's cost above the minimum, and a hard clause rules out exactly its box of
+    ``-inf`` entries. A rule such as "a hall with no corridor among its four neighbours"
+    (3⁴ entries of one cost) is one clause instead of 81.
+    """
+    table = np.frombuffer(data, dtype=np.float64).reshape(shape)
+    fin = np.isfinite(table)
+    cost = np.where(fin, np.rint(-COST_SCALE * np.where(fin, table, 0.0)), 0).astype(np.int64)
+    low = int(cost[fin].min())
+    cost = np.where(fin, cost - low, _HARD)
+    boxes: list = []
+    _boxes(cost, (), boxes)
+    clauses = tuple((w, tuple((a, k) for a, states in enumerate(sets) if len(states) < shape[a]
+                              for k in range(shape[a]) if k not in states))
+                    for sets, w in boxes)
+    return low, clauses
+
+
+def _boxes(cost, prefix, out) -> None:
+    """Append ``(sets, cost)`` for disjoint boxes covering the nonzero entries of ``cost``
+    (integer; zero needs no clause): the first axis's states grouped by equal sub-tables, in
+    order of their first state, each group's sub-table split the same way."""
+    if cost.ndim == 0:
+        out.append((prefix, int(cost)))
+        return
+    groups: dict = {}
+    for k in range(cost.shape[0]):
+        if cost[k].any():
+            groups.setdefault(cost[k].tobytes(), []).append(k)
+    for states in groups.values():
+        _boxes(cost[states[0]], prefix + (frozenset(states),), out)
