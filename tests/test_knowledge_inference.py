@@ -166,6 +166,36 @@ def test_map_engines_reach_the_minimum_cost(rule_file):
     assert n_soft >= 3
 
 
+def test_rc2_map_keeps_hard_rules_that_the_soft_ones_would_break(tmp_path):
+    """Soft rules that pay for corridors next to corridors and for a hall with no corridor
+    beside it, hard rules that forbid a corridor with many doors and two adjacent halls: RC2 on
+    the ground network (hard factors' forbidden states as boxes of hard clauses) reaches
+    clingo's minimum cost and breaks no hard rule, on random hard evidence (without the hard
+    clauses it breaks them: checked by deleting them)."""
+    path = tmp_path / "clash.lp"
+    path.write_text(
+        "nextcorr(U) :- adj(U,V), corr(V).\n"
+        ":~ colike(U), not corr(U). [2000@0, c, U]\n"
+        ":~ hall(U), not nextcorr(U). [700@0, h, U]\n"
+        ":~ corr(P), corr(Q), adj(P,Q). [300@0, cc, P, Q]\n"
+        ":- corr(U), muldoor(U).\n"
+        ":- hall(P), hall(Q), adj(P,Q).\n"
+        ":- halike(U), room(U).\n")
+    rules = load_rules(path)
+    rng = np.random.default_rng(3)
+    for _ in range(12):
+        n = int(rng.integers(3, 7))
+        units = range(1, n + 1)
+        adj = [(p, q) for p in units for q in units if p < q and rng.random() < 0.5]
+        ev = Evidence.build(units, colike=[u for u in units if rng.random() < 0.6],
+                            muldoor=[u for u in units if rng.random() < 0.4],
+                            halike=[u for u in units if rng.random() < 0.4], adj=adj)
+        g = ground(rules, ev, keep_control=True)
+        _xc, cc = map_clingo(g)
+        xr, cr = map_rc2(g.network)
+        assert cr == cc and g.network.cost(xr) == cc
+
+
 def test_clingo_map_refuses_soft_evidence_it_would_maximise():
     rules = load_rules("rules/table3.lp")
     engine = KnowledgeEngine(rules, map_method="clingo")

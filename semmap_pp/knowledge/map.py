@@ -3,9 +3,9 @@
 :func:`map_clingo` and :func:`map_rc2` minimise the cost of a whole world of the network
 (integer thousandths): clingo solves the ground program itself (its weak constraints are the
 soft rules), RC2 solves a WCNF encoding of the network (one Boolean per type state with
-exactly-one clauses, one per binary atom; each violating assignment of a hard factor is a hard
-clause; a soft factor gets an indicator ``y`` forced by its violating assignments and a soft
-clause ``¬y`` of its weight). The engine uses them only for evidence without soft atoms: its MAP
+exactly-one clauses, one per binary atom; a factor's violating assignments are covered by
+disjoint boxes, each a hard clause for a hard factor and a soft clause of the factor's weight
+for a soft one: :func:`_clauses_of`). The engine uses them only for evidence without soft atoms: its MAP
 sums those out first (:func:`semmap_pp.knowledge.exact.sum_out`) and hands the resulting log
 tables to :func:`map_tables_rc2` when the junction tree is too large.
 """
@@ -64,25 +64,23 @@ def map_rc2(net: Network) -> tuple[np.ndarray, int]:
             return ids[v][0] if s else -ids[v][0]
         return ids[v][s]
 
-    wcnf = WCNF()
+    hard, soft, wght = [], [], []
     for v, c in enumerate(net.card):
         if c != 2:
-            wcnf.append(list(ids[v]))
+            hard.append(list(ids[v]))
             for a in range(c):
                 for b in range(a + 1, c):
-                    wcnf.append([-ids[v][a], -ids[v][b]])
-    for scope, viol in net.hard:
-        for states in np.argwhere(viol):
-            wcnf.append([-lit(v, int(s)) for v, s in zip(scope, states)])
-    for scope, t, w in net.soft:
-        bad = np.argwhere(t)
-        if len(bad) == 1:
-            wcnf.append([-lit(v, int(s)) for v, s in zip(scope, bad[0])], weight=int(w))
-            continue
-        top += 1
-        for states in bad:
-            wcnf.append([-lit(v, int(s)) for v, s in zip(scope, states)] + [top])
-        wcnf.append([-top], weight=int(w))
+                    hard.append([-ids[v][a], -ids[v][b]])
+    for scope, viol in net.hard:       # boxes of forbidden states: hard clauses
+        for _w, template in _cost_clauses(np.where(viol, _HARD, 0)):
+            hard.append([lit(scope[a], k) for a, k in template])
+    for scope, t, w in net.soft:       # disjoint boxes of violating states, each weight w
+        for _w, template in _cost_clauses(np.where(t, 1, 0)):
+            soft.append([lit(scope[a], k) for a, k in template])
+            wght.append(int(w))
+    wcnf = WCNF()
+    wcnf.hard, wcnf.soft, wcnf.wght, wcnf.nv = hard, soft, wght, top
+    wcnf.topw = sum(wght) + 1
     with RC2(wcnf) as rc2:
         model = rc2.compute()
         if model is None:
@@ -216,13 +214,32 @@ def _table_boxes(shape, data) -> tuple[int, tuple]:
     fin = np.isfinite(table)
     cost = np.where(fin, np.rint(-COST_SCALE * np.where(fin, table, 0.0)), 0).astype(np.int64)
     low = int(cost[fin].min())
-    cost = np.where(fin, cost - low, _HARD)
+    return low, _clauses_of(np.where(fin, cost - low, _HARD))
+
+
+def _cost_clauses(cost) -> tuple:
+    """:func:`_clauses_of` an integer cost table, cached by content as :func:`_table_boxes`."""
+    cost = np.ascontiguousarray(cost, dtype=np.int64)
+    if cost.size > _CACHED_ENTRIES:
+        return _clauses_of(cost)
+    return _cached_cost_clauses(cost.shape, cost.tobytes())
+
+
+@functools.lru_cache(maxsize=1024)
+def _cached_cost_clauses(shape, data) -> tuple:
+    return _clauses_of(np.frombuffer(data, dtype=np.int64).reshape(shape))
+
+
+def _clauses_of(cost) -> tuple:
+    """The clauses of an integer cost table (0: none, ``_HARD``: forbidden, else a weight):
+    ``((weight or _HARD, ((axis, state), ...)), ...)``, a clause per box of :func:`_boxes`, its
+    literals the states outside the box."""
     boxes: list = []
     _boxes(cost, (), boxes)
-    clauses = tuple((w, tuple((a, k) for a, states in enumerate(sets) if len(states) < shape[a]
-                              for k in range(shape[a]) if k not in states))
-                    for sets, w in boxes)
-    return low, clauses
+    shape = cost.shape
+    return tuple((w, tuple((a, k) for a, states in enumerate(sets) if len(states) < shape[a]
+                           for k in range(shape[a]) if k not in states))
+                 for sets, w in boxes)
 
 
 def _boxes(cost, prefix, out) -> None:
