@@ -26,6 +26,15 @@ from semmap_pp.knowledge.map import map_pairwise_rc2
 TABLE3_TOL = 0.02
 
 
+def enumerated_marginals(card, pots):
+    """Marginals of a factor network (log tables over scopes), by enumeration."""
+    states = np.array(list(itertools.product(*[range(c) for c in card])))
+    logp = sum(t[tuple(states[:, v] for v in s)] for s, t in pots)
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    return [np.bincount(states[:, v], w, c) for v, c in enumerate(card)]
+
+
 def brute_force(unary, pairs):
     """Marginals and pair joints of a pairwise log-potential network, by enumeration."""
     cards = [len(u) for u in unary]
@@ -105,12 +114,9 @@ def test_factor_bp_is_exact_on_a_tree_of_factors():
     pots = [((0, 1, 2), rng.normal(0, 1, (2, 3, 4))), ((2, 3), rng.normal(0, 1, (4, 2))),
             ((1,), rng.normal(0, 1, 3))]
     res = factor_bp(card, pots, BPSettings(tol=1e-13, max_iter=500))
-    states = np.array(list(itertools.product(*[range(c) for c in card])))
-    logp = sum(t[tuple(states[:, v] for v in s)] for s, t in pots)
-    w = np.exp(logp - logp.max())
-    w /= w.sum()
     for v, c in enumerate(card):
-        np.testing.assert_allclose(res.marginals[v], np.bincount(states[:, v], w, c), atol=1e-9)
+        np.testing.assert_allclose(res.marginals[v], enumerated_marginals(card, pots)[v],
+                                   atol=1e-9)
 
 
 def _messages_in_log_space(tables, ins_log, shape):
@@ -274,12 +280,9 @@ def test_factor_bp_is_exact_on_a_tree_with_a_sparse_factor():
     pots = [((0, 1, 2, 3), big), ((3, 4), rng.normal(0, 1, (4, 3))), ((0,), rng.normal(0, 1, 4)),
             ((2,), rng.normal(0, 1, 4))]
     res = factor_bp(card, pots, BPSettings(tol=1e-13, max_iter=500))
-    states = np.array(list(itertools.product(*[range(c) for c in card])))
-    logp = sum(t[tuple(states[:, v] for v in s)] for s, t in pots)
-    w = np.exp(logp - logp.max())
-    w /= w.sum()
     for v, c in enumerate(card):
-        np.testing.assert_allclose(res.marginals[v], np.bincount(states[:, v], w, c), atol=1e-9)
+        np.testing.assert_allclose(res.marginals[v], enumerated_marginals(card, pots)[v],
+                                   atol=1e-9)
 
 
 def test_cluster_keeps_the_joint_and_merges_tight_overlaps():

@@ -345,6 +345,21 @@ def _exp_tables(tables) -> np.ndarray:
     return np.ascontiguousarray(np.exp(t - np.where(np.isfinite(top), top, 0.0)))
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _add_products(ins, col, r, e, pre, suf, out):  # pragma: no cover - compiled
+    """For one joint state (``col[q]``: the message entry of position ``q``'s state) add ``e``
+    times the product of the other positions' incoming entries to each position's outgoing
+    entry, by prefix and suffix products (no division, so zero entries are exact)."""
+    pre[0] = 1.0
+    for q in range(r):
+        pre[q + 1] = pre[q] * ins[col[q]]
+    suf[r] = 1.0
+    for q in range(r - 1, -1, -1):
+        suf[q] = suf[q + 1] * ins[col[q]]
+    for p in range(r):
+        out[col[p]] += e * pre[p] * suf[p + 1]
+
+
 @numba.njit(cache=True, nogil=True)
 def _one_factor(etab, ins, out, dims, pre, suf, digit, col):  # pragma: no cover - compiled
     """The new messages of one factor of shape ``dims`` to each variable of its scope.
@@ -376,14 +391,7 @@ def _one_factor(etab, ins, out, dims, pre, suf, digit, col):  # pragma: no cover
         for q in range(r):
             col[q] = o + digit[q]
             o += dims[q]
-        pre[0] = 1.0
-        for q in range(r):
-            pre[q + 1] = pre[q] * ins[col[q]]
-        suf[r] = 1.0
-        for q in range(r - 1, -1, -1):
-            suf[q] = suf[q + 1] * ins[col[q]]
-        for p in range(r):
-            out[col[p]] += e * pre[p] * suf[p + 1]
+        _add_products(ins, col, r, e, pre, suf, out)
     o = 0
     for p in range(r):
         c = dims[p]
@@ -484,15 +492,7 @@ def _sparse_factor(c, sidx, sval, ins, out, dims, pre, suf, start, col):  # prag
         for q in range(r - 1, -1, -1):
             col[q] = start[q] + j % dims[q]
             j //= dims[q]
-        pre[0] = 1.0
-        for q in range(r):
-            pre[q + 1] = pre[q] * ins[col[q]]
-        suf[r] = 1.0
-        for q in range(r - 1, -1, -1):
-            suf[q] = suf[q + 1] * ins[col[q]]
-        d = sval[t]
-        for p in range(r):
-            out[col[p]] += d * pre[p] * suf[p + 1]
+        _add_products(ins, col, r, sval[t], pre, suf, out)
     for p in range(r):
         cdim = dims[p]
         tot = 0.0
