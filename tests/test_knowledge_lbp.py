@@ -16,7 +16,7 @@ from test_knowledge_inference import _map_tuple, assert_matches_brute_force, ora
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.exact import MAX_CLIQUE_STATES, JunctionTree, TooDense
 from semmap_pp.knowledge.layouts import dense_floor
-from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _factor_messages, _sparse_factor,
+from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _one_factor, _sparse_factor,
                                      _sparse_plan, cluster, factor_bp, pairwise_bp)
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2
@@ -117,6 +117,20 @@ def test_factor_bp_is_exact_on_a_tree_of_factors():
     for v, c in enumerate(card):
         np.testing.assert_allclose(res.marginals[v], enumerated_marginals(card, pots)[v],
                                    atol=1e-9)
+
+
+def _factor_messages(etab, ins, dims):
+    """``lbp._one_factor`` (the compiled pass over one factor) on each of ``n`` factors of one
+    shape: ``etab`` (n, S), ``ins`` (n, Σ dims); returns (n, Σ dims)."""
+    dims = np.asarray(dims, dtype=np.int64)
+    r = len(dims)
+    out = np.zeros(ins.shape)
+    pre, suf = np.empty(r + 1), np.empty(r + 1)
+    digit, col = np.empty(r, dtype=np.int64), np.empty(r, dtype=np.int64)
+    for i in range(len(etab)):
+        _one_factor(np.ascontiguousarray(etab[i]), np.ascontiguousarray(ins[i]), out[i], dims,
+                    pre, suf, digit, col)
+    return out
 
 
 def _messages_in_log_space(tables, ins_log, shape):

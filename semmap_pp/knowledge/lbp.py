@@ -360,6 +360,24 @@ def _add_products(ins, col, r, e, pre, suf, out):  # pragma: no cover - compiled
         out[col[p]] += e * pre[p] * suf[p + 1]
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _normalise(out, dims):  # pragma: no cover - compiled
+    """Each position's message in ``out`` (position ``p``'s entries after those of positions
+    ``< p``) clamped at 0 (a sparse correction can round an entry below it) and normalised; a
+    message whose sum is 0 becomes uniform."""
+    o = 0
+    for p in range(dims.shape[0]):
+        c = dims[p]
+        tot = 0.0
+        for x in range(c):
+            v = max(out[o + x], 0.0)
+            out[o + x] = v
+            tot += v
+        for x in range(c):
+            out[o + x] = out[o + x] / tot if tot > 0 else 1.0 / c
+        o += c
+
+
 @numba.njit(cache=True, nogil=True)
 def _one_factor(etab, ins, out, dims, pre, suf, digit, col):  # pragma: no cover - compiled
     """The new messages of one factor of shape ``dims`` to each variable of its scope.
@@ -392,29 +410,7 @@ def _one_factor(etab, ins, out, dims, pre, suf, digit, col):  # pragma: no cover
             col[q] = o + digit[q]
             o += dims[q]
         _add_products(ins, col, r, e, pre, suf, out)
-    o = 0
-    for p in range(r):
-        c = dims[p]
-        tot = 0.0
-        for x in range(c):
-            tot += out[o + x]
-        for x in range(c):
-            out[o + x] = out[o + x] / tot if tot > 0 else 1.0 / c
-        o += c
-
-
-def _factor_messages(etab, ins, dims):
-    """:func:`_one_factor` on each of ``n`` factors of one shape: ``etab`` (n, S), ``ins``
-    (n, Σ dims); returns (n, Σ dims)."""
-    dims = np.asarray(dims, dtype=np.int64)
-    r = len(dims)
-    out = np.zeros(ins.shape)
-    pre, suf = np.empty(r + 1), np.empty(r + 1)
-    digit, col = np.empty(r, dtype=np.int64), np.empty(r, dtype=np.int64)
-    for i in range(len(etab)):
-        _one_factor(np.ascontiguousarray(etab[i]), np.ascontiguousarray(ins[i]), out[i], dims,
-                    pre, suf, digit, col)
-    return out
+    _normalise(out, dims)
 
 
 #: a table of at least this many joint states whose entries mostly share one value is handled as
@@ -493,15 +489,7 @@ def _sparse_factor(c, sidx, sval, ins, out, dims, pre, suf, start, col):  # prag
             col[q] = start[q] + j % dims[q]
             j //= dims[q]
         _add_products(ins, col, r, sval[t], pre, suf, out)
-    for p in range(r):
-        cdim = dims[p]
-        tot = 0.0
-        for x in range(cdim):
-            v = max(out[start[p] + x], 0.0)
-            out[start[p] + x] = v
-            tot += v
-        for x in range(cdim):
-            out[start[p] + x] = out[start[p] + x] / tot if tot > 0 else 1.0 / cdim
+    _normalise(out, dims)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -67,10 +67,7 @@ def map_rc2(net: Network) -> tuple[np.ndarray, int]:
     hard, soft, wght = [], [], []
     for v, c in enumerate(net.card):
         if c != 2:
-            hard.append(list(ids[v]))
-            for a in range(c):
-                for b in range(a + 1, c):
-                    hard.append([-ids[v][a], -ids[v][b]])
+            _exactly_one(hard, ids[v])
     for scope, viol in net.hard:       # boxes of forbidden states: hard clauses
         for _w, template in _cost_clauses(np.where(viol, _HARD, 0)):
             hard.append([lit(scope[a], k) for a, k in template])
@@ -78,15 +75,7 @@ def map_rc2(net: Network) -> tuple[np.ndarray, int]:
         for _w, template in _cost_clauses(np.where(t, 1, 0)):
             soft.append([lit(scope[a], k) for a, k in template])
             wght.append(int(w))
-    wcnf = WCNF()
-    wcnf.hard, wcnf.soft, wcnf.wght, wcnf.nv = hard, soft, wght, top
-    wcnf.topw = sum(wght) + 1
-    with RC2(wcnf) as rc2:
-        model = rc2.compute()
-        if model is None:
-            raise RuleError(net.path, _NO_WORLD)
-        cost = int(rc2.cost)
-    true = {m for m in model if m > 0}
+    true, cost = _solve(hard, soft, wght, top, net.path)
     x = np.zeros(net.n_vars, dtype=np.int64)
     for v, c in enumerate(net.card):
         if c == 2:
@@ -145,28 +134,46 @@ def map_tables_rc2(card, potentials, path) -> tuple[np.ndarray, float]:
         top += int(c)
     hard, soft, wght = [], [], []
     for row in ids:
-        hard.append(list(row))
-        for a in range(len(row)):
-            for b in range(a + 1, len(row)):
-                hard.append([-row[a], -row[b]])
+        _exactly_one(hard, row)
     base = 0
     for scope, t in potentials:
         base += _add_costs(hard, soft, wght, t, [ids[v][0] for v in scope])
+    true, cost = _solve(hard, soft, wght, top, path)
+    x = np.array([next(k for k, i in enumerate(row) if i in true) for row in ids], dtype=np.int64)
+    return x, -(cost + base) / COST_SCALE
+
+
+def _exactly_one(hard, row) -> None:
+    """Hard clauses: exactly one of the literals ``row`` (a variable's states) is true."""
+    hard.append(list(row))
+    for a in range(len(row)):
+        for b in range(a + 1, len(row)):
+            hard.append([-row[a], -row[b]])
+
+
+def _solve(hard, soft, wght, nv, path) -> tuple[set, int]:
+    """RC2 on the clauses: (the true literals of an optimal model, its cost); RuleError naming
+    ``path`` when the hard clauses admit none."""
     wcnf = WCNF()               # filled directly: WCNF.append costs a Python call per clause
-    wcnf.hard, wcnf.soft, wcnf.wght, wcnf.nv = hard, soft, wght, top
+    wcnf.hard, wcnf.soft, wcnf.wght, wcnf.nv = hard, soft, wght, nv
     wcnf.topw = sum(wght) + 1
     with RC2(wcnf) as rc2:
         model = rc2.compute()
         if model is None:
             raise RuleError(path, _NO_WORLD)
         cost = int(rc2.cost)
-    true = {m for m in model if m > 0}
-    x = np.array([next(k for k, i in enumerate(row) if i in true) for row in ids], dtype=np.int64)
-    return x, -(cost + base) / COST_SCALE
+    return {m for m in model if m > 0}, cost
 
 
-_HARD = -1   # marks a forbidden entry in the integer cost tables of _table_boxes
-_CACHED_ENTRIES = 4096   # larger tables are not cached (at most 1,024 of 32 kB keys)
+_HARD = -1   # marks a forbidden entry in the integer cost tables of _clauses_of
+_CACHED_ENTRIES = 4096   # larger tables are not cached (at most 1,024 of 32 kB keys each)
+
+
+def _by_content(cached, table):
+    """``cached(shape, bytes)`` (an ``lru_cache`` keyed by a table's content) for ``table``; a
+    table above :data:`_CACHED_ENTRIES` entries is computed without entering the cache."""
+    fn = cached if table.size <= _CACHED_ENTRIES else cached.__wrapped__
+    return fn(table.shape, table.tobytes())
 
 
 def _add_costs(hard, soft, wght, table, first) -> int:
@@ -182,9 +189,7 @@ def _add_costs(hard, soft, wght, table, first) -> int:
     first : list of int
         Per axis, the literal of the variable's state 0 (state ``k`` is ``first + k``).
     """
-    table = np.ascontiguousarray(table, dtype=np.float64)
-    boxes_of = _table_boxes if table.size <= _CACHED_ENTRIES else _table_boxes.__wrapped__
-    low, boxes = boxes_of(table.shape, table.tobytes())
+    low, boxes = _by_content(_table_boxes, np.ascontiguousarray(table, dtype=np.float64))
     for w, template in boxes:
         clause = [first[a] + k for a, k in template]
         if w == _HARD:
@@ -219,10 +224,7 @@ def _table_boxes(shape, data) -> tuple[int, tuple]:
 
 def _cost_clauses(cost) -> tuple:
     """:func:`_clauses_of` an integer cost table, cached by content as :func:`_table_boxes`."""
-    cost = np.ascontiguousarray(cost, dtype=np.int64)
-    if cost.size > _CACHED_ENTRIES:
-        return _clauses_of(cost)
-    return _cached_cost_clauses(cost.shape, cost.tobytes())
+    return _by_content(_cached_cost_clauses, np.ascontiguousarray(cost, dtype=np.int64))
 
 
 @functools.lru_cache(maxsize=1024)
