@@ -82,3 +82,66 @@ def test_flat_calibration_of_an_empty_network():
     jt = JunctionTree([], [])
     log_z, marg, joint = calibrate_flat(jt.plan([]), [], [])
     assert log_z == 0.0 and marg == [] and joint == []
+
+
+def _wide_network(rng, n):
+    """A chain-and-triangle network whose log tables span thousands of nats, so some clique's
+    finite entries lie more than exact._EXP_RANGE below its maximum."""
+    card = [int(rng.choice((2, 3, 4))) for _ in range(n)]
+    pots = [((i,), rng.normal(size=card[i]) * 400.0) for i in range(n)]
+    for i in range(n - 1):
+        pots.append(((i, i + 1), rng.normal(size=(card[i], card[i + 1])) * 400.0))
+    for i in range(0, n - 2, 2):
+        s = (i, i + 1, i + 2)
+        pots.append((s, rng.normal(size=tuple(card[v] for v in s)) * 400.0))
+    return card, pots
+
+
+def _log_enumerate(card, pots):
+    logp = np.zeros(card)
+    for s, t in pots:
+        shape = [1] * len(card)
+        for v, k in zip(s, t.shape):
+            shape[v] = k
+        logp = logp + t.reshape(shape)
+    return logp
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_calibration_of_cliques_spanning_thousands_of_nats(seed, monkeypatch):
+    """calibrate exponentiates a clique once for all its children when its finite entries lie
+    within _EXP_RANGE of their maximum, and takes log-sum-exp per child otherwise: both give
+    log Z, the marginals and every finite calibrated belief (the log joint mass of a clique
+    state, here enumerated), where one shared exp(x - max) would underflow to -inf."""
+    from semmap_pp.knowledge import exact
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(4, 8))
+    card, pots = _wide_network(rng, n)
+    jt = JunctionTree(card, [s for s, _ in pots])
+    logp = _log_enumerate(card, pots)
+    top = logp.max()
+    brute_z = float(np.log(np.exp(logp - top).sum()) + top)
+    log_z, marg, full = calibrate(jt, pots, return_beliefs=True)
+    assert abs(log_z - brute_z) <= 1e-9 * abs(brute_z)
+    p = np.exp(logp - top)
+    p /= p.sum()
+    for v in range(n):
+        assert np.abs(marg[v] - p.sum(axis=tuple(a for a in range(n) if a != v))).max() <= 1e-9
+    spans = []
+    for i, ax in enumerate(jt.axes):
+        others = tuple(a for a in range(n) if a not in ax)
+        mx = logp.max(axis=others, keepdims=True)
+        ref = np.log(np.exp(logp - mx).sum(axis=others, keepdims=True)) + mx
+        ref = ref.reshape(tuple(card[a] for a in sorted(ax)))
+        ref = np.transpose(ref, np.argsort(np.argsort(ax)))   # axes in clique order
+        assert np.isfinite(full[i]).all()
+        assert np.allclose(full[i], ref, rtol=1e-9, atol=1e-6)
+        spans.append(float(full[i].max() - full[i].min()))
+    assert max(spans) > exact._EXP_RANGE     # the per-child path was taken somewhere
+    monkeypatch.setattr(exact, "_EXP_RANGE", 0.0)   # every clique by log-sum-exp per child
+    z2, marg2, full2 = calibrate(jt, pots, return_beliefs=True)
+    assert abs(z2 - log_z) <= 1e-12 * abs(log_z)
+    for v in range(n):
+        assert np.abs(marg2[v] - marg[v]).max() <= 1e-12
+    for a, b in zip(full, full2):
+        assert np.allclose(a, b, rtol=1e-12, atol=1e-9)

@@ -135,6 +135,16 @@ class JunctionTree:
                 keep = [ax.index(a) for a in seps[i]]
                 rest = [k for k in range(len(ax)) if k not in keep]
                 self.down_perm[i] = (tuple(rest + keep), tuple(card[a] for a in seps[i]))
+        # the same marginalisation as a sum over the parent's other axes (tuple) followed by
+        # the transpose that puts the kept axes, left in the parent's order, in separator order
+        self.down_sum = [None] * n
+        for i, p in enumerate(self.parent):
+            if p >= 0:
+                ax = self.axes[p]
+                keep = [ax.index(a) for a in seps[i]]
+                kept = sorted(keep)
+                self.down_sum[i] = (tuple(k for k in range(len(ax)) if k not in keep),
+                                    tuple(kept.index(k) for k in keep))
 
     def _place(self, scope, axes):
         perm, shape, targets = _placement(scope, axes)
@@ -198,7 +208,7 @@ def upward(jt: JunctionTree, potentials, maximize=False):
         if pl is None:
             const += float(table)
         else:
-            beliefs[pl[0]] = beliefs[pl[0]] + _put(table, pl)
+            beliefs[pl[0]] += _put(table, pl)     # in place: the beliefs are this call's own
     msgs = [None] * n
     for i in range(n):
         b = beliefs[i]
@@ -206,7 +216,7 @@ def upward(jt: JunctionTree, potentials, maximize=False):
         p = jt.parent[i]
         if p >= 0:
             perm, shape = jt.msg_place[i]
-            beliefs[p] = beliefs[p] + np.transpose(msgs[i], perm).reshape(shape)
+            beliefs[p] += np.transpose(msgs[i], perm).reshape(shape)
     return beliefs, msgs, const
 
 
@@ -215,6 +225,12 @@ def calibrate(jt: JunctionTree, potentials, return_beliefs=False):
 
     With ``return_beliefs`` also the calibrated clique beliefs (log, unnormalised), for
     :func:`scope_marginal`.
+
+    The downward pass exponentiates each calibrated clique once (:func:`_scaled`) and sums that
+    table onto every child's separator and onto the clique's own variable, instead of a
+    ``log Σ exp`` of the whole clique per child: a clique of a ground network has several
+    children, and its exponentials were most of the time. A clique whose finite entries span
+    more than :data:`_EXP_RANGE` nats, where some would underflow, takes :func:`_lse` per child.
     """
     beliefs, msgs, const = upward(jt, potentials)
     n = len(jt.order)
@@ -222,28 +238,63 @@ def calibrate(jt: JunctionTree, potentials, return_beliefs=False):
     if not np.isfinite(log_z):
         return (log_z, None, None) if return_beliefs else (log_z, None)
     full = [None] * n
+    scaled = [None] * n
     marg = [None] * n
     for i in range(n - 1, -1, -1):
         f = beliefs[i]
         p = jt.parent[i]
         if p >= 0:
-            rest_keep, sep_shape = jt.down_perm[i]
-            pf = np.transpose(full[p], rest_keep)
-            k = len(sep_shape)
-            flat = pf.reshape((-1,) + sep_shape) if k else pf.reshape(-1)
-            with np.errstate(invalid="ignore"):
-                d = _lse(flat, 0) - msgs[i]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                d = _down_lse(jt, i, full[p], scaled[p]) - msgs[i]
             d = np.where(np.isnan(d), -np.inf, d)
-            perm, shape = jt.msg_place[i]
             # the separator message enters clique i on its sep axes (axes 1..)
-            f = f + d.reshape((1,) + d.shape)
+            f += d.reshape((1,) + d.shape)      # in place: f is upward's own belief
         full[i] = f
+        scaled[i] = _scaled(f)
         v = jt.order[i]
-        x = f.reshape(f.shape[0], -1)
-        lm = _lse(x, 1) if x.shape[1] > 1 else x[:, 0]
-        pm = np.exp(lm - np.max(lm))
+        if scaled[i] is not None:
+            top, e = scaled[i]
+            pm = e.reshape(e.shape[0], -1).sum(axis=1)
+        else:
+            x = f.reshape(f.shape[0], -1)
+            lm = _lse(x, 1) if x.shape[1] > 1 else x[:, 0]
+            pm = np.exp(lm - np.max(lm))
         marg[v] = pm / pm.sum()
     return (log_z, marg, full) if return_beliefs else (log_z, marg)
+
+
+#: Largest span (nats) of a clique's finite log entries for :func:`_scaled`: ``exp(x - max)``
+#: then stays a normal float (above 2.2e-308 = e^-708) for every entry, so no sum loses a term.
+_EXP_RANGE = 700.0
+
+
+def _scaled(f):
+    """``(top, exp(f - top))`` for a log table whose finite entries lie within
+    :data:`_EXP_RANGE` of their maximum ``top``; None when they spread wider or none is finite
+    (the callers then take :func:`_lse`)."""
+    top = float(f.max())
+    if not np.isfinite(top):
+        return None
+    low = float(np.min(f, where=f > -np.inf, initial=np.inf))
+    if top - low > _EXP_RANGE:
+        return None
+    return top, np.exp(f - top)
+
+
+def _down_lse(jt: JunctionTree, i: int, parent_full, parent_scaled):
+    """``log Σ exp`` of the parent's calibrated clique onto clique ``i``'s separator (in
+    separator order); ``-inf`` where the parent has no possible state."""
+    if parent_scaled is not None:
+        top, e = parent_scaled
+        rest, order = jt.down_sum[i]
+        s = np.transpose(e.sum(axis=rest) if rest else e, order)
+        out = np.full(s.shape, -np.inf)
+        np.log(s, out=out, where=s > 0)
+        return out + top
+    rest_keep, sep_shape = jt.down_perm[i]
+    pf = np.transpose(parent_full, rest_keep)
+    flat = pf.reshape((-1,) + sep_shape) if sep_shape else pf.reshape(-1)
+    return _lse(flat, 0)
 
 
 def scope_marginal(jt: JunctionTree, full, scope):
