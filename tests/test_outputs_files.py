@@ -253,6 +253,9 @@ def test_the_types_layer_is_a_raw_map_server_map_of_the_units_types_and_doors(ho
         assert codes[y, x] == DOOR_CODE
     door = codes == DOOR_CODE
     assert 0 < door.sum() < 3 * 22 * len(doc["doors"])
+    # the same door pixels as overlay.png's picture (one rasterisation: SemanticMap.door_image)
+    overlay = figures.overlay_rgb(run.semantic)
+    assert np.array_equal(door, (overlay == figures.RGB["door"]).all(axis=2))
     for u in doc["units"]:                  # every other pixel of a unit holds its type's code
         mine = (labels == u["id"]) & ~door
         assert mine.any() and (codes[mine] == TYPE_CODES[u["type"]]).all()

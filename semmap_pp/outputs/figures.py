@@ -56,15 +56,6 @@ def classified_rgb(classes: np.ndarray, light: bool = False) -> np.ndarray:
     return lut[np.asarray(classes, dtype=np.uint8)]
 
 
-def door_mask_image(sm) -> np.ndarray:
-    """(H, W) bool door cells of W* in the image frame."""
-    lat = np.zeros(sm.frame.shape, bool)
-    for d in sm.derived.doors:
-        r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
-        lat[r0:r1, c0:c1] = True
-    return sm.frame.to_image(lat, fill=False)
-
-
 def overlay_rgb(sm) -> np.ndarray:
     """(H, W, 3) uint8: the classified map with W*'s walls (blue; light blue where the map shows
     nothing there: an inferred wall, e.g. the far side of a room glimpsed through its door), doors
@@ -74,7 +65,7 @@ def overlay_rgb(sm) -> np.ndarray:
     rgb[wall] = RGB["wall"]
     rgb[wall & (sm.grid.classes == UNKNOWN)] = RGB["inferred wall"]
     rgb[sm.states_image == W_OBJECT] = RGB["object"]
-    rgb[door_mask_image(sm)] = RGB["door"]
+    rgb[sm.door_image()] = RGB["door"]
     return rgb
 
 
@@ -393,6 +384,6 @@ def stability_png(sm, agreement, seeds) -> bytes:
     return png(fig)
 
 
-__all__ = ["png", "classified_rgb", "overlay_rgb", "door_mask_image", "crop_box", "overlay_png",
+__all__ = ["png", "classified_rgb", "overlay_rgb", "crop_box", "overlay_png",
            "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "independent_text", "posterior_png", "posterior_cells_png", "roi_png",
            "regions_preview_png", "AGREEMENT_COLOURS", "agreement_class", "stability_png"]

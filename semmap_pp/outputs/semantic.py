@@ -61,6 +61,15 @@ class SemanticMap:
     def type_of(self, unit_id: int) -> str:
         return UNIT_TYPES[int(self.world.types[self.slot_of(unit_id)])]
 
+    def door_image(self) -> np.ndarray:
+        """(H, W) bool: W*'s door cells in the image frame, each door's lattice box warped as
+        :attr:`labels_image` is (the doors of overlay.png and of types.pgm)."""
+        lat = np.zeros(self.frame.shape, bool)
+        for d in self.derived.doors:
+            r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
+            lat[r0:r1, c0:c1] = True
+        return self.frame.to_image(lat, fill=False)
+
     def units_text(self) -> str:
         """The units of W* in words, for logs and diagnostics.txt, e.g. ``"20 units (18 room,
         1 corridor, 1 other; +1 exterior)"`` (types with no unit left out)."""

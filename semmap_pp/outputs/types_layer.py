@@ -12,7 +12,7 @@ code  pixel
 2     a corridor
 3     a hall
 4     other
-5     a door of world.json (the opening across the wall band, drawn over the units)
+5     a door of world.json (its cells across the wall band, drawn over the units)
 ====  =====================================================================
 
 Published as an ``OccupancyGrid`` the codes are the cells' values 0..5, to be read as labels, not
@@ -34,39 +34,21 @@ TYPE_CODES = {"room": 1, "corridor": 2, "hall": 3, "other": 4}
 DOOR_CODE = 5
 
 
-def _segment_mask(shape, a, b, radius: float) -> tuple[slice, slice, np.ndarray]:
-    """The pixels whose centres lie within ``radius`` of the segment ``a``-``b`` (continuous
-    ``[x, y]`` pixel frame), as a mask over its bounding box: ``(rows, cols, mask)``."""
-    h, w = shape
-    (ax, ay), (bx, by) = a, b
-    c0 = max(0, int(np.floor(min(ax, bx) - radius)))
-    c1 = min(w, int(np.ceil(max(ax, bx) + radius)) + 1)
-    r0 = max(0, int(np.floor(min(ay, by) - radius)))
-    r1 = min(h, int(np.ceil(max(ay, by) + radius)) + 1)
-    if c0 >= c1 or r0 >= r1:
-        return slice(0, 0), slice(0, 0), np.zeros((0, 0), bool)
-    y, x = np.mgrid[r0:r1, c0:c1] + 0.5
-    dx, dy = bx - ax, by - ay
-    n2 = dx * dx + dy * dy
-    t = np.clip(((x - ax) * dx + (y - ay) * dy) / n2, 0.0, 1.0) if n2 > 0 else np.zeros_like(x)
-    d2 = (x - ax - t * dx) ** 2 + (y - ay - t * dy) ** 2
-    return slice(r0, r1), slice(c0, c1), d2 <= radius * radius
-
-
 def types_image(sm, doc: dict) -> np.ndarray:
     """The layer's codes (uint8, the input image's shape) from the semantic map ``sm`` and its
-    world.json content ``doc``: each unit's pixels of labels.png get its type's code, then each
-    door's segment, as wide as the wall band, gets :data:`DOOR_CODE`.
+    world.json content ``doc``: each unit's pixels of labels.png get its type's code, then the
+    door cells (:meth:`~semmap_pp.outputs.semantic.SemanticMap.door_image`, the doors
+    overlay.png draws) get :data:`DOOR_CODE`.
 
     Examples
     --------
     >>> from types import SimpleNamespace
     >>> import numpy as np
     >>> labels = np.array([[1, 1, 0, 2, 2]] * 3, dtype=np.uint16)
-    >>> sm = SimpleNamespace(labels_image=labels, frame=SimpleNamespace(
-    ...     cells=SimpleNamespace(wall=1), resolution=0.05), grid=SimpleNamespace(resolution=0.05))
-    >>> doc = {"units": [{"id": 1, "type": "room"}, {"id": 2, "type": "corridor"}],
-    ...        "doors": [{"endpoints_px": [[2.5, 0.0], [2.5, 3.0]]}]}
+    >>> doors = np.zeros(labels.shape, bool)
+    >>> doors[:, 2] = True
+    >>> sm = SimpleNamespace(labels_image=labels, door_image=lambda: doors)
+    >>> doc = {"units": [{"id": 1, "type": "room"}, {"id": 2, "type": "corridor"}]}
     >>> types_image(sm, doc).tolist()
     [[1, 1, 5, 2, 2], [1, 1, 5, 2, 2], [1, 1, 5, 2, 2]]
     """
@@ -76,12 +58,7 @@ def types_image(sm, doc: dict) -> np.ndarray:
         if u["id"] < len(code):
             code[u["id"]] = TYPE_CODES[u["type"]]
     image = code[labels]
-    # the wall band's width in input pixels (the lattice may be finer or coarser than the image)
-    radius = max(0.5, 0.5 * sm.frame.cells.wall * sm.frame.resolution / sm.grid.resolution)
-    for d in doc.get("doors", []):
-        a, b = d["endpoints_px"]
-        rows, cols, mask = _segment_mask(image.shape, a, b, radius)
-        image[rows, cols][mask] = DOOR_CODE
+    image[sm.door_image()] = DOOR_CODE
     return image
 
 
