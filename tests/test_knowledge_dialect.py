@@ -140,3 +140,24 @@ def test_contradictory_hard_rules_name_the_file(tmp_path):
     rs = check(tmp_path, ":- unit(U), rolike(U).\n")
     with pytest.raises(RuleError, match=r"r\.lp: the hard rules admit no world"):
         ground(rs, Evidence.build([1], rolike={1}))
+
+
+@pytest.mark.parametrize("text", [
+    "adj(Q,P) :- adj(P,Q-5).\n",              # found by bench/fuzz.py: grounding never ended
+    "adj(Q,P) :- adj(P,-Q).\n",
+    "h(X) :- unit(X).\nh(Y) :- h(f(Y*2)).\n",
+    "h(X) :- unit(X).\nh(Y) :- h(|Y|).\n",
+])
+def test_a_head_variable_solved_from_body_arithmetic_is_rejected(tmp_path, text):
+    """clingo solves Q from an arithmetic body term (Q-5 = 2 gives Q = 7): a new value, so
+    such a recursive rule grounds without end; the head variable must occur outside arithmetic."""
+    rejects(tmp_path, text, r"head variable [QY] must occur in a positive body atom, outside "
+            "arithmetic")
+
+
+def test_body_arithmetic_is_fine_when_the_head_variable_also_occurs_plainly(tmp_path):
+    rs = check(tmp_path, "near(P,Q) :- adj(P,Q), adj(Q,R), R != P+1.\n"
+                         "fivish(Q) :- adj(P,Q), unit(P+0).\n"
+                         ":~ near(P,Q), fivish(Q), room(P). [100@0, n, P, Q]\n")
+    net = ground(rs, Evidence(units=(1, 2, 3), adj=((1, 2), (2, 3)))).network
+    assert net.n_vars >= 3

@@ -16,7 +16,8 @@ Everything else that could run code or reach outside the rules folder is rejecte
 files outside the folder of the top-level file, choice rules, disjunctions, ``#minimize``,
 ``#heuristic``, ``#project``, ``#edge``, theory atoms, classical negation. So is what could make
 grounding endless or clingo misbehave: intervals ``a..b``, derived atoms whose arguments are not
-constants or variables of positive body atoms (``c(X+1) :- c(X).``), integer literals beyond 32 bits
+constants or variables of positive body atoms outside arithmetic (``c(X+1) :- c(X).``,
+``adj(Q,P) :- adj(P,Q-5).``), integer literals beyond 32 bits
 (clingo wraps them silently), non-ASCII characters outside comments and strings (clingo aborts
 the process on them), and statements whose grounding could exceed
 :data:`~semmap_pp.knowledge.size.MAX_GROUND_STATEMENTS` on a floor of 64 units (many free unit
@@ -249,16 +250,19 @@ def atom_signature(symbol_node, path) -> tuple[str, int]:
 def check_head_terms(symbol, body, path) -> None:
     """A derived atom holds only values of its positive body atoms (Datalog).
 
-    Each head argument is a constant or a variable that occurs in a positive body atom, so
-    grounding can only combine the constants of the evidence and the rule files: no arithmetic,
-    function terms or aggregate results in heads, which could make grounding endless (e.g.
-    ``chain(X+1) :- chain(X).``).
+    Each head argument is a constant or a variable that occurs in a positive body atom outside
+    any arithmetic, so grounding can only combine the constants of the evidence and the rule
+    files: no arithmetic, function terms or aggregate results in heads, which could make
+    grounding endless (e.g. ``chain(X+1) :- chain(X).``), and no head variable that clingo
+    solves from an arithmetic body term, which computes new values just the same
+    (``adj(Q,P) :- adj(P,Q-5).`` derives ``adj(7,1)`` from ``adj(1,2)``, then ``adj(6,7)``,
+    without end; found by ``bench/fuzz.py`` in session 30).
     """
     bound = set()
     for lit in body:
         if (lit.ast_type == cast.ASTType.Literal and lit.sign == cast.Sign.NoSign
                 and lit.atom.ast_type == cast.ASTType.SymbolicAtom):
-            bound |= {n.name for n in walk(lit.atom) if n.ast_type == cast.ASTType.Variable}
+            bound |= _plain_variables(lit.atom)
     args = symbol.arguments if symbol.ast_type == cast.ASTType.Function else []
     for arg in args:
         if arg.ast_type == cast.ASTType.SymbolicTerm:
@@ -268,8 +272,29 @@ def check_head_terms(symbol, body, path) -> None:
                             "atom cannot compute new values (they could make grounding endless)",
                             *_loc(arg))
         if arg.name not in bound:
-            raise RuleError(path, f"head variable {arg.name} must occur in a positive body atom "
-                            "(a derived atom holds only values of the evidence)", *_loc(arg))
+            raise RuleError(path, f"head variable {arg.name} must occur in a positive body atom, "
+                            "outside arithmetic (a derived atom holds only values of the "
+                            "evidence)", *_loc(arg))
+
+
+_ARITHMETIC = (cast.ASTType.BinaryOperation, cast.ASTType.UnaryOperation)
+
+
+def _plain_variables(node) -> set[str]:
+    """The variables of ``node`` that occur outside arithmetic terms: those a match binds to a
+    value that is already there (under ``Q-5`` clingo solves ``Q`` from the value)."""
+    if node.ast_type == cast.ASTType.Variable:
+        return {node.name}
+    if node.ast_type in _ARITHMETIC:
+        return set()
+    out: set[str] = set()
+    for key in node.child_keys:
+        value = getattr(node, key)
+        if value is None:
+            continue
+        for item in ([value] if isinstance(value, cast.AST) else value):
+            out |= _plain_variables(item)
+    return out
 
 
 _FORBIDDEN = {
