@@ -23,13 +23,19 @@ def _random_network(rng, n, p_edge, cards=(2, 3, 4), p_inf=0.0):
     return card, pots
 
 
-def _enumerate(card, pots):
+def _log_enumerate(card, pots):
+    """The log potential of every joint state (axes in variable order)."""
     logp = np.zeros(card)
     for s, t in pots:
         shape = [1] * len(card)
         for v, k in zip(s, t.shape):
             shape[v] = k
         logp = logp + t.reshape(shape)
+    return logp
+
+
+def _enumerate(card, pots):
+    logp = _log_enumerate(card, pots)
     m = logp.max()
     p = np.exp(logp - m)
     return float(np.log(p.sum()) + m), p / p.sum()
@@ -95,16 +101,6 @@ def _wide_network(rng, n):
         s = (i, i + 1, i + 2)
         pots.append((s, rng.normal(size=tuple(card[v] for v in s)) * 400.0))
     return card, pots
-
-
-def _log_enumerate(card, pots):
-    logp = np.zeros(card)
-    for s, t in pots:
-        shape = [1] * len(card)
-        for v, k in zip(s, t.shape):
-            shape[v] = k
-        logp = logp + t.reshape(shape)
-    return logp
 
 
 @pytest.mark.parametrize("seed", range(12))
