@@ -238,7 +238,7 @@ def calibrate(jt: JunctionTree, potentials, return_beliefs=False):
     if not np.isfinite(log_z):
         return (log_z, None, None) if return_beliefs else (log_z, None)
     full = [None] * n
-    scaled = [None] * n
+    scaled = [None] * n     # a clique's exp table, kept until its last child has used it
     marg = [None] * n
     for i in range(n - 1, -1, -1):
         f = beliefs[i]
@@ -249,11 +249,15 @@ def calibrate(jt: JunctionTree, potentials, return_beliefs=False):
             d = np.where(np.isnan(d), -np.inf, d)
             # the separator message enters clique i on its sep axes (axes 1..)
             f += d.reshape((1,) + d.shape)      # in place: f is upward's own belief
+            if i == min(jt.children[p]):        # children come in descending order
+                scaled[p] = None
         full[i] = f
-        scaled[i] = _scaled(f)
+        mine = _scaled(f)
+        if jt.children[i]:
+            scaled[i] = mine
         v = jt.order[i]
-        if scaled[i] is not None:
-            top, e = scaled[i]
+        if mine is not None:
+            top, e = mine
             pm = e.reshape(e.shape[0], -1).sum(axis=1)
         else:
             x = f.reshape(f.shape[0], -1)

@@ -62,13 +62,19 @@ class SemanticMap:
         return UNIT_TYPES[int(self.world.types[self.slot_of(unit_id)])]
 
     def door_image(self) -> np.ndarray:
-        """(H, W) bool: W*'s door cells in the image frame, each door's lattice box warped as
-        :attr:`labels_image` is (the doors of overlay.png and of types.pgm)."""
-        lat = np.zeros(self.frame.shape, bool)
-        for d in self.derived.doors:
-            r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
-            lat[r0:r1, c0:c1] = True
-        return self.frame.to_image(lat, fill=False)
+        """(H, W) bool, read-only: W*'s door cells in the image frame, each door's lattice box
+        warped as :attr:`labels_image` is (the doors of overlay.png and of types.pgm; warped
+        once, as warping a rotated map's image takes about 50 bytes a pixel for a moment)."""
+        hit = self.__dict__.get("_door_image")
+        if hit is None:
+            lat = np.zeros(self.frame.shape, bool)
+            for d in self.derived.doors:
+                r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
+                lat[r0:r1, c0:c1] = True
+            hit = self.frame.to_image(lat, fill=False)
+            hit.setflags(write=False)
+            self.__dict__["_door_image"] = hit     # the dataclass is frozen: its own cache
+        return hit
 
     def units_text(self) -> str:
         """The units of W* in words, for logs and diagnostics.txt, e.g. ``"20 units (18 room,
