@@ -164,15 +164,18 @@ class JunctionTree:
         return hit
 
     def assign(self, scopes):
-        """Clique index and placement for each factor scope."""
-        out = []
-        for s in scopes:
-            if not s:
-                out.append(None)
-                continue
-            i = min(self.pos[v] for v in s)
-            out.append((i,) + self._place(s, self.axes[i]))
-        return out
+        """Clique index and placement for each factor scope (a list, cached per scope list as
+        :meth:`plan` is: the engine passes the same scopes with new tables again and again)."""
+        key = tuple(scopes)
+        cache = self.__dict__.setdefault("_assigned", {})
+        hit = cache.get(key)
+        if hit is None:
+            if len(cache) > 16:
+                cache.clear()
+            hit = cache[key] = tuple(
+                None if not s else (i,) + self._place(s, self.axes[i])
+                for s, i in ((s, min(self.pos[v] for v in s) if s else -1) for s in key))
+        return list(hit)
 
 
 def _lse(x, axis):
