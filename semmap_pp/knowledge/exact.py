@@ -127,24 +127,20 @@ class JunctionTree:
         for i, p in enumerate(self.parent):
             if p >= 0:
                 self.msg_place[i] = self._place(seps[i], self.axes[p])
-        # downward: parent clique marginalised onto the child's separator
+        # downward: parent clique marginalised onto the child's separator, as a transpose that
+        # puts the separator's axes last (down_perm, for log-sum-exp) and as a sum over the
+        # parent's other axes followed by the transpose that puts the kept axes, left in the
+        # parent's order, in separator order (down_sum, for the parent's exp table)
         self.down_perm = [None] * n
+        self.down_sum = [None] * n
         for i, p in enumerate(self.parent):
             if p >= 0:
                 ax = self.axes[p]
                 keep = [ax.index(a) for a in seps[i]]
                 rest = [k for k in range(len(ax)) if k not in keep]
                 self.down_perm[i] = (tuple(rest + keep), tuple(card[a] for a in seps[i]))
-        # the same marginalisation as a sum over the parent's other axes (tuple) followed by
-        # the transpose that puts the kept axes, left in the parent's order, in separator order
-        self.down_sum = [None] * n
-        for i, p in enumerate(self.parent):
-            if p >= 0:
-                ax = self.axes[p]
-                keep = [ax.index(a) for a in seps[i]]
                 kept = sorted(keep)
-                self.down_sum[i] = (tuple(k for k in range(len(ax)) if k not in keep),
-                                    tuple(kept.index(k) for k in keep))
+                self.down_sum[i] = (tuple(rest), tuple(kept.index(k) for k in keep))
 
     def _place(self, scope, axes):
         perm, shape, targets = _placement(scope, axes)
