@@ -148,30 +148,36 @@ class JunctionTree:
             shape[t] = self.card[scope[j]]
         return perm, tuple(shape)
 
-    def plan(self, scopes) -> "Plan":
-        """The flat layout of this tree for factors over ``scopes`` (cached per scope list)."""
+    def _per_scopes(self, name: str, scopes, build):
+        """``build(key)`` for the scope list ``scopes`` (``key``: it as a tuple), cached in this
+        tree under ``name`` (at most 17 scope lists; the engine passes the same scopes with
+        new tables again and again)."""
         key = tuple(scopes)
-        plans = self.__dict__.setdefault("_plans", {})
-        hit = plans.get(key)
-        if hit is None:
-            if len(plans) > 16:
-                plans.clear()
-            hit = plans[key] = Plan(self, key)
-        return hit
-
-    def assign(self, scopes):
-        """Clique index and placement for each factor scope (a list, cached per scope list as
-        :meth:`plan` is: the engine passes the same scopes with new tables again and again)."""
-        key = tuple(scopes)
-        cache = self.__dict__.setdefault("_assigned", {})
+        cache = self.__dict__.setdefault(name, {})
         hit = cache.get(key)
         if hit is None:
             if len(cache) > 16:
                 cache.clear()
-            hit = cache[key] = tuple(
-                None if not s else (i,) + self._place(s, self.axes[i])
-                for s, i in ((s, min(self.pos[v] for v in s) if s else -1) for s in key))
-        return list(hit)
+            hit = cache[key] = build(key)
+        return hit
+
+    def plan(self, scopes) -> "Plan":
+        """The flat layout of this tree for factors over ``scopes`` (cached per scope list)."""
+        return self._per_scopes("_plans", scopes, lambda key: Plan(self, key))
+
+    def assign(self, scopes):
+        """Clique index and placement for each factor scope (a list; cached per scope list)."""
+        return list(self._per_scopes("_assigned", scopes, self._assign))
+
+    def _assign(self, scopes) -> tuple:
+        out = []
+        for s in scopes:
+            if not s:
+                out.append(None)
+                continue
+            i = min(self.pos[v] for v in s)
+            out.append((i,) + self._place(s, self.axes[i]))
+        return tuple(out)
 
 
 def _lse(x, axis):
