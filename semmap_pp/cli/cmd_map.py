@@ -38,17 +38,23 @@ def _seconds(text: str) -> float:
 FIXED_WHEN_RESUMING = ("chains", "tune", "n_inner", "seed", "rules", "model", "roi")
 
 
+def add_target_options(p: argparse.ArgumentParser) -> None:
+    """``--rules``, ``--model``, ``--roi``: what the target of a run on a map is made of (``map``,
+    ``score``)."""
+    p.add_argument("--rules", metavar="FILE", default=None,
+                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge)")
+    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
+    p.add_argument("--roi", metavar="MASK", default=None,
+                   help="region-of-interest mask image for the CPR (default: the known part, closed)")
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("map", help="build the semantic map of an occupancy grid",
                               description=__doc__.splitlines()[0])
     p.add_argument("map", metavar="MAP", nargs="?", help="map_server YAML, or a .png/.pgm/.npy image")
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="output directory (required, except with --resume: default the resumed DIR)")
-    p.add_argument("--rules", metavar="FILE", default=None,
-                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge)")
-    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
-    p.add_argument("--roi", metavar="MASK", default=None,
-                   help="region-of-interest mask image for the CPR (default: the known part, closed)")
+    add_target_options(p)
     p.add_argument("--seed", type=_non_negative_int, default=None, help="random seed (default 0)")
     p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
     p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")

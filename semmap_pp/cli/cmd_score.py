@@ -22,6 +22,7 @@ import math
 from pathlib import Path
 
 from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.cmd_map import add_target_options
 
 TYPE_ORDER = ("room", "corridor", "hall", "other")
 
@@ -35,11 +36,7 @@ def register(subparsers) -> None:
     p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
     p.add_argument("worlds", metavar="WORLD_JSON", nargs="+", type=Path,
                    help="world.json files written for MAP (by `semmap map`, edited or not)")
-    p.add_argument("--rules", metavar="FILE", default=None,
-                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge)")
-    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
-    p.add_argument("--roi", metavar="MASK", default=None,
-                   help="region-of-interest mask image for the CPR (default: the known part, closed)")
+    add_target_options(p)
     p.add_argument("--polish", action="store_true",
                    help="also climb from each world by W*'s polish (greedy ascent) and score the result")
     p.add_argument("--json", action="store_true", help="print one JSON object")
