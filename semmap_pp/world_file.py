@@ -34,11 +34,28 @@ MAX_OFF_PX = 1.0
 MAX_BYTES = 256 * 2 ** 20
 
 
+def _finite(x) -> float | None:
+    """``x`` as a finite float, or None (not a number, a bool, infinite, or an int beyond floats)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return None
+    try:
+        v = float(x)
+    except OverflowError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _brief(x) -> str:
+    """``x`` for a message: a file's value shown whole unless it is long (a 400-digit width)."""
+    text = str(x)
+    return text if len(text) <= 24 else text[:20] + "..."
+
+
 def _corners(path, item, name: str) -> np.ndarray:
     v = item.get("vertices_px") if isinstance(item, dict) else None
     try:
         arr = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):   # an int beyond floats too
         arr = None
     if arr is None or arr.shape != (4, 2) or not np.all(np.isfinite(arr)):
         raise SemmapError(path, f"{name}: 'vertices_px' must be four [x, y] numbers")
@@ -67,9 +84,10 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
     m = doc.get("map")
     size = (m.get("width"), m.get("height"), m.get("resolution")) if isinstance(m, dict) else None
     here = (grid.width, grid.height, grid.resolution)
-    if size is None or size[:2] != here[:2] or not isinstance(size[2], (int, float)) \
-            or not math.isclose(size[2], here[2], rel_tol=1e-9):
-        was = "no 'map' size" if size is None else f"a {size[0]}x{size[1]} map at {size[2]} m/cell"
+    if size is None or size[:2] != here[:2] or _finite(size[2]) is None \
+            or not math.isclose(_finite(size[2]), here[2], rel_tol=1e-9):
+        was = ("no 'map' size" if size is None
+               else f"a {_brief(size[0])}x{_brief(size[1])} map at {_brief(size[2])} m/cell")
         raise SemmapError(path, f"written for {was}; this map is {here[0]}x{here[1]} at {here[2]} "
                                 f"m/cell")
     items = []

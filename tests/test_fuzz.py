@@ -1,7 +1,8 @@
 """Fuzzing the map, rule and model loaders with hypothesis (CI-sized; bench/fuzz.py runs longer).
 
 Inputs are random bytes and mutations of valid files: a PNG (grey, RGBA, 16-bit), a PGM (P5 and
-P2), a ``.npy`` array, a map_server YAML, every rule file in rules/ and models/default.toml. The only
+P2), a ``.npy`` array, a map_server YAML, every rule file in rules/, models/default.toml and a
+world.json (``semmap map --start``, ``semmap score``). The only
 exception a loader may raise is the project's own :class:`~semmap_pp.errors.SemmapError`
 (MapError, RuleError, ModelError); a rule file that loads must also ground against a small evidence
 set (a RuleError for hard rules that admit no world is fine). Anything else -- a traceback, an
@@ -77,6 +78,39 @@ EVIDENCE = Evidence.build([1, 2, 3], rolike={1}, colike={2: 0.7}, halike={3}, mu
                           adj=[(1, 2), (2, 3)])
 
 
+
+
+def _world_map():
+    """A 4 x 3 m room (0.05 m cells) and its lattice, for the world.json target (built once)."""
+    if "frame" not in _WORLD_MAP:
+        from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+        from semmap_pp.frame import build_frame
+        from semmap_pp.grid import OccupancyGrid
+
+        m = np.full((70, 90), UNKNOWN, np.uint8)
+        m[4:66, 4:86] = OCCUPIED
+        m[6:64, 6:84] = FREE
+        grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
+        _WORLD_MAP.update(grid=grid, frame=build_frame(grid, load_model()))
+    return _WORLD_MAP["grid"], _WORLD_MAP["frame"]
+
+
+_WORLD_MAP: dict = {}
+
+
+def _seed_world() -> bytes:
+    import json
+
+    from semmap_pp.outputs.world_json import FORMAT
+    grid, frame = _world_map()
+    r0, c0 = frame.crop[:2] if frame.crop is not None else (0, 0)
+    unit = frame.rect_vertices_px((r0 + 2, c0 + 2, r0 + 30, c0 + 40)).round(3).tolist()
+    doc = {"format": FORMAT, "map": {"width": grid.width, "height": grid.height, "resolution": 0.05,
+                                     "orientation_deg": 0.0},
+           "units": [{"id": 1, "type": "room", "vertices_px": unit}], "exterior": []}
+    return json.dumps(doc).encode()
+
+
 # --- mutations -----------------------------------------------------------------------------------
 
 @st.composite
@@ -115,6 +149,10 @@ YAML_TOKENS = tuple(t.encode() for t in (
     ".nan", ".inf", "-.inf", "1e400", "1.0e+308", "9" * 40, "[", "]", "{", "}", "&a ", "*a", "!!binary ",
     "!!python/object:os.system ", "../", "/etc/passwd", "m.yaml", "m.pgm", "'", '"', "\n", "- ", ": ",
     "true", "0x1F", "0o17", "1_000"))
+WORLD_TOKENS = tuple(t.encode() for t in (
+    "{", "}", "[", "]", ",", ":", '"', "null", "true", "NaN", "Infinity", "-Infinity", "1e400",
+    "-1e400", "9" * 40, "-0", '"units"', '"exterior"', '"vertices_px"', '"map"', '"format"',
+    '"width"', "[[0,0],[1,0],[1,1],[0,1]]", "[[1e308,0],[0,1e308],[1,1],[0,1]]", "\\u0000", "\n"))
 MODEL_TOKENS = tuple(t.encode() for t in (
     "nan", "inf", "-inf", "1e308", "-1", "0", "99999999999999999999", "true", '"x"', "[", "]", "{",
     "}", "=", "\n", "[sensor]", "[prior]", "k_max = ", "psi = ", "weights = { add_remove = -1 }"))
@@ -176,6 +214,23 @@ def check_model_bytes(data: bytes) -> None:
             assert "\n" not in str(exc)
 
 
+def check_world_bytes(data: bytes) -> None:
+    """Read ``data`` as a world.json onto a small map's lattice (``semmap map --start``)."""
+    from semmap_pp import world as wm
+    from semmap_pp.world_file import read_start_world
+
+    COUNT["cases"] += 1
+    grid, frame = _world_map()
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "world.json").write_bytes(data)
+        try:
+            world = read_start_world(Path(d) / "world.json", frame, grid, 8)
+        except SemmapError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 2000
+            return
+        assert wm.is_valid(world, frame.shape, frame.cells.min_side)
+
+
 # --- the targets with their inputs (bench/fuzz.py runs the same for longer) ----------------------
 
 HOSTILE_VALUES = [10**400, -10**400, 2**63, 1e-320, 1e308, [1e308, 1e308, 0], [10**400, 0, 0],
@@ -191,6 +246,34 @@ YAML_KEYS = st.sampled_from(["image", "resolution", "origin", "negate", "occupie
 def _yaml_doc(doc: dict) -> tuple[bytes]:
     import yaml
     return (yaml.safe_dump({"image": "m.pgm", "resolution": 0.05} | doc).encode(),)
+
+
+WORLD_PATHS = st.sampled_from([("format",), ("map",), ("map", "width"), ("map", "height"),
+                               ("map", "resolution"), ("units",), ("exterior",), ("units", 0),
+                               ("units", 0, "vertices_px"), ("units", 0, "vertices_px", 0),
+                               ("units", 0, "vertices_px", 0, 1), ("units", 0, "id")])
+
+
+def _world_doc(edits) -> tuple[bytes]:
+    """The seed world.json with each ``(path, value)`` edit made where the path still leads (each
+    value a copy: a later edit must not write into a shared value, such as a list of
+    HOSTILE_VALUES)."""
+    import copy
+    import json
+    doc = json.loads(_seed_world())
+    for path, value in edits:
+        node = doc
+        for key in path[:-1]:
+            try:
+                node = node[key]
+            except (KeyError, IndexError, TypeError):
+                break
+        else:
+            try:
+                node[path[-1]] = copy.deepcopy(value)
+            except (IndexError, TypeError):
+                pass
+    return (json.dumps(doc).encode(),)
 
 
 def _one(strategy):
@@ -209,6 +292,10 @@ TARGETS = {
     "mutated-rules": (_one(st.sampled_from(sorted(SEED_RULES)).flatmap(
         lambda n: mutated(SEED_RULES[n].encode(), RULE_TOKENS))), check_rules_bytes),
     "mutated-model": (_one(mutated(SEED_MODEL.encode(), MODEL_TOKENS)), check_model_bytes),
+    "mutated-world": (st.just(None).flatmap(lambda _: _one(mutated(_seed_world(), WORLD_TOKENS))),
+                      check_world_bytes),
+    "random-values-world": (st.lists(st.tuples(WORLD_PATHS, st.sampled_from(HOSTILE_VALUES) | YAML_VALUES),
+                                     min_size=1, max_size=3).map(_world_doc), check_world_bytes),
 }
 
 
@@ -248,3 +335,26 @@ def test_mutated_rule_files(args):
 @given(TARGETS["mutated-model"][0])
 def test_mutated_model_file(args):
     check_model_bytes(*args)
+
+
+def test_the_seed_world_reads_back():
+    """The world.json target's seed is a valid world: mutations start from something that loads."""
+    from semmap_pp import world as wm
+    from semmap_pp.world_file import read_start_world
+
+    grid, frame = _world_map()
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "world.json").write_bytes(_seed_world())
+        assert wm.n_units(read_start_world(Path(d) / "world.json", frame, grid, 8)) == 1
+
+
+@CI
+@given(TARGETS["mutated-world"][0])
+def test_mutated_world_json(args):
+    check_world_bytes(*args)
+
+
+@CI
+@given(TARGETS["random-values-world"][0])
+def test_random_values_in_a_world_json(args):
+    check_world_bytes(*args)

@@ -98,6 +98,10 @@ def _lattice_unit(doc, frame, rect):
 @pytest.mark.parametrize("edit, needle", [
     (lambda d, f: d.update(format="other/1"), "not a world.json of semmap_pp"),
     (lambda d, f: d["map"].update(width=999), "written for a 999x207 map at 0.05 m/cell; this map is 240x207"),
+    (lambda d, f: d["map"].update(resolution=10**400), "written for a 240x207 map at 10000000000000000000... m/cell"),
+    (lambda d, f: d["map"].update(resolution=float("nan")), "written for a 240x207 map at nan m/cell"),
+    (lambda d, f: d["units"][0].update(vertices_px=[[10**400, 0], [3, 0], [3, 3], [0, 3]]),
+     "'vertices_px' must be four"),
     (lambda d, f: d["units"][0].update(vertices_px=[[0, 0], [3, 0]]), "'vertices_px' must be four"),
     (lambda d, f: d["units"][0].update(vertices_px=[[0, 0], [30, 5], [25, 35], [-5, 30]]),
      "is not a rectangle of this map's lattice"),
