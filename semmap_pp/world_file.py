@@ -84,8 +84,9 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
     m = doc.get("map")
     size = (m.get("width"), m.get("height"), m.get("resolution")) if isinstance(m, dict) else None
     here = (grid.width, grid.height, grid.resolution)
-    if size is None or size[:2] != here[:2] or _finite(size[2]) is None \
-            or not math.isclose(_finite(size[2]), here[2], rel_tol=1e-9):
+    res = _finite(size[2]) if size is not None else None
+    if size is None or size[:2] != here[:2] or res is None \
+            or not math.isclose(res, here[2], rel_tol=1e-9):
         was = ("no 'map' size" if size is None
                else f"a {_brief(size[0])}x{_brief(size[1])} map at {_brief(size[2])} m/cell")
         raise SemmapError(path, f"written for {was}; this map is {here[0]}x{here[1]} at {here[2]} "

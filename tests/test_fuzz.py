@@ -14,6 +14,7 @@ time (``python bench/fuzz.py --seconds 600``) and reports how many cases ran.
 
 from __future__ import annotations
 
+import functools
 import io
 import tempfile
 from pathlib import Path
@@ -78,26 +79,21 @@ EVIDENCE = Evidence.build([1, 2, 3], rolike={1}, colike={2: 0.7}, halike={3}, mu
                           adj=[(1, 2), (2, 3)])
 
 
-
-
+@functools.cache
 def _world_map():
     """A 4 x 3 m room (0.05 m cells) and its lattice, for the world.json target (built once)."""
-    if "frame" not in _WORLD_MAP:
-        from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-        from semmap_pp.frame import build_frame
-        from semmap_pp.grid import OccupancyGrid
+    from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+    from semmap_pp.frame import build_frame
+    from semmap_pp.grid import OccupancyGrid
 
-        m = np.full((70, 90), UNKNOWN, np.uint8)
-        m[4:66, 4:86] = OCCUPIED
-        m[6:64, 6:84] = FREE
-        grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
-        _WORLD_MAP.update(grid=grid, frame=build_frame(grid, load_model()))
-    return _WORLD_MAP["grid"], _WORLD_MAP["frame"]
+    m = np.full((70, 90), UNKNOWN, np.uint8)
+    m[4:66, 4:86] = OCCUPIED
+    m[6:64, 6:84] = FREE
+    grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
+    return grid, build_frame(grid, load_model())
 
 
-_WORLD_MAP: dict = {}
-
-
+@functools.cache
 def _seed_world() -> bytes:
     import json
 

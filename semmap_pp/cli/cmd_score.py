@@ -21,10 +21,9 @@ import json
 import math
 from pathlib import Path
 
+from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.cmd_map import add_target_options
-
-TYPE_ORDER = ("room", "corridor", "hall", "other")
 
 
 def register(subparsers) -> None:
@@ -49,10 +48,10 @@ def score_world(inputs, post, world) -> dict:
     from semmap_pp.outputs.semantic import semantic_map
 
     terms = post.evaluate(world)
-    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi)
+    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms)
     types = [sm.type_of(uid) for uid in sm.unit_ids]
     return {"units": len(types), "exterior": len(sm.exterior_ids),
-            "types": {t: types.count(t) for t in TYPE_ORDER},
+            "types": {t: types.count(t) for t in UNIT_TYPES},
             "cpr": None if math.isnan(sm.cpr) else round(sm.cpr, 6),
             "log_posterior": round(float(terms.total), 6),
             "log_likelihood": round(float(terms.loglik), 6),
@@ -60,7 +59,7 @@ def score_world(inputs, post, world) -> dict:
 
 
 def _line(name: str, s: dict, ref: float | None) -> str:
-    types = "/".join(str(s["types"][t]) for t in TYPE_ORDER)
+    types = "/".join(str(s["types"][t]) for t in UNIT_TYPES)
     ext = f" +{s['exterior']}X" if s["exterior"] else ""
     units = f"{s['units']} ({types}){ext}"
     cpr = "-" if s["cpr"] is None else f"{s['cpr']:.4f}"

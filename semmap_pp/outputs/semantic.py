@@ -119,9 +119,11 @@ def label_lattice(shape, world: W.World, slot_ids: dict, wall: int) -> np.ndarra
     return labels
 
 
-def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | None = None) -> SemanticMap:
-    """Derive the semantic map of ``world`` (types re-assigned by ``posterior``)."""
-    terms = posterior.evaluate(world)
+def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | None = None,
+                 terms=None) -> SemanticMap:
+    """Derive the semantic map of ``world`` (types re-assigned by ``posterior``); ``terms``:
+    ``posterior.evaluate(world)`` when the caller has it already."""
+    terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world
     derived = derive_world(frame, world)
     slot_ids = number_units(frame, world, derived.slots)
