@@ -679,6 +679,22 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
                         double_cuts=False, births=False)
 
 
+def snap_walls(posterior, world: wm.World, data, slots, *, reach: int, rounds: int = 2) -> wm.World:
+    """Each wall of the units in ``slots`` to its best position within ``reach`` cells of where it
+    is (local steps only, no line peak farther away, no unit swallowed), for up to ``rounds``
+    passes: the walls of a hand-edited world (``semmap edit``) set on the map's own lines near
+    the points given. Returns a world whose log posterior is at least that of ``world``, or
+    ``world`` itself when its log posterior is not finite."""
+    asc = _Ascent(posterior, world, data, peaks=0, local=max(int(reach), 0), absorb_share=2.0)
+    if not np.isfinite(asc.tr.logp) or reach <= 0:
+        return world
+    within = {int(s) for s in slots}
+    for _ in range(rounds):
+        if not asc.all_wall_moves(within):
+            break
+    return asc.untyped()
+
+
 def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:
     """Wall moves only: each wall of each unit to its best position, for up to ``rounds`` passes.
 

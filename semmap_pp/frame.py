@@ -308,6 +308,14 @@ class Frame:
         c, s = math.cos(yaw), math.sin(yaw)
         return ox + c * u - s * v, oy + s * u + c * v
 
+    def metres_to_image(self, x_m, y_m) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous pixel-frame coordinates of map-frame metres; inverse of :meth:`image_to_metres`."""
+        ox, oy, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        dx, dy = np.asarray(x_m, dtype=np.float64) - ox, np.asarray(y_m, dtype=np.float64) - oy
+        u, v = c * dx + s * dy, -s * dx + c * dy
+        return u / self.resolution, self.image_shape[0] - v / self.resolution
+
     def rect_vertices_m(self, rect) -> np.ndarray:
         """The four corners of :meth:`rect_vertices_px` in map-frame metres."""
         v = self.rect_vertices_px(rect)

@@ -70,6 +70,29 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
     ``grid`` is the map the run reads (:class:`semmap_pp.grid.OccupancyGrid`): the file must have
     been written for a map of the same width, height and resolution.
     """
+    return pack_world([rect for _, rect in read_world_units(path, frame, grid)], capacity, path)
+
+
+def pack_world(rects, capacity: int, path=None) -> wm.World:
+    """Lattice rectangles as a world (types unassigned) in ``capacity`` slots or the smallest
+    doubling of it that holds them; more than :data:`semmap_pp.model.MAX_K` is an error naming
+    ``path``."""
+    if len(rects) > MAX_K:
+        raise SemmapError(path, f"{len(rects)} units; a world holds at most {MAX_K}")
+    size_k = max(1, int(capacity))
+    while size_k < len(rects):   # doubled as the ascent grows a full world (ascent._Ascent.free)
+        size_k = min(2 * size_k, MAX_K)
+    world = wm.empty(size_k)
+    for slot, rect in enumerate(rects):
+        world = wm.add(world, slot, rect)
+    return world
+
+
+def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tuple[int, int, int, int]]]:
+    """The units and exterior units of the world.json at ``path`` on ``frame``'s lattice, in the
+    file's order, each as ``(key, rect)``: the key is the unit's id as text (``"7"``; ``"X2"`` for
+    exterior unit 2), the position in its list when it has none. Checked as
+    :func:`read_start_world` says."""
     from semmap_pp.evaluate.io import read_json
 
     p = Path(path)
@@ -96,11 +119,12 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
         listed = doc.get(key, [])
         if not isinstance(listed, list):
             raise SemmapError(path, f"'{key}' must be a list")
-        items += [(f"{prefix}{u.get('id', i + 1) if isinstance(u, dict) else i + 1}", u)
-                  for i, u in enumerate(listed)]
+        items += [(f"{prefix}{u.get('id', i + 1) if isinstance(u, dict) else i + 1}",
+                   ("X" if key == "exterior" else "") + str(u.get("id", i + 1) if isinstance(u, dict) else i + 1),
+                   u) for i, u in enumerate(listed)]
     c = frame.cells
     rects = []
-    for name, item in items:
+    for name, key, item in items:
         rect, off = frame.rect_from_vertices_px(_corners(path, item, name))
         if off > MAX_OFF_PX:
             raise SemmapError(path, f"{name} is not a rectangle of this map's lattice (its corners lie "
@@ -118,13 +142,5 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
             raise SemmapError(path, f"{name} is {sides[0]} x {sides[1]} cells; the model allows sides of "
                                     f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, "
                                     f"max_unit_side_m)")
-        rects.append(rect)
-    if len(rects) > MAX_K:
-        raise SemmapError(path, f"{len(rects)} units; a world holds at most {MAX_K}")
-    size_k = max(1, int(capacity))
-    while size_k < len(rects):   # doubled as the ascent grows a full world (ascent._Ascent.free)
-        size_k = min(2 * size_k, MAX_K)
-    world = wm.empty(size_k)
-    for slot, rect in enumerate(rects):
-        world = wm.add(world, slot, rect)
-    return world
+        rects.append((key, rect))
+    return rects

@@ -48,7 +48,11 @@ def score_world(inputs, post, world) -> dict:
     from semmap_pp.outputs.semantic import semantic_map
 
     terms = post.evaluate(world)
-    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms)
+    return scores_of(semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms), terms)
+
+
+def scores_of(sm, terms) -> dict:
+    """:func:`score_world`'s dict from a world's semantic map and its evaluated terms."""
     types = [sm.type_of(uid) for uid in sm.unit_ids]
     return {"units": len(types), "exterior": len(sm.exterior_ids),
             "types": {t: types.count(t) for t in UNIT_TYPES},
@@ -90,20 +94,25 @@ def run(args) -> int:
         if args.polish:
             row["polished"] = score_world(inputs, post, polish(post, world, data, rounds))
         rows.append(row)
+    print_scores(args, rules, inputs, rows)
+    return 0
+
+
+def print_scores(args, rules: Path, inputs, rows: list[dict]) -> None:
+    """The rows as one JSON object (``args.json``) or as the table: the first row is the reference."""
     ref = rows[0]["log_posterior"]
     if args.json:
         print(json.dumps({"map": str(args.map), "rules": str(rules), "model": args.model or "default",
                           "roi": inputs.roi_name, "worlds": rows}, indent=1))
-        return 0
+        return
     print(f"map {args.map}, rules {rules.name}, model {Path(args.model).name if args.model else 'default.toml'}, "
           f"ROI {inputs.roi_name}; types decided again by the rules (the files' types are not read)")
     print(f"{'world':<32} {'units (room/corr/hall/other)':<28} {'CPR':>7} {'log posterior':>16} "
           f"{'vs first':>12} {'log-likelihood':>16} {'log-prior':>10}")
     for i, row in enumerate(rows):
         print(_line(_short(row["world"]), row, None if i == 0 else ref))
-        if args.polish:
+        if "polished" in row:
             print(_line("  polished", row["polished"], ref))
-    return 0
 
 
 def _short(name: str, width: int = 32) -> str:

@@ -1,0 +1,131 @@
+"""``semmap_pp.world_edit``: hand edits by unit id and map point, on a rotated lattice with a moved
+origin, in metres and in pixels."""
+
+import numpy as np
+import pytest
+
+from semmap_pp.errors import SemmapError
+from semmap_pp.frame import build_frame_from_classes
+from semmap_pp.model import load_model
+from semmap_pp.world_edit import Edit, apply_edits, check_args, to_lattice, unit_key
+
+RES = 0.05
+
+
+@pytest.fixture(scope="module")
+def frame():
+    # a rotated lattice (0.3 rad) over a map whose origin is moved and turned: every conversion counts
+    return build_frame_from_classes(np.zeros((300, 400), np.uint8), RES, load_model(),
+                                    origin=(3.5, -2.0, 0.4), theta=0.3)
+
+
+def metres(frame, row, col):
+    """Map-frame metres of a fractional lattice coordinate (an integer = a cell's centre)."""
+    x, y = frame.lattice_to_image(row, col)
+    mx, my = frame.image_to_metres(float(x) + 0.5, float(y) + 0.5)
+    return float(mx), float(my)
+
+
+def pixels(frame, row, col):
+    x, y = frame.lattice_to_image(row, col)
+    return float(x) + 0.5, float(y) + 0.5
+
+
+def band_centre(start, t):
+    return start + (t - 1) / 2
+
+
+def args(*values):
+    return tuple(f"{v:.6f}" if isinstance(v, float) else str(v) for v in values)
+
+
+UNITS = [("1", (40, 40, 100, 160)), ("2", (98, 40, 150, 100)), ("X1", (150, 200, 200, 260))]
+
+
+def test_ids_are_read_as_overlay_png_writes_them():
+    assert [unit_key(t) for t in ("3", "R3", "c3", "H03", "E3", "X2", "x2")] == ["3"] * 5 + ["X2"] * 2
+    for bad in ("", "R", "3R", "Q3", "-3", "R 3x"):
+        with pytest.raises(ValueError, match="not a unit id"):
+            unit_key(bad)
+    check_args(Edit("cut", ("R3", "1", "2", "3.5", "-4e1")))
+    for edit, message in ((Edit("merge", ("3",)), "two unit ids"), (Edit("cut", ("3", "1", "2")), "takes 5"),
+                          (Edit("wall", ("3", "x", "2")), "not a number"),
+                          (Edit("add", ("1", "2", "3", "inf")), "finite")):
+        with pytest.raises(ValueError, match=message):
+            check_args(edit)
+
+
+def test_a_point_in_metres_or_pixels_lands_on_its_lattice_coordinate(frame):
+    for row, col in ((40.0, 40.0), (97.5, 161.25), (0.0, 0.0)):
+        p = to_lattice(frame, *metres(frame, row, col))
+        assert (p.row, p.col) == pytest.approx((row, col), abs=1e-9)
+        p = to_lattice(frame, *pixels(frame, row, col), pixels=True)
+        assert (p.row, p.col) == pytest.approx((row, col), abs=1e-9)
+
+
+@pytest.mark.parametrize("in_pixels", [False, True])
+def test_a_unit_added_at_its_walls_centres_is_that_rectangle(frame, in_pixels):
+    t = frame.cells.wall
+    rect = (60, 80, 131, 177)
+    where = pixels if in_pixels else metres
+    a = where(frame, band_centre(rect[0], t), band_centre(rect[1], t))
+    b = where(frame, band_centre(rect[2] - t, t), band_centre(rect[3] - t, t))
+    out = apply_edits(UNITS, [Edit("add", args(*b, *a))], frame, pixels=in_pixels)   # corners in any order
+    assert out[-1] == (None, rect, True)
+    assert out[:3] == [(k, r, False) for k, r in UNITS]
+
+
+def test_a_cut_shares_one_wall_band_centred_on_the_line_whichever_way_it_runs(frame):
+    t = frame.cells.wall
+    # a line along the lattice's columns (slightly skewed: snapped to the axis) at row 70.3
+    p, q = metres(frame, 70.0, 50.0), metres(frame, 70.6, 150.0)
+    out = apply_edits(UNITS, [Edit("cut", args("R1", *p, *q))], frame)
+    assert [k for k, _, _ in out] == ["2", "X1", None, None]
+    (_, first, _), (_, second, _) = out[2:]
+    assert first[:2] == (40, 40) and second[2:] == (100, 160) and first[3] == second[3] == 160
+    assert first[2] - second[0] == t                                  # the pieces share the band
+    assert abs(band_centre(second[0], t) - 70.3) <= 0.5
+    # a steep line cuts along the other axis
+    p, q = metres(frame, 45.0, 121.0), metres(frame, 95.0, 119.0)
+    (_, first, _), (_, second, _) = apply_edits(UNITS, [Edit("cut", args("1", *p, *q))], frame)[2:]
+    assert first[0] == second[0] == 40 and first[3] - second[1] == t
+    assert abs(band_centre(second[1], t) - 120.0) <= 0.5
+
+
+def test_a_wall_moves_its_nearest_side_onto_the_point_only(frame):
+    t = frame.cells.wall
+    out = apply_edits(UNITS, [Edit("wall", args("1", *metres(frame, 70.0, 170.2)))], frame)
+    rect = out[0][1]
+    assert rect[:3] == (40, 40, 100) and abs(band_centre(rect[3] - t, t) - 170.2) <= 0.5
+    assert out[0][2] and not out[1][2]
+    # a unit's own wall centre leaves it as it is
+    same = apply_edits(UNITS, [Edit("wall", args("2", *metres(frame, band_centre(98, t), 70.0)))], frame)
+    assert same[1] == ("2", UNITS[1][1], True)
+
+
+def test_merge_drop_and_the_order_of_edits(frame):
+    out = apply_edits(UNITS, [Edit("merge", ("2", "R1")), Edit("drop", ("x1",))], frame)
+    assert out == [("2", (40, 40, 150, 160), True)]
+    with pytest.raises(SemmapError, match=r"--wall 1 .*: unit 1 no longer exists after --merge 2 R1"):
+        apply_edits(UNITS, [Edit("merge", ("2", "R1")), Edit("wall", args("1", 1.0, 2.0))], frame)
+    with pytest.raises(SemmapError, match=r"no unit 7 in this world \(its units: 1, 2, X1\)"):
+        apply_edits(UNITS, [Edit("drop", ("7",))], frame, path="w.json")
+    with pytest.raises(SemmapError, match="named twice"):
+        apply_edits(UNITS, [Edit("merge", ("1", "R1"))], frame)
+    with pytest.raises(SemmapError, match="appears twice"):
+        apply_edits(UNITS + [("2", (0, 0, 30, 30))], [Edit("drop", ("1",))], frame)
+
+
+def test_edits_that_make_no_valid_unit_are_refused_naming_the_file_and_the_edit(frame):
+    # a cut 0.3 m from the unit's edge leaves a piece below min_unit_side_m
+    p, q = metres(frame, 46.0, 50.0), metres(frame, 46.0, 150.0)
+    with pytest.raises(SemmapError) as err:
+        apply_edits(UNITS, [Edit("cut", args("1", *p, *q))], frame, path="w.json")
+    assert str(err.value).startswith("w.json: --cut 1 ") and "a unit's sides are at least 1.00 m" in str(err.value)
+    p, q = metres(frame, 120.0, 50.0), metres(frame, 120.0, 150.0)       # the line misses unit 1
+    with pytest.raises(SemmapError, match="does not cross unit 1"):
+        apply_edits(UNITS, [Edit("cut", args("1", *p, *q))], frame)
+    with pytest.raises(SemmapError, match="beyond the map's lattice"):
+        apply_edits(UNITS, [Edit("add", args(*metres(frame, -20.0, 10.0), *metres(frame, 60.0, 90.0)))], frame)
+    with pytest.raises(SemmapError, match="new unit would be"):
+        apply_edits(UNITS, [Edit("add", args(*metres(frame, 20.0, 10.0), *metres(frame, 25.0, 90.0)))], frame)
