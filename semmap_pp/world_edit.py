@@ -106,11 +106,18 @@ class Point:
     col: float
 
 
-def to_lattice(frame, x: float, y: float, *, pixels: bool = False) -> Point:
-    """The lattice coordinate of a map-frame point (metres), or of an image point (pixels)."""
+def to_image(frame, x: float, y: float, *, pixels: bool = False) -> tuple[float, float]:
+    """The image point ``[x, y]`` (continuous pixel frame) of a map-frame point in metres, or of an
+    image point given in pixels."""
     if not pixels:
         x, y = frame.metres_to_image(x, y)
-    r, c = frame.image_to_lattice(float(x) - 0.5, float(y) - 0.5)
+    return float(x), float(y)
+
+
+def to_lattice(frame, x: float, y: float, *, pixels: bool = False) -> Point:
+    """The lattice coordinate of a map-frame point (metres), or of an image point (pixels)."""
+    x, y = to_image(frame, x, y, pixels=pixels)
+    r, c = frame.image_to_lattice(x - 0.5, y - 0.5)
     return Point(float(r), float(c))
 
 
@@ -179,7 +186,12 @@ def apply_edits(units: list[tuple[str, tuple]], edits: list[Edit], frame, *, pix
         return k
 
     def point(edit: Edit, x: str, y: str) -> Point:
-        return to_lattice(frame, _number(x), _number(y), pixels=pixels)
+        px, py = to_image(frame, _number(x), _number(y), pixels=pixels)
+        h, w = frame.image_shape
+        if not (0 <= px <= w and 0 <= py <= h):
+            fail(edit, f"the point {x} {y} lies outside the map ({w} x {h} pixels"
+                       f"{'' if pixels else '; points are map-frame metres, --pixels for pixels'})")
+        return to_lattice(frame, px, py, pixels=True)
 
     def check(edit: Edit, rect, what: str = "the result") -> tuple:
         r0, c0, r1, c1 = (int(v) for v in rect)

@@ -12,22 +12,32 @@ from semmap_pp.world_edit import Edit, apply_edits, check_args, to_lattice, unit
 RES = 0.05
 
 
+#: The tests' lattice coordinates are offset by this many cells: a rotated lattice's corners lie
+#: outside the image, and an edit's points must lie on the map.
+OFF = 250
+
+
 @pytest.fixture(scope="module")
 def frame():
     # a rotated lattice (0.3 rad) over a map whose origin is moved and turned: every conversion counts
-    return build_frame_from_classes(np.zeros((300, 400), np.uint8), RES, load_model(),
+    return build_frame_from_classes(np.zeros((800, 900), np.uint8), RES, load_model(),
                                     origin=(3.5, -2.0, 0.4), theta=0.3)
 
 
+def at(rect):
+    """A test rectangle on the lattice."""
+    return tuple(v + OFF for v in rect)
+
+
 def metres(frame, row, col):
-    """Map-frame metres of a fractional lattice coordinate (an integer = a cell's centre)."""
-    x, y = frame.lattice_to_image(row, col)
+    """Map-frame metres of a fractional test coordinate (an integer = a cell's centre)."""
+    x, y = frame.lattice_to_image(row + OFF, col + OFF)
     mx, my = frame.image_to_metres(float(x) + 0.5, float(y) + 0.5)
     return float(mx), float(my)
 
 
 def pixels(frame, row, col):
-    x, y = frame.lattice_to_image(row, col)
+    x, y = frame.lattice_to_image(row + OFF, col + OFF)
     return float(x) + 0.5, float(y) + 0.5
 
 
@@ -39,7 +49,7 @@ def args(*values):
     return tuple(f"{v:.6f}" if isinstance(v, float) else str(v) for v in values)
 
 
-UNITS = [("1", (40, 40, 100, 160)), ("2", (98, 40, 150, 100)), ("X1", (150, 200, 200, 260))]
+UNITS = [("1", at((40, 40, 100, 160))), ("2", at((98, 40, 150, 100))), ("X1", at((150, 200, 200, 260)))]
 
 
 def test_ids_are_read_as_overlay_png_writes_them():
@@ -58,9 +68,9 @@ def test_ids_are_read_as_overlay_png_writes_them():
 def test_a_point_in_metres_or_pixels_lands_on_its_lattice_coordinate(frame):
     for row, col in ((40.0, 40.0), (97.5, 161.25), (0.0, 0.0)):
         p = to_lattice(frame, *metres(frame, row, col))
-        assert (p.row, p.col) == pytest.approx((row, col), abs=1e-9)
+        assert (p.row, p.col) == pytest.approx((row + OFF, col + OFF), abs=1e-9)
         p = to_lattice(frame, *pixels(frame, row, col), pixels=True)
-        assert (p.row, p.col) == pytest.approx((row, col), abs=1e-9)
+        assert (p.row, p.col) == pytest.approx((row + OFF, col + OFF), abs=1e-9)
 
 
 @pytest.mark.parametrize("in_pixels", [False, True])
@@ -71,7 +81,7 @@ def test_a_unit_added_at_its_walls_centres_is_that_rectangle(frame, in_pixels):
     a = where(frame, band_centre(rect[0], t), band_centre(rect[1], t))
     b = where(frame, band_centre(rect[2] - t, t), band_centre(rect[3] - t, t))
     out = apply_edits(UNITS, [Edit("add", args(*b, *a))], frame, pixels=in_pixels)   # corners in any order
-    assert out[-1] == (None, rect, True)
+    assert out[-1] == (None, at(rect), True)
     assert out[:3] == [(k, r, False) for k, r in UNITS]
 
 
@@ -82,21 +92,22 @@ def test_a_cut_shares_one_wall_band_centred_on_the_line_whichever_way_it_runs(fr
     out = apply_edits(UNITS, [Edit("cut", args("R1", *p, *q))], frame)
     assert [k for k, _, _ in out] == ["2", "X1", None, None]
     (_, first, _), (_, second, _) = out[2:]
-    assert first[:2] == (40, 40) and second[2:] == (100, 160) and first[3] == second[3] == 160
+    assert first[:2] == at((40, 40, 0, 0))[:2] and second[2:] == at((0, 0, 100, 160))[2:]
+    assert first[3] == second[3] == 160 + OFF
     assert first[2] - second[0] == t                                  # the pieces share the band
-    assert abs(band_centre(second[0], t) - 70.3) <= 0.5
+    assert abs(band_centre(second[0], t) - 70.3 - OFF) <= 0.5
     # a steep line cuts along the other axis
     p, q = metres(frame, 45.0, 121.0), metres(frame, 95.0, 119.0)
     (_, first, _), (_, second, _) = apply_edits(UNITS, [Edit("cut", args("1", *p, *q))], frame)[2:]
-    assert first[0] == second[0] == 40 and first[3] - second[1] == t
-    assert abs(band_centre(second[1], t) - 120.0) <= 0.5
+    assert first[0] == second[0] == 40 + OFF and first[3] - second[1] == t
+    assert abs(band_centre(second[1], t) - 120.0 - OFF) <= 0.5
 
 
 def test_a_wall_moves_its_nearest_side_onto_the_point_only(frame):
     t = frame.cells.wall
     out = apply_edits(UNITS, [Edit("wall", args("1", *metres(frame, 70.0, 170.2)))], frame)
     rect = out[0][1]
-    assert rect[:3] == (40, 40, 100) and abs(band_centre(rect[3] - t, t) - 170.2) <= 0.5
+    assert rect[:3] == at((40, 40, 100, 0))[:3] and abs(band_centre(rect[3] - t, t) - 170.2 - OFF) <= 0.5
     assert out[0][2] and not out[1][2]
     # a unit's own wall centre leaves it as it is
     same = apply_edits(UNITS, [Edit("wall", args("2", *metres(frame, band_centre(98, t), 70.0)))], frame)
@@ -105,7 +116,7 @@ def test_a_wall_moves_its_nearest_side_onto_the_point_only(frame):
 
 def test_merge_drop_and_the_order_of_edits(frame):
     out = apply_edits(UNITS, [Edit("merge", ("2", "R1")), Edit("drop", ("x1",))], frame)
-    assert out == [("2", (40, 40, 150, 160), True)]
+    assert out == [("2", at((40, 40, 150, 160)), True)]
     with pytest.raises(SemmapError, match=r"--wall 1 .*: unit 1 no longer exists after --merge 2 R1"):
         apply_edits(UNITS, [Edit("merge", ("2", "R1")), Edit("wall", args("1", 1.0, 2.0))], frame)
     with pytest.raises(SemmapError, match=r"no unit 7 in this world \(its units: 1, 2, X1\)"):
@@ -125,7 +136,12 @@ def test_edits_that_make_no_valid_unit_are_refused_naming_the_file_and_the_edit(
     p, q = metres(frame, 120.0, 50.0), metres(frame, 120.0, 150.0)       # the line misses unit 1
     with pytest.raises(SemmapError, match="does not cross unit 1"):
         apply_edits(UNITS, [Edit("cut", args("1", *p, *q))], frame)
-    with pytest.raises(SemmapError, match="beyond the map's lattice"):
-        apply_edits(UNITS, [Edit("add", args(*metres(frame, -20.0, 10.0), *metres(frame, 60.0, 90.0)))], frame)
+    flat = build_frame_from_classes(np.zeros((300, 400), np.uint8), RES, load_model(), theta=0.0)
+    with pytest.raises(SemmapError, match="beyond the map's lattice"):     # a band half off the image
+        apply_edits([], [Edit("add", ("0.01", "0.5", "60", "70"))], flat, pixels=True)
+    far = metres(frame, -600.0, 10.0)
+    with pytest.raises(SemmapError, match=r"--wall 1 .*: the point .* lies outside the map \(900 x 800 pixels; "
+                                          r"points are map-frame metres"):
+        apply_edits(UNITS, [Edit("wall", args("1", *far))], frame)
     with pytest.raises(SemmapError, match="new unit would be"):
         apply_edits(UNITS, [Edit("add", args(*metres(frame, 20.0, 10.0), *metres(frame, 25.0, 90.0)))], frame)

@@ -1,13 +1,15 @@
-"""``semmap edit MAP WORLD_JSON --out FILE [edits ...]``: a world.json changed by hand, by id and point.
+"""``semmap edit MAP WORLD_JSON --out DIR [edits ...]``: a world.json changed by hand, by id and point.
 
 The plan a person knows better than the search, said in the outputs' own terms: units by the id
 world.json and overlay.png give them, places by points read off the map (map-frame metres, or
 image pixels with ``--pixels``). The edits (``--drop``, ``--merge``, ``--cut``, ``--wall``,
 ``--add``; :mod:`semmap_pp.world_edit`) apply in the order given; then every wall is set on the
 lattice's best position within ``--snap`` metres (``ascent.snap_walls``; 0 keeps them as given),
-the types are decided again under ``--rules``, and the result is written as a complete world.json:
-the input to ``semmap map MAP --start FILE`` and ``semmap score MAP FILE``. Both worlds' scores
-are printed, as ``semmap score`` prints them. Nothing is written when an edit cannot be made.
+the types are decided again under ``--rules``, and the result is written into DIR as ``semmap map``
+writes a W*'s plan: world.json (for ``semmap map MAP --start``, ``semmap score`` and the next
+edit), labels.png, regions.png, the types layer, world.geojson, graph.graphml, overlay.png and
+graph.png; no trace, diagnostics or report (nothing was sampled). Both worlds' scores are
+printed, as ``semmap score`` prints them. Nothing is written when an edit cannot be made.
 """
 
 from __future__ import annotations
@@ -48,8 +50,10 @@ def register(subparsers) -> None:
                     "them: 7 or R7/C7/H7/E7; X2 for exterior unit 2.")
     p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
     p.add_argument("world", metavar="WORLD_JSON", type=Path, help="a world.json written for MAP")
-    p.add_argument("--out", type=Path, required=True, metavar="FILE", help="the edited world.json to write")
-    p.add_argument("--force", action="store_true", help="overwrite FILE")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output directory: world.json, labels.png, overlay.png and the other files of "
+                        "the plan (not WORLD_JSON's own directory)")
+    p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     g = p.add_argument_group("edits (applied in the order given; each may be repeated)")
     g.add_argument("--drop", dest="edit_drop", nargs="+", action=_Edits, metavar="ID", default=argparse.SUPPRESS,
                    help="remove the units")
@@ -78,17 +82,19 @@ def run(args) -> int:
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import settings_from_mapping
     from semmap_pp.outputs.semantic import semantic_map
-    from semmap_pp.outputs.world_json import world_dict, write_world_json
-    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs, run_target
+    from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
+    from semmap_pp.outputs.write import write_plan
+    from semmap_pp.pipeline import DEFAULT_RULES, check_out_dir, load_inputs, run_target
     from semmap_pp.world_edit import apply_edits
     from semmap_pp.world_file import pack_world, read_world_units
 
     if not args.edits:
         raise OutputError(args.out, "no edit given (--drop, --merge, --cut, --wall, --add); nothing written")
-    if args.out.exists() and not args.force:
-        raise OutputError(args.out, "exists (use --force to overwrite)")
-    if args.out.exists() and not args.out.is_file():
-        raise OutputError(args.out, "is not a regular file")
+    check_out_dir(args.out, args.force)
+    if args.out.is_dir() and args.world.parent.resolve() == args.out.resolve():
+        raise OutputError(args.out, "is the directory of WORLD_JSON: its run's other files (trace.nc, "
+                                    "report.html) would not match the edited world; write to another "
+                                    "directory")
     rules = Path(args.rules) if args.rules else DEFAULT_RULES
     inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
                          map_options=map_options(args))
@@ -102,13 +108,16 @@ def run(args) -> int:
     if reach > 0:
         settings = settings_from_mapping(inputs.model.kernels, source=f"{inputs.model.path} [kernels]")
         world = snap_walls(post, world, data_from_frame(inputs.frame, settings),
-                           [i for i, (_, _, edited) in enumerate(edited) if edited], reach=reach)
+                           [i for i, (_, _, changed) in enumerate(edited) if changed], reach=reach)
     terms = post.evaluate(world)
     sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms)
     rows = [{"world": str(args.world), **score_world(inputs, post, before)},
-            {"world": str(args.out), **scores_of(sm, terms)}]
+            {"world": str(args.out / "world.json"), **scores_of(sm, terms)}]
     doc = world_dict(sm, rules=rules.name, model=inputs.model.path.name, seed=None, roi_name=inputs.roi_name)
-    doc["edited"] = {"from": args.world.name, "edits": [str(e) for e in args.edits], "snap_m": args.snap}
-    write_world_json(args.out, doc)
+    doc["edited"] = {"from": str(args.world), "edits": [str(e) for e in args.edits], "snap_m": args.snap}
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_world_json(args.out / "world.json", doc)
+    write_labels_png(args.out / "labels.png", sm.labels_image)
+    write_plan(args.out, sm, doc)
     print_scores(args, rules, inputs, rows)
     return 0

@@ -12,6 +12,8 @@ import glob
 import os
 from pathlib import Path
 
+import numpy as np
+
 from semmap_pp import atomic
 from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
@@ -102,6 +104,25 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     return gone
 
 
+def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.ndarray]:
+    """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
+    regions.png, the types layer, overlay.png and graph.png (world.json and labels.png are the
+    caller's). Returns the paths, the two figures' PNG bytes, the regions and their image."""
+    passages = passage_pairs(sm)
+    regions = join_regions(sm.unit_ids, passages)
+    region_img = regions_image(sm, regions)
+    graph = world_graph(sm, doc, regions, passages)
+    written = [write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)),
+               write_graphml(out / "graph.graphml", graph),
+               write_regions_png(out / "regions.png", region_img)]
+    written.extend(write_types_layer(out, sm, doc))
+    pngs = {"overlay": fig.overlay_png(sm, doc), "graph": fig.graph_png(sm, graph)}
+    for name, data in pngs.items():
+        atomic.write_bytes(out / f"{name}.png", data)
+        written.append(out / f"{name}.png")
+    return written, pngs, regions, region_img
+
+
 def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
               n_worlds: int = N_SAMPLED_WORLDS, written_after: tuple[str, ...] = ()) -> list[Path]:
     """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
@@ -127,14 +148,8 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     written, doc = write_core(out, run, rules_name=rules_name,
                               rules_path=rules_path if rules_path is not None else rules_name)
 
-    passages = passage_pairs(sm)
-    regions = join_regions(sm.unit_ids, passages)
-    region_img = regions_image(sm, regions)
-    graph = world_graph(sm, doc, regions, passages)
-    written.append(write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)))
-    written.append(write_graphml(out / "graph.graphml", graph))
-    written.append(write_regions_png(out / "regions.png", region_img))
-    written.extend(write_types_layer(out, sm, doc))
+    plan, pngs, regions, region_img = write_plan(out, sm, doc)
+    written += plan
 
     from semmap_pp.pipeline import figure_source
 
@@ -142,16 +157,14 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
     mode = figure_source(run).report.within_mode      # the draws the worlds come from
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
-    pngs = {
-        "overlay": fig.overlay_png(sm, doc),
-        "graph": fig.graph_png(sm, graph),
+    pngs |= {
         "posterior": fig.posterior_png(sm, worlds, ess),
         "posterior_cells": fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0),
                                                    sm.frame.to_image(p_type.transpose(1, 2, 0), fill=0.0)
                                                    .transpose(2, 0, 1), len(worlds), ess),
     }
-    for name, data in pngs.items():
-        atomic.write_bytes(out / f"{name}.png", data)
+    for name in ("posterior", "posterior_cells"):
+        atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")
     pngs["regions"] = fig.regions_preview_png(sm, region_img)
     pngs["roi"] = fig.roi_png(sm, run.inputs.roi_name)
@@ -162,4 +175,4 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     return written
 
 
-__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "diagnostics_text", "posterior_worlds"]
+__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "write_plan", "diagnostics_text", "posterior_worlds"]
