@@ -3,11 +3,13 @@ origin, in metres and in pixels."""
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from semmap_pp.errors import SemmapError
 from semmap_pp.frame import build_frame_from_classes
 from semmap_pp.model import load_model
-from semmap_pp.world_edit import Edit, apply_edits, check_args, to_lattice, unit_key
+from semmap_pp.world_edit import EDITS, Edit, apply_edits, check_args, to_lattice, unit_key
 
 RES = 0.05
 
@@ -145,3 +147,37 @@ def test_edits_that_make_no_valid_unit_are_refused_naming_the_file_and_the_edit(
         apply_edits(UNITS, [Edit("wall", args("1", *far))], frame)
     with pytest.raises(SemmapError, match="new unit would be"):
         apply_edits(UNITS, [Edit("add", args(*metres(frame, 20.0, 10.0), *metres(frame, 25.0, 90.0)))], frame)
+
+
+_TEXT = st.one_of(st.sampled_from(["1", "R2", "x1", "X9", "7", "-3", "R", "nan", "1e400", ""]),
+                  st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                  st.integers(-10**6, 10**6).map(str), st.text(max_size=6))
+_ID = st.sampled_from(["1", "R1", "2", "C2", "X1", "x1"])
+_PX = st.floats(250, 650).map(lambda v: f"{v:.2f}")      # image pixels over the test units
+_JUNK = st.tuples(st.sampled_from(sorted(EDITS)), st.lists(_TEXT, max_size=6))
+_WELL_FORMED = st.one_of(
+    st.tuples(st.just("drop"), st.lists(_ID, min_size=1, max_size=2)),
+    st.tuples(st.just("merge"), st.lists(_ID, min_size=2, max_size=3)),
+    st.tuples(st.just("cut"), st.tuples(_ID, _PX, _PX, _PX, _PX).map(list)),
+    st.tuples(st.just("wall"), st.tuples(_ID, _PX, _PX).map(list)),
+    st.tuples(st.just("add"), st.tuples(_PX, _PX, _PX, _PX).map(list)))
+
+
+@settings(max_examples=300, deadline=None, database=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.one_of(_WELL_FORMED, _JUNK), min_size=1, max_size=4))
+def test_any_edits_give_valid_units_or_one_semmap_error(frame, edits):
+    """Whatever is typed (image points over the units, or anything): valid lattice rectangles of
+    the model's sizes and unique ids, or a SemmapError naming the file and the edit; never another
+    exception."""
+    try:
+        out = apply_edits(UNITS, [Edit(k, tuple(a)) for k, a in edits], frame, pixels=True, path="w.json")
+    except SemmapError as exc:
+        assert str(exc).startswith("w.json: --") and "\n" not in str(exc)
+        return
+    c = frame.cells
+    for key, (r0, c0, r1, c1), _ in out:
+        assert 0 <= r0 and 0 <= c0 and r1 <= frame.shape[0] and c1 <= frame.shape[1]
+        assert c.min_side <= min(r1 - r0, c1 - c0) and max(r1 - r0, c1 - c0) <= c.max_side
+    keys = [k for k, _, _ in out if k is not None]
+    assert len(keys) == len(set(keys))
