@@ -16,18 +16,14 @@ from semmap_pp.world_file import read_world_units
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
-FAST = ["--chains", "2", "--cores", "1", "--tune", "4", "--draws", "4", "--n-inner", "20",
-        "--spread-draws", "0"]
 SCHEMA = json.loads((ROOT / "docs" / "world.schema.json").read_text())
 PLAN = ["world.json", "labels.png", "regions.png", "types.yaml", "types.pgm", "world.geojson", "graph.graphml",
         "overlay.png", "graph.png"]
 
 
 @pytest.fixture(scope="module")
-def wstar(tmp_path_factory):
-    out = tmp_path_factory.mktemp("edit") / "run"
-    assert main(["map", str(MAP), "--out", str(out), "--seed", "3", *FAST]) == 0
-    return out / "world.json"
+def wstar(intel_corner_wstar):
+    return intel_corner_wstar
 
 
 @pytest.fixture(scope="module")

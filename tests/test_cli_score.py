@@ -9,15 +9,11 @@ from semmap_pp.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
-FAST = ["--chains", "2", "--cores", "1", "--tune", "4", "--draws", "4", "--n-inner", "20",
-        "--spread-draws", "0"]
 
 
 @pytest.fixture(scope="module")
-def wstar(tmp_path_factory):
-    out = tmp_path_factory.mktemp("score") / "run"
-    assert main(["map", str(MAP), "--out", str(out), "--seed", "3", *FAST]) == 0
-    return out / "world.json"
+def wstar(intel_corner_wstar):
+    return intel_corner_wstar
 
 
 def score(capsys, *args) -> tuple[int, str, str]:
