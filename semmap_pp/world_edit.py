@@ -181,7 +181,7 @@ def apply_edits(units: list[tuple[str, tuple]], edits: list[Edit], frame, *, pix
             fail(edit, f"unit {text} no longer exists after {gone[k]} (edits apply in order; edit the "
                        f"written file again to change its pieces)")
         if k not in current:
-            listed = ", ".join(sorted(current, key=lambda s: (s.startswith("X"), int(s.lstrip("X")))))
+            listed = ", ".join(sorted(current, key=lambda s: (s.startswith("X"), len(s), s)))
             fail(edit, f"no unit {text} in this world (its units: {listed or 'none'})")
         return k
 

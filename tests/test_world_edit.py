@@ -125,6 +125,8 @@ def test_merge_drop_and_the_order_of_edits(frame):
         apply_edits(UNITS, [Edit("drop", ("7",))], frame, path="w.json")
     with pytest.raises(SemmapError, match="named twice"):
         apply_edits(UNITS, [Edit("merge", ("1", "R1"))], frame)
+    with pytest.raises(SemmapError, match=r"no unit 3 in this world \(its units: 1, 2, 10, abc, X1\)"):
+        apply_edits(UNITS + [("10", at((0, 0, 30, 30))), ("abc", at((0, 40, 30, 90)))], [Edit("drop", ("3",))], frame)
     with pytest.raises(SemmapError, match="appears twice"):
         apply_edits(UNITS + [("2", (0, 0, 30, 30))], [Edit("drop", ("1",))], frame)
 
