@@ -34,7 +34,7 @@ from semmap_pp.evaluate import closing_radius_cells, default_roi
 from semmap_pp.frame import build_frame
 from semmap_pp.grid import load_map
 from semmap_pp.kernels import data_from_frame
-from semmap_pp.kernels.data import settings_from_mapping
+from semmap_pp.kernels.data import model_settings
 from semmap_pp.likelihood import prepare
 from semmap_pp.model import load_model
 
@@ -61,7 +61,7 @@ frame = phase("build_frame", lambda: build_frame(grid, model))
 phase("default_roi", lambda: default_roi(grid.classes, closing_radius_cells(
     model.evaluate.roi_closing_m, grid.resolution)))
 phase("likelihood", lambda: prepare(frame, model))
-phase("kernel_data", lambda: data_from_frame(frame, settings_from_mapping(model.kernels)))
+phase("kernel_data", lambda: data_from_frame(frame, model_settings(model)))
 out["lattice"] = list(frame.shape)
 out["theta_deg"] = round(math.degrees(frame.theta), 2)
 out["total_s"] = round(sum(p["s"] for p in out["phases"].values()), 3)

@@ -221,14 +221,14 @@ def spread_best(run):
     the benchmark measures what taking it would give (``--spread-best``)."""
     from semmap_pp.ascent import polish
     from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.kernels.data import model_settings
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.pipeline import run_target
     sp = run.spread
     if sp is None or sp.best_world is None or not sp.best_logp > sp.start_logp:
         return run
     inputs = run.inputs
-    ks = settings_from_mapping(inputs.model.kernels, source=f"{inputs.model.path} [kernels]")
+    ks = model_settings(inputs.model)
     post = run_target(inputs)
     world = polish(post, sp.best_world, data_from_frame(inputs.frame, ks), ks.polish_rounds)
     sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi)
@@ -622,8 +622,8 @@ def kernel_data(inputs, model):
     """The kernels' data of ``inputs``' lattice with the model's ``[kernels]`` settings (what
     :func:`semmap_pp.ascent.align_walls` needs)."""
     from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
-    return data_from_frame(inputs.frame, settings_from_mapping(model.kernels, source="model [kernels]"))
+    from semmap_pp.kernels.data import model_settings
+    return data_from_frame(inputs.frame, model_settings(model))
 
 
 def outside_units(pred: dict, truth: dict, shape) -> list:

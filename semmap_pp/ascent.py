@@ -684,15 +684,11 @@ def snap_walls(posterior, world: wm.World, data, slots, *, reach: int, rounds: i
     is (local steps only, no line peak farther away, no unit swallowed), for up to ``rounds``
     passes: the walls of a hand-edited world (``semmap edit``) set on the map's own lines near
     the points given. Returns a world whose log posterior is at least that of ``world``, or
-    ``world`` itself when its log posterior is not finite."""
-    asc = _Ascent(posterior, world, data, peaks=0, local=max(int(reach), 0), absorb_share=2.0)
-    if not np.isfinite(asc.tr.logp) or reach <= 0:
+    ``world`` itself when its log posterior is not finite or ``reach`` is 0."""
+    if reach <= 0:
         return world
-    within = {int(s) for s in slots}
-    for _ in range(rounds):
-        if not asc.all_wall_moves(within):
-            break
-    return asc.untyped()
+    asc = _Ascent(posterior, world, data, peaks=0, local=int(reach), absorb_share=2.0)
+    return _wall_rounds(asc, world, rounds, {int(s) for s in slots})
 
 
 def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.World:
@@ -704,10 +700,15 @@ def align_walls(posterior, world: wm.World, data, *, rounds: int = 3) -> wm.Worl
     Returns a world whose log posterior is at least that of ``world`` (types left undecided), or
     ``world`` itself when its log posterior is not finite.
     """
-    asc = _Ascent(posterior, world, data)
+    return _wall_rounds(_Ascent(posterior, world, data), world, rounds)
+
+
+def _wall_rounds(asc: _Ascent, world: wm.World, rounds: int, within=None) -> wm.World:
+    """Up to ``rounds`` passes of ``asc``'s wall moves (of the units in ``within``, when given)
+    from ``world``, stopping when a pass moves nothing; ``world`` when its log p is not finite."""
     if not np.isfinite(asc.tr.logp):
         return world
     for _ in range(rounds):
-        if not asc.all_wall_moves():
+        if not asc.all_wall_moves(within):
             break
     return asc.untyped()

@@ -87,7 +87,7 @@ def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> No
     """
     from math import isfinite
 
-    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.kernels.data import model_settings
 
     try:
         c = model.cells(grid.resolution)
@@ -101,7 +101,7 @@ def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> No
                                     f"cells: the {w}x{h} map padded by them exceeds the limit of "
                                     f"{max_cells} cells (is the resolution right?)")
     try:
-        ks = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+        ks = model_settings(model)
     except (TypeError, ValueError) as exc:
         raise ModelError(model.path, f"[kernels]: {exc}") from None
     if not all(isfinite(v) for _, v in ks.weights):
@@ -339,8 +339,8 @@ def data_start_world(inputs: Inputs) -> wm.World:
     for i, s in enumerate(ok):
         clean = wm.add(clean, i, base.rects[s])
     from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
-    ks = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+    from semmap_pp.kernels.data import model_settings
+    ks = model_settings(model)
     if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/ascent.py)
         clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
                              rounds=ks.start_rounds)
@@ -371,12 +371,12 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         ``semmap stability`` makes it once for all its seeds); the run is the same as without.
     """
     from semmap_pp.kernels import data_from_frame, default_mix
-    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.kernels.data import model_settings
     from semmap_pp.resume import merge_records
     from semmap_pp.sampling import sample_worlds
 
     model, frame = inputs.model, inputs.frame
-    kernel_settings = settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+    kernel_settings = model_settings(model)
     data = data_from_frame(frame, kernel_settings)
     factory = TargetFactory(frame, model, inputs.rules)
     head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "

@@ -115,13 +115,13 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
         raise SemmapError(path, f"written for {was}; this map is {here[0]}x{here[1]} at {here[2]} "
                                 f"m/cell")
     items = []
-    for key, prefix in (("units", "unit "), ("exterior", "exterior unit X")):
+    for key, prefix, noun in (("units", "", "unit "), ("exterior", "X", "exterior unit ")):
         listed = doc.get(key, [])
         if not isinstance(listed, list):
             raise SemmapError(path, f"'{key}' must be a list")
-        items += [(f"{prefix}{u.get('id', i + 1) if isinstance(u, dict) else i + 1}",
-                   ("X" if key == "exterior" else "") + str(u.get("id", i + 1) if isinstance(u, dict) else i + 1),
-                   u) for i, u in enumerate(listed)]
+        for i, u in enumerate(listed):
+            uid = f"{prefix}{u.get('id', i + 1) if isinstance(u, dict) else i + 1}"
+            items.append((noun + uid, uid, u))
     c = frame.cells
     rects = []
     for name, key, item in items:

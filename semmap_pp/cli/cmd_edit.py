@@ -18,8 +18,8 @@ import argparse
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_float
-from semmap_pp.cli.cmd_info import add_map_options, map_options
-from semmap_pp.cli.cmd_map import add_target_options
+from semmap_pp.cli.cmd_info import add_map_options
+from semmap_pp.cli.cmd_map import add_target_options, target_inputs
 from semmap_pp.cli.cmd_score import print_scores, score_world, scores_of
 from semmap_pp.errors import OutputError
 from semmap_pp.world_edit import Edit
@@ -80,11 +80,11 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from semmap_pp.ascent import snap_walls
     from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
+    from semmap_pp.kernels.data import model_settings
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
     from semmap_pp.outputs.write import write_plan
-    from semmap_pp.pipeline import DEFAULT_RULES, check_out_dir, load_inputs, run_target
+    from semmap_pp.pipeline import check_out_dir, run_target
     from semmap_pp.world_edit import apply_edits
     from semmap_pp.world_file import pack_world, read_world_units
 
@@ -95,9 +95,7 @@ def run(args) -> int:
         raise OutputError(args.out, "is the directory of WORLD_JSON: its run's other files (trace.nc, "
                                     "report.html) would not match the edited world; write to another "
                                     "directory")
-    rules = Path(args.rules) if args.rules else DEFAULT_RULES
-    inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                         map_options=map_options(args))
+    rules, inputs = target_inputs(args)
     k_max = inputs.model.prior.k_max
     units = read_world_units(args.world, inputs.frame, inputs.grid)
     before = pack_world([r for _, r in units], k_max, args.world)
@@ -106,7 +104,7 @@ def run(args) -> int:
     post = run_target(inputs)
     reach = int(round(args.snap / inputs.frame.resolution))
     if reach > 0:
-        settings = settings_from_mapping(inputs.model.kernels, source=f"{inputs.model.path} [kernels]")
+        settings = model_settings(inputs.model)
         world = snap_walls(post, world, data_from_frame(inputs.frame, settings),
                            [i for i, (_, _, changed) in enumerate(edited) if changed], reach=reach)
     terms = post.evaluate(world)

@@ -48,6 +48,16 @@ def add_target_options(p: argparse.ArgumentParser) -> None:
                    help="region-of-interest mask image for the CPR (default: the known part, closed)")
 
 
+def target_inputs(args: argparse.Namespace):
+    """The rule file and the loaded inputs (map, model, rules, ROI) that ``args`` name: MAP, the
+    options of :func:`add_target_options` and the map options."""
+    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
+
+    rules = Path(args.rules) if args.rules else DEFAULT_RULES
+    return rules, load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
+                              map_options=map_options(args))
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("map", help="build the semantic map of an occupancy grid",
                               description=__doc__.splitlines()[0])
@@ -133,7 +143,7 @@ def run(args) -> int:
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
     from semmap_pp.outputs.write import write_all
-    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs, run_map
+    from semmap_pp.pipeline import RunSettings, check_out_dir, run_map
     from semmap_pp.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.resume import write_resume
     from semmap_pp.step import StopFlag
@@ -157,9 +167,7 @@ def run(args) -> int:
             return _usage("MAP and --out DIR are required (or --resume DIR)")
         out = args.out
         check_out_dir(out, args.force)
-        rules = Path(args.rules) if args.rules else DEFAULT_RULES
-        inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                             map_options=map_options(args))
+        rules, inputs = target_inputs(args)
         settings = RunSettings.from_model(inputs.model, seed=args.seed or 0, chains=args.chains,
                                           cores=args.cores, tune=args.tune, draws=args.draws,
                                           n_inner=args.n_inner, spread_draws=args.spread_draws)

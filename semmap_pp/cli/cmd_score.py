@@ -22,8 +22,8 @@ import math
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.cli.cmd_info import add_map_options, map_options
-from semmap_pp.cli.cmd_map import add_target_options
+from semmap_pp.cli.cmd_info import add_map_options
+from semmap_pp.cli.cmd_map import add_target_options, target_inputs
 
 
 def register(subparsers) -> None:
@@ -75,17 +75,15 @@ def _line(name: str, s: dict, ref: float | None) -> str:
 def run(args) -> int:
     from semmap_pp.ascent import polish
     from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import settings_from_mapping
-    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs, run_target
+    from semmap_pp.kernels.data import model_settings
+    from semmap_pp.pipeline import run_target
     from semmap_pp.world_file import read_start_world
 
-    rules = Path(args.rules) if args.rules else DEFAULT_RULES
-    inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                         map_options=map_options(args))
+    rules, inputs = target_inputs(args)
     worlds = [(p, read_start_world(p, inputs.frame, inputs.grid, inputs.model.prior.k_max))
               for p in args.worlds]          # every file checked before any scoring
     post = run_target(inputs)
-    settings = settings_from_mapping(inputs.model.kernels, source=f"{inputs.model.path} [kernels]")
+    settings = model_settings(inputs.model)
     data = data_from_frame(inputs.frame, settings) if args.polish else None
     rounds = max(settings.polish_rounds, 1)     # the model's rounds; 0 (polish off) still polishes
     rows = []

@@ -18,7 +18,8 @@ from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
-from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.cmd_info import add_map_options
+from semmap_pp.cli.cmd_map import target_inputs
 
 
 def register(subparsers) -> None:
@@ -48,7 +49,7 @@ def run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.cli.runs import run_each
     from semmap_pp.outputs.figures import stability_png
-    from semmap_pp.pipeline import DEFAULT_RULES, RunSettings, check_out_dir, load_inputs
+    from semmap_pp.pipeline import RunSettings, check_out_dir
     from semmap_pp.stability import Plan, Stability
 
     seeds = list(dict.fromkeys(args.seeds))
@@ -57,9 +58,7 @@ def run(args) -> int:
         return 2
     if args.out is not None:
         check_out_dir(args.out, args.force)
-    rules = Path(args.rules) if args.rules else DEFAULT_RULES
-    inputs = load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                         map_options=map_options(args))
+    rules, inputs = target_inputs(args)
     settings = RunSettings.from_model(inputs.model, seed=seeds[0], chains=args.chains, cores=args.cores,
                                       tune=args.tune, draws=args.draws, n_inner=args.n_inner,
                                       spread_draws=0)

@@ -93,6 +93,11 @@ class KernelSettings(NamedTuple):
     ascent_peaks: int = 8
 
 
+def model_settings(model) -> KernelSettings:
+    """The :class:`KernelSettings` of a model file's ``[kernels]`` table (errors name the file)."""
+    return settings_from_mapping(model.kernels, source=f"{model.path} [kernels]")
+
+
 def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelSettings:
     """Read a ``[kernels]`` table (e.g. from a model file) into :class:`KernelSettings`.
 
