@@ -34,16 +34,36 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+def _finite(text: str, what: str) -> float:
+    """``text`` as a finite float, else argparse's error naming ``what`` it should be."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not {what}: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
 def non_negative_float(text: str) -> float:
     """A finite number >= 0 (a distance in metres).
 
     >>> non_negative_float("0.5")
     0.5
     """
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value) or value < 0:
+    value = _finite(text, "a number")
+    if value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A finite number of seconds > 0 (a time budget, an interval).
+
+    >>> seconds("2.5")
+    2.5
+    """
+    value = _finite(text, "a number of seconds")
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
     return value

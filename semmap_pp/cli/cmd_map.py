@@ -13,25 +13,15 @@ docs/cli.md has every option.
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
+from semmap_pp.cli.argtypes import seconds as _seconds
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
-
-
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
-    return value
 
 
 #: Options a resumed run takes from the resume file (giving them with --resume is an error).

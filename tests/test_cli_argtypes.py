@@ -1,0 +1,35 @@
+"""The shared argument types of the subcommands: good text parsed, bad text one argparse error."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from semmap_pp.cli import argtypes
+
+
+@pytest.mark.parametrize("parse, text, value", [
+    (argtypes.integer, "-3", -3), (argtypes.positive_int, "1", 1), (argtypes.non_negative_int, "0", 0),
+    (argtypes.non_negative_float, "0", 0.0), (argtypes.non_negative_float, "2.5e-1", 0.25),
+    (argtypes.seconds, "0.5", 0.5), (argtypes.seconds, "1e3", 1000.0),
+])
+def test_good_text_is_parsed(parse, text, value):
+    assert parse(text) == value
+
+
+@pytest.mark.parametrize("parse, text, message", [
+    (argtypes.integer, "1.5", "not an integer: '1.5'"),
+    (argtypes.positive_int, "0", "must be >= 1, got 0"),
+    (argtypes.non_negative_int, "-1", "must be >= 0, got -1"),
+    (argtypes.non_negative_float, "x", "not a number: 'x'"),
+    (argtypes.non_negative_float, "-0.1", "must be a finite number >= 0, got -0.1"),
+    (argtypes.non_negative_float, "nan", "must be a finite number, got nan"),
+    (argtypes.seconds, "soon", "not a number of seconds: 'soon'"),
+    (argtypes.seconds, "0", "must be a positive number of seconds, got 0"),
+    (argtypes.seconds, "-inf", "must be a finite number, got -inf"),
+])
+def test_bad_text_is_one_argparse_error(parse, text, message):
+    with pytest.raises(argparse.ArgumentTypeError) as err:
+        parse(text)
+    assert str(err.value) == message
