@@ -12,7 +12,7 @@ from semmap_pp.cli import argtypes
 @pytest.mark.parametrize("parse, text, value", [
     (argtypes.integer, "-3", -3), (argtypes.positive_int, "1", 1), (argtypes.non_negative_int, "0", 0),
     (argtypes.non_negative_float, "0", 0.0), (argtypes.non_negative_float, "2.5e-1", 0.25),
-    (argtypes.seconds, "0.5", 0.5), (argtypes.seconds, "1e3", 1000.0),
+    (argtypes.finite, "-2e1", -20.0), (argtypes.seconds, "0.5", 0.5), (argtypes.seconds, "1e3", 1000.0),
 ])
 def test_good_text_is_parsed(parse, text, value):
     assert parse(text) == value
@@ -22,6 +22,8 @@ def test_good_text_is_parsed(parse, text, value):
     (argtypes.integer, "1.5", "not an integer: '1.5'"),
     (argtypes.positive_int, "0", "must be >= 1, got 0"),
     (argtypes.non_negative_int, "-1", "must be >= 0, got -1"),
+    (argtypes.finite, "1,5", "not a number: '1,5'"),
+    (argtypes.finite, "inf", "must be a finite number, got inf"),
     (argtypes.non_negative_float, "x", "not a number: 'x'"),
     (argtypes.non_negative_float, "-0.1", "must be a finite number >= 0, got -0.1"),
     (argtypes.non_negative_float, "nan", "must be a finite number, got nan"),

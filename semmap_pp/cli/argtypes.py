@@ -34,8 +34,12 @@ def non_negative_int(text: str) -> int:
     return value
 
 
-def _finite(text: str, what: str) -> float:
-    """``text`` as a finite float, else argparse's error naming ``what`` it should be."""
+def finite(text: str, what: str = "a number") -> float:
+    """``text`` as a finite float, else argparse's error naming ``what`` it should be.
+
+    >>> finite("-2e1")
+    -20.0
+    """
     try:
         value = float(text)
     except ValueError:
@@ -51,7 +55,7 @@ def non_negative_float(text: str) -> float:
     >>> non_negative_float("0.5")
     0.5
     """
-    value = _finite(text, "a number")
+    value = finite(text, "a number")
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
     return value
@@ -63,7 +67,7 @@ def seconds(text: str) -> float:
     >>> seconds("2.5")
     2.5
     """
-    value = _finite(text, "a number of seconds")
+    value = finite(text, "a number of seconds")
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
     return value

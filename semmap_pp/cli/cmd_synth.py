@@ -9,7 +9,6 @@ files are written into a temporary sibling folder that is then renamed); into an
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import shutil
 import tempfile
@@ -17,7 +16,7 @@ from collections import Counter
 from pathlib import Path
 
 from semmap_pp.errors import OutputError
-from semmap_pp.cli.argtypes import integer, non_negative_int
+from semmap_pp.cli.argtypes import finite, integer, non_negative_int
 from semmap_pp.synth import generate_floor, write_floor
 from semmap_pp.synth.floor import MAX_UNITS
 
@@ -29,18 +28,8 @@ def _units(text: str) -> int:
     return value
 
 
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return value
-
-
 def _resolution(text: str) -> float:
-    value = _finite(text)
+    value = finite(text)
     if not 0.01 <= value <= 0.2:
         raise argparse.ArgumentTypeError(f"must be within [0.01, 0.2] m, got {value:g}")
     return value
@@ -56,7 +45,7 @@ def register(subparsers) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--units", type=_units, metavar="K",
                         help="number of space units (default: drawn from the seed)")
-    parser.add_argument("--rotation", type=_finite, metavar="DEG",
+    parser.add_argument("--rotation", type=finite, metavar="DEG",
                         help="counter-clockwise rotation of the building as displayed "
                              "(default: drawn from the seed)")
     parser.add_argument("--resolution", type=_resolution, default=0.05, metavar="M",
