@@ -236,3 +236,54 @@ def test_an_opening_without_a_jamb_is_a_passage_and_its_cells_are_free():
     d = derive_world(frame, W.add(W.add(W.empty(3), 0, hall), 1, corridor))
     assert d.doors == [] and len(d.passages) == 1
     assert (d.states[3, 3:7] == W_FREE).all() and d.states[3, 2] == W_WALL
+
+
+def test_unknown_lines_beside_an_opening_are_no_jamb():
+    """A jamb is a wall the map shows. Where the lines between an opening and the end of the
+    shared wall hold unknown cells alone (the unseen margin along a wall where a corridor
+    narrows), the opening reaches that end: a passage. An occupied cell next to the opening is a
+    jamb, whatever lies beyond it."""
+    from semmap_pp.derive.doors import opening_counts, openings_between
+
+    m = grid("""
+    ##########
+    #........#
+    #........#
+    ###??..###
+    ..#....#..
+    ..#....#..
+    ..#....#..
+    ..######..
+    """)
+    hall, corridor = (0, 0, 4, 10), (3, 2, 8, 8)
+    doors, passages = openings_between(m, hall, corridor, CELLS, 1, 2)
+    assert doors == [] and [(d.box, d.width) for d in passages] == [((3, 5, 4, 7), 2)]
+    assert opening_counts(m, hall, corridor, CELLS) == (0, 1)
+    m[3, 4] = OCCUPIED               # ###?#..###: a jamb beside the opening, unknown beyond it
+    doors, passages = openings_between(m, hall, corridor, CELLS, 1, 2)
+    assert [(d.box, d.width) for d in doors] == [((3, 5, 4, 7), 2)] and passages == []
+    assert opening_counts(m, hall, corridor, CELLS) == (1, 0)
+
+
+def test_compiled_opening_counts_equal_the_detector_on_unknown_rich_maps():
+    """The compiled (doors, passages) count equals ``openings_between``'s on random maps with
+    many unknown cells (the jamb test's unknown lines) and random pairs of rectangles."""
+    from semmap_pp.derive.doors import opening_counts, openings_between
+
+    rng = np.random.default_rng(5)
+    seen = set()
+    for _ in range(300):
+        m = rng.choice(np.array([FREE, UNKNOWN, OCCUPIED], np.uint8), size=(30, 30), p=[0.6, 0.25, 0.15])
+        r0, c0 = rng.integers(0, 12, 2)
+        a = (int(r0), int(c0), int(r0 + rng.integers(4, 18)), int(c0 + rng.integers(4, 18)))
+        if rng.random() < 0.5:          # stacked, sharing the band, overlapping along the wall
+            b = (a[2] - 1, int(c0 + rng.integers(-3, 4)), a[2] + int(rng.integers(4, 10)),
+                 int(c0 + rng.integers(6, 20)))
+        else:                           # side by side
+            b = (int(r0 + rng.integers(-3, 4)), a[3] - 1, int(r0 + rng.integers(6, 20)),
+                 a[3] + int(rng.integers(4, 10)))
+        m[max(a[2] - 1, 0):a[2], a[1]:a[3]] = rng.choice([FREE, UNKNOWN], size=a[3] - a[1])
+        doors, passages = openings_between(m, a, b, CELLS)
+        assert opening_counts(m, a, b, CELLS) == (len(doors), len(passages))
+        seen.add((len(doors) > 0, len(passages) > 0))
+    assert seen >= {(True, False), (False, True)}

@@ -12,8 +12,11 @@ lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an ope
 two units are one space), a shorter one a gap in a noisy wall. A run that reaches within ``wall``
 cells of both ends of the strip has no jamb on the shared wall — the whole boundary the two units
 share is open, as where a corridor ends in a hall — and is an open passage too, whatever its width
-(docs/quality.md, session 6). Passages are not doors, but their cells are open: the world's cell
-states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
+(docs/quality.md, session 6). A jamb is a wall the map shows: lines closed by unknown cells alone
+(no occupied cell: the unseen margin along a wall, where a corridor narrows) count as reached, so
+a corridor piece meeting the next through its whole seen width is joined by a passage
+(docs/quality.md, What changed 40). Passages are not doors, but their cells are open: the
+world's cell states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
 
 Examples
 --------
@@ -34,7 +37,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from semmap_pp.cells import FREE
+from semmap_pp.cells import FREE, OCCUPIED
 
 
 class Door(NamedTuple):
@@ -138,6 +141,8 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
         return [], []
     strip = passable(classes, (a0, b0, a1, b1))
     line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
+    walled = classes[a0:a1, b0:b1] == OCCUPIED
+    line_walled = walled.any(axis=1) if vertical else walled.any(axis=0)
     doors, passages = [], []
     n_lines = len(line_open)
     for s, e in open_runs(line_open):
@@ -146,6 +151,10 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
             continue
         box = (a0 + s, b0, a0 + e, b1) if vertical else (a0, b0 + s, a1, b0 + e)
         door = Door(int(p), int(q), tuple(int(v) for v in box), bool(vertical), width)
+        while s > 0 and not line_walled[s - 1]:      # closed by unknown cells alone: no jamb
+            s -= 1
+        while e < n_lines and not line_walled[e]:
+            e += 1
         no_jamb = s <= cells.wall and e >= n_lines - cells.wall
         (passages if width > cells.door_max or no_jamb else doors).append(door)
     return doors, passages
@@ -182,6 +191,16 @@ def _speck(classes, r, c):  # pragma: no cover - compiled
             if (dr != 0 or dc != 0) and 0 <= rr < H and 0 <= cc < W and classes[rr, cc] != FREE:
                 return False
     return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _walled(classes, vertical, a0, b0, k, n_across):  # pragma: no cover - compiled
+    """Whether line ``k`` of the strip at ``(a0, b0)`` holds an occupied cell."""
+    for m in range(n_across):
+        r, c = (a0 + k, b0 + m) if vertical else (a0 + m, b0 + k)
+        if classes[r, c] == OCCUPIED:
+            return True
+    return False
 
 
 @numba.njit(cache=True, nogil=True)
@@ -233,12 +252,20 @@ def _opening_counts(classes, rp, rq, wall, door_min, door_max):  # pragma: no co
         if is_open:
             run += 1
         else:
-            passage = k - run <= wall and k >= n_lines - wall
             if run >= door_min:
-                if run <= door_max and not passage:
-                    count += 1
-                else:
+                passage = run > door_max
+                if not passage:          # a door unless no jamb closes it (unknown lines: none)
+                    s = k - run
+                    while s > 0 and not _walled(classes, vertical, a0, b0, s - 1, n_across):
+                        s -= 1
+                    e = k
+                    while e < n_lines and not _walled(classes, vertical, a0, b0, e, n_across):
+                        e += 1
+                    passage = s <= wall and e >= n_lines - wall
+                if passage:
                     passages += 1
+                else:
+                    count += 1
             run = 0
     return count, passages
 
