@@ -205,23 +205,28 @@ def test_compiled_adjacency_row_equals_the_closed_form():
         assert np.array_equal(out, adjacency_rows(rects, [s], 2, 1)[0] & active)
 
 
+#: A corridor (rows 3..8, columns 2..8) ending in a hall (rows 0..4): the whole wall they share,
+#: row 3 between the corridor's walls, is open.
+HALL_END = grid("""
+##########
+#........#
+#........#
+###....###
+..#....#..
+..#....#..
+..#....#..
+..######..
+""")
+HALL, CORRIDOR = (0, 0, 4, 10), (3, 2, 8, 8)
+
+
 def test_an_opening_without_a_jamb_is_a_passage_and_its_cells_are_free():
     """A corridor ending in a hall: the whole wall the two units share is open. Within door
     width, but with no jamb on the shared wall (none wider than the wall band): a passage, not a
     door; its cells are FREE in the world's states, as door cells are."""
     from semmap_pp.derive.doors import door_count, openings_between
 
-    m = grid("""
-    ##########
-    #........#
-    #........#
-    ###....###
-    ..#....#..
-    ..#....#..
-    ..#....#..
-    ..######..
-    """)
-    hall, corridor = (0, 0, 4, 10), (3, 2, 8, 8)
+    m, hall, corridor = HALL_END, HALL, CORRIDOR
     doors, passages = openings_between(m, hall, corridor, CELLS, 1, 2)
     assert doors == [] and [(d.box, d.width) for d in passages] == [((3, 3, 4, 7), 4)]
     assert door_count(m, hall, corridor, CELLS) == 0
@@ -245,17 +250,8 @@ def test_unknown_lines_beside_an_opening_are_no_jamb():
     jamb, whatever lies beyond it."""
     from semmap_pp.derive.doors import opening_counts, openings_between
 
-    m = grid("""
-    ##########
-    #........#
-    #........#
-    ###??..###
-    ..#....#..
-    ..#....#..
-    ..#....#..
-    ..######..
-    """)
-    hall, corridor = (0, 0, 4, 10), (3, 2, 8, 8)
+    m, hall, corridor = HALL_END.copy(), HALL, CORRIDOR
+    m[3, 3:5] = UNKNOWN              # ###??..###: the opening's first two lines unseen
     doors, passages = openings_between(m, hall, corridor, CELLS, 1, 2)
     assert doors == [] and [(d.box, d.width) for d in passages] == [((3, 5, 4, 7), 2)]
     assert opening_counts(m, hall, corridor, CELLS) == (0, 1)
