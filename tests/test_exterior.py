@@ -201,6 +201,35 @@ def test_fans_do_not_widen_the_footprint():
     assert _outside_share(np.array(fan_b), _hull(np.array([hall, fan_a]))) < 0.5
 
 
+def test_a_corridor_stub_open_at_its_end_does_not_widen_the_footprint():
+    """A corridor along the top of a room reaches past the room's window wall, over the fan of
+    rays beyond the window (aces' north-west stub): its own walls enclose two of its sides (its
+    floor and its closed end), so it is enclosed, but it does not widen the footprint. With it
+    in the hull the fan would lie mostly inside; without it the fan is exterior."""
+    from semmap_pp.derive.exterior import _hull, _outside_share
+
+    c = np.full((110, 170), UNKNOWN, np.uint8)
+    c[30:82, 10:72] = OCCUPIED
+    c[32:80, 12:70] = FREE                                # a room ...
+    c[44:68, 70:72] = FREE                                # ... with a window on its right
+    c[80:100, 10:72] = OCCUPIED
+    c[82:98, 12:70] = FREE                                # a room below it
+    c[10:32, 10:150] = FREE                               # a corridor above, open above and right
+    c[30:32, 10:150] = OCCUPIED                           # its floor wall drawn
+    c[10:32, 10:12] = OCCUPIED                            # its closed left end
+    c[40:43, 72:150:2] = FREE                             # rays beyond the window
+    for row in range(34, 110, 3):
+        r = np.linspace(56, row, 78).round().astype(int)
+        ok = (r >= 34) & (r < 109)
+        c[r[ok], np.arange(72, 150)[ok]] = FREE
+    room, room2, stub, fan = (30, 10, 82, 72), (80, 10, 100, 72), (10, 10, 32, 150), (40, 70, 76, 150)
+    assert find_exterior(c, np.array([room, room2, stub, fan]), 2, 0.3, 0.1).tolist() == [
+        False, False, False, True]
+    assert _outside_share(np.array(fan), _hull(np.array([room, room2, stub]))) < 0.5
+    own = side_shares(c, stub, None, 2, 0.1, own=0)
+    assert np.sort(own)[1] < 0.3 <= np.sort(own)[2]       # two sides of its own: enclosed, not walled
+
+
 def test_without_an_enclosed_unit_nothing_is_exterior():
     """Free space everywhere (a map that shows its outside as free): no unit is enclosed, there
     is no footprint to be outside of, and no unit is flagged."""

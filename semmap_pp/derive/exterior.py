@@ -17,8 +17,10 @@ only at its two short ends.
 Rays also leave a unit that covers the part of a room seen through its door (a room the robot
 never entered); such a unit lies within the building's footprint, so a unit is flagged only when
 more than half its area lies outside the convex hull of the *enclosed* units (supported ones
-that pass the test with cover too). Fans are never enclosed, so they neither shield each other
-nor widen the footprint; a world without an enclosed unit has no footprint and no exterior unit,
+that pass the test with cover too) whose own walls enclose at least three of their sides (a
+corridor stub open at its end, held by its neighbour's cover, may reach out of the building and
+does not widen the footprint). Fans are never enclosed, so they neither shield each other
+nor widen the footprint; a world without such a unit has no footprint and no exterior unit,
 and at least two units are always left (a world is never left without units).
 
 A fan in a concave corner of the building (beyond a window in one wing, against the outer wall
@@ -226,7 +228,8 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
     building's footprint: the convex hull of the units that are enclosed (supported, and with a
-    second largest share of at least ``max_share``); a fan of rays through a door into a room
+    second largest share of at least ``max_share``) with walls of their own on three sides (own
+    third largest share at least ``max_share``); a fan of rays through a door into a room
     the robot never entered lies within it. Fans are never supported, so they add nothing to the
     footprint and do not shield each other; without an enclosed unit nothing is flagged. A unit
     with two open sides is flagged when it lies between two drawn building walls and outside the
@@ -253,7 +256,10 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     ranked = np.sort(shares, axis=1)
     share = ranked[:, 2]                                   # the second largest share
     enclosed = supported & (share >= max_share)
-    hull = _hull(rects[enclosed])
+    # the footprint: the enclosed units drawn on three sides by walls of their own (a corridor
+    # stub open at its end and held by its neighbour's cover may reach out of the building)
+    walled = np.array([np.sort(sh)[1] >= max_share for sh in own], dtype=bool)
+    hull = _hull(rects[enclosed & walled])
     if hull is None:                # no unit enclosed: no footprint to be outside of
         return exterior
     enclosed_mask = _union(rects[enclosed], classes.shape)
