@@ -176,15 +176,20 @@ class Posterior:
             self._door_cache[key] = k
         return k
 
-    def _infer(self, world: W.World, adj: np.ndarray, provider):
-        """The provider's result (types, SaLe, MAP types) for the active units of ``world``."""
+    def _evidence(self, world: W.World, adj: np.ndarray, provider):
+        """The evidence of the active units of ``world`` (adjacency ``adj``), their doors and
+        corridor pieces counted when ``provider`` needs them."""
         slots = W.active_slots(world)
         rects = world.rects[slots]
         sub = adj[np.ix_(slots, slots)]
         doors, pieces = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True)
                          else (None, None))
-        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
-                            pieces)
+        return build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
+                              pieces)
+
+    def _infer(self, world: W.World, adj: np.ndarray, provider):
+        """The provider's result (types, SaLe, MAP types) for the active units of ``world``."""
+        ev = self._evidence(world, adj, provider)
         return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
 
     def _cached_arrays(self, provider, evidence, capacity: int):
@@ -257,13 +262,7 @@ class Posterior:
         if isinstance(provider, FixedProvider):
             types = np.where(world.active, GEOMETRY_TYPE[geometry], W.NO_TYPE).astype(np.int8)
             return types, None
-        slots = W.active_slots(world)
-        rects = world.rects[slots]
-        sub = adj[np.ix_(slots, slots)]
-        doors, pieces = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True)
-                         else (None, None))
-        ev = build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
-                            pieces)
+        ev = self._evidence(world, adj, provider)
         types, sale = self._result_arrays(provider, ev.to_knowledge(), world.capacity)
         return types.copy(), sale
 
