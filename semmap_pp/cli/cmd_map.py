@@ -30,7 +30,7 @@ FIXED_WHEN_RESUMING = ("chains", "tune", "n_inner", "seed", "rules", "model", "r
 
 def add_target_options(p: argparse.ArgumentParser) -> None:
     """``--rules``, ``--model``, ``--roi``: what the target of a run on a map is made of (``map``,
-    ``score``)."""
+    ``score``, ``edit``, ``stability``; read by :func:`target_inputs`)."""
     p.add_argument("--rules", metavar="FILE", default=None,
                    help="rule file (default rules/table3.lp; rules/none.lp = no knowledge)")
     p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")

@@ -19,7 +19,7 @@ from pathlib import Path
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import target_inputs
+from semmap_pp.cli.cmd_map import add_target_options, target_inputs
 
 
 def register(subparsers) -> None:
@@ -30,9 +30,7 @@ def register(subparsers) -> None:
                    help="the seeds, at least two different ones (default 0 1 2)")
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="also write stability.md, stability.json, stability.png")
-    p.add_argument("--rules", metavar="FILE", default=None, help="rule file (default rules/table3.lp)")
-    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
-    p.add_argument("--roi", metavar="MASK", default=None, help="region-of-interest mask for the CPR")
+    add_target_options(p)
     p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
     p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
     p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
