@@ -21,6 +21,13 @@ Pure functions over :class:`~semmap_pp.pipeline.MapRun` objects. Per rule set:
   differ by more than ``[diagnostics] defect_tolerance_m``, in W* and averaged over the sampled
   worlds (typed as the sampler typed them).
 
+With several seeds (``semmap compare --seeds``) each rule set gets one such column per seed, and
+:class:`AcrossSeeds` sums them up: every quantity's mean, standard deviation and range over the
+seeds, and how far the seeds' W*s agree (:mod:`semmap_pp.stability`: the mean unit F1 between
+them, and the units of the best one found with their type in every other). What a rule set
+changes is often which local maximum the search ends in (docs/knowledge_comparison.md), so a
+difference between two rule sets means little unless it is larger than the spread between seeds.
+
 Examples
 --------
 >>> rows = [RuleSetSummary("table3", "table3.lp", 10, 0.9, -100.0, False, {"cpr": 1.2}, {"cpr": 40.0},
@@ -238,5 +245,113 @@ def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
     return png(fig)
 
 
-__all__ = ["RuleSetSummary", "conditional_wall_sd", "mean_wall_sd_m", "typed_sampled_worlds", "wall_spread", "wall_disagreement", "summarise", "compare_table",
+#: The quantities of :class:`RuleSetSummary` summed up over seeds: (field, table label, format).
+ACROSS_QUANTITIES = (
+    ("n_units", "units in W*", ".1f"),
+    ("cpr", "CPR of W*", ".4f"),
+    ("log_posterior", "log posterior of W* (own target)", ".1f"),
+    ("defects_best", "topological defects in W*", ".2f"),
+    ("defects_mean", "defects, mean over sampled worlds", ".2f"),
+    ("wall_spread", "wall spread (mean p(1-p) over cells ever wall)", ".4f"),
+    ("wall_disagreement_m2", "wall disagreement, m² (Σ 2p(1-p) · cell area)", ".2f"),
+    ("wall_sd_m", "wall sd given the rest of W*, mean over its walls, m", ".4f"),
+    ("seconds", "sampling seconds", ".1f"),
+)
+
+
+def spread_of(values) -> dict:
+    """``{"mean", "sd", "min", "max", "n"}`` of the finite ``values`` (sd with n - 1; NaN for
+    fewer than two values, every statistic NaN when none is finite)."""
+    v = np.array([float(x) for x in values], dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return {"mean": math.nan, "sd": math.nan, "min": math.nan, "max": math.nan, "n": 0}
+    return {"mean": float(v.mean()), "sd": float(v.std(ddof=1)) if v.size > 1 else math.nan,
+            "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
+
+
+@dataclass(frozen=True)
+class AcrossSeeds:
+    """One rule set's columns over several seeds: ``rows`` (a :class:`RuleSetSummary` per seed,
+    in the order of ``seeds``) and the agreement of the seeds' W*s (``mean_unit_f1``, the mean
+    unit F1 between every two of them; ``stable_units`` of the ``reference_units`` units of the
+    best one, seed ``reference_seed``, found with their type in every other)."""
+
+    name: str
+    rules: str
+    seeds: tuple
+    rows: tuple
+    mean_unit_f1: float
+    stable_units: int
+    reference_units: int
+    reference_seed: int
+
+    @classmethod
+    def of(cls, seeds, rows, plans) -> "AcrossSeeds":
+        """From one rule set's summaries and :class:`~semmap_pp.stability.Plan` s (W*s), both
+        in the order of ``seeds`` (at least two)."""
+        from semmap_pp.stability import Stability
+
+        if len(seeds) < 2 or not len(seeds) == len(rows) == len(plans):
+            raise ValueError("AcrossSeeds needs one summary and one plan for each of two or more seeds")
+        st = Stability.of(list(plans))
+        return cls(rows[0].name, rows[0].rules, tuple(int(s) for s in seeds), tuple(rows), st.mean_f1(),
+                   st.stable_units(), len(st.reference.ids), int(st.reference.seed))
+
+    def spread(self, field: str) -> dict:
+        """:func:`spread_of` the quantity ``field`` over the seeds."""
+        return spread_of(getattr(r, field) for r in self.rows)
+
+    @property
+    def converged(self) -> int:
+        """Seeds whose chains passed the convergence verdict."""
+        return sum(bool(r.converged) for r in self.rows)
+
+
+def _mean_sd(stats: dict, spec: str) -> str:
+    if not stats["n"]:
+        return "nan"
+    text = _fmt(stats["mean"], spec)
+    if stats["n"] > 1:
+        text += f" ± {_fmt(stats['sd'], spec)} ({_fmt(stats['min'], spec)} – {_fmt(stats['max'], spec)})"
+    return text
+
+
+def across_table(cols: list[AcrossSeeds]) -> str:
+    """A Markdown table over seeds: one row per quantity (mean ± sd (min – max)), one column per
+    rule set, then the agreement of the seeds' W*s."""
+    seeds = ", ".join(map(str, cols[0].seeds))
+    lines = [f"| quantity (seeds {seeds}: mean ± sd (min – max)) | " + " | ".join(c.name for c in cols) + " |",
+             "|---|" + "---:|" * len(cols)]
+
+    def add(label, values):
+        lines.append(f"| {label} | " + " | ".join(values) + " |")
+
+    add("rule file", [c.rules for c in cols])
+    for field, label, spec in ACROSS_QUANTITIES:
+        add(label, [_mean_sd(c.spread(field), spec) for c in cols])
+    add("converged", [f"{c.converged} of {len(c.seeds)} seeds" for c in cols])
+    add("W* between seeds: mean unit F1 (IoU >= 0.5)", [_fmt(c.mean_unit_f1, ".3f") for c in cols])
+    add("units of the best W* found with their type in every other seed's",
+        [f"{c.stable_units} of {c.reference_units} (seed {c.reference_seed})" for c in cols])
+    return "\n".join(lines)
+
+
+def across_dict(cols: list[AcrossSeeds]) -> list[dict]:
+    """compare.json's ``across_seeds``: per rule set every quantity's :func:`spread_of` (NaN as
+    null) and the agreement of its seeds' W*s."""
+    def clean(v):
+        return None if isinstance(v, float) and not math.isfinite(v) else v
+
+    out = []
+    for c in cols:
+        q = {field: {k: clean(v) for k, v in c.spread(field).items()} for field, _label, _spec in ACROSS_QUANTITIES}
+        out.append({"name": c.name, "rules": c.rules, "seeds": list(c.seeds), "quantities": q,
+                    "converged": c.converged, "mean_unit_f1": clean(c.mean_unit_f1),
+                    "stable_units": c.stable_units, "reference_units": c.reference_units,
+                    "reference_seed": c.reference_seed})
+    return out
+
+
+__all__ = ["RuleSetSummary", "AcrossSeeds", "ACROSS_QUANTITIES", "spread_of", "across_table", "across_dict", "conditional_wall_sd", "mean_wall_sd_m", "typed_sampled_worlds", "wall_spread", "wall_disagreement", "summarise", "compare_table",
            "compare_dict", "compare_png"]

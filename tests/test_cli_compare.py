@@ -42,6 +42,43 @@ def test_compare_writes_table_json_and_figure(tmp_path, capsys):
     assert w > h       # two panels side by side
 
 
+def test_several_seeds_give_a_table_over_the_seeds_and_each_seeds_own(tmp_path, capsys):
+    """``--seeds 4 5``: every rule set is run with each seed; each seed's columns are those of
+    ``--seed N`` alone, and the table over the seeds sums them up."""
+    out = tmp_path / "cmp"
+    rules = ["--rules", str(RULES / "table3.lp"), "--rules", str(RULES / "none.lp")]
+    assert main(["compare", str(MAP), *rules, "--out", str(out), "--seeds", "4", "5", "4", *TINY]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith("## Across seeds\n\n| quantity (seeds 4, 5: mean ± sd (min – max)) | table3 | none |")
+    assert printed.index("## Seed 4\n\n| quantity | table3 | none |") < printed.index("## Seed 5\n")
+    assert "| W* between seeds: mean unit F1 (IoU >= 0.5) |" in printed
+    assert (out / "compare.md").read_text().endswith(printed.split(str(out))[0])
+    doc = json.loads((out / "compare.json").read_text())
+    assert doc["seeds"] == [4, 5] and [p["seed"] for p in doc["per_seed"]] == [4, 5]
+    assert doc["rule_sets"] == doc["per_seed"][0]["rule_sets"] and doc["settings"]["seed"] == 4
+    for j, name in enumerate(["table3", "none"]):
+        col = doc["across_seeds"][j]
+        assert col["name"] == name and col["seeds"] == [4, 5] and 0 <= col["mean_unit_f1"] <= 1
+        for field in ("cpr", "defects_best", "n_units"):
+            values = [p["rule_sets"][j][field] for p in doc["per_seed"]]
+            assert col["quantities"][field]["mean"] == pytest.approx(sum(values) / 2)
+            assert col["quantities"][field]["min"] == min(values) and col["quantities"][field]["max"] == max(values)
+        assert col["converged"] == sum(p["rule_sets"][j]["converged"] for p in doc["per_seed"])
+        assert col["reference_seed"] in (4, 5) and col["stable_units"] <= col["reference_units"]
+    alone = tmp_path / "alone"
+    assert main(["compare", str(MAP), *rules, "--out", str(alone), "--seed", "5", *TINY]) == 0
+    one = json.loads((alone / "compare.json").read_text())
+    drop = ("seconds",)
+    assert [{k: v for k, v in r.items() if k not in drop} for r in one["rule_sets"]] == \
+        [{k: v for k, v in r.items() if k not in drop} for r in doc["per_seed"][1]["rule_sets"]]
+
+
+def test_seed_and_seeds_exclude_each_other(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["compare", str(MAP), "--rules", "a.lp", "--rules", "b.lp", "--seed", "1", "--seeds", "2", "3"])
+    assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("rules, needle", [
     (["table3.lp"], "give --rules at least twice"),
     (["table3.lp", "missing.lp"], "missing.lp"),

@@ -9,7 +9,8 @@ import pytest
 
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN
-from semmap_pp.compare import (RuleSetSummary, compare_dict, compare_table, summarise, wall_disagreement,
+from semmap_pp.compare import (ACROSS_QUANTITIES, AcrossSeeds, RuleSetSummary, across_dict, across_table,
+                               compare_dict, compare_table, spread_of, summarise, wall_disagreement,
                                wall_spread)
 from semmap_pp.evaluate import closing_radius_cells, default_roi
 from semmap_pp.frame import build_frame
@@ -81,6 +82,47 @@ def test_json_turns_nan_into_null():
     back = json.loads(text)
     assert back["rule_sets"][0]["ess_tail"]["log_posterior"] is None
     assert back["rule_sets"][0]["defects_best"] == 1 and back["settings"] == {"seed": 3}
+
+
+def test_spread_of_is_mean_sample_sd_and_range_of_the_finite_values():
+    got = spread_of([1.0, 2.0, math.nan, 6.0])
+    assert got == {"mean": 3.0, "sd": pytest.approx(math.sqrt(7.0)), "min": 1.0, "max": 6.0, "n": 3}
+    one = spread_of([4])
+    assert one["mean"] == 4.0 and math.isnan(one["sd"]) and one["n"] == 1
+    none = spread_of([math.nan, math.inf])
+    assert none["n"] == 0 and all(math.isnan(none[k]) for k in ("mean", "sd", "min", "max"))
+
+
+def _plan(seed, logp, rects):
+    from semmap_pp.stability import Plan
+    return Plan(seed, tuple(range(1, len(rects) + 1)), tuple(rects), ("room",) * len(rects), logp, 0.9, 1.0)
+
+
+def test_across_seeds_sums_up_each_quantity_and_the_agreement_of_the_wstars():
+    a, b, c = (0, 0, 10, 10), (0, 10, 10, 20), (10, 0, 20, 20)
+    rows = [dataclasses.replace(row("t", d, cpr=p), seconds=s, converged=k)
+            for d, p, s, k in ((1, 0.90, 2.0, True), (3, 0.92, 4.0, False), (2, 0.94, math.nan, False))]
+    plans = [_plan(7, -10.0, [a, b, c]), _plan(8, -12.0, [a, b]), _plan(9, -11.0, [a, b, c])]
+    col = AcrossSeeds.of([7, 8, 9], rows, plans)
+    assert col.name == "t" and col.rules == "t.lp" and col.seeds == (7, 8, 9) and col.converged == 1
+    assert col.spread("defects_best") == {"mean": 2.0, "sd": 1.0, "min": 1.0, "max": 3.0, "n": 3}
+    assert col.spread("cpr")["mean"] == pytest.approx(0.92) and col.spread("seconds")["n"] == 2
+    # seed 7's W* is the best; seed 8's lacks unit c: pairwise F1 0.8, 1.0, 0.8
+    assert col.reference_seed == 7 and col.reference_units == 3 and col.stable_units == 2
+    assert col.mean_unit_f1 == pytest.approx((0.8 + 1.0 + 0.8) / 3)
+    text = across_table([col, col])
+    lines = text.splitlines()
+    assert lines[0] == "| quantity (seeds 7, 8, 9: mean ± sd (min – max)) | t | t |"
+    assert "| topological defects in W* | 2.00 ± 1.00 (1.00 – 3.00) | 2.00 ± 1.00 (1.00 – 3.00) |" in lines
+    assert "| sampling seconds | 3.0 ± 1.4 (2.0 – 4.0) | 3.0 ± 1.4 (2.0 – 4.0) |" in lines
+    assert "| converged | 1 of 3 seeds | 1 of 3 seeds |" in lines
+    assert "| units of the best W* found with their type in every other seed's | 2 of 3 (seed 7) | 2 of 3 (seed 7) |" in lines
+    assert len(lines) == 2 + 1 + len(ACROSS_QUANTITIES) + 3
+    doc = json.loads(json.dumps(across_dict([col]), allow_nan=False))[0]
+    assert doc["quantities"]["cpr"]["max"] == pytest.approx(0.94) and doc["stable_units"] == 2
+    assert set(doc["quantities"]) == {f for f, _l, _s in ACROSS_QUANTITIES}
+    with pytest.raises(ValueError):
+        AcrossSeeds.of([7], rows[:1], plans[:1])
 
 
 def two_rooms_grid():

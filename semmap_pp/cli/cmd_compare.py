@@ -1,10 +1,12 @@
-"""``semmap compare MAP --rules A --rules B [--out DIR]``: two knowledge sets on the same map and seed.
+"""``semmap compare MAP --rules A --rules B [--seeds N N ...] [--out DIR]``: knowledge sets on one map.
 
 Runs ``semmap map``'s sampling once per rule file with the same map, model, seed and run lengths,
 then prints a Markdown table (CPR, log posterior, R-hat and ESS of the summaries, posterior wall
-spread, topological defects; see :mod:`semmap_pp.compare`). With ``--out DIR`` it also writes
-``compare.md``, ``compare.json`` and ``compare.png`` (the sampled worlds of each run drawn thin, side
-by side), each atomically. Ctrl-C stops and writes nothing (exit 130).
+spread, topological defects; see :mod:`semmap_pp.compare`). With ``--seeds`` it does so for each
+seed and first prints every quantity's mean, sd and range over the seeds, with how far each rule
+set's W*s agree between seeds (:class:`semmap_pp.compare.AcrossSeeds`). With ``--out DIR`` it also
+writes ``compare.md``, ``compare.json`` and ``compare.png`` (the sampled worlds of each run drawn
+thin, side by side; of the first seed), each atomically. Ctrl-C stops and writes nothing (exit 130).
 """
 
 from __future__ import annotations
@@ -29,7 +31,11 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, metavar="DIR", help="also write compare.md, compare.json, compare.png")
     p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
     p.add_argument("--roi", metavar="MASK", default=None, help="region-of-interest mask for the CPR")
-    p.add_argument("--seed", type=_non_negative_int, default=0, help="random seed (default 0)")
+    seeds = p.add_mutually_exclusive_group()
+    seeds.add_argument("--seed", type=_non_negative_int, default=None, help="random seed (default 0)")
+    seeds.add_argument("--seeds", type=_non_negative_int, nargs="+", default=None, metavar="N",
+                       help="several seeds: every rule set is run with each, and a table over the seeds "
+                            "(mean, sd, range; how far the seeds' W*s agree) comes first")
     p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
     p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
     p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
@@ -55,22 +61,25 @@ def _names(paths: list[Path]) -> list[str]:
 
 def run(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.compare import compare_dict, compare_png, compare_table, summarise, typed_sampled_worlds
+    from semmap_pp.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
+                                   compare_table, summarise, typed_sampled_worlds)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
     from semmap_pp.pipeline import RunSettings, check_out_dir, load_inputs
+    from semmap_pp.stability import Plan
 
     if len(args.rules) < 2:
         print("semmap compare: error: give --rules at least twice (the knowledge sets to compare)",
               file=sys.stderr)
         return 2
+    seeds = list(dict.fromkeys(args.seeds)) if args.seeds else [0 if args.seed is None else args.seed]
     if args.out is not None:
         check_out_dir(args.out, args.force)
     paths = [Path(r) for r in args.rules]
     rule_sets = [load_rules(p) for p in paths]          # every rule file is checked before sampling
     inputs = load_inputs(args.map, model_path=args.model, rules_path=paths[0], roi_path=args.roi,
                          map_options=map_options(args))
-    settings = RunSettings.from_model(inputs.model, seed=args.seed, chains=args.chains, cores=args.cores,
+    settings = RunSettings.from_model(inputs.model, seed=seeds[0], chains=args.chains, cores=args.cores,
                                       tune=args.tune, draws=args.draws, n_inner=args.n_inner,
                                       spread_draws=args.spread_draws)
     if settings.draws < 4:
@@ -80,31 +89,57 @@ def run(args) -> int:
         print(f"semmap compare: error: --spread-draws {SPREAD_DRAWS_RULE}", file=sys.stderr)
         return 2
 
-    done = run_each("compare", inputs, [(f"rules {path}", dataclasses.replace(inputs, rules=rs), settings)
-                                        for path, rs in zip(paths, rule_sets)])
+    several = len(seeds) > 1
+    names = _names(paths)
+    jobs = [(f"rules {path}" + (f", seed {seed}" if several else ""), dataclasses.replace(inputs, rules=rs),
+             dataclasses.replace(settings, seed=seed))
+            for seed in seeds for path, rs in zip(paths, rule_sets)]
+    done = run_each("compare", inputs, jobs)
     if done is None:
         return 130
-    runs, worlds, rows = [], [], []
-    for name, path, (r, _seconds) in zip(_names(paths), paths, done):
-        ws = typed_sampled_worlds(r, args.n_worlds)
-        runs.append(r)
-        worlds.append(ws)
-        rows.append(summarise(r, name, path.name, ws))
-    table = compare_table(rows)
-    print(table)
+    n = len(paths)
+    per_seed = []        # per seed: (runs, sampled worlds, rows), rule sets in the order given
+    for k in range(len(seeds)):
+        runs, worlds, rows = [], [], []
+        for name, path, (r, _seconds) in zip(names, paths, done[k * n:(k + 1) * n]):
+            ws = typed_sampled_worlds(r, args.n_worlds)
+            runs.append(r)
+            worlds.append(ws)
+            rows.append(summarise(r, name, path.name, ws))
+        per_seed.append((runs, worlds, rows))
+    tables = [compare_table(rows) for _runs, _worlds, rows in per_seed]
+    cols = []
+    if several:
+        cols = [AcrossSeeds.of(seeds, [rows[j] for _r, _w, rows in per_seed],
+                               [Plan.from_semantic(seed, runs[j].semantic, runs[j].seconds)
+                                for seed, (runs, _w, _rows) in zip(seeds, per_seed)])
+                for j in range(n)]
+        text = "\n\n".join([f"## Across seeds\n\n{across_table(cols)}"]
+                            + [f"## Seed {seed}\n\n{t}" for seed, t in zip(seeds, tables)])
+    else:
+        text = tables[0]
+    print(text)
     if args.out is not None:
         out = args.out
         out.mkdir(parents=True, exist_ok=True)
         shared = {k: getattr(settings, k) for k in ("chains", "tune", "draws", "n_inner", "anneal", "seed")}
+        which = (f"seeds {', '.join(map(str, seeds))}" if several else f"seed {settings.seed}")
         head = (f"# Knowledge sets compared on {inputs.grid.source}\n\nSame map, model "
-                f"({inputs.model.path.name}), seed {settings.seed}; {settings.chains} chains x "
+                f"({inputs.model.path.name}), {which}; {settings.chains} chains x "
                 f"({settings.tune} burn-in + {settings.draws} draws) x {settings.n_inner} kernels. "
                 "Log posteriors are values of different targets; CPR, spread and defects compare "
                 "directly.\n\n")
-        atomic.write_text(out / "compare.md", head + table + "\n")
+        atomic.write_text(out / "compare.md", head + text + "\n")
+        runs, worlds, rows = per_seed[0]
         doc = compare_dict(rows, map_path=str(inputs.grid.source), settings=shared)
+        if several:
+            doc["seeds"] = seeds
+            doc["per_seed"] = [{"seed": seed, "rule_sets": compare_dict(r, map_path=doc["map"],
+                                                                       settings=shared)["rule_sets"]}
+                               for seed, (_r, _w, r) in zip(seeds, per_seed)]
+            doc["across_seeds"] = across_dict(cols)
         atomic.write_text(out / "compare.json", json.dumps(doc, indent=1) + "\n")
         atomic.write_bytes(out / "compare.png", compare_png(runs, worlds, rows))
-        for n in ("compare.md", "compare.json", "compare.png"):
-            print(out / n)
+        for name in ("compare.md", "compare.json", "compare.png"):
+            print(out / name)
     return 0
