@@ -44,10 +44,12 @@ def test_compare_writes_table_json_and_figure(tmp_path, capsys):
 
 def test_several_seeds_give_a_table_over_the_seeds_and_each_seeds_own(tmp_path, capsys):
     """``--seeds 4 5``: every rule set is run with each seed; each seed's columns are those of
-    ``--seed N`` alone, and the table over the seeds sums them up."""
+    ``--seed N`` alone, and the table over the seeds sums them up. Run with ``--jobs 2`` (two
+    runs at a time, each in a process of its own), which must change no number."""
     out = tmp_path / "cmp"
     rules = ["--rules", str(RULES / "table3.lp"), "--rules", str(RULES / "none.lp")]
-    assert main(["compare", str(MAP), *rules, "--out", str(out), "--seeds", "4", "5", "4", *TINY]) == 0
+    assert main(["compare", str(MAP), *rules, "--out", str(out), "--seeds", "4", "5", "4", "--jobs", "2",
+                 *TINY]) == 0
     printed = capsys.readouterr().out
     assert printed.startswith("## Across seeds\n\n| quantity (seeds 4, 5: mean ± sd (min – max)) | table3 | none |")
     assert printed.index("## Seed 4\n\n| quantity | table3 | none |") < printed.index("## Seed 5\n")

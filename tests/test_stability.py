@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -162,6 +163,39 @@ def test_ctrl_c_stops_semmap_stability_and_writes_nothing(tmp_path):
     code, err = sigint_after([floor / "map.yaml", "--seeds", "0", "1", "--out", out, "--chains", "2",
                               "--cores", "1", "--tune", "2", "--draws", "100000", "--n-inner", "5"],
                              "sampling:", wait=1.0, command="stability", out=stdout)
+    assert code == 130, err
+    assert "interrupted: stopping; nothing will be written" in err and "Traceback" not in err
+    assert stdout == [""] and not out.exists()
+
+
+def test_jobs_run_the_seeds_in_processes_of_their_own_with_the_same_results(tmp_path, capfd):
+    """``--jobs 2``: the seeds' runs go two at a time in spawned processes, after the start world
+    they share is built once; every number but the seconds is what the runs in a row give."""
+    docs = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"j{jobs}"
+        assert main(["stability", str(MAP), "--seeds", "3", "5", "--out", str(out), "--jobs", jobs, *TINY]) == 0
+        doc = json.loads((out / "stability.json").read_text())
+        for r in doc["runs"]:
+            r.pop("seconds")
+        docs.append(doc)
+    assert docs[0] == docs[1]
+    err = capfd.readouterr().err          # the workers write to the same file descriptor
+    assert "2 runs, 2 at a time (--jobs)" in err
+    assert re.search(r"^\[seed 5\] start world: \d+ units \(shared\)$", err, re.M), err
+
+
+def test_ctrl_c_stops_parallel_runs_and_writes_nothing(tmp_path):
+    """SIGINT while the workers sample (``--jobs 2``): the parent stops them, exit 130, the message,
+    no traceback, no output folder."""
+    from test_cli_faults import sigint_after
+
+    floor = tmp_path / "f"
+    assert main(["synth", "--seed", "3", "--units", "4", "--out", str(floor)]) == 0
+    out, stdout = tmp_path / "stab", []
+    code, err = sigint_after([floor / "map.yaml", "--seeds", "0", "1", "--out", out, "--jobs", "2", "--chains",
+                              "2", "--cores", "1", "--tune", "2", "--draws", "100000", "--n-inner", "5"],
+                             "] sampling:", wait=1.0, command="stability", out=stdout)
     assert code == 130, err
     assert "interrupted: stopping; nothing will be written" in err and "Traceback" not in err
     assert stdout == [""] and not out.exists()

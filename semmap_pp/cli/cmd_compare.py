@@ -46,6 +46,9 @@ def register(subparsers) -> None:
                         "file default; 0: the spread from the search's draws)")
     p.add_argument("--n-worlds", type=_positive_int, default=200,
                    help="sampled worlds for the spread, the defects and compare.png (default 200)")
+    p.add_argument("--jobs", type=_positive_int, default=1, metavar="N",
+                   help="runs at a time, each in a process of its own (default 1); each run's chains "
+                        "use --cores processes besides")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     add_map_options(p)
     p.set_defaults(func=run)
@@ -94,7 +97,7 @@ def run(args) -> int:
     jobs = [(f"rules {path}" + (f", seed {seed}" if several else ""), dataclasses.replace(inputs, rules=rs),
              dataclasses.replace(settings, seed=seed))
             for seed in seeds for path, rs in zip(paths, rule_sets)]
-    done = run_each("compare", inputs, jobs)
+    done = run_each("compare", inputs, jobs, workers=args.jobs)
     if done is None:
         return 130
     n = len(paths)

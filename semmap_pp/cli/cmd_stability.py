@@ -36,6 +36,9 @@ def register(subparsers) -> None:
     p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
     p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
     p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    p.add_argument("--jobs", type=_positive_int, default=1, metavar="N",
+                   help="runs at a time, each in a process of its own (default 1); each run's chains "
+                        "use --cores processes besides")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     p.add_argument("--json", action="store_true",
                    help="print stability.json's object (one line) instead of the table")
@@ -66,7 +69,7 @@ def run(args) -> int:
         return 2
 
     done = run_each("stability", inputs, [(f"seed {seed}", inputs, dataclasses.replace(settings, seed=seed))
-                                          for seed in seeds])
+                                          for seed in seeds], workers=args.jobs)
     if done is None:
         return 130
     plans = [Plan.from_semantic(seed, r.semantic, seconds) for seed, (r, seconds) in zip(seeds, done)]
