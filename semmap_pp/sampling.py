@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 import time
 import warnings
 from typing import NamedTuple
@@ -28,6 +29,14 @@ from typing import NamedTuple
 import numpy as np
 
 from semmap_pp import world as wm
+
+#: How ``pm.sample`` starts the processes of parallel chains when the caller names none: "fork"
+#: on Linux, the start method of Python 3.12 and 3.13 there, which the project's speed figures
+#: were measured with (a forked chain inherits the imported modules and the compiled code; with
+#: "forkserver", Python 3.14's default, each chain imports and loads them anew: ``semmap map
+#: data/maps/ubremen-cartesium.yaml`` took 17.6 s instead of 6.0 s, the same W*; docs/sampler.md).
+#: None elsewhere: PyMC's own choice (forkserver on Intel macOS, fork on Apple silicon).
+DEFAULT_MP_CONTEXT = "fork" if sys.platform.startswith("linux") else None
 
 
 class ChainRecord(NamedTuple):
@@ -159,7 +168,8 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     draws, tune : int
         Recorded draws and burn-in draws per chain (burn-in annealed when ``anneal > 1``).
     chains, cores : int
-        ``cores > 1`` samples chains in parallel processes (the step is pickled).
+        ``cores > 1`` samples chains in parallel processes (the step is pickled), started by
+        ``mp_ctx`` (a multiprocessing start method or context; None: :data:`DEFAULT_MP_CONTEXT`).
     seed : int or None
         One seed; PyMC spawns the per-chain generators from it.
     callback : callable(dict), optional
@@ -213,7 +223,8 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
             trace = pm.sample(draws=draws, tune=tune, chains=chains, cores=cores, step=step,
                               initvals=initvals, random_seed=seed, compute_convergence_checks=False,
                               return_inferencedata=False, discard_tuned_samples=False,
-                              progressbar=progressbar, mp_ctx=mp_ctx, callback=recorder)
+                              progressbar=progressbar, callback=recorder,
+                              mp_ctx=DEFAULT_MP_CONTEXT if mp_ctx is None else mp_ctx)
         except ParallelSamplingError as exc:
             # a chain in another process failed: the project's own error (a rule file too dense
             # for this map, say) is raised as itself, so the command prints its one line

@@ -93,6 +93,35 @@ def test_two_cores_match_one_core(problem):
     assert one.best_logp == pytest.approx(two.best_logp)
 
 
+def test_parallel_chains_are_forked_on_linux_unless_told_otherwise(problem, monkeypatch):
+    """``pm.sample`` gets ``mp_ctx="fork"`` on Linux whatever Python's default start method (3.14
+    made it forkserver: every chain would import and load the compiled code anew), and the
+    caller's ``mp_ctx`` when given."""
+    import sys
+
+    import pymc as pm
+
+    import semmap_pp.sampling as sampling
+
+    seen = []
+
+    class Called(Exception):
+        pass
+
+    def fake_sample(*args, **kwargs):
+        seen.append(kwargs["mp_ctx"])
+        raise Called
+
+    monkeypatch.setattr(pm, "sample", fake_sample)
+    post, data = problem
+    for given in (None, "spawn"):
+        with pytest.raises(Called):
+            sample_worlds(post, data, [wm.empty(CAP)], draws=3, tune=0, chains=2, cores=2, n_inner=5,
+                          seed=1, mp_ctx=given)
+    assert seen == [sampling.DEFAULT_MP_CONTEXT, "spawn"]
+    assert sampling.DEFAULT_MP_CONTEXT == ("fork" if sys.platform.startswith("linux") else None)
+
+
 def test_step_pickles_without_its_caches(problem):
     post, data = problem
     with world_model(CAP) as m:
