@@ -19,6 +19,8 @@ from pathlib import Path
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
+from semmap_pp.cli.cmd_map import add_run_length_options
+from semmap_pp.cli.runs import add_jobs_option
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
 
 
@@ -36,19 +38,13 @@ def register(subparsers) -> None:
     seeds.add_argument("--seeds", type=_non_negative_int, nargs="+", default=None, metavar="N",
                        help="several seeds: every rule set is run with each, and a table over the seeds "
                             "(mean, sd, range; how far the seeds' W*s agree) comes first")
-    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
-    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
-    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
-    p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
-    p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    add_run_length_options(p)
     p.add_argument("--spread-draws", type=_non_negative_int, default=None, metavar="N",
                    help="draws per chain of each rule set's sample around its W* (paper Fig. 7; model "
                         "file default; 0: the spread from the search's draws)")
     p.add_argument("--n-worlds", type=_positive_int, default=200,
                    help="sampled worlds for the spread, the defects and compare.png (default 200)")
-    p.add_argument("--jobs", type=_positive_int, default=1, metavar="N",
-                   help="runs at a time, each in a process of its own (default 1); each run's chains "
-                        "use --cores processes besides")
+    add_jobs_option(p)
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     add_map_options(p)
     p.set_defaults(func=run)

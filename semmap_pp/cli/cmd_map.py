@@ -38,6 +38,16 @@ def add_target_options(p: argparse.ArgumentParser) -> None:
                    help="region-of-interest mask image for the CPR (default: the known part, closed)")
 
 
+def add_run_length_options(p: argparse.ArgumentParser, draws_help: str = "recorded draws per chain") -> None:
+    """``--chains``, ``--cores``, ``--tune``, ``--draws``, ``--n-inner`` (None: the model file's
+    ``[sampler]`` values), as ``semmap map``, ``compare`` and ``stability`` take them."""
+    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
+    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
+    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
+    p.add_argument("--draws", type=_positive_int, default=None, help=draws_help)
+    p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+
+
 def target_inputs(args: argparse.Namespace):
     """The rule file and the loaded inputs (map, model, rules, ROI) that ``args`` name: MAP, the
     options of :func:`add_target_options` and the map options."""
@@ -56,12 +66,7 @@ def register(subparsers) -> None:
                    help="output directory (required, except with --resume: default the resumed DIR)")
     add_target_options(p)
     p.add_argument("--seed", type=_non_negative_int, default=None, help="random seed (default 0)")
-    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
-    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
-    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
-    p.add_argument("--draws", type=_positive_int, default=None,
-                   help="recorded draws per chain (with --resume: this many more per chain)")
-    p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    add_run_length_options(p, draws_help="recorded draws per chain (with --resume: this many more per chain)")
     p.add_argument("--spread-draws", type=_non_negative_int, default=None, metavar="N",
                    help="draws per chain of the sample around W* that the spread figures are drawn from "
                         "(paper Fig. 7; model file default 1000; 0: none, the figures use the search's draws)")

@@ -17,9 +17,9 @@ import sys
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
-from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_target_options, target_inputs
+from semmap_pp.cli.cmd_map import add_run_length_options, add_target_options, target_inputs
+from semmap_pp.cli.runs import add_jobs_option
 
 
 def register(subparsers) -> None:
@@ -31,14 +31,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="also write stability.md, stability.json, stability.png")
     add_target_options(p)
-    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
-    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
-    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
-    p.add_argument("--draws", type=_positive_int, default=None, help="recorded draws per chain")
-    p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
-    p.add_argument("--jobs", type=_positive_int, default=1, metavar="N",
-                   help="runs at a time, each in a process of its own (default 1); each run's chains "
-                        "use --cores processes besides")
+    add_run_length_options(p)
+    add_jobs_option(p)
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     p.add_argument("--json", action="store_true",
                    help="print stability.json's object (one line) instead of the table")

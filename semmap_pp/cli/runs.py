@@ -9,6 +9,15 @@ import sys
 import time
 
 
+def add_jobs_option(p) -> None:
+    """``--jobs N``: how many runs at a time (:func:`run_each`'s ``workers``)."""
+    from semmap_pp.cli.argtypes import positive_int
+
+    p.add_argument("--jobs", type=positive_int, default=1, metavar="N",
+                   help="runs at a time, each in a process of its own (default 1); each run's chains "
+                        "use --cores processes besides")
+
+
 def log(msg: str) -> None:
     """A progress or log line, on stderr (results go to stdout)."""
     print(msg, file=sys.stderr, flush=True)
