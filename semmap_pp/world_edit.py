@@ -153,6 +153,40 @@ def _box(p: Point, q: Point, t: int):
     return (_band_start(lo_r, t), _band_start(lo_c, t), _band_start(hi_r, t) + t, _band_start(hi_c, t) + t)
 
 
+def edit_origins(edits: list[Edit]) -> list[str]:
+    """The edit that made each new unit of :func:`apply_edits` (its key-None entries), in its
+    order: two pieces per ``--cut``, one unit per ``--add``.
+
+    >>> [str(o) for o in edit_origins([Edit("drop", ("3",)), Edit("cut", ("1", "0", "0", "1", "1")),
+    ...                                Edit("add", ("0", "0", "2", "2"))])]
+    ['--cut 1 0 0 1 1', '--cut 1 0 0 1 1', '--add 0 0 2 2']
+    """
+    out = []
+    for edit in edits:
+        out += [str(edit)] * {"cut": 2, "add": 1}.get(edit.kind, 0)
+    return out
+
+
+def id_changes(edited: list[tuple], origins: list[str], slot_ids: dict, exterior_ids: dict,
+               letters: dict) -> list[dict]:
+    """What each unit of the written world was: ``edited`` as :func:`apply_edits` returns it,
+    slot ``i`` holding its ``i``-th unit (:func:`semmap_pp.world_file.pack_world`), ``origins``
+    from :func:`edit_origins`, and the written world's numbering (``slot_ids``: slot -> id,
+    ``exterior_ids``: slot -> exterior id; ``letters``: slot -> its type's letter). One
+    ``{"was", "now", "by"}`` per unit, in the new file's order (the building's units, then the
+    exterior ones): ``was`` the key in the edited file (None for a new unit), ``now`` the id in
+    the written one (``"R3"``, ``"X2"``), ``by`` the edit that made a new unit (else None)."""
+    new_origin = iter(origins)
+    rows = []
+    for i, (key, _rect, _changed) in enumerate(edited):
+        by = next(new_origin) if key is None else None
+        if i in slot_ids:
+            rows.append(((0, slot_ids[i]), {"was": key, "now": f"{letters.get(i, '')}{slot_ids[i]}", "by": by}))
+        elif i in exterior_ids:
+            rows.append(((1, exterior_ids[i]), {"was": key, "now": f"X{exterior_ids[i]}", "by": by}))
+    return [row for _order, row in sorted(rows, key=lambda r: r[0])]
+
+
 def apply_edits(units: list[tuple[str, tuple]], edits: list[Edit], frame, *, pixels: bool = False,
                 path=None) -> list[tuple[str | None, tuple, bool]]:
     """``units`` (key, lattice rectangle) after ``edits``, in order, each as ``(key, rect,

@@ -79,6 +79,39 @@ def test_a_cut_writes_a_valid_world_json_that_score_and_start_read(wstar, tmp_pa
     assert len(read_world_units(out, frame, load_map(MAP))) == len(edited["units"]) + len(edited["exterior"])
 
 
+def test_the_written_file_says_what_each_unit_was(wstar, tmp_path, capsys, frame):
+    """``edited.ids`` (and the printed lines): every unit of the written world.json with its id in
+    the edited file, the two pieces of the cut with the edit that made them; the ids match the
+    units' geometry, read back from both files."""
+    doc = json.loads(wstar.read_text())
+    unit = largest(doc)
+    drop = next(u for u in doc["units"] if u["id"] != unit["id"])
+    out = tmp_path / "ids" / "world.json"
+    code, text, err = run(capsys, MAP, wstar, "--out", out.parent, "--drop", drop["id"],
+                          "--cut", f"R{unit['id']}", *cut_line(unit), "--snap", "0")
+    assert code == 0, err
+    edited = json.loads(out.read_text())
+    ids = edited["edited"]["ids"]
+    assert len(ids) == len(edited["units"]) + len(edited["exterior"])
+    assert [r["now"] for r in ids] == [f"{'RCHE'['room corridor hall other'.split().index(u['type'])]}{u['id']}"
+                                       for u in edited["units"]] + [f"X{u['id']}" for u in edited["exterior"]]
+    cut = edited["edited"]["edits"][1]
+    assert [r["by"] for r in ids if r["was"] is None] == [cut, cut]
+    assert all(r["by"] is None for r in ids if r["was"] is not None)
+    was = {r["was"] for r in ids}
+    assert str(unit["id"]) not in was and str(drop["id"]) not in was
+    # a unit not edited is the same rectangle under its old and its new id (no snap: nothing moved)
+    old = dict(read_world_units(wstar, frame, load_map(MAP)))
+    new = dict(read_world_units(out, frame, load_map(MAP)))
+    for r in ids:
+        if r["was"] is not None:
+            assert old[r["was"]] == new[r["now"].lstrip("RCHE")]
+    lines = text.splitlines()
+    head = lines.index(f"ids in {out} (each world.json numbers its units afresh, in reading order):")
+    assert any(line.startswith("  new ") and line.endswith(f": {cut}") for line in lines[head:])
+    assert f"  gone: {drop['id']}, {unit['id']}" in lines[head:] or f"  gone: {unit['id']}, {drop['id']}" in lines[head:]
+
+
 def test_without_snapping_the_pieces_share_a_band_on_the_line(wstar, tmp_path, capsys, frame):
     doc = json.loads(wstar.read_text())
     unit = largest(doc)

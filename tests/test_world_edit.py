@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from semmap_pp.errors import SemmapError
 from semmap_pp.frame import build_frame_from_classes
 from semmap_pp.model import load_model
-from semmap_pp.world_edit import EDITS, Edit, apply_edits, check_args, to_lattice, unit_key
+from semmap_pp.world_edit import EDITS, Edit, apply_edits, check_args, edit_origins, id_changes, to_lattice, unit_key
 
 RES = 0.05
 
@@ -183,3 +183,19 @@ def test_any_edits_give_valid_units_or_one_semmap_error(frame, edits):
         assert c.min_side <= min(r1 - r0, c1 - c0) and max(r1 - r0, c1 - c0) <= c.max_side
     keys = [k for k, _, _ in out if k is not None]
     assert len(keys) == len(set(keys))
+    # edit_origins names one edit per new unit, in apply_edits' order
+    origins = edit_origins([Edit(k, tuple(a)) for k, a in edits])
+    assert len(origins) == sum(k is None for k, _, _ in out)
+    assert all(o.startswith(("--cut ", "--add ")) for o in origins)
+
+
+def test_id_changes_follow_the_slots_into_the_new_numbering():
+    edited = [("3", (0, 0, 9, 9), False), ("X1", (0, 9, 9, 18), False), (None, (9, 0, 18, 9), True),
+              (None, (9, 9, 18, 18), True), ("7", (18, 0, 27, 9), True)]
+    origins = ["--cut 5 a b c d", "--cut 5 a b c d"]
+    slot_ids, exterior_ids = {0: 2, 2: 1, 3: 3, 4: 4}, {1: 1}
+    letters = {0: "R", 2: "C", 3: "E", 4: "R"}
+    assert id_changes(edited, origins, slot_ids, exterior_ids, letters) == [
+        {"was": None, "now": "C1", "by": "--cut 5 a b c d"}, {"was": "3", "now": "R2", "by": None},
+        {"was": None, "now": "E3", "by": "--cut 5 a b c d"}, {"was": "7", "now": "R4", "by": None},
+        {"was": "X1", "now": "X1", "by": None}]

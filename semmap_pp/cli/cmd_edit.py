@@ -85,7 +85,8 @@ def run(args) -> int:
     from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
     from semmap_pp.outputs.write import write_plan
     from semmap_pp.pipeline import check_out_dir, run_target
-    from semmap_pp.world_edit import apply_edits
+    from semmap_pp.outputs.graphml import TYPE_LETTER
+    from semmap_pp.world_edit import apply_edits, edit_origins, id_changes
     from semmap_pp.world_file import pack_world, read_world_units
 
     if not args.edits:
@@ -112,10 +113,51 @@ def run(args) -> int:
     rows = [{"world": str(args.world), **score_world(inputs, post, before)},
             {"world": str(args.out / "world.json"), **scores_of(sm, terms)}]
     doc = world_dict(sm, rules=rules.name, model=inputs.model.path.name, seed=None, roi_name=inputs.roi_name)
-    doc["edited"] = {"from": str(args.world), "edits": [str(e) for e in args.edits], "snap_m": args.snap}
+    ids = id_changes(edited, edit_origins(args.edits), sm.slot_ids, sm.exterior_ids,
+                     {s: TYPE_LETTER[sm.type_of(u)] for s, u in sm.slot_ids.items()})
+    doc["edited"] = {"from": str(args.world), "edits": [str(e) for e in args.edits], "snap_m": args.snap,
+                     "ids": ids}
     args.out.mkdir(parents=True, exist_ok=True)
     write_world_json(args.out / "world.json", doc)
     write_labels_png(args.out / "labels.png", sm.labels_image)
     write_plan(args.out, sm, doc)
-    print_scores(args, rules, inputs, rows)
+    print_scores(args, rules, inputs, rows, extra={"ids": ids})
+    if not args.json:
+        print(ids_text(ids, args.out / "world.json", gone=[k for k, _ in units if k not in {r["was"] for r in ids}]))
     return 0
+
+
+def ids_text(ids: list[dict], path, gone=()) -> str:
+    """The units of the written world.json whose id is not the one they had, the new ones with
+    the edit that made them, and the ids ``gone`` (dropped, merged away or cut); ``semmap edit``
+    prints it after the scores.
+
+    >>> print(ids_text([{"was": None, "now": "R1", "by": "--add 1 2 3 4"}, {"was": "1", "now": "C2", "by": None},
+    ...                 {"was": "3", "now": "R3", "by": None}], "w.json", gone=["2"]))
+    ids in w.json (each world.json numbers its units afresh, in reading order):
+      1 -> C2
+      new R1: --add 1 2 3 4
+      gone: 2
+      every other unit keeps its id
+    """
+    lines = [f"ids in {path} (each world.json numbers its units afresh, in reading order):"]
+    kept = [r for r in ids if r["was"] is not None]
+    moved = [f"{r['was']} -> {r['now']}" for r in kept if r["was"] != r["now"].lstrip("RCHE")]
+    line = ""
+    for item in moved:                       # items never split across lines
+        if line and len(line) + 2 + len(item) > 98:
+            lines.append("  " + line)
+            line = ""
+        line = f"{line}, {item}" if line else item
+    if line:
+        lines.append("  " + line)
+    made: dict = {}
+    for r in ids:
+        if r["was"] is None:
+            made.setdefault(r["by"], []).append(r["now"])
+    lines += [f"  new {', '.join(now)}: {by}" for by, now in made.items()]
+    if gone:
+        lines.append(f"  gone: {', '.join(gone)}")
+    if len(moved) < len(kept):
+        lines.append("  every other unit keeps its id" if len(lines) > 1 else "  every unit keeps its id")
+    return "\n".join(lines)

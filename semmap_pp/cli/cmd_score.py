@@ -96,12 +96,13 @@ def run(args) -> int:
     return 0
 
 
-def print_scores(args, rules: Path, inputs, rows: list[dict]) -> None:
-    """The rows as one JSON object (``args.json``) or as the table: the first row is the reference."""
+def print_scores(args, rules: Path, inputs, rows: list[dict], extra: dict | None = None) -> None:
+    """The rows as one JSON object (``args.json``; with the members of ``extra`` added) or as the
+    table: the first row is the reference."""
     ref = rows[0]["log_posterior"]
     if args.json:
         print(json.dumps({"map": str(args.map), "rules": str(rules), "model": args.model or "default",
-                          "roi": inputs.roi_name, "worlds": rows}, indent=1))
+                          "roi": inputs.roi_name, "worlds": rows, **(extra or {})}, indent=1))
         return
     print(f"map {args.map}, rules {rules.name}, model {Path(args.model).name if args.model else 'default.toml'}, "
           f"ROI {inputs.roi_name}; types decided again by the rules (the files' types are not read)")
