@@ -266,6 +266,14 @@ class Posterior:
         types, sale = self._result_arrays(provider, ev.to_knowledge(), world.capacity)
         return types.copy(), sale
 
+    def knowledge_evidence(self, world: W.World):
+        """The evidence the knowledge engine gets for ``world``'s active units (keys: slots), as
+        a :class:`semmap_pp.knowledge.Evidence` (``semmap rules evidence`` writes it as facts);
+        the same with knowledge on or off: geometry classes, MulDoor and corridor pieces from the
+        doors (counted whatever the provider), adjacency."""
+        typ = self.typing(world)
+        return self._evidence(typ.world, typ.adj, None).to_knowledge()
+
     def knowledge_result(self, world: W.World):
         """Type marginals, SaLe marginals and MAP types of ``world`` from the provider in use.
 

@@ -122,3 +122,46 @@ def test_cli_check_says_how_the_engine_runs_the_rules(tmp_path, capsys):
         else:
             assert out[1].startswith("  inference: the general path") and reason in out[1]
             assert engine.local is None
+
+
+def test_cli_evidence_of_a_world_gives_its_types_back(intel_corner_wstar, tmp_path, capsys):
+    """``rules evidence MAP WORLD_JSON`` writes what the engine saw for that world: queried with
+    the rules of the run, the MAP types and the marginals are world.json's own (units keep their
+    ids; exterior unit Xk becomes n + k); a bad world.json is one line, nothing written."""
+    doc = json.loads(intel_corner_wstar.read_text())
+    ev = tmp_path / "ev.lp"
+    map_path = "tests/data/maps/intel_corner.yaml"
+    assert main(["rules", "evidence", map_path, str(intel_corner_wstar), "--out", str(ev)]) == 0
+    assert capsys.readouterr().out.strip() == str(ev)
+    text = ev.read_text()
+    assert text.startswith(f"% the evidence of {intel_corner_wstar} on ")
+    parsed = evidence_from_facts(text, str(ev))
+    n = max(u["id"] for u in doc["units"])
+    assert list(parsed.units) == sorted([u["id"] for u in doc["units"]] + [n + x["id"] for x in doc["exterior"]])
+    assert doc["rules"] == "table3.lp"
+    assert main(["rules", "query", "rules/table3.lp", "--evidence", str(ev), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for u in doc["units"]:
+        assert out["map_types"][str(u["id"])] == u["type"]
+        got = out["types"][str(u["id"])]
+        assert all(got[t] == pytest.approx(p, abs=2e-6) for t, p in u["type_marginals"].items())
+    # the same facts on stdout
+    assert main(["rules", "evidence", map_path, str(intel_corner_wstar)]) == 0
+    assert capsys.readouterr().out == text
+    # an exterior unit X1 is numbered after the largest unit id
+    moved = dict(doc, units=doc["units"][:-1], exterior=[dict(doc["units"][-1], id=1)] + [
+        dict(x, id=x["id"] + 1) for x in doc["exterior"]])
+    (tmp_path / "ext.json").write_text(json.dumps(moved))
+    assert main(["rules", "evidence", map_path, str(tmp_path / "ext.json")]) == 0
+    facts = capsys.readouterr().out
+    top = max(u["id"] for u in moved["units"])
+    assert f"% {top + 1}: exterior unit X1 of the file" in facts
+    assert top + 1 in evidence_from_facts(facts).units
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert main(["rules", "evidence", map_path, str(bad), "--out", str(tmp_path / "x.lp")]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and err.count("\n") == 1 and not (tmp_path / "x.lp").exists()
+    assert main(["rules", "evidence", map_path, str(intel_corner_wstar), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a directory" in err

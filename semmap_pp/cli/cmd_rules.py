@@ -1,4 +1,5 @@
-"""``semmap rules check FILE...`` and ``semmap rules query FILE --evidence FACTS.lp``."""
+"""``semmap rules check FILE...``, ``semmap rules query FILE --evidence FACTS.lp`` and ``semmap rules
+evidence MAP WORLD_JSON``: a world's evidence as such a facts file, to try rule files on it."""
 
 from __future__ import annotations
 
@@ -30,6 +31,20 @@ def register(subparsers) -> None:
                             "max-product, RC2, or clingo optimisation (no soft evidence)")
     query.add_argument("--json", action="store_true", help="print one JSON object")
     query.set_defaults(func=_query)
+    evid = sub.add_parser("evidence", help="the evidence of a world.json as a facts file for `rules query`",
+                          description="Write the evidence the knowledge engine gets for a world.json "
+                                      "(geometry classes, MulDoor, adjacency; its units numbered as "
+                                      "the file numbers them) as a facts file that `semmap rules query "
+                                      "RULES --evidence FILE` reads: try a rule file on a real map's "
+                                      "world without sampling.")
+    evid.add_argument("map", metavar="MAP", help="the map the world.json was written for")
+    evid.add_argument("world", metavar="WORLD_JSON", type=Path, help="a world.json written for MAP")
+    evid.add_argument("--out", type=Path, metavar="FILE", help="write the facts here (default: stdout)")
+    evid.add_argument("--model", metavar="FILE", default=None,
+                      help="model file (default models/default.toml): the evidence thresholds")
+    from semmap_pp.cli.cmd_info import add_map_options
+    add_map_options(evid)
+    evid.set_defaults(func=_evidence)
 
 
 def _check(args) -> int:
@@ -104,4 +119,57 @@ def _query(args) -> int:
         print(f"P(SaLe({p},{q})) = {v:.4f}")
     extra = f", log Z = {r.log_z:.4f}" if r.log_z is not None else ""
     print(f"MAP cost = {r.map_cost:.3f}{extra}")
+    return 0
+
+
+def world_evidence_facts(inputs, world_path) -> str:
+    """The evidence of the world.json at ``world_path`` on ``inputs``' lattice as a facts file
+    (:func:`semmap_pp.knowledge.evidence.evidence_to_facts`) with a comment per unit. Units keep
+    their world.json ids; exterior unit ``Xk`` becomes ``n + k`` (``n``: the largest unit id),
+    as clingo ids are integers."""
+    from semmap_pp.knowledge import Evidence
+    from semmap_pp.knowledge.evidence import evidence_to_facts
+    from semmap_pp.posterior import Posterior
+    from semmap_pp.world_file import pack_world, read_world_units
+
+    units = read_world_units(world_path, inputs.frame, inputs.grid)
+    world = pack_world([r for _, r in units], inputs.model.prior.k_max, world_path)
+    ev = Posterior(inputs.frame, inputs.model, None).knowledge_evidence(world)
+    top = max((int(k) for k, _ in units if not k.startswith("X")), default=0)
+    label = {slot: int(k) if not k.startswith("X") else top + int(k[1:]) for slot, (k, _) in enumerate(units)}
+    relabel = {name: {label[u]: p for u, p in ev.unary(name)} for name in ("rolike", "colike", "halike", "muldoor")}
+    out = Evidence.build([label[u] for u in ev.units], adj=[(label[p], label[q]) for p, q in ev.adj], **relabel)
+    import json
+    listed = json.loads(Path(world_path).read_text(encoding="utf-8"))   # read_world_units checked it
+    types = {str(u.get("id")): u.get("type") for u in listed.get("units", []) if isinstance(u, dict)}
+    res = inputs.frame.resolution
+    head = [f"% the evidence of {world_path} on {inputs.grid.source} (model {inputs.model.path.name}),",
+            "% as the knowledge engine gets it: Table 4 geometry classes (soft near a threshold), MulDoor,",
+            "% adjacency. Try a rule file on it: semmap rules query RULES --evidence THIS_FILE"]
+    for slot, (k, (r0, c0, r1, c1)) in enumerate(units):
+        name = f"exterior unit X{k[1:]}" if k.startswith("X") else f"unit {k} ({types.get(k) or 'no type'})"
+        long, short = sorted(((r1 - r0) * res, (c1 - c0) * res), reverse=True)
+        head.append(f"% {label[slot]}: {name} of the file, {long:.2f} x {short:.2f} m")
+    return "\n".join(head) + "\n" + evidence_to_facts(out)
+
+
+def _evidence(args) -> int:
+    from semmap_pp import atomic
+    from semmap_pp.cli.cmd_info import map_options
+    from semmap_pp.pipeline import load_inputs
+
+    from semmap_pp.errors import OutputError
+
+    if args.out is not None and (args.out.is_dir() or str(args.out).endswith(("/", "\\"))):
+        raise OutputError(args.out, "is a directory; --out names the facts file to write")
+    inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))
+    text = world_evidence_facts(inputs, args.world)
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    try:
+        atomic.write_text(args.out, text)
+    except OSError as exc:
+        raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
+    print(args.out)
     return 0
