@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.errors import EvidenceError, SemmapError
+from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.errors import EvidenceError, OutputError, SemmapError
 
 
 def register(subparsers) -> None:
@@ -42,7 +43,6 @@ def register(subparsers) -> None:
     evid.add_argument("--out", type=Path, metavar="FILE", help="write the facts here (default: stdout)")
     evid.add_argument("--model", metavar="FILE", default=None,
                       help="model file (default models/default.toml): the evidence thresholds")
-    from semmap_pp.cli.cmd_info import add_map_options
     add_map_options(evid)
     evid.set_defaults(func=_evidence)
 
@@ -139,7 +139,6 @@ def world_evidence_facts(inputs, world_path) -> str:
     label = {slot: int(k) if not k.startswith("X") else top + int(k[1:]) for slot, (k, _) in enumerate(units)}
     relabel = {name: {label[u]: p for u, p in ev.unary(name)} for name in ("rolike", "colike", "halike", "muldoor")}
     out = Evidence.build([label[u] for u in ev.units], adj=[(label[p], label[q]) for p, q in ev.adj], **relabel)
-    import json
     listed = json.loads(Path(world_path).read_text(encoding="utf-8"))   # read_world_units checked it
     types = {str(u.get("id")): u.get("type") for u in listed.get("units", []) if isinstance(u, dict)}
     res = inputs.frame.resolution
@@ -155,10 +154,7 @@ def world_evidence_facts(inputs, world_path) -> str:
 
 def _evidence(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.cli.cmd_info import map_options
     from semmap_pp.pipeline import load_inputs
-
-    from semmap_pp.errors import OutputError
 
     if args.out is not None and (args.out.is_dir() or str(args.out).endswith(("/", "\\"))):
         raise OutputError(args.out, "is a directory; --out names the facts file to write")
