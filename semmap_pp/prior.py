@@ -52,6 +52,26 @@ def rects_valid(rects: np.ndarray, shape, min_side: int, max_side: int) -> np.nd
             & (h >= min_side) & (h <= max_side) & (w >= min_side) & (w <= max_side))
 
 
+def rect_faults(rect, shape, min_side: int, max_side: int) -> frozenset:
+    """Why one rectangle ``(r0, c0, r1, c1)`` is outside the prior's support, for a message: the
+    set of ``"small"`` (a side below ``min_side``), ``"large"`` (a side above ``max_side``) and
+    ``"outside"`` (beyond the lattice ``shape``) that apply; empty exactly when
+    :func:`rects_valid` holds (tested).
+
+    >>> sorted(rect_faults((-1, 0, 10, 30), (100, 100), 20, 80)), rect_faults((0, 0, 30, 30), (100, 100), 20, 80)
+    (['outside', 'small'], frozenset())
+    """
+    r0, c0, r1, c1 = (int(v) for v in rect)
+    out = set()
+    if min(r1 - r0, c1 - c0) < min_side:
+        out.add("small")
+    if max(r1 - r0, c1 - c0) > max_side:
+        out.add("large")
+    if r0 < 0 or c0 < 0 or r1 > shape[0] or c1 > shape[1]:
+        out.add("outside")
+    return frozenset(out)
+
+
 def log_p_rect(rect, shape, min_side: int, max_side: int) -> float:
     """``log p_rect`` of one rectangle (``-inf`` outside the support)."""
     if not rects_valid(np.asarray(rect).reshape(1, 4), shape, min_side, max_side)[0]:

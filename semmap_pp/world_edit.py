@@ -38,6 +38,7 @@ import numpy as np
 
 from semmap_pp.errors import SemmapError
 from semmap_pp.kernels.split_merge import pieces
+from semmap_pp.prior import rect_faults
 
 #: The edits and the number of arguments each takes (``None``: one id or more).
 EDITS = {"drop": None, "merge": None, "cut": 5, "wall": 3, "add": 4}
@@ -231,13 +232,14 @@ def apply_edits(units: list[tuple[str, tuple]], edits: list[Edit], frame, *, pix
         r0, c0, r1, c1 = (int(v) for v in rect)
         sides = (r1 - r0, c1 - c0)
         res = frame.resolution
-        if min(sides) < c.min_side:
+        faults = rect_faults((r0, c0, r1, c1), frame.shape, c.min_side, c.max_side)
+        if "small" in faults:
             fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides are at "
                        f"least {c.min_side * res:.2f} m, walls included ([world] min_unit_side_m)")
-        if max(sides) > c.max_side:
+        if "large" in faults:
             fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides are at "
                        f"most {c.max_side * res:.2f} m ([world] max_unit_side_m)")
-        if r0 < 0 or c0 < 0 or r1 > frame.shape[0] or c1 > frame.shape[1]:
+        if "outside" in faults:
             fail(edit, f"{what} would reach beyond the map's lattice")
         return (r0, c0, r1, c1)
 

@@ -23,6 +23,7 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
 from semmap_pp.model import MAX_K
+from semmap_pp.prior import rect_faults
 from semmap_pp.outputs.world_json import FORMAT
 
 #: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
@@ -133,13 +134,13 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
                                     f"{m.get('orientation_deg', '?')}): was it written for this map "
                                     f"and model?")
         r0, c0, r1, c1 = rect
-        if r0 < 0 or c0 < 0 or r1 > frame.shape[0] or c1 > frame.shape[1]:
+        faults = rect_faults(rect, frame.shape, c.min_side, c.max_side)
+        if "outside" in faults:
             raise SemmapError(path, f"{name} reaches beyond the map's lattice ({frame.shape[0]} x "
                                     f"{frame.shape[1]} cells; the unit spans rows {r0}..{r1}, columns "
                                     f"{c0}..{c1})")
-        sides = (r1 - r0, c1 - c0)
-        if min(sides) < c.min_side or max(sides) > c.max_side:
-            raise SemmapError(path, f"{name} is {sides[0]} x {sides[1]} cells; the model allows sides of "
+        if faults:
+            raise SemmapError(path, f"{name} is {r1 - r0} x {c1 - c0} cells; the model allows sides of "
                                     f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, "
                                     f"max_unit_side_m)")
         rects.append((key, rect))

@@ -8,7 +8,8 @@ import pytest
 
 from semmap_pp.model import load_model
 from semmap_pp.prior import (connecting_length_difference, log_p_n, log_p_n_table, log_p_rect,
-                             log_prior, log_slots, n_rects, sale_log_factor)
+                             log_prior, log_slots, n_rects, rect_faults, rects_valid,
+                             sale_log_factor)
 
 PRIOR = load_model().prior
 
@@ -93,3 +94,16 @@ def test_compiled_slot_sale_sum_equals_the_reference():
         ref = sale_log_factor(rects[live], adj[np.ix_(live, live)], sale[np.ix_(live, live)], 0.05, PRIOR)
         assert sale_log_factor_slots(rects, active, adj, PRIOR, 0.05, sale=sale) == pytest.approx(ref)
         assert sale_log_factor_slots(rects, active, adj, PRIOR, 0.05, types=types, table=table) == pytest.approx(ref)
+
+
+def test_rect_faults_are_empty_exactly_when_the_rectangle_is_in_the_support():
+    """The reasons world_file and world_edit give for a refused rectangle come from one rule,
+    the prior's own (:func:`rects_valid`)."""
+    rng = np.random.default_rng(5)
+    for _ in range(3000):
+        r0, c0 = rng.integers(-5, 40, 2)
+        h, w = rng.integers(-2, 40, 2)
+        rect = (int(r0), int(c0), int(r0 + h), int(c0 + w))
+        faults = rect_faults(rect, (50, 60), 4, 30)
+        assert (not faults) == bool(rects_valid(np.array([rect]), (50, 60), 4, 30)[0])
+        assert ("small" in faults) == (min(h, w) < 4) and ("large" in faults) == (max(h, w) > 30)
