@@ -271,8 +271,7 @@ class Posterior:
         a :class:`semmap_pp.knowledge.Evidence` (``semmap rules evidence`` writes it as facts);
         the same with knowledge on or off: geometry classes, MulDoor and corridor pieces from the
         doors (counted whatever the provider), adjacency."""
-        typ = self.typing(world)
-        return self._evidence(typ.world, typ.adj, None).to_knowledge()
+        return self._evidence(world, self.adjacency(world), None).to_knowledge()
 
     def knowledge_result(self, world: W.World):
         """Type marginals, SaLe marginals and MAP types of ``world`` from the provider in use.
@@ -287,17 +286,23 @@ class Posterior:
         types.setflags(write=False)
         return W.World(world.rects, world.active, types)
 
-    def typing(self, world: W.World) -> _Typing:
-        """Geometry classes, adjacency, types and SaLe marginals of a world, from scratch."""
+    def adjacency(self, world: W.World) -> np.ndarray:
+        """(K, K) bool: which active slots of ``world`` are adjacent (walls dilated, paper Fig. 4)."""
         K = world.capacity
-        geometry = np.zeros(K, dtype=np.int8)
         adj = np.zeros((K, K), dtype=bool)
         slots = W.active_slots(world)
         if len(slots):
-            rects = world.rects[slots]
-            geometry[slots] = geometry_class(rects, self.cells.resolution, self.model.evidence)
             adj[np.ix_(slots, slots)] = adjacency_rows(
-                rects, np.arange(len(slots)), self.cells.wall, self.cells.adjacency_dilation)
+                world.rects[slots], np.arange(len(slots)), self.cells.wall, self.cells.adjacency_dilation)
+        return adj
+
+    def typing(self, world: W.World) -> _Typing:
+        """Geometry classes, adjacency, types and SaLe marginals of a world, from scratch."""
+        geometry = np.zeros(world.capacity, dtype=np.int8)
+        adj = self.adjacency(world)
+        slots = W.active_slots(world)
+        if len(slots):
+            geometry[slots] = geometry_class(world.rects[slots], self.cells.resolution, self.model.evidence)
         types, sale = self._types(world, geometry, adj)
         return _Typing(self._typed(world, types), geometry, adj, sale)
 

@@ -123,7 +123,8 @@ def run(args) -> int:
     write_plan(args.out, sm, doc)
     print_scores(args, rules, inputs, rows, extra={"ids": ids})
     if not args.json:
-        print(ids_text(ids, args.out / "world.json", gone=[k for k, _ in units if k not in {r["was"] for r in ids}]))
+        kept = {r["was"] for r in ids}
+        print(ids_text(ids, args.out / "world.json", gone=[k for k, _ in units if k not in kept]))
     return 0
 
 

@@ -128,6 +128,7 @@ def world_evidence_facts(inputs, world_path) -> str:
     their world.json ids; exterior unit ``Xk`` becomes ``n + k`` (``n``: the largest unit id),
     as clingo ids are integers."""
     from semmap_pp.knowledge import Evidence
+    from semmap_pp.knowledge.dialect import SOFT_PREDICATES
     from semmap_pp.knowledge.evidence import evidence_to_facts
     from semmap_pp.posterior import Posterior
     from semmap_pp.world_file import pack_world, read_world_units
@@ -137,7 +138,7 @@ def world_evidence_facts(inputs, world_path) -> str:
     ev = Posterior(inputs.frame, inputs.model, None).knowledge_evidence(world)
     top = max((int(k) for k, _ in units if not k.startswith("X")), default=0)
     label = {slot: int(k) if not k.startswith("X") else top + int(k[1:]) for slot, (k, _) in enumerate(units)}
-    relabel = {name: {label[u]: p for u, p in ev.unary(name)} for name in ("rolike", "colike", "halike", "muldoor")}
+    relabel = {name: {label[u]: p for u, p in ev.unary(name)} for name in SOFT_PREDICATES}
     out = Evidence.build([label[u] for u in ev.units], adj=[(label[p], label[q]) for p, q in ev.adj], **relabel)
     listed = json.loads(Path(world_path).read_text(encoding="utf-8"))   # read_world_units checked it
     types = {str(u.get("id")): u.get("type") for u in listed.get("units", []) if isinstance(u, dict)}
