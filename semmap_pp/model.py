@@ -26,8 +26,8 @@ import numpy as np
 
 from semmap_pp.cells import UNIT_TYPES, WORLD_STATES
 from semmap_pp.errors import ModelError
+from semmap_pp.resources import DEFAULT_MODEL
 
-DEFAULT_MODEL = Path(__file__).resolve().parents[1] / "models" / "default.toml"
 SIZE_MEASURES = ("short_side", "long_side", "area")
 # Whose doors count towards MulDoor: the unit's own, or for a corridor-like unit those of the
 # space it forms with the units joined to it by open passages (semmap_pp.evidence.muldoor_counts).
@@ -342,7 +342,8 @@ class _Reader:
 
 
 def load_model(path: str | Path | None = None) -> Model:
-    """Read and validate a model file; ``None`` reads ``models/default.toml`` of the repository.
+    """Read and validate a model file; ``None`` reads the shipped ``models/default.toml``
+    (:mod:`semmap_pp.resources`).
 
     Raises
     ------

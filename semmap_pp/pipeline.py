@@ -36,8 +36,8 @@ from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJEC
 from semmap_pp.model import Model, load_model
 from semmap_pp.outputs import SemanticMap, semantic_map
 from semmap_pp.posterior import Posterior
+from semmap_pp.resources import DEFAULT_RULES
 
-DEFAULT_RULES = Path(__file__).resolve().parents[1] / "rules" / "table3.lp"
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,7 @@
-"""``semmap rules check FILE...``, ``semmap rules query FILE --evidence FACTS.lp`` and ``semmap rules
-evidence MAP WORLD_JSON``: a world's evidence as such a facts file, to try rule files on it."""
+"""``semmap rules check FILE...``, ``semmap rules query FILE --evidence FACTS.lp``, ``semmap rules
+evidence MAP WORLD_JSON`` (a world's evidence as such a facts file, to try rule files on it) and
+``semmap rules list`` (the rule files and the model file that ship with the package, and where
+they are: an installed package keeps them inside itself)."""
 
 from __future__ import annotations
 
@@ -45,6 +47,11 @@ def register(subparsers) -> None:
                       help="model file (default models/default.toml): the evidence thresholds")
     add_map_options(evid)
     evid.set_defaults(func=_evidence)
+    listing = sub.add_parser("list", help="the shipped rule files and model file, and where they are",
+                             description="List the rule files and the model file that ship with "
+                                         "semmap_pp, with their paths and what each is: copy one, edit "
+                                         "the copy, and pass it with --rules FILE or --model FILE.")
+    listing.set_defaults(func=_list)
 
 
 def _check(args) -> int:
@@ -89,6 +96,52 @@ def _grounding_line(rs) -> str:
         where = st.path
     return text + (f"the limit of {MAX_GROUND_STATEMENTS:,} is reached at {at:,} units (worlds "
                    f"that large stop with an error), most of it from {where}:{st.line}:{st.col}")
+
+
+def shipped_listing() -> list[str]:
+    """The lines of ``semmap rules list``: each shipped rule file and evidence example with the
+    first sentence of its leading comment, then the model file."""
+    from semmap_pp.resources import DEFAULT_MODEL, DEFAULT_RULES, evidence_files, rule_files, shipped
+
+    root = shipped("rules")
+    rules, examples = rule_files(), evidence_files()
+    width = max((len(f.relative_to(root).as_posix()) for f in rules + examples), default=0)
+
+    def row(f: Path) -> str:
+        mark = " (the default of --rules)" if f == DEFAULT_RULES else ""
+        return f"  {f.relative_to(root).as_posix():<{width}}  {leading_sentence(f)}{mark}"
+
+    return ([f"rule files in {root}:"] + [row(f) for f in rules]
+            + ["evidence examples (semmap rules query FILE --evidence EXAMPLE):"]
+            + [row(f) for f in examples]
+            + [f"model file: {DEFAULT_MODEL} (the default of --model)",
+               "copy one, edit the copy, pass it with --rules FILE or --model FILE"])
+
+
+def leading_sentence(path: Path, limit: int = 100) -> str:
+    """The first sentence of the comment lines that open a rule file (at most ``limit``
+    characters), or "" when it opens with none.
+
+    >>> import tempfile
+    >>> f = Path(tempfile.mkdtemp()) / "r.lp"
+    >>> _ = f.write_text("% Rooms are small. Halls are big.\\n% more\\nroom(1).\\n")
+    >>> leading_sentence(f)
+    'Rooms are small.'
+    """
+    words = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("%"):
+            break
+        words.extend(line.lstrip("%").split())
+    text = " ".join(words)
+    end = text.find(". ")
+    text = text if end < 0 else text[:end + 1]
+    return text if len(text) <= limit else text[:limit - 3].rstrip() + "..."
+
+
+def _list(args) -> int:
+    print("\n".join(shipped_listing()))
+    return 0
 
 
 def _query(args) -> int:
