@@ -35,3 +35,21 @@ def test_bad_text_is_one_argparse_error(parse, text, message):
     with pytest.raises(argparse.ArgumentTypeError) as err:
         parse(text)
     assert str(err.value) == message
+
+
+@pytest.mark.parametrize("text", ["-2e1", "-2.", "-2.5E-1", "-.5", "-3"])
+def test_negative_numbers_in_every_spelling_are_arguments_not_options(text):
+    from semmap_pp.cli import build_parser
+
+    args = build_parser().parse_args(["edit", "m.yaml", "w.json", "--out", "o", "--cut", "1", text,
+                                      "2", "3", "4", "--wall", "2", "5", text])
+    assert [(e.kind, e.args) for e in args.edits] == [("cut", ("1", text, "2", "3", "4")),
+                                                      ("wall", ("2", "5", text))]
+
+
+@pytest.mark.parametrize("text", ["-x", "-2x", "--2e1", "-e1"])
+def test_what_is_no_number_is_still_an_unknown_option(text, capsys):
+    from semmap_pp.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["edit", "m.yaml", "w.json", "--out", "o", "--wall", "2", "5", text])

@@ -17,14 +17,30 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import sys
 
 from semmap_pp import __version__
 from semmap_pp.errors import SemmapError
 
 
+#: a negative number as an argument: argparse's own test takes ``-2``, ``-2.5`` and ``-.5`` only,
+#: and reads ``-2e1`` or ``-2.`` as an unknown option (then "expected 5 arguments")
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, reading every negative number as one (:data:`NEGATIVE_NUMBER`): map
+    coordinates in metres are often negative. Sub-commands' parsers are of this class too
+    (``add_subparsers`` makes them of the parent's class)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="semmap",
         description="Abstract semantic maps (rooms, corridors, halls, doors) from ROS occupancy grids.",
     )
