@@ -39,7 +39,6 @@ from semmap_pp.posterior import Posterior
 from semmap_pp.resources import DEFAULT_RULES
 
 
-
 @dataclass(frozen=True)
 class Inputs:
     """Everything read from disk, validated, before any sampling."""
