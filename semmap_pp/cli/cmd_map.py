@@ -32,7 +32,8 @@ def add_target_options(p: argparse.ArgumentParser) -> None:
     """``--rules``, ``--model``, ``--roi``: what the target of a run on a map is made of (``map``,
     ``score``, ``edit``, ``stability``; read by :func:`target_inputs`)."""
     p.add_argument("--rules", metavar="FILE", default=None,
-                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge)")
+                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge; "
+                        "`semmap rules list` shows where the shipped ones are)")
     p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
     p.add_argument("--roi", metavar="MASK", default=None,
                    help="region-of-interest mask image for the CPR (default: the known part, closed)")
