@@ -76,6 +76,21 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
     return Inputs(grid, model, rules, frame, roi, roi_name, tuple(n for n in (outside_note, off_axis) if n))
 
 
+def ids_text(record: dict) -> str:
+    """One line on the unit ids carried from an earlier world.json (``SemanticMap.id_record``).
+
+    >>> ids_text({"from": "old/world.json", "next": 23, "carried": [1, 2, 4], "new": [21, 22], "gone": [3]})
+    'unit ids from old/world.json: 3 carried, 2 new (21, 22), 1 gone (3); the next new id is 23'
+    """
+    def ids(values):
+        shown = ", ".join(str(v) for v in values[:12])
+        return f" ({shown}{', ...' if len(values) > 12 else ''})" if values else ""
+
+    return (f"unit ids from {record['from']}: {len(record['carried'])} carried, "
+            f"{len(record['new'])} new{ids(record['new'])}, {len(record['gone'])} gone"
+            f"{ids(record['gone'])}; the next new id is {record['next']}")
+
+
 def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> None:
     """Refuse a model and map that cannot run together, before any work array is built.
 
@@ -348,7 +363,7 @@ def data_start_world(inputs: Inputs) -> wm.World:
 
 def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,
             budget: float | None = None, resume=None, starts: list | None = None,
-            base_start: wm.World | None = None) -> MapRun:
+            base_start: wm.World | None = None, previous_ids=None) -> MapRun:
     """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report.
 
     Parameters
@@ -368,6 +383,9 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     base_start : World, optional
         :func:`data_start_world` of ``inputs``, made earlier (it does not depend on the seed:
         ``semmap stability`` makes it once for all its seeds); the run is the same as without.
+    previous_ids : semmap_pp.world_file.PreviousIds, optional
+        The units of an earlier world.json whose ids W*'s units carry over where they are the
+        same place (:mod:`semmap_pp.outputs.ids`); W* itself is the same as without.
     """
     from semmap_pp.kernels import data_from_frame, default_mix
     from semmap_pp.kernels.data import model_settings
@@ -435,10 +453,12 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         t_polish, before = time.perf_counter(), post.evaluate(best).total
         best = polish(post, best, data, kernel_settings.polish_rounds)
         polished = (before, time.perf_counter() - t_polish)
-    sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi)
+    sm = semantic_map(inputs.grid, frame, post, best, roi=inputs.roi, previous=previous_ids)
     if polished is not None:            # sm.log_posterior is W*'s, evaluated once
         log(f"W* polished by greedy ascent: log posterior {sm.log_posterior - polished[0]:+.1f} "
             f"in {polished[1]:.1f} s")
+    if sm.id_record is not None:
+        log(ids_text(sm.id_record))
     rate = total_kernels / seconds if seconds > 0 else 0.0
     swallowed = _walls_inside_note(sm, post, model)
     if swallowed:

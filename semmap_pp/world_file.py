@@ -10,12 +10,16 @@ naming the file: not a world.json, written for a map of
 another size or resolution, a unit that is not a rectangle of this map's lattice (the building's
 orientation differs: another map, or a model whose lattice settings changed), or a unit outside
 the lattice or outside the prior's side range.
+
+:func:`read_previous_ids` reads a world.json's units in map-frame metres instead, for a new run on
+a map that has grown since (``semmap map --ids-from FILE``: the units' ids carried over).
 """
 
 from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +28,7 @@ from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
 from semmap_pp.model import MAX_K
 from semmap_pp.prior import rect_faults
+from semmap_pp.outputs.ids import MAX_ID
 from semmap_pp.outputs.world_json import FORMAT
 
 #: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
@@ -145,3 +150,67 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
                                     f"max_unit_side_m)")
         rects.append((key, rect))
     return rects
+
+
+@dataclass(frozen=True)
+class PreviousIds:
+    """The units of an earlier world.json in map-frame metres, whose ids a new run carries over
+    (``semmap map --ids-from FILE``, :func:`semmap_pp.outputs.ids.carry_ids`)."""
+
+    path: Path
+    ids: tuple[int, ...]
+    corners_m: np.ndarray      # (n, 4, 2) each unit's ``vertices_m``
+    next_id: int               # the first id the file's numbering never used
+
+
+def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
+    """The units of the world.json at ``path`` with their ids and corners in metres.
+
+    Unlike :func:`read_world_units` it does not ask for the same map: a SLAM map grows between
+    updates (size and origin change, the ``map`` frame stays), so units are read in metres. Each
+    unit needs an integer ``id`` of at least 1, unique in the file, and four finite ``vertices_m``;
+    the next id is the file's own ``ids.next`` when it carries one (ids that went away are not
+    given again), else its largest id + 1. Anything else is one :class:`SemmapError` naming the
+    file. Exterior units are not read: their ids are numbered afresh in every file.
+    """
+    from semmap_pp.evaluate.io import read_json
+
+    p = Path(path)
+    if p.exists() and not p.is_file():
+        raise SemmapError(path, "not a regular file")
+    if p.exists() and p.stat().st_size > MAX_BYTES:
+        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json "
+                                f"(at most {MAX_BYTES})")
+    doc = read_json(path)
+    if doc.get("format") != FORMAT:
+        raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
+    units = doc.get("units", [])
+    if not isinstance(units, list):
+        raise SemmapError(path, "'units' must be a list")
+    ids, corners = [], []
+    for i, u in enumerate(units):
+        uid = u.get("id") if isinstance(u, dict) else None
+        if isinstance(uid, bool) or not isinstance(uid, int) or not 1 <= uid <= MAX_ID:
+            raise SemmapError(path, f"unit {i + 1} of the list: 'id' must be an integer from 1 to "
+                                    f"{MAX_ID}, got {_brief(uid)}")
+        if uid in ids:
+            raise SemmapError(path, f"unit id {uid} is used twice")
+        v = u.get("vertices_m")
+        try:
+            arr = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            arr = None
+        if arr is None or arr.shape != (4, 2) or not np.all(np.isfinite(arr)):
+            raise SemmapError(path, f"unit {uid}: 'vertices_m' must be four [x, y] numbers")
+        ids.append(uid)
+        corners.append(arr)
+    nxt = max(ids, default=0) + 1
+    listed = doc.get("ids")
+    if isinstance(listed, dict) and "next" in listed:
+        given = listed["next"]
+        if isinstance(given, bool) or not isinstance(given, int) or not 1 <= given <= MAX_ID:
+            raise SemmapError(path, f"ids.next must be an integer from 1 to {MAX_ID}, got {_brief(given)}")
+        nxt = max(nxt, given)
+    if nxt > MAX_ID:
+        raise SemmapError(path, f"no unit id is left after {MAX_ID} (labels.png holds 16-bit ids)")
+    return PreviousIds(p, tuple(ids), np.asarray(corners, np.float64).reshape(-1, 4, 2), nxt)

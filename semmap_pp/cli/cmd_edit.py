@@ -71,6 +71,9 @@ def register(subparsers) -> None:
     p.add_argument("--snap", type=non_negative_float, default=SNAP_M, metavar="M",
                    help=f"move each wall of the edited units to its best position within M metres "
                         f"(default {SNAP_M}; 0 keeps the walls where the edits put them)")
+    p.add_argument("--ids-from", type=Path, metavar="WORLD_JSON",
+                   help="number the units as this world.json does where they are the same place (IoU >= "
+                        "0.5), the others with ids it never used; give WORLD_JSON itself to keep its ids")
     add_target_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     add_map_options(p)
@@ -87,7 +90,7 @@ def run(args) -> int:
     from semmap_pp.outputs.write import write_plan
     from semmap_pp.pipeline import check_out_dir, run_target
     from semmap_pp.world_edit import apply_edits, edit_origins, id_changes
-    from semmap_pp.world_file import pack_world, read_world_units
+    from semmap_pp.world_file import pack_world, read_previous_ids, read_world_units
 
     if not args.edits:
         raise OutputError(args.out, "no edit given (--drop, --merge, --cut, --wall, --add); nothing written")
@@ -96,6 +99,7 @@ def run(args) -> int:
         raise OutputError(args.out, "is the directory of WORLD_JSON: its run's other files (trace.nc, "
                                     "report.html) would not match the edited world; write to another "
                                     "directory")
+    previous = read_previous_ids(args.ids_from) if args.ids_from is not None else None
     rules, inputs = target_inputs(args)
     k_max = inputs.model.prior.k_max
     units = read_world_units(args.world, inputs.frame, inputs.grid)
@@ -109,12 +113,14 @@ def run(args) -> int:
         world = snap_walls(post, world, data_from_frame(inputs.frame, settings),
                            [i for i, (_, _, changed) in enumerate(edited) if changed], reach=reach)
     terms = post.evaluate(world)
-    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms)
+    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms, previous=previous)
     rows = [{"world": str(args.world), **score_world(inputs, post, before)},
             {"world": str(args.out / "world.json"), **scores_of(sm, terms)}]
     doc = world_dict(sm, rules=rules.name, model=inputs.model.path.name, seed=None, roi_name=inputs.roi_name)
     ids = id_changes(edited, edit_origins(args.edits), sm.slot_ids, sm.exterior_ids,
                      {s: TYPE_LETTER[sm.type_of(u)] for s, u in sm.slot_ids.items()})
+    if sm.id_record is not None:
+        ids = carried_rows(ids, sm.id_record)
     doc["edited"] = {"from": str(args.world), "edits": [str(e) for e in args.edits], "snap_m": args.snap,
                      "ids": ids}
     args.out.mkdir(parents=True, exist_ok=True)
@@ -124,14 +130,37 @@ def run(args) -> int:
     print_scores(args, rules, inputs, rows, extra={"ids": ids})
     if not args.json:
         kept = {r["was"] for r in ids}
-        print(ids_text(ids, args.out / "world.json", gone=[k for k, _ in units if k not in kept]))
+        print(ids_text(ids, args.out / "world.json", gone=[k for k, _ in units if k not in kept],
+                       carried_from=args.ids_from))
     return 0
 
 
-def ids_text(ids: list[dict], path, gone=()) -> str:
+def carried_rows(ids: list[dict], record: dict) -> list[dict]:
+    """:func:`~semmap_pp.world_edit.id_changes` rows after ``--ids-from``: a unit an edit made
+    that carried an id (the piece of a cut that is most of the unit it came from) continues that
+    unit, so its ``was`` is the id (its ``by`` still names the edit).
+
+    >>> carried_rows([{"was": None, "now": "C1", "by": "--cut 1 0 0 1 1"}, {"was": None, "now": "E21",
+    ...               "by": "--cut 1 0 0 1 1"}, {"was": None, "now": "X1", "by": None}], {"carried": [1]})
+    ... # doctest: +NORMALIZE_WHITESPACE
+    [{'was': '1', 'now': 'C1', 'by': '--cut 1 0 0 1 1'}, {'was': None, 'now': 'E21', 'by': '--cut 1 0 0 1 1'},
+     {'was': None, 'now': 'X1', 'by': None}]
+    """
+    carried = {str(i) for i in record["carried"]}
+    out = []
+    for r in ids:
+        num = r["now"].lstrip("RCHE")
+        if r["was"] is None and not r["now"].startswith("X") and num in carried:
+            r = {**r, "was": num}
+        out.append(r)
+    return out
+
+
+def ids_text(ids: list[dict], path, gone=(), carried_from=None) -> str:
     """The units of the written world.json whose id is not the one they had, the new ones with
     the edit that made them, and the ids ``gone`` (dropped, merged away or cut); ``semmap edit``
-    prints it after the scores.
+    prints it after the scores. ``carried_from``: the world.json the ids were carried from
+    (``--ids-from``), named in the heading.
 
     >>> print(ids_text([{"was": None, "now": "R1", "by": "--add 1 2 3 4"}, {"was": "1", "now": "C2", "by": None},
     ...                 {"was": "3", "now": "R3", "by": None}], "w.json", gone=["2"]))
@@ -141,7 +170,9 @@ def ids_text(ids: list[dict], path, gone=()) -> str:
       gone: 2
       every other unit keeps its id
     """
-    lines = [f"ids in {path} (each world.json numbers its units afresh, in reading order):"]
+    how = ("each world.json numbers its units afresh, in reading order" if carried_from is None
+           else f"ids carried from {carried_from} where a unit is the same place")
+    lines = [f"ids in {path} ({how}):"]
     kept = [r for r in ids if r["was"] is not None]
     moved = [f"{r['was']} -> {r['now']}" for r in kept if r["was"] != r["now"].lstrip("RCHE")]
     line = ""

@@ -80,6 +80,10 @@ def register(subparsers) -> None:
                         "with --tune 0 the paper's Fig. 7)")
     p.add_argument("--resume", type=Path, metavar="DIR",
                    help="continue the run in DIR (its resume.npz): the chains go on and draws are appended")
+    p.add_argument("--ids-from", type=Path, metavar="WORLD_JSON",
+                   help="number W*'s units as this earlier world.json does where they are the same place "
+                        "(rectangles overlapping by IoU >= 0.5 in map-frame metres; the map may have grown "
+                        "since), the other units with ids it never used (also with --resume)")
     p.add_argument("--progress", choices=("auto", "rich", "plain", "none"), default="auto",
                    help="live progress on stderr (auto: rich on a terminal, plain lines otherwise)")
     p.add_argument("--progress-every", type=_seconds, default=5.0, metavar="SECONDS",
@@ -173,6 +177,11 @@ def run(args) -> int:
             from semmap_pp.world_file import read_start_world
             starts = [read_start_world(args.start, inputs.frame, inputs.grid, inputs.model.prior.k_max)]
 
+    previous_ids = None
+    if args.ids_from is not None:   # read before sampling: a bad file costs no run
+        from semmap_pp.world_file import read_previous_ids
+        previous_ids = read_previous_ids(args.ids_from)
+
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
@@ -189,7 +198,8 @@ def run(args) -> int:
         with Progress(settings.chains, left, budget=args.budget, mode=args.progress,
                       every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
-                             stop=stop, budget=args.budget, resume=state, starts=starts)
+                             stop=stop, budget=args.budget, resume=state, starts=starts,
+                             previous_ids=previous_ids)
     except SemmapError as exc:
         if stop():
             log(f"semmap: interrupted: nothing written ({exc.message})")

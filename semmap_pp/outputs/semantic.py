@@ -2,7 +2,8 @@
 
 :func:`semantic_map` derives everything once (doors, objects, adjacency, unexplored areas, cell states,
 type marginals, CPR) and numbers the units 1..n in reading order (by the image row, then column, of
-their centres), so ids do not depend on which slot a unit happened to occupy.
+their centres), so ids do not depend on which slot a unit happened to occupy; or, given the units
+of an earlier world.json, carries their ids over (:mod:`semmap_pp.outputs.ids`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ class SemanticMap:
     cpr : float (NaN when the ROI is empty)
     log_posterior : float
     exterior_ids : dict slot -> exterior id (1..m) of the exterior units (not in ``slot_ids``)
+    id_record : dict or None, how the unit ids were carried from an earlier world.json
+        (:func:`semmap_pp.outputs.ids.carry_ids`; world.json's ``ids``), None when numbered 1..n
     """
 
     grid: object
@@ -50,6 +53,7 @@ class SemanticMap:
     cpr: float
     log_posterior: float
     exterior_ids: dict = field(default_factory=dict)
+    id_record: dict | None = None
 
     @property
     def unit_ids(self) -> list[int]:
@@ -119,14 +123,32 @@ def label_lattice(shape, world: W.World, slot_ids: dict, wall: int) -> np.ndarra
     return labels
 
 
+def unit_corners_m(frame, world: W.World, slots) -> dict:
+    """slot -> (4, 2) corners of the unit's rectangle in map-frame metres (world.json's
+    ``vertices_m`` before rounding)."""
+    out = {}
+    for s in slots:
+        v = frame.rect_vertices_px(world.rects[int(s)])
+        x, y = frame.image_to_metres(v[:, 0], v[:, 1])
+        out[int(s)] = np.stack([np.atleast_1d(x), np.atleast_1d(y)], axis=1)
+    return out
+
+
 def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | None = None,
-                 terms=None) -> SemanticMap:
+                 terms=None, previous=None) -> SemanticMap:
     """Derive the semantic map of ``world`` (types re-assigned by ``posterior``); ``terms``:
-    ``posterior.evaluate(world)`` when the caller has it already."""
+    ``posterior.evaluate(world)`` when the caller has it already; ``previous``: the units of an
+    earlier world.json (:func:`semmap_pp.world_file.read_previous_ids`) whose ids to carry over,
+    instead of numbering the units 1..n."""
+    from semmap_pp.outputs.ids import carry_ids
+
     terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world
     derived = derive_world(frame, world)
-    slot_ids = number_units(frame, world, derived.slots)
+    slot_ids, id_record = number_units(frame, world, derived.slots), None
+    if previous is not None:
+        order = sorted(slot_ids, key=slot_ids.get)
+        slot_ids, id_record = carry_ids(unit_corners_m(frame, world, order), order, previous)
     exterior_ids = number_units(frame, world, [e.slot for e in derived.exterior])
     result = posterior.knowledge_result(world) if W.n_units(world) else None
     marginals = {}
@@ -141,7 +163,7 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
                                                              grid.resolution))
     rate, _ = cpr(grid.classes, states_img, roi)
     return SemanticMap(grid, frame, world, slot_ids, derived, marginals, labels_lat, states_img,
-                       labels_img, roi, float(rate), float(terms.total), exterior_ids)
+                       labels_img, roi, float(rate), float(terms.total), exterior_ids, id_record)
 
 
 __all__ = ["SemanticMap", "semantic_map", "number_units", "label_lattice",

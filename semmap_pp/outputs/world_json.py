@@ -145,6 +145,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         "rules": rules,
         "model": model,
         "seed": seed,
+        **({"ids": sm.id_record} if sm.id_record is not None else {}),
         "generator": f"semmap_pp {__version__}",
     }
 

@@ -1,0 +1,130 @@
+"""Unit ids carried over from an earlier world.json (``semmap map --ids-from FILE``).
+
+A robot's map grows as it explores, and its semantic map is built again. Each world.json numbers
+its units afresh, in reading order (:func:`semmap_pp.outputs.semantic.number_units`), so unit 7
+of one run need not be unit 7 of the next. A planner or a person who has named "room 7" wants it
+to stay 7. Given the units of an earlier world.json in map-frame metres
+(:func:`semmap_pp.world_file.read_previous_ids`), :func:`carry_ids` gives each unit of a new
+world the id of the earlier unit it overlaps with an intersection over union of at least
+:data:`MIN_IOU` (one to one, best pairs first), and every other unit an id that the earlier file
+never used, in reading order. An id therefore never names two different places across updates:
+the earlier file's ``ids.next`` (the first id it left unused) is honoured, so an id that went
+away is not given again.
+
+The overlap is measured between the units' rectangles in the map frame (convex polygons, exact:
+:func:`overlap_iou`), so the two maps may differ in size, origin and orientation estimate, as a
+SLAM map does between updates while its ``map`` frame stays put.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from semmap_pp.errors import SemmapError
+
+#: The largest unit id labels.png can hold (16-bit, 0 = no unit); as world_file.MAX_ID.
+MAX_ID = 2 ** 16 - 1
+
+#: Two units are the same place when their rectangles' intersection over union reaches this (as
+#: ``semmap stability`` and the evaluation match units). At 0.5 a unit matches at most one other
+#: unit of a world whose units do not overlap beyond their shared wall bands.
+MIN_IOU = 0.5
+
+
+def _ccw(poly: np.ndarray) -> np.ndarray:
+    """``poly`` with its vertices counter-clockwise (positive signed area)."""
+    return poly if signed_area(poly) >= 0 else poly[::-1]
+
+
+def signed_area(poly: np.ndarray) -> float:
+    """Shoelace area of a polygon, positive when its vertices run counter-clockwise.
+
+    >>> signed_area(np.array([[0, 0], [2, 0], [2, 1], [0, 1]], float))
+    2.0
+    """
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def clip_convex(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
+    """The intersection of two convex polygons (Sutherland–Hodgman), as a polygon (possibly empty).
+
+    >>> a = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)
+    >>> abs(signed_area(clip_convex(a, a + 1.0)))
+    1.0
+    """
+    out = _ccw(np.asarray(subject, float))
+    clip = _ccw(np.asarray(clip, float))
+    for i in range(len(clip)):
+        if len(out) == 0:
+            break
+        a, b = clip[i], clip[(i + 1) % len(clip)]
+        edge = b - a
+        side = edge[0] * (out[:, 1] - a[1]) - edge[1] * (out[:, 0] - a[0])   # >= 0: inside
+        kept = []
+        for j in range(len(out)):
+            p, q = out[j], out[(j + 1) % len(out)]
+            sp, sq = side[j], side[(j + 1) % len(out)]
+            if sp >= 0:
+                kept.append(p)
+            if (sp >= 0) != (sq >= 0):
+                kept.append(p + (q - p) * (sp / (sp - sq)))
+        out = np.asarray(kept, float).reshape(-1, 2)
+    return out
+
+
+def overlap_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two convex polygons (0 when either has no area).
+
+    >>> a = np.array([[0, 0], [2, 0], [2, 1], [0, 1]], float)
+    >>> round(overlap_iou(a, a + [1.0, 0.0]), 6)
+    0.333333
+    """
+    area_a, area_b = abs(signed_area(a)), abs(signed_area(b))
+    if area_a <= 0 or area_b <= 0:
+        return 0.0
+    inter = clip_convex(a, b)
+    common = abs(signed_area(inter)) if len(inter) >= 3 else 0.0
+    return common / (area_a + area_b - common)
+
+
+def carry_ids(corners_m: dict, order: list, previous, min_iou: float = MIN_IOU) -> tuple[dict, dict]:
+    """Unit ids for the units ``corners_m`` (slot -> (4, 2) corners in map-frame metres), carried
+    from ``previous`` (:class:`semmap_pp.world_file.PreviousIds`).
+
+    Pairs of a new and an earlier unit with IoU at least ``min_iou`` are matched best first, each
+    unit at most once; a matched unit takes the earlier id. The others get ids from
+    ``previous.next_id`` on, in ``order`` (the slots in reading order).
+
+    Returns ``(slot_ids, record)``: slot -> id, and the record world.json keeps under ``ids``:
+    the file, the next id never used, and which ids were carried, are new and are gone.
+    """
+    old = np.asarray(previous.corners_m, float).reshape(-1, 4, 2)
+    lo, hi = old.min(axis=1), old.max(axis=1)
+    pairs = []
+    for s, corners in corners_m.items():
+        c = np.asarray(corners, float)
+        near = np.flatnonzero(np.all(lo < c.max(axis=0), axis=1) & np.all(hi > c.min(axis=0), axis=1))
+        for k in near.tolist():
+            iou = overlap_iou(c, old[k])
+            if iou >= min_iou:
+                pairs.append((-iou, previous.ids[k], s))
+    slot_ids, taken = {}, set()
+    for _, uid, s in sorted(pairs):
+        if s not in slot_ids and uid not in taken:
+            slot_ids[s] = uid
+            taken.add(uid)
+    carried = sorted(taken)
+    nxt = int(previous.next_id)
+    new = []
+    for s in order:
+        if s not in slot_ids:
+            slot_ids[s] = nxt
+            new.append(nxt)
+            nxt += 1
+    if nxt - 1 > MAX_ID:
+        raise SemmapError(previous.path, f"the new units would need ids beyond {MAX_ID} (labels.png "
+                                         "holds 16-bit ids); number them afresh (no --ids-from)")
+    record = {"from": str(previous.path), "next": nxt, "carried": carried, "new": new,
+              "gone": sorted(set(previous.ids) - taken)}
+    return slot_ids, record
