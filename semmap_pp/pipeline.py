@@ -35,6 +35,7 @@ from semmap_pp.init import dispersed_world, start_world
 from semmap_pp.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
 from semmap_pp.model import Model, load_model
 from semmap_pp.outputs import SemanticMap, semantic_map
+from semmap_pp.outputs.ids import carried_text
 from semmap_pp.posterior import Posterior
 from semmap_pp.resources import DEFAULT_RULES
 
@@ -74,21 +75,6 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
         roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
         roi_name = "default"
     return Inputs(grid, model, rules, frame, roi, roi_name, tuple(n for n in (outside_note, off_axis) if n))
-
-
-def ids_text(record: dict) -> str:
-    """One line on the unit ids carried from an earlier world.json (``SemanticMap.id_record``).
-
-    >>> ids_text({"from": "old/world.json", "next": 23, "carried": [1, 2, 4], "new": [21, 22], "gone": [3]})
-    'unit ids from old/world.json: 3 carried, 2 new (21, 22), 1 gone (3); the next new id is 23'
-    """
-    def ids(values):
-        shown = ", ".join(str(v) for v in values[:12])
-        return f" ({shown}{', ...' if len(values) > 12 else ''})" if values else ""
-
-    return (f"unit ids from {record['from']}: {len(record['carried'])} carried, "
-            f"{len(record['new'])} new{ids(record['new'])}, {len(record['gone'])} gone"
-            f"{ids(record['gone'])}; the next new id is {record['next']}")
 
 
 def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> None:
@@ -458,7 +444,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         log(f"W* polished by greedy ascent: log posterior {sm.log_posterior - polished[0]:+.1f} "
             f"in {polished[1]:.1f} s")
     if sm.id_record is not None:
-        log(ids_text(sm.id_record))
+        log(carried_text(sm.id_record))
     rate = total_kernels / seconds if seconds > 0 else 0.0
     swallowed = _walls_inside_note(sm, post, model)
     if swallowed:

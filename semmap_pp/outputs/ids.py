@@ -128,3 +128,18 @@ def carry_ids(corners_m: dict, order: list, previous, min_iou: float = MIN_IOU) 
     record = {"from": str(previous.path), "next": nxt, "carried": carried, "new": new,
               "gone": sorted(set(previous.ids) - taken)}
     return slot_ids, record
+
+
+def carried_text(record: dict) -> str:
+    """One line on the unit ids carried from an earlier world.json (``SemanticMap.id_record``).
+
+    >>> carried_text({"from": "old/world.json", "next": 23, "carried": [1, 2, 4], "new": [21, 22], "gone": [3]})
+    'unit ids from old/world.json: 3 carried, 2 new (21, 22), 1 gone (3); the next new id is 23'
+    """
+    def ids(values):
+        shown = ", ".join(str(v) for v in values[:12])
+        return f" ({shown}{', ...' if len(values) > 12 else ''})" if values else ""
+
+    return (f"unit ids from {record['from']}: {len(record['carried'])} carried, "
+            f"{len(record['new'])} new{ids(record['new'])}, {len(record['gone'])} gone"
+            f"{ids(record['gone'])}; the next new id is {record['next']}")
