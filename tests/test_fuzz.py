@@ -100,10 +100,13 @@ def _seed_world() -> bytes:
     from semmap_pp.outputs.world_json import FORMAT
     grid, frame = _world_map()
     r0, c0 = frame.crop[:2] if frame.crop is not None else (0, 0)
-    unit = frame.rect_vertices_px((r0 + 2, c0 + 2, r0 + 30, c0 + 40)).round(3).tolist()
+    px = frame.rect_vertices_px((r0 + 2, c0 + 2, r0 + 30, c0 + 40))
+    unit = px.round(3).tolist()
+    metres = np.stack(frame.image_to_metres(px[:, 0], px[:, 1]), axis=1).round(4).tolist()
     doc = {"format": FORMAT, "map": {"width": grid.width, "height": grid.height, "resolution": 0.05,
                                      "orientation_deg": 0.0},
-           "units": [{"id": 1, "type": "room", "vertices_px": unit}], "exterior": []}
+           "units": [{"id": 1, "type": "room", "vertices_px": unit, "vertices_m": metres}], "exterior": [],
+           "ids": {"next": 2}}
     return json.dumps(doc).encode()
 
 
@@ -148,7 +151,7 @@ YAML_TOKENS = tuple(t.encode() for t in (
 WORLD_TOKENS = tuple(t.encode() for t in (
     "{", "}", "[", "]", ",", ":", '"', "null", "true", "NaN", "Infinity", "-Infinity", "1e400",
     "-1e400", "9" * 40, "-0", '"units"', '"exterior"', '"vertices_px"', '"map"', '"format"',
-    '"width"', "[[0,0],[1,0],[1,1],[0,1]]", "[[1e308,0],[0,1e308],[1,1],[0,1]]", "\\u0000", "\n"))
+    '"width"', '"vertices_m"', '"ids"', '"next"', "65535", "[[0,0],[1,0],[1,1],[0,1]]", "[[1e308,0],[0,1e308],[1,1],[0,1]]", "\\u0000", "\n"))
 MODEL_TOKENS = tuple(t.encode() for t in (
     "nan", "inf", "-inf", "1e308", "-1", "0", "99999999999999999999", "true", '"x"', "[", "]", "{",
     "}", "=", "\n", "[sensor]", "[prior]", "k_max = ", "psi = ", "weights = { add_remove = -1 }"))
@@ -211,9 +214,11 @@ def check_model_bytes(data: bytes) -> None:
 
 
 def check_world_bytes(data: bytes) -> None:
-    """Read ``data`` as a world.json onto a small map's lattice (``semmap map --start``)."""
+    """Read ``data`` as a world.json onto a small map's lattice (``semmap map --start``), and in
+    metres as the earlier world of ``--ids-from``, whose ids then number a one-unit world."""
     from semmap_pp import world as wm
-    from semmap_pp.world_file import read_start_world
+    from semmap_pp.outputs.ids import MAX_ID, carry_ids
+    from semmap_pp.world_file import read_previous_ids, read_start_world
 
     COUNT["cases"] += 1
     grid, frame = _world_map()
@@ -221,10 +226,23 @@ def check_world_bytes(data: bytes) -> None:
         (Path(d) / "world.json").write_bytes(data)
         try:
             world = read_start_world(Path(d) / "world.json", frame, grid, 8)
+            assert wm.is_valid(world, frame.shape, frame.cells.min_side)
+        except SemmapError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 2000
+        try:
+            previous = read_previous_ids(Path(d) / "world.json")
         except SemmapError as exc:
             assert "\n" not in str(exc) and len(str(exc)) < 2000
             return
-        assert wm.is_valid(world, frame.shape, frame.cells.min_side)
+        corners = np.asarray([[0, 0], [2, 0], [2, 1.5], [0, 1.5]], float)
+        try:
+            ids, record = carry_ids({0: corners, 1: corners + 5}, [0, 1], previous)
+        except SemmapError as exc:     # no id left: one line too
+            assert "\n" not in str(exc) and "16-bit" in str(exc)
+            return
+        assert sorted(ids) == [0, 1] and len(set(ids.values())) == 2
+        assert all(1 <= v <= MAX_ID for v in ids.values()) and record["next"] > max(record["new"], default=0)
+        assert set(record["carried"]) <= set(previous.ids) and not set(record["new"]) & set(previous.ids)
 
 
 # --- the targets with their inputs (bench/fuzz.py runs the same for longer) ----------------------
@@ -247,7 +265,9 @@ def _yaml_doc(doc: dict) -> tuple[bytes]:
 WORLD_PATHS = st.sampled_from([("format",), ("map",), ("map", "width"), ("map", "height"),
                                ("map", "resolution"), ("units",), ("exterior",), ("units", 0),
                                ("units", 0, "vertices_px"), ("units", 0, "vertices_px", 0),
-                               ("units", 0, "vertices_px", 0, 1), ("units", 0, "id")])
+                               ("units", 0, "vertices_px", 0, 1), ("units", 0, "id"),
+                               ("units", 0, "vertices_m"), ("units", 0, "vertices_m", 2, 0), ("ids",),
+                               ("ids", "next")])
 
 
 def _world_doc(edits) -> tuple[bytes]:
