@@ -6,7 +6,9 @@ they are: an installed package keeps them inside itself)."""
 from __future__ import annotations
 
 import json
+import re
 import sys
+import textwrap
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
@@ -109,7 +111,9 @@ def shipped_listing() -> list[str]:
 
     def row(f: Path) -> str:
         mark = " (the default of --rules)" if f == DEFAULT_RULES else ""
-        return f"  {f.relative_to(root).as_posix():<{width}}  {leading_sentence(f)}{mark}"
+        lines = textwrap.wrap(leading_sentence(f) + mark, max(40, 96 - width)) or [""]
+        pad = " " * (width + 4)
+        return f"  {f.relative_to(root).as_posix():<{width}}  " + f"\n{pad}".join(lines)
 
     return ([f"rule files in {root}:"] + [row(f) for f in rules]
             + ["evidence examples (semmap rules query FILE --evidence EXAMPLE):"]
@@ -118,15 +122,15 @@ def shipped_listing() -> list[str]:
                "copy one, edit the copy, pass it with --rules FILE or --model FILE"])
 
 
-def leading_sentence(path: Path, limit: int = 100) -> str:
+def leading_sentence(path: Path, limit: int = 400) -> str:
     """The first sentence of the comment lines that open a rule file (at most ``limit``
     characters), or "" when it opens with none.
 
     >>> import tempfile
     >>> f = Path(tempfile.mkdtemp()) / "r.lp"
-    >>> _ = f.write_text("% Rooms are small. Halls are big.\\n% more\\nroom(1).\\n")
+    >>> _ = f.write_text("% Rooms are small (Fig. 5b). Halls are big.\\n% more\\nroom(1).\\n")
     >>> leading_sentence(f)
-    'Rooms are small.'
+    'Rooms are small (Fig. 5b).'
     """
     words = []
     for line in path.read_text(encoding="utf-8").splitlines():
@@ -134,8 +138,8 @@ def leading_sentence(path: Path, limit: int = 100) -> str:
             break
         words.extend(line.lstrip("%").split())
     text = " ".join(words)
-    end = text.find(". ")
-    text = text if end < 0 else text[:end + 1]
+    end = re.search(r"\.\s+(?=[A-Z])", text)     # a full stop before a capital: "Fig. 5b" goes on
+    text = text if end is None else text[:end.start() + 1]
     return text if len(text) <= limit else text[:limit - 3].rstrip() + "..."
 
 
