@@ -164,7 +164,8 @@ class PreviousIds:
 
 
 def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
-    """The units of the world.json at ``path`` with their ids and corners in metres.
+    """The units of the world.json at ``path`` (or in the folder ``path``, an earlier run's) with
+    their ids and corners in metres.
 
     Unlike :func:`read_world_units` it does not ask for the same map: a SLAM map grows between
     updates (size and origin change, the ``map`` frame stays), so units are read in metres. Each
@@ -176,8 +177,10 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
     from semmap_pp.evaluate.io import read_json
 
     p = Path(path)
+    if p.is_dir() and (p / "world.json").is_file():   # an earlier run's folder
+        p = path = p / "world.json"
     if p.exists() and not p.is_file():
-        raise SemmapError(path, "not a regular file")
+        raise SemmapError(path, "not a regular file (a world.json, or a run's folder that holds one)")
     if p.exists() and p.stat().st_size > MAX_BYTES:
         raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json "
                                 f"(at most {MAX_BYTES})")

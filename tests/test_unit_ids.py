@@ -119,6 +119,11 @@ def test_the_next_id_honours_the_files_own(tmp_path):
     prev = read_previous_ids(path)
     assert prev.ids == (3, 1) and prev.next_id == 9 and prev.corners_m.shape == (2, 4, 2)
     assert read_previous_ids(world_json(tmp_path, [{"id": 3, "vertices_m": SQUARE}], ids={"next": 2})).next_id == 4
+    (tmp_path / "run").mkdir()
+    (tmp_path / "w.json").rename(tmp_path / "run" / "world.json")
+    assert read_previous_ids(tmp_path / "run").path == tmp_path / "run" / "world.json"   # a run's folder
+    with pytest.raises(SemmapError, match="not a regular file"):
+        read_previous_ids(tmp_path)
     (tmp_path / "x.json").write_text('{"format": "other"}')
     with pytest.raises(SemmapError, match="not a world.json of semmap_pp"):
         read_previous_ids(tmp_path / "x.json")

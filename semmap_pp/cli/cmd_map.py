@@ -83,7 +83,7 @@ def register(subparsers) -> None:
     p.add_argument("--ids-from", type=Path, metavar="WORLD_JSON",
                    help="number W*'s units as this earlier world.json does where they are the same place "
                         "(rectangles overlapping by IoU >= 0.5 in map-frame metres; the map may have grown "
-                        "since), the other units with ids it never used (also with --resume)")
+                        "since), the other units with ids it never used; or an earlier run's folder (also with --resume)")
     p.add_argument("--progress", choices=("auto", "rich", "plain", "none"), default="auto",
                    help="live progress on stderr (auto: rich on a terminal, plain lines otherwise)")
     p.add_argument("--progress-every", type=_seconds, default=5.0, metavar="SECONDS",
