@@ -221,3 +221,19 @@ def test_the_larger_piece_of_a_cut_keeps_the_units_id(intel_corner_wstar, tmp_pa
     assert len(made) == 1 and int(made[0]["now"].lstrip("RCHE")) == max(u["id"] for u in old["units"]) + 1
     assert new["ids"]["gone"] == [] and new["ids"]["new"] == [int(made[0]["now"].lstrip("RCHE"))]
     assert "gone:" not in text and f"new {made[0]['now']}: --cut" in text
+
+
+def test_a_resumed_run_keeps_the_ids_its_run_carried(intel_corner_wstar, grown, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["map", str(grown), "--out", str(out), "--seed", "3", *FAST_RUN,
+                 "--ids-from", str(intel_corner_wstar)]) == 0
+    first = json.loads((out / "world.json").read_text())
+    capsys.readouterr()
+    assert main(["map", "--resume", str(out), "--draws", "2", "--progress", "none"]) == 0
+    assert f"unit ids from {out / 'world.json'}" in capsys.readouterr().err
+    again = json.loads((out / "world.json").read_text())
+    assert again["ids"]["next"] >= first["ids"]["next"]
+    same = {tuple(map(tuple, u["vertices_m"])): u["id"] for u in first["units"]}
+    for u in again["units"]:          # a unit where it was keeps its id; none takes an id of the first
+        key = tuple(map(tuple, u["vertices_m"]))
+        assert u["id"] == same[key] if key in same else u["id"] >= first["ids"]["next"]

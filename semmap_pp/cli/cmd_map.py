@@ -123,6 +123,20 @@ def _resume_inputs(args):
     return inputs, RunSettings(**values), state, Path(m["rules"]) if m["rules"] else None
 
 
+def carried_ids_source(run_dir: Path) -> Path | None:
+    """``run_dir``'s world.json when its unit ids were carried from an earlier one (it has an
+    ``ids`` object): what ``--resume run_dir`` carries them from, so that the resumed run keeps
+    them; None otherwise (a file that cannot be read is left to the resume's own checks)."""
+    import json
+
+    path = Path(run_dir) / "world.json"
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    return path if isinstance(doc, dict) and isinstance(doc.get("ids"), dict) else None
+
+
 def _install_sigint(stop):
     """Ctrl-C sets ``stop`` (sampling ends cleanly); a second Ctrl-C restores the default."""
 
@@ -147,6 +161,7 @@ def run(args) -> int:
     from semmap_pp.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.resume import write_resume
     from semmap_pp.step import StopFlag
+    from semmap_pp.world_file import read_previous_ids
 
     state, starts = None, None
     if not spread_draws_ok(args.spread_draws or 0):
@@ -177,10 +192,11 @@ def run(args) -> int:
             from semmap_pp.world_file import read_start_world
             starts = [read_start_world(args.start, inputs.frame, inputs.grid, inputs.model.prior.k_max)]
 
-    previous_ids = None
-    if args.ids_from is not None:   # read before sampling: a bad file costs no run
-        from semmap_pp.world_file import read_previous_ids
-        previous_ids = read_previous_ids(args.ids_from)
+    ids_from = args.ids_from
+    if ids_from is None and state is not None:   # a resumed run keeps the ids its world.json carried
+        ids_from = carried_ids_source(args.resume)
+    # read before sampling: a bad file costs no run
+    previous_ids = read_previous_ids(ids_from) if ids_from is not None else None
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
