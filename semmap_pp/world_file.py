@@ -57,15 +57,33 @@ def _brief(x) -> str:
     return text if len(text) <= 24 else text[:20] + "..."
 
 
-def _corners(path, item, name: str) -> np.ndarray:
-    v = item.get("vertices_px") if isinstance(item, dict) else None
+def _corners(path, item, name: str, key: str = "vertices_px") -> np.ndarray:
+    """``item[key]`` as four finite ``[x, y]`` corners, else one error naming ``path`` and ``name``."""
+    v = item.get(key) if isinstance(item, dict) else None
     try:
         arr = np.asarray(v, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):   # an int beyond floats too
         arr = None
     if arr is None or arr.shape != (4, 2) or not np.all(np.isfinite(arr)):
-        raise SemmapError(path, f"{name}: 'vertices_px' must be four [x, y] numbers")
+        raise SemmapError(path, f"{name}: '{key}' must be four [x, y] numbers")
     return arr
+
+
+def _read_world_doc(path, not_file: str = "not a regular file") -> dict:
+    """The top-level object of the world.json at ``path``, refused when it is not a regular
+    file (``not_file`` says so), is larger than :data:`MAX_BYTES`, or is not of :data:`FORMAT`."""
+    from semmap_pp.evaluate.io import read_json
+
+    p = Path(path)
+    if p.exists() and not p.is_file():   # a directory, FIFO or device would fail or block
+        raise SemmapError(path, not_file)
+    if p.exists() and p.stat().st_size > MAX_BYTES:
+        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json "
+                                f"(at most {MAX_BYTES})")
+    doc = read_json(path)
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
+    return doc
 
 
 def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.World:
@@ -99,17 +117,7 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
     file's order, each as ``(key, rect)``: the key is the unit's id as text (``"7"``; ``"X2"`` for
     exterior unit 2), the position in its list when it has none. Checked as
     :func:`read_start_world` says."""
-    from semmap_pp.evaluate.io import read_json
-
-    p = Path(path)
-    if p.exists() and not p.is_file():   # a directory, FIFO or device would fail or block
-        raise SemmapError(path, "not a regular file")
-    if p.exists() and p.stat().st_size > MAX_BYTES:
-        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json "
-                                f"(at most {MAX_BYTES})")
-    doc = read_json(path)
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
+    doc = _read_world_doc(path)
     m = doc.get("map")
     size = (m.get("width"), m.get("height"), m.get("resolution")) if isinstance(m, dict) else None
     here = (grid.width, grid.height, grid.resolution)
@@ -174,19 +182,10 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
     given again), else its largest id + 1. Anything else is one :class:`SemmapError` naming the
     file. Exterior units are not read: their ids are numbered afresh in every file.
     """
-    from semmap_pp.evaluate.io import read_json
-
     p = Path(path)
     if p.is_dir() and (p / "world.json").is_file():   # an earlier run's folder
         p = path = p / "world.json"
-    if p.exists() and not p.is_file():
-        raise SemmapError(path, "not a regular file (a world.json, or a run's folder that holds one)")
-    if p.exists() and p.stat().st_size > MAX_BYTES:
-        raise SemmapError(path, f"{p.stat().st_size} bytes is too large for a world.json "
-                                f"(at most {MAX_BYTES})")
-    doc = read_json(path)
-    if doc.get("format") != FORMAT:
-        raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
+    doc = _read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
     units = doc.get("units", [])
     if not isinstance(units, list):
         raise SemmapError(path, "'units' must be a list")
@@ -198,15 +197,8 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
                                     f"{MAX_ID}, got {_brief(uid)}")
         if uid in ids:
             raise SemmapError(path, f"unit id {uid} is used twice")
-        v = u.get("vertices_m")
-        try:
-            arr = np.asarray(v, dtype=np.float64)
-        except (TypeError, ValueError, OverflowError):
-            arr = None
-        if arr is None or arr.shape != (4, 2) or not np.all(np.isfinite(arr)):
-            raise SemmapError(path, f"unit {uid}: 'vertices_m' must be four [x, y] numbers")
+        corners.append(_corners(path, u, f"unit {uid}", "vertices_m"))
         ids.append(uid)
-        corners.append(arr)
     nxt = max(ids, default=0) + 1
     listed = doc.get("ids")
     if isinstance(listed, dict) and "next" in listed:

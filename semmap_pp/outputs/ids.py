@@ -22,7 +22,7 @@ import numpy as np
 
 from semmap_pp.errors import SemmapError
 
-#: The largest unit id labels.png can hold (16-bit, 0 = no unit); as world_file.MAX_ID.
+#: The largest unit id labels.png can hold (16-bit, 0 = no unit); world_file's reader checks it too.
 MAX_ID = 2 ** 16 - 1
 
 #: Two units are the same place when their rectangles' intersection over union reaches this (as

@@ -123,17 +123,6 @@ def label_lattice(shape, world: W.World, slot_ids: dict, wall: int) -> np.ndarra
     return labels
 
 
-def unit_corners_m(frame, world: W.World, slots) -> dict:
-    """slot -> (4, 2) corners of the unit's rectangle in map-frame metres (world.json's
-    ``vertices_m`` before rounding)."""
-    out = {}
-    for s in slots:
-        v = frame.rect_vertices_px(world.rects[int(s)])
-        x, y = frame.image_to_metres(v[:, 0], v[:, 1])
-        out[int(s)] = np.stack([np.atleast_1d(x), np.atleast_1d(y)], axis=1)
-    return out
-
-
 def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | None = None,
                  terms=None, previous=None) -> SemanticMap:
     """Derive the semantic map of ``world`` (types re-assigned by ``posterior``); ``terms``:
@@ -141,6 +130,7 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
     earlier world.json (:func:`semmap_pp.world_file.read_previous_ids`) whose ids to carry over,
     instead of numbering the units 1..n."""
     from semmap_pp.outputs.ids import carry_ids
+    from semmap_pp.outputs.world_json import rect_corners_m
 
     terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world
@@ -148,7 +138,8 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
     slot_ids, id_record = number_units(frame, world, derived.slots), None
     if previous is not None:
         order = sorted(slot_ids, key=slot_ids.get)
-        slot_ids, id_record = carry_ids(unit_corners_m(frame, world, order), order, previous)
+        corners = {s: rect_corners_m(frame, world.rects[s]) for s in order}   # world.json's vertices_m
+        slot_ids, id_record = carry_ids(corners, order, previous)
     exterior_ids = number_units(frame, world, [e.slot for e in derived.exterior])
     result = posterior.knowledge_result(world) if W.n_units(world) else None
     marginals = {}

@@ -46,11 +46,16 @@ def _box_centre(box) -> tuple[float, float]:
     return (r0 + r1 - 1) / 2.0, (c0 + c1 - 1) / 2.0
 
 
+def rect_corners_m(frame, rect) -> np.ndarray:
+    """(4, 2) corners of a lattice rectangle in map-frame metres, unrounded (``vertices_m``'s)."""
+    return _m(frame, frame.rect_vertices_px(rect))
+
+
 def _rect_geometry(frame, rect, res: float) -> dict:
     """``vertices_px``, ``vertices_m``, ``center_m`` and ``size_m`` of a unit's lattice rectangle."""
     r0, c0, r1, c1 = (int(v) for v in rect)
     vpx = frame.rect_vertices_px(rect)
-    vm = _m(frame, vpx)
+    vm = rect_corners_m(frame, rect)
     return {"vertices_px": [_r(v, 3) for v in vpx], "vertices_m": [_r(v, 4) for v in vm],
             "center_m": _r(vm.mean(axis=0), 4),
             "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)], reverse=True)}
