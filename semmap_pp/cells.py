@@ -26,6 +26,8 @@ WORLD_STATES = ("wall", "free", "object", "unknown")
 
 # Unit types, in the order used by every marginal vector.
 UNIT_TYPES = ("room", "corridor", "hall", "other")
+#: The letter of each type, as overlay.png, graph.png and graph.graphml label units (the paper's Fig. 5c).
+TYPE_LETTER = {"room": "R", "corridor": "C", "hall": "H", "other": "E"}
 
 
 def known_box(classes) -> tuple[int, int, int, int] | None:

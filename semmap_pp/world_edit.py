@@ -31,19 +31,17 @@ world file and the edit. Pure: rectangles in, rectangles out.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from semmap_pp.errors import SemmapError
 from semmap_pp.kernels.split_merge import pieces
+from semmap_pp.places import unit_key
 from semmap_pp.prior import rect_faults
 
 #: The edits and the number of arguments each takes (``None``: one id or more).
 EDITS = {"drop": None, "merge": None, "cut": 5, "wall": 3, "add": 4}
-
-_ID = re.compile(r"^([RCHEX]?)(\d+)$", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -55,19 +53,6 @@ class Edit:
 
     def __str__(self) -> str:
         return f"--{self.kind} {' '.join(self.args)}"
-
-
-def unit_key(text: str) -> str:
-    """The key of a unit id as typed: ``"7"``, ``"R7"``, ``"c7"`` -> ``"7"``; ``"X2"`` -> ``"X2"``
-    (exterior unit 2). Raises ValueError for anything else.
-
-    >>> [unit_key(t) for t in ("7", "R7", "e12", "x2")]
-    ['7', '7', '12', 'X2']
-    """
-    m = _ID.match(text.strip())
-    if not m:
-        raise ValueError(f"{text!r} is not a unit id (7, R7, C7, H7, E7, or X2 for an exterior unit)")
-    return ("X" if m.group(1).upper() == "X" else "") + str(int(m.group(2)))
 
 
 def _number(text: str) -> float:

@@ -40,7 +40,7 @@ MAX_OFF_PX = 1.0
 MAX_BYTES = 256 * 2 ** 20
 
 
-def _finite(x) -> float | None:
+def finite(x) -> float | None:
     """``x`` as a finite float, or None (not a number, a bool, infinite, or an int beyond floats)."""
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         return None
@@ -57,7 +57,7 @@ def _brief(x) -> str:
     return text if len(text) <= 24 else text[:20] + "..."
 
 
-def _corners(path, item, name: str, key: str = "vertices_px") -> np.ndarray:
+def corners(path, item, name: str, key: str = "vertices_px") -> np.ndarray:
     """``item[key]`` as four finite ``[x, y]`` corners, else one error naming ``path`` and ``name``."""
     v = item.get(key) if isinstance(item, dict) else None
     try:
@@ -69,7 +69,7 @@ def _corners(path, item, name: str, key: str = "vertices_px") -> np.ndarray:
     return arr
 
 
-def _read_world_doc(path, not_file: str = "not a regular file") -> dict:
+def read_world_doc(path, not_file: str = "not a regular file") -> dict:
     """The top-level object of the world.json at ``path``, refused when it is not a regular
     file (``not_file`` says so), is larger than :data:`MAX_BYTES`, or is not of :data:`FORMAT`."""
     from semmap_pp.evaluate.io import read_json
@@ -117,11 +117,11 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
     file's order, each as ``(key, rect)``: the key is the unit's id as text (``"7"``; ``"X2"`` for
     exterior unit 2), the position in its list when it has none. Checked as
     :func:`read_start_world` says."""
-    doc = _read_world_doc(path)
+    doc = read_world_doc(path)
     m = doc.get("map")
     size = (m.get("width"), m.get("height"), m.get("resolution")) if isinstance(m, dict) else None
     here = (grid.width, grid.height, grid.resolution)
-    res = _finite(size[2]) if size is not None else None
+    res = finite(size[2]) if size is not None else None
     if size is None or size[:2] != here[:2] or res is None \
             or not math.isclose(res, here[2], rel_tol=1e-9):
         was = ("no 'map' size" if size is None
@@ -139,7 +139,7 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
     c = frame.cells
     rects = []
     for name, key, item in items:
-        rect, off = frame.rect_from_vertices_px(_corners(path, item, name))
+        rect, off = frame.rect_from_vertices_px(corners(path, item, name))
         if off > MAX_OFF_PX:
             raise SemmapError(path, f"{name} is not a rectangle of this map's lattice (its corners lie "
                                     f"{off:.2f} px from the nearest one; the building's orientation here "
@@ -185,11 +185,11 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
     p = Path(path)
     if p.is_dir() and (p / "world.json").is_file():   # an earlier run's folder
         p = path = p / "world.json"
-    doc = _read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
+    doc = read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
     units = doc.get("units", [])
     if not isinstance(units, list):
         raise SemmapError(path, "'units' must be a list")
-    ids, corners = [], []
+    ids, quads = [], []
     for i, u in enumerate(units):
         uid = u.get("id") if isinstance(u, dict) else None
         if isinstance(uid, bool) or not isinstance(uid, int) or not 1 <= uid <= MAX_ID:
@@ -197,7 +197,7 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
                                     f"{MAX_ID}, got {_brief(uid)}")
         if uid in ids:
             raise SemmapError(path, f"unit id {uid} is used twice")
-        corners.append(_corners(path, u, f"unit {uid}", "vertices_m"))
+        quads.append(corners(path, u, f"unit {uid}", "vertices_m"))
         ids.append(uid)
     nxt = max(ids, default=0) + 1
     listed = doc.get("ids")
@@ -208,4 +208,4 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
         nxt = max(nxt, given)
     if nxt > MAX_ID:
         raise SemmapError(path, f"no unit id is left after {MAX_ID} (labels.png holds 16-bit ids)")
-    return PreviousIds(p, tuple(ids), np.asarray(corners, np.float64).reshape(-1, 4, 2), nxt)
+    return PreviousIds(p, tuple(ids), np.asarray(quads, np.float64).reshape(-1, 4, 2), nxt)

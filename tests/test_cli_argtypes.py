@@ -47,7 +47,15 @@ def test_negative_numbers_in_every_spelling_are_arguments_not_options(text):
                                                       ("wall", ("2", "5", text))]
 
 
-@pytest.mark.parametrize("text", ["-x", "-2x", "--2e1", "-e1"])
+@pytest.mark.parametrize("text", ["-2.5,3", "-1e1,-2", "-.5,-.5"])
+def test_a_point_whose_x_is_negative_is_an_argument(text):
+    from semmap_pp.cli import build_parser
+
+    args = build_parser().parse_args(["route", "w.json", text, "1"])
+    assert (args.start, args.goal) == (text, "1")
+
+
+@pytest.mark.parametrize("text", ["-x", "-2x", "--2e1", "-e1", "-2,x", "-2,3,4"])
 def test_what_is_no_number_is_still_an_unknown_option(text, capsys):
     from semmap_pp.cli import build_parser
 

@@ -1,5 +1,5 @@
-"""docs/robot.md's Python block runs as written on a world.json the tests make, and finds the unit
-that holds a point."""
+"""docs/robot.md's Python block runs as written on a world.json the tests make: it names the unit
+that holds a point and a route from there."""
 
 import os
 import re
@@ -20,28 +20,25 @@ def test_the_robot_pages_python_block_runs(intel_corner_wstar, tmp_path):
     run = subprocess.run([sys.executable, "snippet.py"], cwd=tmp_path, capture_output=True, text=True,
                          timeout=60, env={**os.environ, "PYTHONPATH": ""})
     assert run.returncode == 0, run.stderr
-    assert re.fullmatch(r"unit 1: a (room|corridor|hall|other), [\d.]+ x [\d.]+ m, doors to \[[\d, ]*\]\n", run.stdout)
+    lines = run.stdout.splitlines()
+    assert re.fullmatch(r"[RCHE]1: a (room|corridor|hall|other), [\d.]+ x [\d.]+ m, openings to \[[\d, ]*\]",
+                        lines[0])
+    assert len(lines) == 1 or re.fullmatch(r"[\d.]+ m through units \['1'(, '\d+')*\], waypoints \d+", lines[1])
 
 
-def test_unit_at_tells_inside_from_outside(intel_corner_wstar):
+def test_the_robot_pages_commands_run(intel_corner_wstar, capsys):
+    """The page's `semmap where` and `semmap route` lines, with its point 12.5 4.2 moved to the
+    centre of the test world's unit 1 (the page's map is not the test's)."""
     import json
 
-    text = (ROOT / "docs" / "robot.md").read_text()
-    (block,) = re.findall(r"```python\n(.*?)```", text, re.S)
-    scope = {}
-    exec(block.split("with open(")[0], scope)            # the function alone
-    from matplotlib.path import Path as Polygon
+    from semmap_pp.cli import main
 
-    world = json.loads(intel_corner_wstar.read_text())
-    order = [u["id"] for u in world["units"]]
-    for unit in world["units"]:
-        x, y = unit["center_m"]
-        found = scope["unit_at"](world, x, y)
-        # the unit itself, or one listed before it whose rectangle also holds the point
-        assert order.index(found["id"]) <= order.index(unit["id"])
-        assert Polygon(found["vertices_m"]).contains_point((x, y), radius=1e-6) or found is unit
-        x0, y0 = unit["vertices_m"][0]                       # just outside a corner, away from the centre
-        out = (x0 + 2 * (x0 - x), y0 + 2 * (y0 - y))
-        hit = scope["unit_at"](world, *out)
-        assert hit is None or Polygon(hit["vertices_m"]).contains_point(out, radius=1e-6)
-    assert scope["unit_at"](world, -1e6, -1e6) is None
+    text = (ROOT / "docs" / "robot.md").read_text()
+    x, y = json.loads(intel_corner_wstar.read_text())["units"][0]["center_m"]
+    lines = re.findall(r"^semmap (where|route) run1 (.*?)\s+#", text, re.M)
+    assert [kind for kind, _ in lines] == ["where", "route"]
+    for kind, args in lines:
+        args = args.replace("12.5", str(x)).replace("4.2", str(y))
+        assert main([kind, str(intel_corner_wstar.parent), *args.split()]) in (0, 1)
+        out = capsys.readouterr()
+        assert "error" not in out.err and out.out

@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import functools
 import io
+import math
 import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from PIL import Image
@@ -100,13 +102,18 @@ def _seed_world() -> bytes:
     from semmap_pp.outputs.world_json import FORMAT
     grid, frame = _world_map()
     r0, c0 = frame.crop[:2] if frame.crop is not None else (0, 0)
-    px = frame.rect_vertices_px((r0 + 2, c0 + 2, r0 + 30, c0 + 40))
-    unit = px.round(3).tolist()
-    metres = np.stack(frame.image_to_metres(px[:, 0], px[:, 1]), axis=1).round(4).tolist()
+    units = []
+    for uid, rect in ((1, (r0 + 2, c0 + 2, r0 + 30, c0 + 40)), (2, (r0 + 2, c0 + 38, r0 + 30, c0 + 80))):
+        px = frame.rect_vertices_px(rect)
+        metres = np.stack(frame.image_to_metres(px[:, 0], px[:, 1]), axis=1).round(4)
+        units.append({"id": uid, "type": "room", "vertices_px": px.round(3).tolist(),
+                      "vertices_m": metres.tolist(), "center_m": metres.mean(axis=0).round(4).tolist()})
+    wall = ((np.asarray(units[0]["vertices_m"][1]) + np.asarray(units[0]["vertices_m"][2])) / 2).round(4)
+    door = {"id": 1, "units": [1, 2], "center_m": wall.tolist(), "width_m": 0.9}
     doc = {"format": FORMAT, "map": {"width": grid.width, "height": grid.height, "resolution": 0.05,
                                      "orientation_deg": 0.0},
-           "units": [{"id": 1, "type": "room", "vertices_px": unit, "vertices_m": metres}], "exterior": [],
-           "ids": {"next": 2}}
+           "units": units, "doors": [door], "passages": [dict(door, width_m=3.0)], "exterior": [],
+           "ids": {"next": 3}}
     return json.dumps(doc).encode()
 
 
@@ -151,7 +158,7 @@ YAML_TOKENS = tuple(t.encode() for t in (
 WORLD_TOKENS = tuple(t.encode() for t in (
     "{", "}", "[", "]", ",", ":", '"', "null", "true", "NaN", "Infinity", "-Infinity", "1e400",
     "-1e400", "9" * 40, "-0", '"units"', '"exterior"', '"vertices_px"', '"map"', '"format"',
-    '"width"', '"vertices_m"', '"ids"', '"next"', "65535", "[[0,0],[1,0],[1,1],[0,1]]", "[[1e308,0],[0,1e308],[1,1],[0,1]]", "\\u0000", "\n"))
+    '"width"', '"vertices_m"', '"ids"', '"next"', '"doors"', '"passages"', '"center_m"', '"width_m"', "65535", "[[0,0],[1,0],[1,1],[0,1]]", "[[1e308,0],[0,1e308],[1,1],[0,1]]", "\\u0000", "\n"))
 MODEL_TOKENS = tuple(t.encode() for t in (
     "nan", "inf", "-inf", "1e308", "-1", "0", "99999999999999999999", "true", '"x"', "[", "]", "{",
     "}", "=", "\n", "[sensor]", "[prior]", "k_max = ", "psi = ", "weights = { add_remove = -1 }"))
@@ -214,16 +221,28 @@ def check_model_bytes(data: bytes) -> None:
 
 
 def check_world_bytes(data: bytes) -> None:
-    """Read ``data`` as a world.json onto a small map's lattice (``semmap map --start``), and in
+    """Read ``data`` as a world.json onto a small map's lattice (``semmap map --start``), as the
+    places of ``semmap where`` / ``semmap route`` (a route from the first unit to the last), and in
     metres as the earlier world of ``--ids-from``, whose ids then number a one-unit world."""
     from semmap_pp import world as wm
     from semmap_pp.outputs.ids import MAX_ID, carry_ids
+    from semmap_pp.places import read_places
     from semmap_pp.world_file import read_previous_ids, read_start_world
 
     COUNT["cases"] += 1
     grid, frame = _world_map()
     with tempfile.TemporaryDirectory() as d:
         (Path(d) / "world.json").write_bytes(data)
+        try:
+            places = read_places(Path(d) / "world.json")
+            if places.units:
+                a, b = places.units[0], places.units[-1]
+                route = places.route(a, b)
+                assert route is None or (math.isfinite(route.length_m) and route.length_m >= 0
+                                         and route.units[0] == a.key and route.units[-1] == b.key)
+                places.units_at(*a.center)
+        except SemmapError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 2000
         try:
             world = read_start_world(Path(d) / "world.json", frame, grid, 8)
             assert wm.is_valid(world, frame.shape, frame.cells.min_side)
@@ -267,7 +286,9 @@ WORLD_PATHS = st.sampled_from([("format",), ("map",), ("map", "width"), ("map", 
                                ("units", 0, "vertices_px"), ("units", 0, "vertices_px", 0),
                                ("units", 0, "vertices_px", 0, 1), ("units", 0, "id"),
                                ("units", 0, "vertices_m"), ("units", 0, "vertices_m", 2, 0), ("ids",),
-                               ("ids", "next")])
+                               ("ids", "next"), ("doors",), ("doors", 0, "units"), ("doors", 0, "units", 1),
+                               ("doors", 0, "center_m"), ("passages", 0, "width_m"), ("units", 1, "center_m"),
+                               ("units", 1, "id")])
 
 
 def _world_doc(edits) -> tuple[bytes]:
@@ -356,12 +377,15 @@ def test_mutated_model_file(args):
 def test_the_seed_world_reads_back():
     """The world.json target's seed is a valid world: mutations start from something that loads."""
     from semmap_pp import world as wm
+    from semmap_pp.places import read_places
     from semmap_pp.world_file import read_start_world
 
     grid, frame = _world_map()
     with tempfile.TemporaryDirectory() as d:
         (Path(d) / "world.json").write_bytes(_seed_world())
-        assert wm.n_units(read_start_world(Path(d) / "world.json", frame, grid, 8)) == 1
+        assert wm.n_units(read_start_world(Path(d) / "world.json", frame, grid, 8)) == 2
+        route = read_places(Path(d) / "world.json").route((3.0, 2.7), (0.5, 2.7))
+        assert route.units == ["2", "1"] and route.length_m == pytest.approx(2.5)
 
 
 @CI

@@ -1,6 +1,7 @@
 """The output files of `semmap map` beyond world.json: GeoJSON, GraphML, regions, figures, report.
 
-One literal floor explains every case (0.05 m cells, walls 2 cells, doors 10..50 cells)::
+One literal floor (tests/literal_floor.py) explains every case (0.05 m cells, walls 2 cells, doors
+10..50 cells)::
 
     +------+------+------+      A | B : a 1 m door          -> separate regions, edge "door"
     |  A o |  B   :  C   |      B : C : wall open for 3.1 m -> one region (an open passage)
@@ -22,13 +23,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from semmap_pp import world as W
-from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.cells import FREE, OCCUPIED
 from semmap_pp.diagnostics import SUMMARIES, convergence
-from semmap_pp.frame import build_frame
-from semmap_pp.grid import OccupancyGrid
 from semmap_pp.model import load_model
-from semmap_pp.outputs import dumps, semantic_map, world_dict
+from semmap_pp.outputs import dumps, world_dict
 from semmap_pp.outputs import figures
 from semmap_pp.outputs.geojson import geojson_dict, ring_area, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
@@ -36,42 +34,17 @@ from semmap_pp.outputs.regions import (join_regions, passage_pairs, regions_imag
                                        unit_regions, write_regions_png)
 from semmap_pp.outputs.write import write_all
 from semmap_pp.pipeline import Inputs, MapRun, RunSettings
-from semmap_pp.posterior import Posterior
+
+from literal_floor import literal_floor
 
 MODEL = load_model()
 HOSTILE = "<script>alert(1)</script>.yaml"
-RECTS = {"A": (4, 4, 70, 56), "B": (4, 54, 70, 106), "C": (4, 104, 70, 156), "D": (68, 4, 110, 56)}
-
-
-def floor_grid(source=None):
-    c = np.full((116, 162), UNKNOWN, np.uint8)
-    c[4:70, 4:156] = OCCUPIED
-    c[68:110, 4:56] = OCCUPIED
-    c[6:68, 6:54] = FREE        # A
-    c[6:68, 56:104] = FREE      # B
-    c[6:68, 106:154] = FREE     # C
-    c[70:108, 6:54] = FREE      # D
-    c[25:45, 54:56] = FREE      # door A|B, 20 cells = 1 m
-    c[6:68, 104:106] = FREE     # B:C open over 62 cells > door_max
-    c[20:24, 20:24] = OCCUPIED  # an object in A
-    c[73:83, 70:82] = FREE      # unexplored patch, 3 rows below B
-    return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
-                         origin=(-1.0, 0.5, 0.0), source=source, image_path=None)
-
-
-def floor_world():
-    w = W.empty(6)
-    for slot, key in zip((0, 2, 3, 5), "ABCD"):  # slots scattered: ids must not depend on them
-        w = W.add(w, slot, RECTS[key])
-    return w
 
 
 @pytest.fixture(scope="module")
 def floor():
-    g = floor_grid()
-    f = build_frame(g, MODEL)
-    assert f.theta == 0.0
-    sm = semantic_map(g, f, Posterior(f, MODEL), floor_world())
+    sm = literal_floor(MODEL)
+    assert sm.frame.theta == 0.0
     return sm, world_dict(sm)
 
 
@@ -79,6 +52,9 @@ def test_the_literal_floor_is_what_the_picture_says(floor):
     sm, doc = floor
     assert doc["adjacency"] == [[1, 2], [1, 4], [2, 3], [2, 4]]
     assert [d["units"] for d in doc["doors"]] == [[1, 2]]
+    assert [(d["id"], d["units"], d["width_m"]) for d in doc["passages"]] == [(1, [2, 3], 3.1)]
+    assert [(u["doors"], u["passages"]) for u in doc["units"]] == [([1], []), ([1], [1]), ([], [1]), ([], [])]
+    assert [tuple(d["units"]) for d in doc["passages"]] == passage_pairs(sm)
     assert [o["unit"] for o in doc["objects"]] == [1]
     assert len(doc["unexplored"]) == 1
 
@@ -137,7 +113,7 @@ def test_geojson_is_closed_ccw_in_the_stated_local_frame(floor, tmp_path):
     assert gj["properties"]["frame"] == "map" and gj["properties"]["units"] == "m"
     assert "WGS84" in gj["properties"]["note"]
     kinds = [f["properties"]["kind"] for f in gj["features"]]
-    assert kinds == ["unit"] * 4 + ["door", "object", "unexplored"]
+    assert kinds == ["unit"] * 4 + ["door", "passage", "object", "unexplored"]
     by_id = {f["id"]: f for f in gj["features"]}
     assert len(by_id) == len(gj["features"])
     for u in doc["units"]:
@@ -155,6 +131,10 @@ def test_geojson_is_closed_ccw_in_the_stated_local_frame(floor, tmp_path):
     assert abs(np.hypot(x1 - x0, y1 - y0) - 1.0) < 1e-9          # the 1 m opening
     assert abs(x0 - (-1.0 + 55 * 0.05)) < 1e-9                   # on the wall's centre line, metres
     assert by_id["object/1"]["geometry"]["type"] == "Point" and by_id["object/1"]["properties"]["unit"] == 1
+    passage = by_id["passage/1"]
+    assert passage["properties"]["units"] == [2, 3] and by_id["unit/2"]["properties"]["passages"] == [1]
+    (x0, y0), (x1, y1) = passage["geometry"]["coordinates"]
+    assert abs(np.hypot(x1 - x0, y1 - y0) - 3.1) < 1e-9          # the open stretch of B:C
 
 
 def test_graphml_reads_back_with_nodes_and_edges(floor, tmp_path):
@@ -210,9 +190,7 @@ def make_run(sm, source_name=HOSTILE, n_draws=6):
 def hostile_run(tmp_path_factory):
     from pathlib import Path
 
-    g = floor_grid(source=Path("/maps") / HOSTILE)
-    f = build_frame(g, MODEL)
-    sm = semantic_map(g, f, Posterior(f, MODEL), floor_world())
+    sm = literal_floor(MODEL, source=Path("/maps") / HOSTILE)
     out = tmp_path_factory.mktemp("out")
     (out / ".world.json.x1y2z3w4.tmp").write_text('{"units": [')   # left by a killed earlier run
     run = make_run(sm)

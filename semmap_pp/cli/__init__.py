@@ -24,15 +24,17 @@ from semmap_pp import __version__
 from semmap_pp.errors import SemmapError
 
 
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
 #: a negative number as an argument: argparse's own test takes ``-2``, ``-2.5`` and ``-.5`` only,
-#: and reads ``-2e1`` or ``-2.`` as an unknown option (then "expected 5 arguments")
-NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+#: and reads ``-2e1`` or ``-2.`` as an unknown option (then "expected 5 arguments"); also a map
+#: point ``X,Y`` whose X is negative (``semmap route``)
+NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(,-?{_NUMBER})?$")
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse's parser, reading every negative number as one (:data:`NEGATIVE_NUMBER`): map
-    coordinates in metres are often negative. Sub-commands' parsers are of this class too
-    (``add_subparsers`` makes them of the parent's class)."""
+    """argparse's parser, reading every negative number (and point ``X,Y``) as one
+    (:data:`NEGATIVE_NUMBER`): map coordinates in metres are often negative. Sub-commands'
+    parsers are of this class too (``add_subparsers`` makes them of the parent's class)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

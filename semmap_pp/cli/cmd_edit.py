@@ -84,7 +84,7 @@ def run(args) -> int:
     from semmap_pp.ascent import snap_walls
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import model_settings
-    from semmap_pp.outputs.graphml import TYPE_LETTER
+    from semmap_pp.cells import TYPE_LETTER
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
     from semmap_pp.outputs.write import write_plan

@@ -24,8 +24,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
 from scipy import ndimage  # noqa: E402
 
-from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN, W_OBJECT, W_WALL  # noqa: E402
-from semmap_pp.outputs.graphml import TYPE_LETTER  # noqa: E402
+from semmap_pp.cells import FREE, OCCUPIED, TYPE_LETTER, UNIT_TYPES, UNKNOWN, W_OBJECT, W_WALL  # noqa: E402
 
 # Colours of the paper's Fig. 5 (classified map: black occupied, gray unknown, white free).
 RGB = {"free": (255, 255, 255), "unknown": (160, 160, 160), "occupied": (0, 0, 0),

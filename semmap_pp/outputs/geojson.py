@@ -10,9 +10,10 @@ Features (``properties.kind`` says which; ``properties.id`` is the id of world.j
 
 - ``unit``: Polygon, one closed counter-clockwise ring (first vertex repeated last); ``type``, the
   type marginals ``p_room`` ... ``p_other``, ``length_m``, ``width_m``, ``area_m2``, ``region``
-  (regions.png id), ``seen_share`` and ``walls_seen_share`` (as world.json), ``doors`` and
-  ``objects`` (id lists).
+  (regions.png id), ``seen_share`` and ``walls_seen_share`` (as world.json), ``doors``,
+  ``passages`` and ``objects`` (id lists).
 - ``door``: LineString across the opening, from one end to the other; ``units``, ``width_m``.
+- ``passage``: the same for an open stretch of a shared wall (world.json ``passages``).
 - ``object``: Point at its centre; ``unit``, ``extent_m``, ``cells``.
 - ``unexplored``: Point at its centre; ``area_m2``.
 - ``exterior``: Polygon like a unit's (free space seen outside the building through its windows
@@ -86,15 +87,16 @@ def geojson_dict(sm, doc: dict | None = None, regions: dict[int, int] | None = N
                  "length_m": length, "width_m": width, "area_m2": round(length * width, 4),
                  "center": u["center_m"], "region": regions.get(u["id"]),
                  "seen_share": u["seen_share"], "walls_seen_share": u["walls_seen_share"],
-                 "doors": u["doors"], "objects": u["objects"]}
+                 "doors": u["doors"], "passages": u.get("passages", []), "objects": u["objects"]}
         geom = {"type": "Polygon", "coordinates": [closed_ccw(u["vertices_m"])]}
         features.append(_feature("unit", u["id"], geom, props))
-    for d in doc["doors"]:
-        ends = np.asarray(d["endpoints_px"], float)
-        x, y = sm.frame.image_to_metres(ends[:, 0], ends[:, 1])
-        line = [[round(float(a), 4), round(float(b), 4)] for a, b in zip(x, y)]
-        features.append(_feature("door", d["id"], {"type": "LineString", "coordinates": line},
-                                 {"units": d["units"], "width_m": d["width_m"]}))
+    for kind, key in (("door", "doors"), ("passage", "passages")):
+        for d in doc.get(key, []):
+            ends = np.asarray(d["endpoints_px"], float)
+            x, y = sm.frame.image_to_metres(ends[:, 0], ends[:, 1])
+            line = [[round(float(a), 4), round(float(b), 4)] for a, b in zip(x, y)]
+            features.append(_feature(kind, d["id"], {"type": "LineString", "coordinates": line},
+                                     {"units": d["units"], "width_m": d["width_m"]}))
     for o in doc["objects"]:
         features.append(_feature("object", o["id"], _point(o["center_m"]),
                                  {"unit": o["unit"], "extent_m": o["extent_m"], "cells": o["cells"]}))

@@ -27,10 +27,9 @@ import networkx as nx
 import numpy as np
 
 from semmap_pp import atomic
-from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.cells import TYPE_LETTER, UNIT_TYPES
 from semmap_pp.outputs.world_json import world_dict
 
-TYPE_LETTER = {"room": "R", "corridor": "C", "hall": "H", "other": "E"}  # the paper's Fig. 5c letters
 
 
 def _ids(values) -> str:
@@ -132,4 +131,4 @@ def write_graphml(path: str | os.PathLike, graph: nx.Graph) -> Path:
     return Path(path)
 
 
-__all__ = ["TYPE_LETTER", "unexplored_neighbours", "world_graph", "write_graphml"]
+__all__ = ["unexplored_neighbours", "world_graph", "write_graphml"]

@@ -68,6 +68,27 @@ def _seen(frame, rect) -> dict:
     return {"seen_share": round(inside, 4), "walls_seen_share": round(band, 4)}
 
 
+def _openings(frame, openings, ids, res: float) -> list[dict]:
+    """Doors or passages (:class:`semmap_pp.derive.doors.Door`) as world.json lists them: ``units``,
+    ``center_px``, ``center_m``, ``width_m``, ``endpoints_px`` and ``id`` (1..n in order of their
+    unit pair and lattice box)."""
+    out = []
+    for door in sorted(openings, key=lambda o: (sorted((ids[o.p], ids[o.q])), o.box)):
+        r0, c0, r1, c1 = door.box
+        rc, cc = _box_centre(door.box)
+        if door.vertical:   # the opening runs along the rows
+            ends = _px(frame, [r0 - 0.5, r1 - 0.5], [cc, cc])
+        else:
+            ends = _px(frame, [rc, rc], [c0 - 0.5, c1 - 0.5])
+        centre = _px(frame, [rc], [cc])
+        out.append({"units": sorted([ids[door.p], ids[door.q]]), "center_px": _r(centre[0], 3),
+                    "center_m": _r(_m(frame, centre)[0], 4), "width_m": round(door.width * res, 4),
+                    "endpoints_px": [_r(e, 3) for e in ends]})
+    for i, door in enumerate(out, 1):
+        door["id"] = i
+    return out
+
+
 def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: int | None = None,
                roi_name: str = "default") -> dict:
     """The world.json content of a :class:`~semmap_pp.outputs.semantic.SemanticMap`."""
@@ -75,20 +96,8 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
     res = float(grid.resolution)
     ids = sm.slot_ids
 
-    doors = []
-    for door in sorted(d.doors, key=lambda o: (sorted((ids[o.p], ids[o.q])), o.box)):
-        r0, c0, r1, c1 = door.box
-        rc, cc = _box_centre(door.box)
-        if door.vertical:   # the door runs along the rows
-            ends = _px(frame, [r0 - 0.5, r1 - 0.5], [cc, cc])
-        else:
-            ends = _px(frame, [rc, rc], [c0 - 0.5, c1 - 0.5])
-        centre = _px(frame, [rc], [cc])
-        doors.append({"units": sorted([ids[door.p], ids[door.q]]), "center_px": _r(centre[0], 3),
-                      "center_m": _r(_m(frame, centre)[0], 4), "width_m": round(door.width * res, 4),
-                      "endpoints_px": [_r(e, 3) for e in ends]})
-    for i, door in enumerate(doors, 1):
-        door["id"] = i
+    doors = _openings(frame, d.doors, ids, res)
+    passages = _openings(frame, d.passages, ids, res)
 
     objects = []
     for ob in sorted(d.objects, key=lambda o: (ids[o.unit], o.box)):
@@ -125,6 +134,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
             **_rect_geometry(frame, world.rects[s], res),
             **_seen(frame, world.rects[s]),
             "doors": [o["id"] for o in doors if uid in o["units"]],
+            "passages": [o["id"] for o in passages if uid in o["units"]],
             "objects": [o["id"] for o in objects if o["unit"] == uid],
         })
 
@@ -141,6 +151,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         "units": units,
         "adjacency": [list(p) for p in adjacency],
         "doors": doors,
+        "passages": passages,
         "objects": objects,
         "unexplored": unexplored,
         "exterior": exterior,
