@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import math
 import sys
@@ -422,6 +423,54 @@ def door_breakdown(pred: dict, truth: dict, score) -> dict:
     return out
 
 
+def route_agreement(pred: dict, truth: dict, matches: dict, resolution: float) -> dict:
+    """Whether W*'s doors and passages lead where the building's do (what a planner asks of the
+    map): for every two true units that both match a unit of W* (``matches``: W* id -> true id),
+    the shortest route between the two true units' centres through the truth's open doors and open
+    walls (``open_boundaries``), and the shortest between the matched units' centres through W*'s
+    doors and passages (:meth:`semmap_pp.places.Places.route`; both in the image's pixel frame,
+    scaled to metres). ``route_pairs`` counts the pairs the truth joins, ``route_found`` those W*
+    joins too (their ratio is ``route_recall``), ``route_extra`` the pairs W* joins and the truth
+    does not, and ``route_ratios`` W*'s length over the truth's, per pair both join."""
+    from semmap_pp.places import places_from_doc
+
+    def doc(units, doors, passages):
+        return {"units": units, "doors": doors, "passages": passages}
+
+    def unit(uid, kind, corners):
+        return {"id": uid, "type": kind, "vertices_m": (np.asarray(corners, float) * resolution).tolist()}
+
+    def opening(k, a, b, centre):
+        return {"id": k, "units": [a, b], "center_m": (np.asarray(centre, float) * resolution).tolist(),
+                "width_m": 1.0}
+
+    p = places_from_doc(doc([unit(u["id"], u["type"], u["vertices_px"]) for u in pred["units"]],
+                            [opening(d["id"], *d["units"], d["center_px"]) for d in pred["doors"]],
+                            [opening(d["id"], *d["units"], d["center_px"]) for d in pred.get("passages", [])]))
+    true_units = {u["id"]: u for u in truth["units"]}
+    open_walls = []
+    for k, (a, b) in enumerate(truth.get("open_boundaries", []), 1):   # the centre of the shared edge
+        ca, cb = np.asarray(true_units[a]["corners_px"], float), np.asarray(true_units[b]["corners_px"], float)
+        lo, hi = np.maximum(ca.min(axis=0), cb.min(axis=0)), np.minimum(ca.max(axis=0), cb.max(axis=0))
+        open_walls.append(opening(k, a, b, (lo + hi) / 2))
+    t = places_from_doc(doc([unit(u["id"], u["type"], u["corners_px"]) for u in truth["units"]],
+                            [opening(k, *d["units"], d["center_px"])
+                             for k, d in enumerate(truth.get("doors", []), 1) if d.get("open", True)],
+                            open_walls))
+    pairs = found = extra = 0
+    ratios = []
+    matched = sorted(matches.items(), key=lambda m: m[1])
+    for (pa, ta), (pb, tb) in itertools.combinations(matched, 2):
+        rt = t.route(t.unit(str(ta)), t.unit(str(tb)))
+        rp = p.route(p.unit(str(pa)), p.unit(str(pb)))
+        pairs += rt is not None
+        found += rt is not None and rp is not None
+        extra += rt is None and rp is not None
+        if rt is not None and rp is not None and rt.length_m > 0:
+            ratios.append(rp.length_m / rt.length_m)
+    return {"route_pairs": pairs, "route_found": found, "route_extra": extra, "route_ratios": ratios}
+
+
 def building_roi(truth: dict, shape, default: np.ndarray, resolution: float, margin_m: float = 0.25):
     """The building as region of interest: the union of the true units (every one, seen or not),
     grown by ``margin_m`` to hold their walls, within the default ROI. The analogue of the paper's
@@ -563,6 +612,7 @@ def bench_synthetic(args, model, rules) -> dict:
                "type_accuracy_observed": _r4(so.type_accuracy),
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
                "door_errors": door_breakdown(pred, floor.truth, sc),
+               "routes": route_agreement(pred, floor.truth, sc.matches, floor.resolution),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
         for k, v in seen_by_class(pred, floor.truth, sc.matches).items():
@@ -584,11 +634,22 @@ def bench_synthetic(args, model, rules) -> dict:
     errors |= {"pred_units": sum(r["units"] for r in rows if "units" in r),
                "pred_exterior": sum(r.get("exterior", 0) for r in rows),
                "true_units": sum(r["true_units"] for r in rows if "true_units" in r)}
+    routes = [r["routes"] for r in rows if "routes" in r]
+    ratios = np.concatenate([r["route_ratios"] for r in routes]) if routes else np.zeros(0)
+    for r in routes:
+        r["route_ratios"] = len(r["route_ratios"])      # the rows keep the count, the summary the spread
+    route_pairs, route_found = sum(r["route_pairs"] for r in routes), sum(r["route_found"] for r in routes)
+    route_summary = {"pairs": route_pairs, "found": route_found,
+                     "recall": round(route_found / route_pairs, 4) if route_pairs else None,
+                     "extra": sum(r["route_extra"] for r in routes),
+                     "length_ratio_median": round(float(np.median(ratios)), 4) if ratios.size else None,
+                     "length_ratio_p90": round(float(np.percentile(ratios, 90)), 4) if ratios.size else None,
+                     "length_ratio_over_1_5": int((ratios > 1.5).sum())}
     seen_shares = {k: {"units": len(v), "interior_median": round(float(np.median([a for a, _ in v])), 2),
                        "walls_median": round(float(np.median([b for _, b in v])), 2)}
                    for k, v in sorted(seen.items())}
     return {"rows": rows, "means": means, "errors": errors, "door_errors": door_errors,
-            "seen_shares": seen_shares,
+            "routes": route_summary, "seen_shares": seen_shares,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}
 

@@ -26,6 +26,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -240,6 +241,13 @@ class Frame:
     @property
     def shape(self) -> tuple[int, int]:
         return self.classes.shape
+
+    @functools.cached_property
+    def door_classes(self) -> np.ndarray:
+        """``classes`` with specks made free (:func:`semmap_pp.derive.doors.doorway_classes`): the
+        cells doors and passages are looked for on."""
+        from semmap_pp.derive.doors import doorway_classes
+        return doorway_classes(self.classes, self.cells.door_speck)
 
     def _centres(self):
         h, w = self.image_shape

@@ -86,6 +86,7 @@ class WorldParams:
     exterior_seen_min: float = 0.1
     exterior_fan_seen_max: float = 0.0
     wall_min_cells: int = 1
+    door_speck_m2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,7 @@ class CellParams:
     exterior_max_share: float = 0.0
     exterior_seen_min: float = 0.1
     exterior_fan_seen_max: float = 0.0
+    door_speck: int = 1
 
 
 @dataclass(frozen=True)
@@ -253,7 +255,8 @@ class Model:
             wall_line_tolerance=max(1, n(w.wall_line_tolerance_m)),
             wall_line_gap=max(1, n(w.wall_line_gap_m)),
             exterior_max_share=w.exterior_max_share, exterior_seen_min=w.exterior_seen_min,
-            exterior_fan_seen_max=w.exterior_fan_seen_max)
+            exterior_fan_seen_max=w.exterior_fan_seen_max,
+            door_speck=max(1, n(w.door_speck_m2, dims=2)))
 
 
 class _Reader:
@@ -386,7 +389,9 @@ def load_model(path: str | Path | None = None) -> Model:
         "max_unit_side_m", "adjacency_dilation_m", "unexplored_min_area_m2",
         "wall_line_tolerance_m", "wall_line_gap_m")}, **exterior,
         # optional too: model files written before it keep the one-cell minimum
-        wall_min_cells=r.optional("world.wall_min_cells", 1, r.integer, lo=1, hi=64))
+        wall_min_cells=r.optional("world.wall_min_cells", 1, r.integer, lo=1, hi=64),
+        # optional: model files written before it keep one-cell specks
+        door_speck_m2=r.optional("world.door_speck_m2", 0.0, r.number, lo=0.0, hi=1.0))
     if world.door_max_m < world.door_min_m:
         raise r.error("world.door_max_m", "must be >= world.door_min_m")
     if world.max_unit_side_m < world.min_unit_side_m:

@@ -292,16 +292,23 @@ def _point(value) -> tuple[float, float] | None:
 
 def read_places(path: str | os.PathLike) -> Places:
     """The units, exterior units, doors and passages of the world.json at ``path`` (or in the
-    folder ``path``, a run's). Each unit needs an integer ``id`` (unique), a ``type`` and four
-    finite ``vertices_m``; each door and passage an integer ``id``, two ``units`` of the file,
-    a finite ``center_m`` and ``width_m``. Anything else is one :class:`SemmapError` naming
-    the file."""
-    from semmap_pp.world_file import corners, finite, read_world_doc
+    folder ``path``, a run's), checked as :func:`places_from_doc` says."""
+    from semmap_pp.world_file import read_world_doc
 
     p = Path(path)
     if p.is_dir() and (p / "world.json").is_file():
         p = path = p / "world.json"
     doc = read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
+    return places_from_doc(doc, Path(path))
+
+
+def places_from_doc(doc: dict, path: Path | None = None) -> Places:
+    """The places of a world.json's content. Each unit needs an integer ``id`` (unique), a
+    ``type`` and four finite ``vertices_m``; each door and passage an integer ``id``, two
+    ``units`` of the file, a finite ``center_m`` and ``width_m``; coordinates lie within
+    :data:`MAX_COORD_M`. Anything else is one :class:`SemmapError` naming ``path``."""
+    from semmap_pp.world_file import corners, finite
+
     found: dict[str, list[Unit]] = {}
     for key, prefix in (("units", ""), ("exterior", "X")):
         listed = doc.get(key, [])
@@ -349,9 +356,8 @@ def read_places(path: str | os.PathLike) -> Places:
             if width is None or width <= 0:
                 raise SemmapError(path, f"{name}: 'width_m' must be a positive number")
             openings.append(Opening(kind, oid, (str(pair[0]), str(pair[1])), xy, width))
-    return Places(Path(path), tuple(found["units"]), tuple(found["exterior"]), tuple(openings),
-                  "passages" in doc)
+    return Places(path, tuple(found["units"]), tuple(found["exterior"]), tuple(openings), "passages" in doc)
 
 
 __all__ = ["EDGE_TOLERANCE_M", "MAX_COORD_M", "Opening", "Places", "Route", "Step", "TYPE_LETTER", "Unit",
-           "read_places", "unit_key"]
+           "places_from_doc", "read_places", "unit_key"]

@@ -172,7 +172,7 @@ class Posterior:
         if k is None:
             if len(self._door_cache) > 200_000:
                 self._door_cache.clear()
-            k = opening_counts(self.frame.classes, rp, rq, self.cells)
+            k = opening_counts(self.frame.door_classes, rp, rq, self.cells)
             self._door_cache[key] = k
         return k
 

@@ -114,3 +114,29 @@ def test_rows_that_fell_back_to_knowledge_off_are_listed():
             {"map": "NLB", "knowledge": "knowledge: off (engine failed: ...)"}, {"seed": 5, "error": "e"}]
     assert bq.knowledge_off({"rows": rows}) == ["4", "NLB"]
     assert bq.knowledge_off({"skipped": "no data"}) == []
+
+
+def test_route_agreement_counts_pairs_and_detours():
+    """Three rooms in a row, A | B a door, B : C an open wall, and D below A behind a closed door;
+    W* holds the same rooms (ids 10..13)."""
+    truth = {"units": [{"id": i, "type": "room", "corners_px": c} for i, c in
+                       enumerate([box(0, 0, 20, 20), box(20, 0, 40, 20), box(40, 0, 60, 20), box(0, 20, 20, 40)], 1)],
+             "doors": [{"units": [1, 2], "center_px": [20, 10], "width_m": 0.8, "open": True},
+                       {"units": [1, 4], "center_px": [10, 20], "width_m": 0.8, "open": False}],
+             "open_boundaries": [[2, 3]]}
+    units = [{"id": 9 + u["id"], "type": "room", "vertices_px": u["corners_px"]} for u in truth["units"]]
+    matches = {10: 1, 11: 2, 12: 3, 13: 4}
+    same = {"units": units, "doors": [{"id": 1, "units": [10, 11], "center_px": [20, 10]}],
+            "passages": [{"id": 1, "units": [11, 12], "center_px": [40, 10]}]}
+    r = bq.route_agreement(same, truth, matches, 0.05)
+    assert (r["route_pairs"], r["route_found"], r["route_extra"]) == (3, 3, 0)   # A-B, A-C, B-C
+    assert r["route_ratios"] == [1.0, 1.0, 1.0]
+    no_passage = dict(same, passages=[])                                       # C cut off
+    r = bq.route_agreement(no_passage, truth, matches, 0.05)
+    assert (r["route_pairs"], r["route_found"], r["route_extra"]) == (3, 1, 0)
+    into_d = dict(same, doors=same["doors"] + [{"id": 2, "units": [10, 13], "center_px": [10, 20]}])
+    r = bq.route_agreement(into_d, truth, matches, 0.05)
+    assert (r["route_pairs"], r["route_found"], r["route_extra"]) == (3, 3, 3)   # D reached: 3 extra pairs
+    detour = dict(same, doors=[{"id": 1, "units": [10, 11], "center_px": [20, 19]}])   # the door at a corner
+    r = bq.route_agreement(detour, truth, matches, 0.05)
+    assert r["route_ratios"][0] > 1.0 and r["route_found"] == 3

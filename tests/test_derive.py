@@ -49,25 +49,35 @@ def test_door_is_a_run_of_free_cells_on_the_shared_wall():
     assert [(d.p, d.q, d.box, d.vertical, d.width) for d in doors] == [(1, 2, (2, 7, 5, 8), True, 3)]
 
 
-def test_an_isolated_speck_in_a_doorway_does_not_cut_the_door():
-    from semmap_pp.derive.doors import door_count
+def test_a_speck_in_a_doorway_does_not_cut_the_door():
+    """Doors are looked for on the map with its specks made free (``doorway_classes``): up to
+    ``speck`` touching non-free cells, not part of a wall."""
+    from semmap_pp.derive.doors import door_count, doorway_classes
     import dataclasses
 
     wide = dataclasses.replace(CELLS, door_min=4, door_max=6)
+
+    def widths(m, speck):
+        d = doorway_classes(m, speck)
+        found = [x.width for x in doors_between(d, (0, 0, 12, 8), (0, 7, 12, 15), wide)]
+        assert door_count(d, (0, 0, 12, 8), (0, 7, 12, 15), wide) == len(found)
+        return found
+
     m = DOORS.copy()
     m[1:11, 7] = OCCUPIED
     m[3:8, 7] = FREE                 # a 5-cell doorway (rows 3..7) ...
-    assert [d.width for d in doors_between(m, (0, 0, 12, 8), (0, 7, 12, 15), wide)] == [5]
+    assert widths(m, 1) == [5]
     m[5, 7] = OCCUPIED               # ... with a speck of noise in its middle: still one door
-    assert [d.width for d in doors_between(m, (0, 0, 12, 8), (0, 7, 12, 15), wide)] == [5]
-    assert door_count(m, (0, 0, 12, 8), (0, 7, 12, 15), wide) == 1
-    m[5, 6] = OCCUPIED               # two touching cells are clutter, not a speck: two gaps of 2
-    assert doors_between(m, (0, 0, 12, 8), (0, 7, 12, 15), wide) == []
-    assert door_count(m, (0, 0, 12, 8), (0, 7, 12, 15), wide) == 0
-    m[5, 6] = FREE
-    m[4, 7] = UNKNOWN                # a speck touching the jamb side of the door is not isolated
+    assert widths(m, 1) == [5]
+    assert doors_between(m, (0, 0, 12, 8), (0, 7, 12, 15), wide) == []   # on the raw map: two gaps
+    m[5, 6] = UNKNOWN                # a chair leg and the unseen cell behind it: two cells
+    assert widths(m, 1) == [] and widths(m, 2) == [5]
+    m[5, 5] = OCCUPIED               # three touching cells are clutter at two cells
+    assert widths(m, 2) == [] and widths(m, 3) == [5]
+    m[5, 5:7] = FREE
+    m[4, 7] = UNKNOWN                # cells touching the jamb are part of the wall, whatever the size
     m[3, 7] = OCCUPIED
-    assert doors_between(m, (0, 0, 12, 8), (0, 7, 12, 15), wide) == []
+    assert widths(m, 3) == []
 
 
 def test_too_wide_an_opening_is_a_passage_not_a_door():

@@ -117,6 +117,8 @@ def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
     ('colike_scope = "corridor"', "evidence.colike_scope: must be one of unit, space, got 'corridor'"),
     ("space_width_ratio = 0.5", "evidence.space_width_ratio: must be >= 1.0, got 0.5"),
     ("wall_min_cells = 0", "world.wall_min_cells: must be >= 1, got 0"),
+    ("door_speck_m2 = -0.1", "world.door_speck_m2: must be >= 0.0, got -0.1"),
+    ("door_speck_m2 = 2", "world.door_speck_m2: must be <= 1.0, got 2.0"),
     ("spread_draws = 3", "sampler.spread_draws: must be 0 (no sample around W*) or at least 4 (R-hat and "
                          "ESS need them)"),
     ("spread_draws = -1", "sampler.spread_draws: must be >= 0, got -1"),
@@ -149,6 +151,15 @@ def test_model_files_without_the_off_axis_keys_get_no_note_about_walls_at_anothe
     m = without_lines(tmp_path, keys, n=4)
     assert [getattr(m.lattice, k) for k in keys] == [8.0, 5.0, 1.5, 0.0]
     assert load_model().lattice.off_axis_note_share == 0.1
+
+
+def test_door_specks_are_an_area_of_at_least_one_cell(tmp_path):
+    """0.005 m^2 is two cells at 0.05 m, eight at 0.025 m and (at least) one at 0.1 m; model
+    files written before the key keep one-cell specks."""
+    m = load_model()
+    assert [m.cells(r).door_speck for r in (0.025, 0.05, 0.1)] == [8, 2, 1]
+    old = without_lines(tmp_path, "door_speck_m2", n=1)
+    assert [old.cells(r).door_speck for r in (0.025, 0.05, 0.1)] == [1, 1, 1]
 
 
 def test_the_wall_band_is_at_least_wall_min_cells_thick(tmp_path):

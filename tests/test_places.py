@@ -247,3 +247,38 @@ def test_cli_route(floor_file, floor_doc, capsys):
     assert "is not a map point X,Y" in capsys.readouterr().err
     assert main(["route", str(floor_file), "1", "R9"]) == 2
     assert "no unit R9 in this world" in capsys.readouterr().err
+
+
+def test_a_two_cell_speck_in_a_doorway_keeps_the_route(tmp_path):
+    """The literal floor with a chair leg (two cells) in the door A | B: the default model's specks
+    (``[world] door_speck_m2``) keep the door, and the route A -> C with it; one-cell specks (a
+    model file without the key) lose both."""
+    from semmap_pp.cells import OCCUPIED
+    from semmap_pp.frame import build_frame
+    from semmap_pp.outputs import semantic_map
+    from semmap_pp.posterior import Posterior
+
+    from literal_floor import floor_grid, floor_world
+
+    import dataclasses
+
+    g = floor_grid()
+    classes = g.classes.copy()
+    classes[34:36, 54] = OCCUPIED                         # the doorway's rows 25..44: 9 + 9 lines left
+    g = dataclasses.replace(g, classes=classes)
+    old = tmp_path / "old.toml"
+    old.write_text("\n".join(ln for ln in load_model().path.read_text().splitlines()
+                             if not ln.startswith("door_speck_m2")) + "\n")
+    found = {}
+    for name, model in (("default", load_model()), ("one-cell", load_model(old))):
+        f = build_frame(g, model)
+        doc = world_dict(semantic_map(g, f, Posterior(f, model), floor_world()))
+        places = read_places_doc(doc, tmp_path / f"{name}.json")
+        found[name] = ([d["units"] for d in doc["doors"]], places.route(places.unit("1"), places.unit("3")))
+    assert found["default"][0] == [[1, 2]] and found["default"][1].units == ["1", "2", "3"]
+    assert found["one-cell"][0] == [] and found["one-cell"][1] is None
+
+
+def read_places_doc(doc, path):
+    path.write_text(dumps(doc))
+    return read_places(path)

@@ -68,7 +68,7 @@ def derive_world(frame, world: W.World) -> Derived:
     slots = W.active_slots(world)
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
-    doors, passages = find_openings(frame.classes, rects, adj, c, slots)
+    doors, passages = find_openings(frame.door_classes, rects, adj, c, slots)
     objects = find_objects(frame.classes, rects, c.wall, c.object_max_extent, slots)
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)

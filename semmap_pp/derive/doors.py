@@ -3,11 +3,12 @@
 For two units ``p`` and ``q`` the *connecting wall* is the strip between their facing wall bands:
 when they sit side by side along the columns (their column gap exceeds their row gap) it is the
 columns from the inner edge of the left unit's right band to the inner edge of the right unit's
-left band, over the rows both interiors share; likewise with rows and columns swapped. A line of
-the strip across the wall is *open* when every cell on it is input-free or a *speck*: a non-free
-cell none of whose eight neighbours in the map is non-free (an isolated speck of
-SLAM noise in a doorway would otherwise cut a door into two gaps too narrow to count; a wall, a
-door jamb or a closed leaf is a line of cells, never isolated). A door is a maximal run of open
+left band, over the rows both interiors share; likewise with rows and columns swapped. Doors are
+looked for on the map with its *specks* made free (:func:`doorway_classes`, kept by the frame as
+``Frame.door_classes``): clusters of a few non-free cells, such as SLAM noise or a chair leg with
+the unseen cell behind it, which would otherwise cut a door into two gaps too narrow to count (a
+wall, a door jamb or a closed leaf is a long line of cells). A line of the strip across the wall
+is *open* when every cell on it is free there. A door is a maximal run of open
 lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an open passage (the
 two units are one space), a shorter one a gap in a noisy wall. A run that reaches within ``wall``
 cells of both ends of the strip has no jamb on the shared wall — the whole boundary the two units
@@ -78,29 +79,29 @@ def connecting_wall(rp, rq, wall: int):
     return box, vertical
 
 
-def passable(classes: np.ndarray, box) -> np.ndarray:
-    """Cells of the lattice box ``(r0, c0, r1, c1)`` a door may pass: free cells and isolated specks.
+def doorway_classes(classes: np.ndarray, speck_cells: int) -> np.ndarray:
+    """``classes`` with every *speck* made FREE: a non-free cell whose 8-connected component of
+    non-free cells has at most ``speck_cells`` cells (a chair leg and the unseen cell behind it;
+    a wall, a jamb or a closed leaf is a longer line of cells). Doors are looked for on these.
 
-    A speck is a non-free cell none of whose eight neighbours in the map is non-free (a wall
-    cell at the end of a strip touches the rest of its wall outside the strip, so it is not one).
-
-    >>> m = np.array([[2, 2, 2, 2], [0, 0, 0, 0], [0, 2, 0, 0], [0, 0, 0, 0], [2, 2, 0, 1]], np.uint8)
-    >>> passable(m, (1, 0, 5, 4)).astype(int).tolist()
-    [[1, 1, 1, 1], [1, 1, 1, 1], [1, 1, 1, 1], [0, 0, 1, 1]]
+    >>> m = np.array([[0, 0, 0, 0, 0], [0, 2, 0, 0, 2], [0, 1, 0, 0, 2], [0, 0, 0, 0, 2]], np.uint8)
+    >>> doorway_classes(m, 2).tolist()
+    [[0, 0, 0, 0, 0], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2]]
+    >>> doorway_classes(m, 1).tolist() == m.tolist()
+    True
     """
-    r0, c0, r1, c1 = (int(v) for v in box)
-    H, W = classes.shape
-    g0, h0, g1, h1 = max(r0 - 1, 0), max(c0 - 1, 0), min(r1 + 1, H), min(c1 + 1, W)
-    blocked = np.pad(np.asarray(classes[g0:g1, h0:h1]) != FREE,
-                     ((1 - (r0 - g0), 1 - (g1 - r1)), (1 - (c0 - h0), 1 - (h1 - c1))))
-    inner = blocked[1:-1, 1:-1]
-    if not inner.any():
-        return ~inner
-    h, w = inner.shape
-    b8 = blocked.astype(np.uint8)
-    neighbours = sum(b8[1 + di:1 + di + h, 1 + dj:1 + dj + w]
-                     for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj)
-    return ~inner | (neighbours == 0)
+    from scipy import ndimage
+
+    blocked = classes != FREE
+    labels, n = ndimage.label(blocked, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return classes
+    size = np.bincount(labels.ravel(), minlength=n + 1)
+    small = size <= speck_cells
+    small[0] = False
+    out = classes.copy()
+    out[small[labels]] = FREE
+    return out
 
 
 def open_runs(line_open: np.ndarray) -> list[tuple[int, int]]:
@@ -123,7 +124,8 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
     Parameters
     ----------
     classes : (H', W') uint8
-        Lattice input classes.
+        Lattice input classes with their specks made free (``Frame.door_classes``,
+        :func:`doorway_classes`).
     rp, rq : (r0, c0, r1, c1)
     cells : CellParams
         Wall thickness and door width limits in cells.
@@ -139,7 +141,7 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
     full_across = (b1 - b0) == (c1 - c0) if vertical else (a1 - a0) == (r1 - r0)
     if not full_across:  # the wall leaves the map: nothing can be seen through it
         return [], []
-    strip = passable(classes, (a0, b0, a1, b1))
+    strip = classes[a0:a1, b0:b1] == FREE
     line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
     walled = classes[a0:a1, b0:b1] == OCCUPIED
     line_walled = walled.any(axis=1) if vertical else walled.any(axis=0)
@@ -179,18 +181,6 @@ def find_openings(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells
         doors += d
         passages += p
     return doors, passages
-
-
-@numba.njit(cache=True, nogil=True)
-def _speck(classes, r, c):  # pragma: no cover - compiled
-    """A non-free cell with no non-free 8-neighbour in the map (:func:`passable`)."""
-    H, W = classes.shape
-    for dr in range(-1, 2):
-        for dc in range(-1, 2):
-            rr, cc = r + dr, c + dc
-            if (dr != 0 or dc != 0) and 0 <= rr < H and 0 <= cc < W and classes[rr, cc] != FREE:
-                return False
-    return True
 
 
 @numba.njit(cache=True, nogil=True)
@@ -246,7 +236,7 @@ def _opening_counts(classes, rp, rq, wall, door_min, door_max):  # pragma: no co
             is_open = True
             for m in range(n_across):
                 r, c = (a0 + k, b0 + m) if vertical else (a0 + m, b0 + k)
-                if classes[r, c] != FREE and not _speck(classes, r, c):
+                if classes[r, c] != FREE:
                     is_open = False
                     break
         if is_open:
