@@ -1,16 +1,9 @@
 """The output files of `semmap map` beyond world.json: GeoJSON, GraphML, regions, figures, report.
 
-One literal floor (tests/literal_floor.py) explains every case (0.05 m cells, walls 2 cells, doors
-10..50 cells)::
-
-    +------+------+------+      A | B : a 1 m door          -> separate regions, edge "door"
-    |  A o |  B   :  C   |      B : C : wall open for 3.1 m -> one region (an open passage)
-    |      D      :      |      A / D : closed wall         -> separate regions, edge "adjacent"
-    +------+------+------+      o : an object in A;  n : a small free patch below B (unexplored)
-    |  D   |   n
-    +------+
-
-Ids follow reading order of the unit centres: A = 1, B = 2, C = 3, D = 4.
+One literal floor (tests/literal_floor.py, whose docstring draws it) explains every case: A | B a
+1 m door (separate regions, edge "door"), B : C a wall open for 3.1 m (one region, a passage),
+A / D a closed wall (separate regions, edge "adjacent"), an object in A and a small free patch
+below B (unexplored). Ids follow reading order of the unit centres: A = 1, B = 2, C = 3, D = 4.
 """
 
 import html

@@ -31,7 +31,6 @@ from semmap_pp.cells import TYPE_LETTER, UNIT_TYPES
 from semmap_pp.outputs.world_json import world_dict
 
 
-
 def _ids(values) -> str:
     return ",".join(str(int(v)) for v in values)
 
