@@ -119,6 +119,7 @@ def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
     ("wall_min_cells = 0", "world.wall_min_cells: must be >= 1, got 0"),
     ("door_speck_m2 = -0.1", "world.door_speck_m2: must be >= 0.0, got -0.1"),
     ("door_speck_m2 = 2", "world.door_speck_m2: must be <= 1.0, got 2.0"),
+    ("passage_gap_m = -1", "world.passage_gap_m: must be >= 0.0, got -1.0"),
     ("spread_draws = 3", "sampler.spread_draws: must be 0 (no sample around W*) or at least 4 (R-hat and "
                          "ESS need them)"),
     ("spread_draws = -1", "sampler.spread_draws: must be >= 0, got -1"),
@@ -160,6 +161,12 @@ def test_door_specks_are_an_area_of_at_least_one_cell(tmp_path):
     assert [m.cells(r).door_speck for r in (0.025, 0.05, 0.1)] == [8, 2, 1]
     old = without_lines(tmp_path, "door_speck_m2", n=1)
     assert [old.cells(r).door_speck for r in (0.025, 0.05, 0.1)] == [1, 1, 1]
+
+
+def test_passages_across_free_floor_reach_passage_gap_m(tmp_path):
+    """1.0 m is 20 cells at 0.05 m; model files written before the key find none (0)."""
+    assert [load_model().cells(r).passage_gap for r in (0.025, 0.05, 0.1)] == [40, 20, 10]
+    assert without_lines(tmp_path, "passage_gap_m", n=1).cells(0.05).passage_gap == 0
 
 
 def test_the_wall_band_is_at_least_wall_min_cells_thick(tmp_path):

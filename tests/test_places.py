@@ -282,3 +282,41 @@ def test_a_two_cell_speck_in_a_doorway_keeps_the_route(tmp_path):
 def read_places_doc(doc, path):
     path.write_text(dumps(doc))
     return read_places(path)
+
+
+def test_units_facing_across_free_floor_are_joined_by_a_passage(tmp_path):
+    """Two rooms 0.6 m apart with open floor between them and no wall: not adjacent, but a
+    passage joins them (``[world] passage_gap_m``) in world.json, graph.graphml and routes; the
+    strip itself stays outside both units (the same CPR), and regions.png keeps them apart (rooms
+    as a person draws them); a model file without the key lists none."""
+    from semmap_pp import world as W
+    from semmap_pp.cells import FREE, OCCUPIED
+    from semmap_pp.frame import build_frame
+    from semmap_pp.grid import OccupancyGrid
+    from semmap_pp.outputs import semantic_map
+    from semmap_pp.outputs.graphml import world_graph
+    from semmap_pp.outputs.regions import unit_regions
+    from semmap_pp.posterior import Posterior
+
+    c = np.full((60, 100), OCCUPIED, np.uint8)
+    c[4:56, 4:96] = FREE
+    g = OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05)
+    world = W.add(W.add(W.empty(4), 0, (4, 4, 56, 44)), 1, (4, 56, 56, 96))
+    old = tmp_path / "old.toml"
+    old.write_text("\n".join(ln for ln in load_model().path.read_text().splitlines()
+                             if not ln.startswith("passage_gap_m")) + "\n")
+    got = {}
+    for name, model in (("default", load_model()), ("without", load_model(old))):
+        f = build_frame(g, model)
+        sm = semantic_map(g, f, Posterior(f, model), world)
+        doc = world_dict(sm)
+        places = read_places_doc(doc, tmp_path / f"{name}.json")
+        edges = {tuple(sorted(e)): a["relation"] for *e, a in world_graph(sm, doc).edges(data=True)}
+        got[name] = (doc, places.route(places.unit("1"), places.unit("2")), edges, sm.cpr)
+        assert unit_regions(sm) == {1: 1, 2: 2}
+    doc, route, edges, cpr = got["default"]
+    assert doc["adjacency"] == [] and [(p["units"], p["width_m"]) for p in doc["passages"]] == [([1, 2], 2.4)]
+    assert [s.opening.kind for s in route.steps] == ["passage"] and edges[("u1", "u2")] == "passage"
+    doc0, route0, edges0, cpr0 = got["without"]
+    assert doc0["passages"] == [] and route0 is None and ("u1", "u2") not in edges0
+    assert cpr == cpr0

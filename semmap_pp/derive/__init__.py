@@ -25,7 +25,7 @@ import numpy as np
 
 from semmap_pp import world as W
 from semmap_pp.derive.adjacency import adjacency_matrix
-from semmap_pp.derive.doors import Door, find_openings
+from semmap_pp.derive.doors import Door, find_gap_passages, find_openings
 from semmap_pp.derive.exterior import find_exterior
 from semmap_pp.derive.states import Object, cell_states, find_objects
 from semmap_pp.derive.unexplored import Unexplored, find_unexplored
@@ -46,7 +46,9 @@ class Derived(NamedTuple):
 
     ``slots`` are the active slots of the building's units in order (exterior units left out);
     ``adjacency`` is (n, n) over them; doors, passages (open stretches of a shared wall that are
-    not doors: wider than a door or without a jamb) and objects name units by slot and join or lie
+    not doors: wider than a door or without a jamb), gap passages (where two units that do not
+    touch face each other across free floor no unit covers: :func:`find_gap_passages`; for the
+    outputs' routes, not for regions or the model) and objects name units by slot and join or lie
     in building units only. ``states`` (and so the CPR) and ``unexplored`` come from every unit,
     exterior ones included; ``exterior`` lists those.
     """
@@ -59,6 +61,7 @@ class Derived(NamedTuple):
     unexplored: list
     exterior: list
     passages: list = []
+    gap_passages: list = []
 
 
 def derive_world(frame, world: W.World) -> Derived:
@@ -69,6 +72,7 @@ def derive_world(frame, world: W.World) -> Derived:
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
     doors, passages = find_openings(frame.door_classes, rects, adj, c, slots)
+    gaps = find_gap_passages(frame.door_classes, rects, adj, c, slots)   # outputs only: no wall there
     objects = find_objects(frame.classes, rects, c.wall, c.object_max_extent, slots)
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
@@ -79,4 +83,5 @@ def derive_world(frame, world: W.World) -> Derived:
                 for i in np.flatnonzero(ext)]
     return Derived(slots[~ext], states, [d for d in doors if d.p in inside and d.q in inside],
                    [o for o in objects if o.unit in inside], adj[np.ix_(~ext, ~ext)], unexplored,
-                   exterior, [d for d in passages if d.p in inside and d.q in inside])
+                   exterior, [d for d in passages if d.p in inside and d.q in inside],
+                   [d for d in gaps if d.p in inside and d.q in inside])

@@ -183,6 +183,58 @@ def find_openings(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells
     return doors, passages
 
 
+def find_gap_passages(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
+                      slots=None) -> list[Door]:
+    """Passages between units that do not touch: two units that are not adjacent, face each
+    other along a stretch both span and stand at most ``cells.passage_gap`` cells apart, joined
+    where every line from one to the other is free and crosses no other unit (the opening rule of
+    :func:`openings_between`, whatever its width or jambs). The search left that strip of floor
+    to no unit, but a robot walks across it. Off when ``passage_gap`` is 0.
+
+    >>> import numpy as np
+    >>> from semmap_pp.model import load_model
+    >>> cells = load_model().cells(0.05)       # wall 2 cells, gaps up to 20 cells
+    >>> m = np.zeros((40, 60), np.uint8)       # all free
+    >>> rects = np.array([(0, 0, 40, 20), (0, 26, 40, 60)])   # 6 free columns between them
+    >>> [(d.p, d.q, d.width) for d in find_gap_passages(m, rects, np.zeros((2, 2), bool), cells)]
+    [(0, 1, 36)]
+    >>> rects = np.vstack([rects, [(10, 18, 20, 28)]])      # a third unit in the gap, rows 10..19:
+    >>> [(d.box, d.width) for d in find_gap_passages(m, rects, np.zeros((3, 3), bool), cells)]
+    [((20, 18, 38, 28), 18)]
+
+    (the 8 free lines above it are narrower than a door.)
+    """
+    rects = np.asarray(rects).reshape(-1, 4)
+    slots = np.arange(len(rects)) if slots is None else np.asarray(slots)
+    gap_max = int(getattr(cells, "passage_gap", 0))
+    out: list[Door] = []
+    if gap_max <= 0:
+        return out
+    adj = np.asarray(adj, bool)
+    for i in range(len(rects)):
+        for j in range(i + 1, len(rects)):
+            if adj[i, j]:
+                continue
+            a, b = rects[i], rects[j]
+            col_gap = max(a[1], b[1]) - min(a[3], b[3])
+            row_gap = max(a[0], b[0]) - min(a[2], b[2])
+            if not min(col_gap, row_gap) < 0 < max(col_gap, row_gap) <= gap_max:
+                continue
+            cw = connecting_wall(a, b, cells.wall)
+            if cw is None:
+                continue
+            r0, c0, r1, c1 = (max(v, 0) for v in cw[0])
+            window = np.array(classes[r0:r1, c0:c1])    # the strip; other units' cells block it
+            for k in range(len(rects)):
+                if k != i and k != j:
+                    o = rects[k]
+                    window[max(o[0] - r0, 0):max(o[2] - r0, 0), max(o[1] - c0, 0):max(o[3] - c0, 0)] = OCCUPIED
+            shift = np.array([r0, c0, r0, c0])
+            d, p = openings_between(window, a - shift, b - shift, cells, int(slots[i]), int(slots[j]))
+            out += [o._replace(box=tuple(int(v) for v in np.asarray(o.box) + shift)) for o in d + p]
+    return out
+
+
 @numba.njit(cache=True, nogil=True)
 def _walled(classes, vertical, a0, b0, k, n_across):  # pragma: no cover - compiled
     """Whether line ``k`` of the strip at ``(a0, b0)`` holds an occupied cell."""

@@ -13,7 +13,8 @@ Nodes (``kind`` says which; ``id`` is the id of world.json):
 Edges (``relation``): ``door`` between units connected by one or more doors (``doors``: their ids,
 comma-separated; ``n_doors``; ``width_m`` of the widest), ``adjacent`` between units adjacent
 without a door (on both, ``passage``: True when the wall between them is open, see
-:mod:`semmap_pp.outputs.regions`), ``contains`` from a unit to each of its objects, and ``next_to``
+:mod:`semmap_pp.outputs.regions`), ``passage`` between units that do not touch but face each other
+across a strip of free floor (world.json's passages; ``passage`` True), ``contains`` from a unit to each of its objects, and ``next_to``
 from an unexplored area to every unit whose rectangle its bounding box touches (grown by the
 adjacency dilation) and from an exterior unit to every unit it is adjacent to. GraphML holds scalars only, so id lists are comma-separated strings.
 """
@@ -120,6 +121,10 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
                        width_m=max(float(d["width_m"]) for d in ds), passage=(a, b) in passages)
         else:
             g.add_edge(f"u{a}", f"u{b}", relation="adjacent", passage=(a, b) in passages)
+    ids = sm.slot_ids
+    for a, b in sorted({tuple(sorted((ids[d.p], ids[d.q]))) for d in sm.derived.gap_passages}):
+        if not g.has_edge(f"u{a}", f"u{b}"):       # across free floor between units that do not touch
+            g.add_edge(f"u{a}", f"u{b}", relation="passage", passage=True)
     return g
 
 

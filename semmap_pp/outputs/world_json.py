@@ -97,7 +97,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
     ids = sm.slot_ids
 
     doors = _openings(frame, d.doors, ids, res)
-    passages = _openings(frame, d.passages, ids, res)
+    passages = _openings(frame, d.passages + d.gap_passages, ids, res)
 
     objects = []
     for ob in sorted(d.objects, key=lambda o: (ids[o.unit], o.box)):
