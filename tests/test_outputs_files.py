@@ -295,6 +295,7 @@ def test_report_is_self_contained_and_escapes_inputs(hostile_run):
         assert f"<td>{q.name}</td>" in text
     assert "<th>mean per chain</th>" in text
     assert "default" in text and "CPR" in text
+    assert "<th>passages to units</th>" in text and "<th>passages</th>" in text
 
 
 def test_report_and_diagnostics_name_chains_in_separate_modes(floor, hostile_run, tmp_path):

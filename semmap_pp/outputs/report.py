@@ -100,20 +100,26 @@ def _kv(pairs) -> str:
 def units_table(doc: dict, regions: dict[int, int]) -> str:
     """The W* table: one row per unit."""
     door_units = {d["id"]: d["units"] for d in doc["doors"]}
+    passage_units = {d["id"]: d["units"] for d in doc.get("passages", [])}
+
+    def to(u, key, units) -> str:
+        n = Counter(b if a == u["id"] else a for d in u.get(key, []) for a, b in [units[d]])
+        return ", ".join(f"{k} (×{c})" if c > 1 else str(k) for k, c in sorted(n.items())) or "–"
+
     rows = []
     for u in doc["units"]:
         m = u["type_marginals"]
-        n = Counter(b if a == u["id"] else a for d in u["doors"] for a, b in [door_units[d]])
-        to = [f"{k} (×{c})" if c > 1 else str(k) for k, c in sorted(n.items())]
         rows.append([_td(u["id"], True), _td(u["type"])] + [_td(f"{m[t]:.2f}", True) for t in UNIT_TYPES] +
                     [_td(f"{u['size_m'][0]:.2f} × {u['size_m'][1]:.2f}", True),
                      _td(f"{u['size_m'][0] * u['size_m'][1]:.1f}", True),
                      _td(f"{u['seen_share']:.2f} / {u['walls_seen_share']:.2f}", True),
                      _td(regions.get(u["id"], ""), True),
-                     _td(", ".join(to) if to else "–"), _td(len(u["objects"]), True)])
+                     _td(to(u, "doors", door_units)), _td(to(u, "passages", passage_units)),
+                     _td(len(u["objects"]), True)])
     header = ["id", "type"] + [f"p({t})" for t in UNIT_TYPES] + ["size (m)", "area (m²)",
                                                                   "seen (inside / walls)", "region",
-                                                                  "doors to units", "objects"]
+                                                                  "doors to units", "passages to units",
+                                                                  "objects"]
     return _table(header, rows)
 
 
@@ -217,7 +223,9 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
       + [("note", n) for n in run.notes])
     world = _kv([
         ("units", f"{len(doc['units'])} (" + ", ".join(f"{counts[t]} {t}" for t in UNIT_TYPES) + ")"),
-        ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])), ("objects", len(doc["objects"])),
+        ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])),
+        ("passages", f"{len(doc.get('passages', []))} (open walls, and free floor between units that do "
+                     "not touch)"), ("objects", len(doc["objects"])),
         ("unexplored areas", len(doc["unexplored"])),
         ("exterior units", f"{len(doc.get('exterior', []))} (free space seen outside the building; "
                            "not in the units, labels or graph)"),
