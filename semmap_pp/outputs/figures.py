@@ -151,7 +151,8 @@ def overlay_png(sm, doc: dict) -> bytes:
 
 def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
     """graph.png (paper Fig. 5b): units as ellipses at their centres, doors solid, adjacency without
-    a door dashed, objects blue squares, unexplored areas magenta squares, exterior units orange
+    a door dashed, passages across free floor between units that do not touch dash-dotted, objects
+    blue squares, unexplored areas magenta squares, exterior units orange
     squares.
 
     Objects are drawn one node each when there are at most ``max_object_nodes`` of them; otherwise
@@ -171,6 +172,8 @@ def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
     nx.draw_networkx_edges(graph, edgelist=[e for e, r in rel.items() if r == "door"], width=1.8, **common)
     nx.draw_networkx_edges(graph, edgelist=[e for e, r in rel.items() if r == "adjacent"], width=1.2,
                            style="dashed", **common)
+    across = [e for e, r in rel.items() if r == "passage"]
+    nx.draw_networkx_edges(graph, edgelist=across, width=1.2, style="dashdot", **common)
     nx.draw_networkx_edges(graph, pos=pos, ax=ax, edgelist=[e for e, r in rel.items() if r == "next_to"],
                            width=0.8, style="dotted", edge_color=MAGENTA)
     square = dict(boxstyle="square,pad=0.2", lw=0.8)
@@ -197,9 +200,11 @@ def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
         ax.text(*pos[u], a["label"], ha="center", va="center", fontsize=9, fontweight="bold", zorder=5,
                 bbox=dict(boxstyle="ellipse,pad=0.35", fc=TYPE_FACE[a["type"]], ec="black", lw=1.0))
     handles = [Line2D([], [], color="black", lw=1.8, label="door"),
-               Line2D([], [], color="black", lw=1.2, ls="--", label="adjacent, no door"),
-               Patch(fc="tab:blue", label="objects" if len(objects) <= max_object_nodes else "objects per unit"),
-               Patch(fc=MAGENTA, label="unexplored (N)")]
+               Line2D([], [], color="black", lw=1.2, ls="--", label="adjacent, no door")]
+    if across:
+        handles.append(Line2D([], [], color="black", lw=1.2, ls="-.", label="passage across free floor"))
+    handles += [Patch(fc="tab:blue", label="objects" if len(objects) <= max_object_nodes else "objects per unit"),
+                Patch(fc=MAGENTA, label="unexplored (N)")]
     if any(a["kind"] == "exterior" for _, a in graph.nodes(data=True)):
         handles.append(Patch(fc=EXTERIOR, label="exterior (X)"))
     handles += [Patch(fc=TYPE_FACE[t], ec="black", label=f"{TYPE_LETTER[t]} = {t}") for t in UNIT_TYPES]
