@@ -294,12 +294,9 @@ def _point(value) -> tuple[float, float] | None:
 def read_places(path: str | os.PathLike) -> Places:
     """The units, exterior units, doors and passages of the world.json at ``path`` (or in the
     folder ``path``, a run's), checked as :func:`places_from_doc` says."""
-    from semmap_pp.world_file import read_world_doc
+    from semmap_pp.world_file import read_run_world
 
-    p = Path(path)
-    if p.is_dir() and (p / "world.json").is_file():
-        p = path = p / "world.json"
-    doc = read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
+    path, doc = read_run_world(path)
     return places_from_doc(doc, Path(path))
 
 

@@ -171,6 +171,15 @@ class PreviousIds:
     next_id: int               # the first id the file's numbering never used
 
 
+def read_run_world(path: str | os.PathLike) -> tuple:
+    """``(path, doc)``: the world.json at ``path``, or in the folder ``path`` (a run's), read as
+    :func:`read_world_doc` reads it; ``path`` is then the file's, for messages."""
+    p = Path(path)
+    if p.is_dir() and (p / "world.json").is_file():   # a run's folder
+        path = p / "world.json"
+    return path, read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
+
+
 def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
     """The units of the world.json at ``path`` (or in the folder ``path``, an earlier run's) with
     their ids and corners in metres.
@@ -182,10 +191,7 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
     given again), else its largest id + 1. Anything else is one :class:`SemmapError` naming the
     file. Exterior units are not read: their ids are numbered afresh in every file.
     """
-    p = Path(path)
-    if p.is_dir() and (p / "world.json").is_file():   # an earlier run's folder
-        p = path = p / "world.json"
-    doc = read_world_doc(path, "not a regular file (a world.json, or a run's folder that holds one)")
+    path, doc = read_run_world(path)
     units = doc.get("units", [])
     if not isinstance(units, list):
         raise SemmapError(path, "'units' must be a list")
@@ -208,4 +214,4 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
         nxt = max(nxt, given)
     if nxt > MAX_ID:
         raise SemmapError(path, f"no unit id is left after {MAX_ID} (labels.png holds 16-bit ids)")
-    return PreviousIds(p, tuple(ids), np.asarray(quads, np.float64).reshape(-1, 4, 2), nxt)
+    return PreviousIds(Path(path), tuple(ids), np.asarray(quads, np.float64).reshape(-1, 4, 2), nxt)

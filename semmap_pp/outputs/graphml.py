@@ -74,7 +74,7 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
         Unit id -> region id; ``passages`` the unit-id pairs with an open wall
         (:mod:`semmap_pp.outputs.regions`; computed when omitted).
     """
-    from semmap_pp.outputs.regions import join_regions, passage_pairs
+    from semmap_pp.outputs.regions import join_regions, passage_pairs, unit_pairs
 
     doc = world_dict(sm) if doc is None else doc
     passages = set(map(tuple, passage_pairs(sm) if passages is None else passages))
@@ -121,10 +121,8 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
                        width_m=max(float(d["width_m"]) for d in ds), passage=(a, b) in passages)
         else:
             g.add_edge(f"u{a}", f"u{b}", relation="adjacent", passage=(a, b) in passages)
-    ids = sm.slot_ids
-    for a, b in sorted({tuple(sorted((ids[d.p], ids[d.q]))) for d in sm.derived.gap_passages}):
-        if not g.has_edge(f"u{a}", f"u{b}"):       # across free floor between units that do not touch
-            g.add_edge(f"u{a}", f"u{b}", relation="passage", passage=True)
+    for a, b in unit_pairs(sm, sm.derived.gap_passages):   # across free floor: never adjacent
+        g.add_edge(f"u{a}", f"u{b}", relation="passage", passage=True)
     return g
 
 

@@ -55,11 +55,16 @@ def join_regions(unit_ids: Sequence[int], pairs: Iterable[tuple[int, int]]) -> d
     return {u: number[find(u)] for u in sorted(parent)}
 
 
+def unit_pairs(sm, openings) -> list[tuple[int, int]]:
+    """Unit-id pairs ``(a, b)``, ``a < b``, that ``openings`` (doors or passages by slot) join."""
+    ids = sm.slot_ids
+    return sorted({tuple(sorted((ids[d.p], ids[d.q]))) for d in openings})
+
+
 def passage_pairs(sm) -> list[tuple[int, int]]:
     """Unit-id pairs ``(a, b)``, ``a < b``, whose connecting wall holds an open passage
     (``sm.derived.passages``)."""
-    ids = sm.slot_ids
-    return sorted({tuple(sorted((ids[d.p], ids[d.q]))) for d in sm.derived.passages})
+    return unit_pairs(sm, sm.derived.passages)
 
 
 def unit_regions(sm) -> dict[int, int]:
@@ -83,5 +88,5 @@ def write_regions_png(path: str | os.PathLike, image: np.ndarray) -> Path:
     return Path(path)
 
 
-__all__ = ["join_regions", "passage_pairs", "unit_regions", "regions_image",
+__all__ = ["join_regions", "passage_pairs", "unit_pairs", "unit_regions", "regions_image",
            "write_regions_png"]
