@@ -54,6 +54,15 @@ SEPARATION_SDS = 4.0
 #: mean (MSER) comes within this factor of its least value.
 WARMUP_GAIN = 2.0
 
+#: A chain of the best chain's mode is *still climbing* (:func:`climb`) when, over its draws after
+#: the warm-up cut, the mean log posterior of its last quarter exceeds its first quarter's by more
+#: than :data:`CLIMB_MIN_NATS`, no quarter's mean falls below the one before by more than
+#: :data:`CLIMB_DIP` of that rise, and at least :data:`CLIMB_SHARE` of the way its log posterior
+#: travelled from draw to draw went up more than down (``(last - first) / sum |steps|``).
+CLIMB_MIN_NATS = 1.0
+CLIMB_DIP = 0.1
+CLIMB_SHARE = 0.25
+
 #: Label-invariant summaries recorded for every draw, in report order.
 SUMMARIES = ("log_posterior", "n_units", "wall_length", "cpr") + tuple(f"n_{t}" for t in UNIT_TYPES)
 
@@ -92,6 +101,7 @@ class ModeReport:
     first_draw: int = 0   # draws before it (from 0) left out: the mode's chains still settling
     figures: bool = True  # whether the spread figures are drawn from these draws (else: W*'s search)
     draws_option: str = "--draws"   # the option that lengthens these chains (for the verdict)
+    climbing: tuple[tuple[int, float], ...] = ()   # (chain, rise in nats) of the chains still climbing
 
     @property
     def ok(self) -> bool:
@@ -112,7 +122,16 @@ class ModeReport:
         what = "the spread figures rest on" if self.figures else "its estimates rest on"
         ess = (f"{what} about {self.ess:.0f} independent draws (smallest ESS); "
                if math.isfinite(self.ess) else "")
-        return f"NOT mixed within the mode: {ess}more draws ({self.draws_option}) steady them"
+        if self.climbing:
+            chains = chains_phrase(c for c, _ in self.climbing)
+            rises = ", ".join(f"{r:,.1f}" for _, r in self.climbing)
+            return (f"NOT mixed within the mode: {ess}{chains} still climbing (log posterior up {rises} "
+                    f"nats from the first quarter of these draws to the last, with few steps down): "
+                    f"{'the figures follow' if self.figures else 'its draws follow'} a climb, and more "
+                    f"draws ({self.draws_option}) climb further rather than steady them (docs/sampler.md, "
+                    f"\"Chains that climb\")")
+        return (f"NOT mixed within the mode: {ess}more draws ({self.draws_option}) may steady them "
+                f"(docs/sampler.md, \"Chains that climb\")")
 
     def heading(self, n_chains: int) -> str:
         which = "all chains" if len(self.chains) == n_chains else chains_phrase(self.chains)
@@ -128,6 +147,7 @@ class ModeReport:
     def to_dict(self) -> dict:
         return {"ok": self.ok, "chains": list(self.chains), "draws": self.n_draws,
                 "first_draw": self.first_draw, "ess": _clean(self.ess),
+                "climbing": [{"chain": c, "rise": r} for c, r in self.climbing],
                 "quantities": {q.name: _quantity_dict(q) for q in self.quantities},
                 "constant": {n: v for n, v in self.constant}}
 
@@ -382,6 +402,34 @@ def warmup_draws(x) -> int:
     return int(np.flatnonzero(mser <= mser.min() * WARMUP_GAIN + 1e-300)[0])
 
 
+def climb(x) -> float:
+    """How far one chain's log posterior trace ``x`` (after the warm-up cut) still climbs: the
+    mean of its last quarter minus its first quarter's, rounded to 0.1 nats, when the trace climbs
+    as :data:`CLIMB_SHARE` and its neighbours say; else 0. Finite traces of at least 8 draws only.
+
+    A chain at T = 1 in a target this peaked takes nearly every step up and few down: its trace is
+    a staircase of plateaus, which the MSER cut does not remove, and its ESS does not grow with
+    more draws (docs/sampler.md, "Chains that climb"). A stationary chain goes down as far as it
+    goes up: what it travels grows with its length, where it ends does not.
+
+    >>> climb(np.repeat([0.0, 5.0, 9.0, 20.0], 10) + np.tile([0.1, -0.1], 20))   # a staircase
+    20.0
+    >>> climb(np.tile([0.1, -0.1], 20)), climb(np.full(40, 3.0))
+    (0.0, 0.0)
+    """
+    x = np.asarray(x, float)
+    if x.size < 8 or not np.all(np.isfinite(x)):
+        return 0.0
+    x = x - x[-1]
+    q = [float(part.mean()) for part in np.array_split(x, 4)]
+    rise = q[-1] - q[0]
+    travelled = float(np.abs(np.diff(x)).sum())
+    if (rise > CLIMB_MIN_NATS and all(b >= a - CLIMB_DIP * rise for a, b in zip(q, q[1:]))
+            and travelled > 0 and (x[-1] - x[0]) / travelled >= CLIMB_SHARE):
+        return round(rise, 1)
+    return 0.0
+
+
 def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,
                 ess_min: float, draws_option: str = "--draws") -> ConvergenceReport:
     """Judge convergence of label-invariant summaries.
@@ -422,8 +470,9 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
             constant.append((n, float(a.flat[0])))
         else:
             moved.append(whole.get(n) or _diagnose_one(n, a, rhat_max, ess_min))
+    climbing = tuple((c, r) for c in chains if lp is not None for r in [climb(lp[c - 1, first:])] if r > 0)
     return replace(report, within_mode=ModeReport(chains, n_draws, tuple(moved), tuple(constant), first,
-                                                  draws_option=draws_option))
+                                                  draws_option=draws_option, climbing=climbing))
 
 
 def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,

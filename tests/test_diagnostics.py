@@ -242,3 +242,63 @@ def test_a_chain_that_jumped_once_has_an_infinite_rhat_not_twenty_digits():
     q = dg.convergence({"n_other": a}, rhat_max=1.05, ess_min=100).quantities[0]
     assert q.rhat == np.inf and "a chain jumped once" in q.reason and not q.ok
     assert dg.format_rhat(3017531479833410.5) == "3.02e+15" and dg.format_rhat(1.01234) == "1.012"
+
+
+def ar1(rng, phi, n, burn=2000):
+    x = np.zeros(n + burn)
+    e = rng.normal(size=n + burn)
+    for i in range(1, n + burn):
+        x[i] = phi * x[i - 1] + e[i]
+    return x[burn:]
+
+
+def staircase(rng, n, steps=12, height=40.0):
+    """A chain that takes nearly every step up and few down: plateaus of jitter, jumps up at random
+    draws (what cartesium's chains do at T = 1, docs/sampler.md "Chains that climb")."""
+    jumps = np.zeros(n)
+    jumps[rng.choice(np.arange(1, n), steps, replace=False)] = rng.exponential(height, steps)
+    return np.cumsum(jumps) + 0.5 * rng.normal(size=n)
+
+
+def test_a_climbing_chain_is_named_and_more_draws_are_not_promised_to_steady_it():
+    rng = np.random.default_rng(12)
+    lp = np.stack([staircase(rng, 600), staircase(rng, 600)]) - 7.8e5
+    rep = dg.convergence({"log_posterior": lp}, rhat_max=1.05, ess_min=100, draws_option="--spread-draws")
+    m = rep.within_mode
+    assert not m.ok and [c for c, _ in m.climbing] == [1, 2]
+    for c, rise in m.climbing:
+        x = lp[c - 1, m.first_draw:]
+        q = np.array_split(x, 4)
+        assert rise == pytest.approx(q[-1].mean() - q[0].mean(), abs=0.06) and rise > 0
+    verdict = m.verdict()
+    assert "chains 1, 2 still climbing" in verdict and "climb further rather than steady them" in verdict
+    assert "may steady" not in verdict and "(--spread-draws)" in verdict
+    assert rep.to_dict()["within_mode"]["climbing"] == [{"chain": c, "rise": r} for c, r in m.climbing]
+    assert verdict in rep.to_text()
+
+
+def test_stationary_chains_are_not_called_climbing():
+    """White noise of 25 draws or more never (of 8, 2.6 % of 4000 traces); a sticky stationary chain
+    (AR(1), phi up to 0.999) of 400 draws at most once in 200 (of 25 draws, the search's default,
+    it can look like a climb: measured 4-11 %)."""
+    rng = np.random.default_rng(13)
+    assert all(dg.climb(5.0 * rng.normal(size=n)) == 0.0 for n in (25, 400) for _ in range(500))
+    for phi in (0.9, 0.99, 0.999):
+        flagged = 0
+        for _ in range(200):
+            x = ar1(rng, phi, 400)
+            flagged += dg.climb(x[dg.warmup_draws(x):]) > 0
+        assert flagged <= 1, (phi, flagged)
+    rep = dg.convergence({"log_posterior": np.stack([ar1(rng, 0.99, 400), ar1(rng, 0.99, 400)])},
+                         rhat_max=1.05, ess_min=1000)
+    assert rep.within_mode.climbing == () and rep.within_mode.verdict().endswith(
+        '(--draws) may steady them (docs/sampler.md, "Chains that climb")')
+
+
+def test_climb_needs_the_whole_trace_to_rise():
+    up = np.repeat([0.0, 5.0, 9.0, 20.0], 10)
+    assert dg.climb(up) == 20.0
+    assert dg.climb(up[::-1]) == 0.0                              # falling
+    assert dg.climb(np.concatenate([up, up])) == 0.0              # up, back down, up again
+    assert dg.climb(np.repeat([0.0, 0.3, 0.6, 0.9], 10)) == 0.0   # less than CLIMB_MIN_NATS
+    assert dg.climb(up[:7]) == 0.0 and dg.climb(np.r_[up, np.nan]) == 0.0
