@@ -224,6 +224,26 @@ def compare_dict(rows: list[RuleSetSummary], *, map_path: str, settings: dict) -
             "rule_sets": [clean(asdict(r)) for r in rows]}
 
 
+def wstar_diffs(runs: list, names: list[str]) -> list:
+    """The W* of every rule set after the first against the first's, unit by unit
+    (:func:`semmap_pp.world_diff.diff_worlds`: retyped, moved, removed, added units and openings)."""
+    from pathlib import Path
+
+    from semmap_pp.outputs import world_dict
+    from semmap_pp.places import places_from_doc
+    from semmap_pp.world_diff import diff_worlds
+
+    plans = [places_from_doc(world_dict(r.semantic), Path(f"W* of {n}")) for r, n in zip(runs, names)]
+    return [diff_worlds(plans[0], p) for p in plans[1:]]
+
+
+def diffs_section(diffs: list, seed: int | None = None) -> str:
+    """compare.md's section on the W*s unit by unit (:func:`wstar_diffs`)."""
+    which = f", seed {seed}" if seed is not None else ""
+    return (f"## W* unit by unit (`semmap diff`{which})\n\n"
+            + "\n\n".join(f"```\n{d.text()}\n```" for d in diffs))
+
+
 def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
     """compare.png: the sampled worlds of each run drawn thin on the map, side by side (paper Fig. 7)."""
     from semmap_pp.outputs.figures import classified_rgb, png, side_by_side, world_lines

@@ -50,7 +50,20 @@ def iou_matrix(a, b) -> np.ndarray:
 def match_units(a, b, min_iou: float = MATCH_IOU) -> list[tuple[int, int, float]]:
     """One-to-one matches ``(i, j, iou)`` between the rectangles ``a`` and ``b``, greedily from
     the highest IoU (ties: the lower indices first), each at least ``min_iou``; sorted by ``i``."""
-    iou = iou_matrix(a, b)
+    return greedy_matches(iou_matrix(a, b), min_iou)
+
+
+def greedy_matches(iou: np.ndarray, min_iou: float = MATCH_IOU) -> list[tuple[int, int, float]]:
+    """One-to-one matches ``(i, j, iou[i, j])`` of the rows and columns of an IoU matrix, greedily
+    from the highest value (ties: the lower indices first), each at least ``min_iou``; sorted by
+    ``i`` (:func:`match_units`, and ``semmap diff``'s units in map metres).
+
+    >>> greedy_matches(np.array([[0.9, 0.6], [0.7, 0.2]]))
+    [(0, 0, 0.9)]
+    """
+    iou = np.asarray(iou, dtype=np.float64)
+    if iou.size == 0:
+        return []
     out, used_a, used_b = [], set(), set()
     order = np.argsort(-iou, axis=None, kind="stable")
     for k in order.tolist():

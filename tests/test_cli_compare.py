@@ -38,6 +38,15 @@ def test_compare_writes_table_json_and_figure(tmp_path, capsys):
         assert r["n_worlds"] == min(6, (7 - r["spread_first_draw"]) * len(r["spread_chains"]))
         assert 0 <= r["cpr"] <= 1 and 0 <= r["wall_spread"] <= 0.25
         assert set(r["rhat"]) >= {"log_posterior", "n_units", "cpr"}
+    # none.lp against table3.lp, unit by unit, as `semmap diff` of the two W*s
+    assert "## W* unit by unit (`semmap diff`)" in printed and printed.index("## W* unit by unit") < printed.index(str(out))
+    assert "W* of table3 -> W* of none" in md
+    (diff,) = doc["wstar_diffs"]
+    assert diff["old"] == "W* of table3" and diff["new"] == "W* of none"
+    c = diff["counts"]
+    assert c["paired"] + c["removed"] == c["units"][0] and c["paired"] + c["added"] == c["units"][1]
+    assert {p["new"]["type"] for p in diff["units"]} | {u["type"] for u in diff["added"]} <= {"room", "exterior"}
+    assert c["retyped"] == sum(p["old"]["type"] != p["new"]["type"] for p in diff["units"])
     w, h = Image.open(out / "compare.png").size
     assert w > h       # two panels side by side
 

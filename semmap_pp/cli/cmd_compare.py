@@ -61,7 +61,8 @@ def _names(paths: list[Path]) -> list[str]:
 def run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
-                                   compare_table, summarise, typed_sampled_worlds)
+                                   compare_table, diffs_section, summarise, typed_sampled_worlds,
+                                   wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
     from semmap_pp.pipeline import RunSettings, check_out_dir, load_inputs
@@ -117,6 +118,8 @@ def run(args) -> int:
                             + [f"## Seed {seed}\n\n{t}" for seed, t in zip(seeds, tables)])
     else:
         text = tables[0]
+    diffs = wstar_diffs(per_seed[0][0], names)
+    text += "\n\n" + diffs_section(diffs, seeds[0] if several else None)
     print(text)
     if args.out is not None:
         out = args.out
@@ -131,6 +134,7 @@ def run(args) -> int:
         atomic.write_text(out / "compare.md", head + text + "\n")
         runs, worlds, rows = per_seed[0]
         doc = compare_dict(rows, map_path=str(inputs.grid.source), settings=shared)
+        doc["wstar_diffs"] = [d.to_dict() for d in diffs]
         if several:
             doc["seeds"] = seeds
             doc["per_seed"] = [{"seed": seed, "rule_sets": compare_dict(r, map_path=doc["map"],
