@@ -189,7 +189,9 @@ def diff_worlds(old: Places, new: Places, *, tolerance_m: float = TOLERANCE_M,
     for i, u in enumerate(a):
         lo, hi = u.corners.min(axis=0), u.corners.max(axis=0)
         for j, v in enumerate(b):
-            if np.all(lo < v.corners.max(axis=0)) and np.all(hi > v.corners.min(axis=0)):
+            if np.array_equal(u.corners, v.corners):      # the same rectangle, even one without area
+                iou[i, j] = 1.0
+            elif np.all(lo < v.corners.max(axis=0)) and np.all(hi > v.corners.min(axis=0)):
                 iou[i, j] = overlap_iou(u.corners, v.corners)
     matches = greedy_matches(iou, min_iou)
     pairs = tuple(UnitPair(a[i], b[j], v) for i, j, v in matches)

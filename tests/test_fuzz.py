@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import io
+import json
 import math
 import tempfile
 from pathlib import Path
@@ -222,11 +223,13 @@ def check_model_bytes(data: bytes) -> None:
 
 def check_world_bytes(data: bytes) -> None:
     """Read ``data`` as a world.json onto a small map's lattice (``semmap map --start``), as the
-    places of ``semmap where`` / ``semmap route`` (a route from the first unit to the last), and in
+    places of ``semmap where`` / ``semmap route`` (a route from the first unit to the last) and of
+    ``semmap diff`` (the file against itself: the same plan), and in
     metres as the earlier world of ``--ids-from``, whose ids then number a one-unit world."""
     from semmap_pp import world as wm
     from semmap_pp.outputs.ids import MAX_ID, carry_ids
     from semmap_pp.places import read_places
+    from semmap_pp.world_diff import diff_worlds
     from semmap_pp.world_file import read_previous_ids, read_start_world
 
     COUNT["cases"] += 1
@@ -241,6 +244,10 @@ def check_world_bytes(data: bytes) -> None:
                 assert route is None or (math.isfinite(route.length_m) and route.length_m >= 0
                                          and route.units[0] == a.key and route.units[-1] == b.key)
                 places.units_at(*a.center)
+            d_self = diff_worlds(places, places)           # `semmap diff` of the file against itself
+            assert d_self.same and len(d_self.pairs) == len(places.units) + len(places.exterior)
+            d_self.text()
+            json.dumps(d_self.to_dict())
         except SemmapError as exc:
             assert "\n" not in str(exc) and len(str(exc)) < 2000
         try:

@@ -256,6 +256,8 @@ def decode_npy(path: Path, *, max_cells: int = MAX_CELLS) -> Decoded:
         header = np.load(path, mmap_mode="r", allow_pickle=False)
     except _NPY_HEADER_ERRORS as exc:  # numpy parses the header with tokenize and literal_eval
         raise MapError(path, f"not a readable .npy array: {str(exc)[:200]}") from None
+    except SystemError:     # CPython 3.12.1's tokenizer, given null bytes, can leave its error set
+        raise MapError(path, "not a readable .npy array: its header does not parse") from None
     shape, dtype = header.shape, header.dtype
     if len(shape) != 2:
         raise MapError(path, f".npy array must be 2-D (rows, cols), got shape {shape}")
