@@ -67,6 +67,8 @@ class UnitPair:
 
 @dataclass(frozen=True)
 class OpeningPair:
+    """A door or passage of OLD and the one of NEW between the same units, ``distance_m`` apart."""
+
     old: Opening
     new: Opening
     distance_m: float
