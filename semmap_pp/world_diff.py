@@ -156,28 +156,31 @@ class WorldDiff:
             what = [w for w, on in (("retyped", p.retyped), ("moved", self.moved(p))) if on]
             if not what and not all_units:
                 continue
-            text = f"  {', '.join(what) or 'unchanged':<16}{p.old.label + ' -> ' + p.new.label:<16}"
             parts = []
             if p.retyped:
                 parts.append(f"{p.old.type} -> {p.new.type}")
             if self.moved(p):
                 parts.append(f"{_size(p.old)} -> {_size(p.new)} m, corners up to {p.shift_m:.2f} m "
                              f"(IoU {p.iou:.2f})")
-            lines.append(text + ("; ".join(parts) if parts else f"{p.new.type}, {_size(p.new)} m"))
+            lines.append(_line(", ".join(what) or "unchanged", f"{p.old.label} -> {p.new.label}",
+                               "; ".join(parts) if parts else f"{p.new.type}, {_size(p.new)} m"))
         for verb, units in (("removed", self.removed), ("added", self.added)):
             for u in units:
-                lines.append(f"  {verb:<16}{u.label:<16}{u.type}, {_size(u)} m, centre {_xy(u.center)}")
+                lines.append(_line(verb, u.label, f"{u.type}, {_size(u)} m, centre {_xy(u.center)}"))
         for o in self.opening_pairs:
             if o.old.kind != o.new.kind:
-                lines.append(f"  {'changed':<16}{o.old.kind} {o.old.id} -> {o.new.kind} {o.new.id}"
-                             f"{'':<3}{_between(self.new, o.new)}, centre {_xy(o.new.center)}")
+                lines.append(_line("changed", f"{o.old.kind} {o.old.id} -> {o.new.kind} {o.new.id}",
+                                   f"{_between(self.new, o.new)}, centre {_xy(o.new.center)}"))
         for verb, openings, places in (("removed", self.openings_removed, self.old),
                                        ("added", self.openings_added, self.new)):
             for o in openings:
-                lines.append(f"  {verb:<16}{o.kind + ' ' + str(o.id):<16}{_between(places, o)}, "
-                             f"{o.width_m:.2f} m wide, centre {_xy(o.center)}")
+                lines.append(_line(verb, f"{o.kind} {o.id}",
+                                   f"{_between(places, o)}, {o.width_m:.2f} m wide, centre {_xy(o.center)}"))
         if self.same:
             lines.append(f"the same plan (every unit paired, unchanged within {self.tolerance_m:g} m)")
+        elif not self.pairs and self.removed and self.added:
+            lines.append("no unit of one file lies where a unit of the other does: are both of the same "
+                         "building, in the same map frame?")
         return "\n".join(lines)
 
 
@@ -226,6 +229,11 @@ def diff_worlds(old: Places, new: Places, *, tolerance_m: float = TOLERANCE_M,
                      tuple(o for i, o in enumerate(old.openings) if i not in used_i),
                      tuple(o for j, o in enumerate(new.openings) if j not in used_j),
                      float(tolerance_m))
+
+
+def _line(verb: str, label: str, rest: str) -> str:
+    """One change, in columns: what happened, to which unit or opening, and how."""
+    return f"  {verb:<16}{label:<15} {rest}"
 
 
 def _label(places: Places, key: str) -> str:

@@ -110,6 +110,7 @@ def test_units_pair_by_place_in_metres_whatever_the_map(floor_doc):
     d = diff_worlds(places_from_doc(floor_doc), places_from_doc(moved))
     assert not d.pairs and len(d.removed) == len(d.added) == 4 and d.unit_f1 == 0.0
     assert len(d.openings_removed) == len(d.openings_added) == 2
+    assert d.text().endswith("are both of the same building, in the same map frame?")
 
 
 @settings(max_examples=60, deadline=None)
