@@ -120,6 +120,19 @@ class WorldDiff:
                 "openings_changed": sum(o.old.kind != o.new.kind for o in self.opening_pairs),
                 "openings_removed": len(self.openings_removed), "openings_added": len(self.openings_added)}
 
+    def summary(self, old_name: str | None = None) -> str:
+        """One line: how NEW differs from OLD, named ``old_name`` or by its path (``semmap map
+        --ids-from`` logs it)."""
+        c = self.counts()
+        old_name = old_name or str(self.old.path)
+        if self.same:
+            return f"the same plan as {old_name} ({c['units'][1]} units)"
+        openings = (f"; doors and passages: {c['openings_removed']} removed, {c['openings_added']} added"
+                    + (f", {c['openings_changed']} changed kind" if c["openings_changed"] else ""))
+        return (f"since {old_name}: units {c['units'][0]} -> {c['units'][1]} ({c['paired']} paired: "
+                f"{c['retyped']} retyped, {c['moved']} moved; {c['removed']} removed, {c['added']} added)"
+                + openings)
+
     def to_dict(self) -> dict:
         def unit(u: Unit) -> dict:
             length, width = u.size_m

@@ -150,7 +150,17 @@ def test_a_run_on_a_grown_map_carries_the_ids_of_the_same_places(intel_corner_ws
     out = tmp_path / "b"
     assert main(["map", str(grown), "--out", str(out), "--seed", "3", *FAST_RUN,
                  "--ids-from", str(intel_corner_wstar)]) == 0
-    assert "unit ids from " in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "unit ids from " in err
+    # how the new plan differs from the earlier one, as `semmap diff` counts it
+    assert main(["diff", str(intel_corner_wstar), str(out), "--json"]) in (0, 1)
+    c = json.loads(capsys.readouterr().out)["counts"]
+    line = next(x for x in err.splitlines() if x.endswith(f"(`semmap diff {intel_corner_wstar} {out}` lists them)"))
+    assert line.startswith(f"since {intel_corner_wstar}: units {c['units'][0]} -> {c['units'][1]} "
+                           f"({c['paired']} paired: {c['retyped']} retyped, {c['moved']} moved; "
+                           f"{c['removed']} removed, {c['added']} added); doors and passages: "
+                           f"{c['openings_removed']} removed, {c['openings_added']} added") \
+        or line.startswith(f"the same plan as {intel_corner_wstar}")
     old = json.loads(intel_corner_wstar.read_text())
     new = json.loads((out / "world.json").read_text())
     jsonschema.validate(new, SCHEMA)
@@ -230,7 +240,12 @@ def test_a_resumed_run_keeps_the_ids_its_run_carried(intel_corner_wstar, grown, 
     first = json.loads((out / "world.json").read_text())
     capsys.readouterr()
     assert main(["map", "--resume", str(out), "--draws", "2", "--progress", "none"]) == 0
-    assert f"unit ids from {out / 'world.json'}" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"unit ids from {out / 'world.json'}" in err
+    # compared with the file as it was before the resumed run overwrote it
+    line = next(x for x in err.splitlines() if "the world.json this run resumed from" in x)
+    assert line.startswith(("since the world.json this run resumed from: units ",
+                            "the same plan as the world.json this run resumed from")) and "semmap diff" not in line
     again = json.loads((out / "world.json").read_text())
     assert again["ids"]["next"] >= first["ids"]["next"]
     same = {tuple(map(tuple, u["vertices_m"])): u["id"] for u in first["units"]}

@@ -123,6 +123,29 @@ def _resume_inputs(args):
     return inputs, RunSettings(**values), state, Path(m["rules"]) if m["rules"] else None
 
 
+def _places_or_none(path):
+    """The world.json at ``path`` as :func:`semmap_pp.places.read_places` reads it, or None (no
+    ``--ids-from``, or a file too old or odd for ``semmap diff``: its ids are carried all the same)."""
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.places import read_places
+
+    if path is None:
+        return None
+    try:
+        return read_places(path)
+    except SemmapError:
+        return None
+
+
+def _changes_since(previous, out: Path, name: str | None = None) -> str | None:
+    """One line on how the world.json just written to ``out`` differs from ``previous`` (called
+    ``name`` in it, else by its path)."""
+    from semmap_pp.world_diff import diff_worlds
+
+    now = _places_or_none(out / "world.json")
+    return None if now is None else diff_worlds(previous, now).summary(name)
+
+
 def carried_ids_source(run_dir: Path) -> Path | None:
     """``run_dir``'s world.json when its unit ids were carried from an earlier one (it has an
     ``ids`` object): what ``--resume run_dir`` carries them from, so that the resumed run keeps
@@ -197,6 +220,7 @@ def run(args) -> int:
         ids_from = carried_ids_source(args.resume)
     # read before sampling: a bad file costs no run
     previous_ids = read_previous_ids(ids_from) if ids_from is not None else None
+    previous_places = _places_or_none(ids_from)   # what the new plan is compared with (semmap diff)
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
@@ -240,6 +264,11 @@ def run(args) -> int:
     written.append(write_resume(out, result, meta))
     for path in written:
         print(path)
+    if previous_places is not None:
+        resumed = Path(ids_from).resolve() == (out / "world.json").resolve()    # now overwritten
+        changes = _changes_since(previous_places, out, "the world.json this run resumed from" if resumed else None)
+        if changes:
+            log(changes if resumed else f"{changes} (`semmap diff {ids_from} {out}` lists them)")
     rep = result.report
     log(f"chains: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x {rep.n_draws} draws; "
         f"R-hat and ESS: `semmap diagnose {out}`"
