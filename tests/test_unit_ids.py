@@ -243,9 +243,9 @@ def test_a_resumed_run_keeps_the_ids_its_run_carried(intel_corner_wstar, grown, 
     err = capsys.readouterr().err
     assert f"unit ids from {out / 'world.json'}" in err
     # compared with the file as it was before the resumed run overwrote it
-    line = next(x for x in err.splitlines() if "the world.json this run resumed from" in x)
-    assert line.startswith(("since the world.json this run resumed from: units ",
-                            "the same plan as the world.json this run resumed from")) and "semmap diff" not in line
+    line = next(x for x in err.splitlines() if "the world.json this run overwrote" in x)
+    assert line.startswith(("since the world.json this run overwrote: units ",
+                            "the same plan as the world.json this run overwrote")) and "semmap diff" not in line
     again = json.loads((out / "world.json").read_text())
     assert again["ids"]["next"] >= first["ids"]["next"]
     same = {tuple(map(tuple, u["vertices_m"])): u["id"] for u in first["units"]}

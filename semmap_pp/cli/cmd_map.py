@@ -265,8 +265,10 @@ def run(args) -> int:
     for path in written:
         print(path)
     if previous_places is not None:
-        resumed = Path(ids_from).resolve() == (out / "world.json").resolve()    # now overwritten
-        changes = _changes_since(previous_places, out, "the world.json this run resumed from" if resumed else None)
+        earlier = Path(ids_from) / "world.json" if Path(ids_from).is_dir() else Path(ids_from)
+        resumed = earlier.resolve() == (out / "world.json").resolve()    # now overwritten
+        changes = _changes_since(previous_places, out,
+                                 "the world.json this run overwrote" if resumed else None)
         if changes:
             log(changes if resumed else f"{changes} (`semmap diff {ids_from} {out}` lists them)")
     rep = result.report
