@@ -22,6 +22,7 @@ from semmap_pp.cli.cmd_info import add_map_options
 from semmap_pp.cli.cmd_map import add_target_options, target_inputs
 from semmap_pp.cli.cmd_score import print_scores, score_world, scores_of
 from semmap_pp.errors import OutputError
+from semmap_pp.places import unit_key
 from semmap_pp.world_edit import Edit
 
 
@@ -149,8 +150,8 @@ def carried_rows(ids: list[dict], record: dict) -> list[dict]:
     carried = {str(i) for i in record["carried"]}
     out = []
     for r in ids:
-        num = r["now"].lstrip("RCHE")
-        if r["was"] is None and not r["now"].startswith("X") and num in carried:
+        num = unit_key(r["now"])          # "C1" -> "1"; an exterior "X1" stays itself
+        if r["was"] is None and num in carried:
             r = {**r, "was": num}
         out.append(r)
     return out
@@ -174,7 +175,7 @@ def ids_text(ids: list[dict], path, gone=(), carried_from=None) -> str:
            else f"ids carried from {carried_from} where a unit is the same place")
     lines = [f"ids in {path} ({how}):"]
     kept = [r for r in ids if r["was"] is not None]
-    moved = [f"{r['was']} -> {r['now']}" for r in kept if r["was"] != r["now"].lstrip("RCHE")]
+    moved = [f"{r['was']} -> {r['now']}" for r in kept if r["was"] != unit_key(r["now"])]
     line = ""
     for item in moved:                       # items never split across lines
         if line and len(line) + 2 + len(item) > 98:
