@@ -169,3 +169,32 @@ def test_broken_input_is_one_line_and_exit_2(floor_doc, tmp_path, capsys):
     assert exc.value.code == 2
     with pytest.raises(ValueError):
         diff_worlds(places_from_doc(floor_doc), places_from_doc(floor_doc), tolerance_m=float("nan"))
+
+
+def test_the_figure_draws_each_kind_of_change_in_its_colour(floor_doc, tmp_path, capsys):
+    from PIL import Image
+
+    from semmap_pp.outputs.figures import DIFF_COLOUR
+
+    new = copy.deepcopy(floor_doc)
+    shift(unit(new, 3), 0.3, corners=(1, 2))                              # moved: orange
+    new["units"] = [u for u in new["units"] if u["id"] != 4]            # removed: red
+    a, b = write(tmp_path, "a.json", floor_doc), write(tmp_path, "b.json", new)
+    fig = tmp_path / "diff.png"
+    assert main(["diff", str(a), str(b), "--png", str(fig)]) == 1
+    assert capsys.readouterr().out.rstrip().endswith(str(fig))
+    rgb = np.asarray(Image.open(fig).convert("RGB")).reshape(-1, 3)
+
+    def count(name):
+        c = np.array([int(DIFF_COLOUR[name][i:i + 2], 16) for i in (1, 3, 5)])
+        return int(np.count_nonzero(np.abs(rgb.astype(int) - c).sum(axis=1) < 30))
+
+    assert count("moved") > 100 and count("removed") > 100 and count("unchanged") > 100
+    assert count("retyped") < 50                               # only its legend entry
+    same = tmp_path / "same.png"
+    assert main(["diff", str(a), str(a), "--png", str(same)]) == 0 and same.is_file()
+    capsys.readouterr()
+    assert main(["diff", str(a), str(b), "--png", str(a / "d.png")]) == 2      # under a file
+    out, err = capsys.readouterr()
+    assert err.strip().startswith("semmap: error:") and "d.png" in err and "\n" not in err.strip()
+    assert out == ""                                           # nothing printed before the error

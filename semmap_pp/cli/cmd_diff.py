@@ -9,6 +9,7 @@ that cannot be read (one line naming it).
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_float
 
@@ -27,6 +28,8 @@ def register(subparsers) -> None:
                    help="a unit is moved when a corner shifts farther than this (default 0.1)")
     p.add_argument("--all", action="store_true", help="list the unchanged units too")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--png", type=Path, metavar="FILE",
+                   help="also draw both plans, coloured by change, in map metres (a PNG file)")
     p.set_defaults(func=run)
 
 
@@ -36,5 +39,16 @@ def run(args) -> int:
 
     tolerance = TOLERANCE_M if args.tolerance is None else args.tolerance
     diff = diff_worlds(read_places(args.old), read_places(args.new), tolerance_m=tolerance)
+    if args.png is not None:      # written first: a figure that cannot be written prints nothing
+        from semmap_pp import atomic
+        from semmap_pp.errors import OutputError
+        from semmap_pp.outputs.figures import diff_png
+
+        try:
+            atomic.write_bytes(args.png, diff_png(diff))
+        except OSError as exc:
+            raise OutputError(args.png, f"cannot write the figure: {exc.strerror or exc}") from None
     print(json.dumps(diff.to_dict()) if args.json else diff.text(all_units=args.all))
+    if args.png is not None and not args.json:
+        print(args.png)
     return 0 if diff.same else 1

@@ -391,3 +391,62 @@ def stability_png(sm, agreement, seeds) -> bytes:
 __all__ = ["png", "classified_rgb", "overlay_rgb", "crop_box", "overlay_png",
            "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "independent_text", "posterior_png", "posterior_cells_png", "roi_png",
            "regions_preview_png", "AGREEMENT_COLOURS", "agreement_class", "stability_png"]
+
+
+#: ``semmap diff --png``: the colour of each kind of change.
+DIFF_COLOUR = {"unchanged": "#9a9a9a", "moved": "#e67e00", "retyped": "#1f5fd6", "removed": "#d62728",
+               "added": "#1a9a3a"}
+
+
+def diff_png(diff) -> bytes:
+    """``semmap diff --png``: two world.json plans in map-frame metres, one over the other. NEW's
+    units are drawn solid, coloured by what happened to them (unchanged grey, moved orange, retyped
+    blue, added green), OLD's moved and removed units dashed (removed in red), and the doors and
+    passages that went (red x) or came (green +); labels are NEW's, OLD's for a removed unit
+    (:class:`semmap_pp.world_diff.WorldDiff`)."""
+    def ring(u):
+        v = np.asarray(u.corners, float)
+        return np.vstack([v, v[:1]])
+
+    drawn = [ring(u) for p in diff.pairs for u in (p.old, p.new)] + [ring(u) for u in diff.removed + diff.added]
+    pts = np.vstack(drawn) if drawn else np.zeros((1, 2))
+    (x0, y0), (x1, y1) = pts.min(axis=0) - 1.0, pts.max(axis=0) + 1.0
+    scale = LONG_SIDE_PX / max(x1 - x0, y1 - y0, 1e-9)
+    fig = Figure(figsize=(max((x1 - x0) * scale, 300) / DPI, max((y1 - y0) * scale, 300) / DPI + 0.6), dpi=DPI)
+    ax = fig.add_axes((0.01, 0.06, 0.98, 0.9))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)                 # map frame: y up
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+    def draw(u, colour, dashed=False, label=True, lw=1.6):
+        r = ring(u)
+        ax.plot(r[:, 0], r[:, 1], color=colour, lw=lw, ls="--" if dashed else "-")
+        if label:
+            ax.text(*u.center, u.label, color=colour, ha="center", va="center", fontsize=8, clip_on=True)
+
+    for p in diff.pairs:
+        moved = diff.moved(p)
+        kind = "retyped" if p.retyped else "moved" if moved else "unchanged"
+        if moved:
+            draw(p.old, DIFF_COLOUR[kind], dashed=True, label=False, lw=1.0)
+        draw(p.new, DIFF_COLOUR[kind], lw=1.0 if kind == "unchanged" else 1.8)
+    for u in diff.removed:
+        draw(u, DIFF_COLOUR["removed"], dashed=True)
+    for u in diff.added:
+        draw(u, DIFF_COLOUR["added"])
+    for openings, marker, kind in ((diff.openings_removed, "x", "removed"), (diff.openings_added, "+", "added")):
+        if openings:
+            xy = np.array([o.center for o in openings], float)
+            ax.plot(xy[:, 0], xy[:, 1], marker, color=DIFF_COLOUR[kind], ms=8, mew=2, ls="none")
+    c = diff.counts()
+    handles = [Line2D([], [], color=DIFF_COLOUR[k], lw=1.8, ls="--" if k == "removed" else "-",
+                      label=f"{k} ({c[k]})") for k in ("unchanged", "moved", "retyped", "removed", "added")]
+    handles += [Line2D([], [], color=DIFF_COLOUR["removed"], marker="x", ls="none", mew=2,
+                       label=f"door or passage gone ({c['openings_removed']})"),
+                Line2D([], [], color=DIFF_COLOUR["added"], marker="+", ls="none", mew=2,
+                       label=f"door or passage new ({c['openings_added']})")]
+    _legend(fig, handles, ncol=4)
+    fig.suptitle(f"{diff.old.path} -> {diff.new.path}  (old dashed, new solid)", fontsize=9)
+    return png(fig)
