@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from semmap_pp.outputs.ids import MIN_IOU, overlap_iou
+from semmap_pp.outputs.ids import MIN_IOU, overlap_iou_matrix
 from semmap_pp.places import Opening, Places, Unit, _rounded, _xy
 from semmap_pp.stability import greedy_matches
 
@@ -203,15 +203,7 @@ def diff_worlds(old: Places, new: Places, *, tolerance_m: float = TOLERANCE_M,
     if not (math.isfinite(tolerance_m) and tolerance_m >= 0):
         raise ValueError(f"tolerance_m must be a finite number >= 0, got {tolerance_m!r}")
     a, b = (*old.units, *old.exterior), (*new.units, *new.exterior)
-    iou = np.zeros((len(a), len(b)))
-    for i, u in enumerate(a):
-        lo, hi = u.corners.min(axis=0), u.corners.max(axis=0)
-        for j, v in enumerate(b):
-            if np.array_equal(u.corners, v.corners):      # the same rectangle, even one without area
-                iou[i, j] = 1.0
-            elif np.all(lo < v.corners.max(axis=0)) and np.all(hi > v.corners.min(axis=0)):
-                iou[i, j] = overlap_iou(u.corners, v.corners)
-    matches = greedy_matches(iou, min_iou)
+    matches = greedy_matches(overlap_iou_matrix([u.corners for u in a], [v.corners for v in b]), min_iou)
     pairs = tuple(UnitPair(a[i], b[j], v) for i, j, v in matches)
     paired_a, paired_b = {i for i, _, _ in matches}, {j for _, j, _ in matches}
     to_new = {p.old.key: p.new.key for p in pairs}

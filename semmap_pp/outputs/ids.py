@@ -74,18 +74,40 @@ def clip_convex(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
 
 
 def overlap_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two convex polygons (0 when either has no area).
+    """Intersection over union of two convex polygons: 1 for the same corners (even without
+    area), else 0 when either has no area.
 
     >>> a = np.array([[0, 0], [2, 0], [2, 1], [0, 1]], float)
-    >>> round(overlap_iou(a, a + [1.0, 0.0]), 6)
-    0.333333
+    >>> round(overlap_iou(a, a + [1.0, 0.0]), 6), overlap_iou(a[[0, 0, 0, 0]], a[[0, 0, 0, 0]])
+    (0.333333, 1.0)
     """
+    if np.array_equal(a, b):
+        return 1.0
     area_a, area_b = abs(signed_area(a)), abs(signed_area(b))
     if area_a <= 0 or area_b <= 0:
         return 0.0
     inter = clip_convex(a, b)
     common = abs(signed_area(inter)) if len(inter) >= 3 else 0.0
     return common / (area_a + area_b - common)
+
+
+def overlap_iou_matrix(a, b) -> np.ndarray:
+    """(len(a), len(b)) :func:`overlap_iou` of the convex quadrilaterals ``a[i]`` and ``b[j]``
+    (each (4, 2)); a pair whose bounding boxes do not meet is 0 without clipping.
+
+    >>> sq = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)
+    >>> overlap_iou_matrix([sq, sq + 5.0], [sq + [1.0, 0.0]]).round(3).tolist()
+    [[0.333], [0.0]]
+    """
+    a = np.asarray(a, float).reshape(-1, 4, 2)
+    b = np.asarray(b, float).reshape(-1, 4, 2)
+    out = np.zeros((len(a), len(b)))
+    lo, hi = b.min(axis=1), b.max(axis=1)
+    for i, c in enumerate(a):
+        near = np.flatnonzero(np.all(lo <= c.max(axis=0), axis=1) & np.all(hi >= c.min(axis=0), axis=1))
+        for k in near.tolist():
+            out[i, k] = overlap_iou(c, b[k])
+    return out
 
 
 def carry_ids(corners_m: dict, order: list, previous, min_iou: float = MIN_IOU) -> tuple[dict, dict]:
@@ -99,16 +121,9 @@ def carry_ids(corners_m: dict, order: list, previous, min_iou: float = MIN_IOU) 
     Returns ``(slot_ids, record)``: slot -> id, and the record world.json keeps under ``ids``:
     the file, the next id never used, and which ids were carried, are new and are gone.
     """
-    old = np.asarray(previous.corners_m, float).reshape(-1, 4, 2)
-    lo, hi = old.min(axis=1), old.max(axis=1)
-    pairs = []
-    for s, corners in corners_m.items():
-        c = np.asarray(corners, float)
-        near = np.flatnonzero(np.all(lo < c.max(axis=0), axis=1) & np.all(hi > c.min(axis=0), axis=1))
-        for k in near.tolist():
-            iou = overlap_iou(c, old[k])
-            if iou >= min_iou:
-                pairs.append((-iou, previous.ids[k], s))
+    slots = list(corners_m)
+    iou = overlap_iou_matrix([corners_m[s] for s in slots], previous.corners_m)
+    pairs = [(-iou[i, k], previous.ids[k], slots[i]) for i, k in zip(*np.nonzero(iou >= min_iou))]
     slot_ids, taken = {}, set()
     for _, uid, s in sorted(pairs):
         if s not in slot_ids and uid not in taken:
