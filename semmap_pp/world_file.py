@@ -192,6 +192,11 @@ def read_previous_ids(path: str | os.PathLike) -> PreviousIds:
     file. Exterior units are not read: their ids are numbered afresh in every file.
     """
     path, doc = read_run_world(path)
+    return previous_ids_from_doc(doc, path)
+
+
+def previous_ids_from_doc(doc: dict, path) -> PreviousIds:
+    """:func:`read_previous_ids` of a world.json's content, already read from ``path``."""
     units = doc.get("units", [])
     if not isinstance(units, list):
         raise SemmapError(path, "'units' must be a list")

@@ -123,27 +123,30 @@ def _resume_inputs(args):
     return inputs, RunSettings(**values), state, Path(m["rules"]) if m["rules"] else None
 
 
-def _places_or_none(path):
-    """The world.json at ``path`` as :func:`semmap_pp.places.read_places` reads it, or None (no
-    ``--ids-from``, or a file too old or odd for ``semmap diff``: its ids are carried all the same)."""
+def _places_or_none(doc: dict, path):
+    """A world.json's content (read from ``path``) as :func:`semmap_pp.places.places_from_doc`
+    reads it, or None: a file too old or odd for ``semmap diff`` still gives its ids."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.places import read_places
+    from semmap_pp.places import places_from_doc
 
-    if path is None:
-        return None
     try:
-        return read_places(path)
+        return places_from_doc(doc, Path(path))
     except SemmapError:
         return None
 
 
-def _changes_since(previous, out: Path, name: str | None = None) -> str | None:
-    """One line on how the world.json just written to ``out`` differs from ``previous`` (called
+def _changes_since(previous, path: Path, name: str | None = None) -> str | None:
+    """One line on how the world.json just written to ``path`` differs from ``previous`` (called
     ``name`` in it, else by its path)."""
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.places import read_places
     from semmap_pp.world_diff import diff_worlds
 
-    now = _places_or_none(out / "world.json")
-    return None if now is None else diff_worlds(previous, now).summary(name)
+    try:
+        now = read_places(path)
+    except SemmapError:
+        return None
+    return diff_worlds(previous, now).summary(name)
 
 
 def carried_ids_source(run_dir: Path) -> Path | None:
@@ -184,7 +187,7 @@ def run(args) -> int:
     from semmap_pp.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.resume import write_resume
     from semmap_pp.step import StopFlag
-    from semmap_pp.world_file import read_previous_ids
+    from semmap_pp.world_file import previous_ids_from_doc, read_run_world
 
     state, starts = None, None
     if not spread_draws_ok(args.spread_draws or 0):
@@ -219,8 +222,11 @@ def run(args) -> int:
     if ids_from is None and state is not None:   # a resumed run keeps the ids its world.json carried
         ids_from = carried_ids_source(args.resume)
     # read before sampling: a bad file costs no run
-    previous_ids = read_previous_ids(ids_from) if ids_from is not None else None
-    previous_places = _places_or_none(ids_from)   # what the new plan is compared with (semmap diff)
+    previous_ids = previous_places = None
+    if ids_from is not None:
+        ids_from, doc = read_run_world(ids_from)   # the file itself, when given a run's folder
+        previous_ids = previous_ids_from_doc(doc, ids_from)
+        previous_places = _places_or_none(doc, ids_from)   # what the new plan is compared with
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
@@ -265,9 +271,8 @@ def run(args) -> int:
     for path in written:
         print(path)
     if previous_places is not None:
-        earlier = Path(ids_from) / "world.json" if Path(ids_from).is_dir() else Path(ids_from)
-        resumed = earlier.resolve() == (out / "world.json").resolve()    # now overwritten
-        changes = _changes_since(previous_places, out,
+        resumed = Path(ids_from).resolve() == (out / "world.json").resolve()    # now overwritten
+        changes = _changes_since(previous_places, out / "world.json",
                                  "the world.json this run overwrote" if resumed else None)
         if changes:
             log(changes if resumed else f"{changes} (`semmap diff {ids_from} {out}` lists them)")
