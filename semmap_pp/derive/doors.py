@@ -206,7 +206,7 @@ def find_gap_passages(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, c
     """
     rects = np.asarray(rects).reshape(-1, 4)
     slots = np.arange(len(rects)) if slots is None else np.asarray(slots)
-    gap_max = int(getattr(cells, "passage_gap", 0))
+    gap_max = int(cells.passage_gap)
     out: list[Door] = []
     if gap_max <= 0:
         return out
