@@ -42,6 +42,10 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   ``occupied_thresh=0.0198``; the YAML's 0.65 / 0.03 would make grey obstacles unknown). Segments are
   *regions*: regions.png's, units joined where their connecting wall holds an open passage (one
   space cut in two units), see :func:`regions_of`. Precision / recall micro, published protocol and restricted.
+* **real-gt**: the five real SLAM floors of ``bench/data/real-gt`` (ROSE2's evaluation maps, MIT
+  licence: LICENSE-ROSE2 there) with their hand-drawn room truth. rooms.png is scored by the ROSE2
+  protocol (:func:`semmap_pp.evaluate.protocol_scores`), and so, with the same code, are ROSE2's own
+  published output (``rose2.png``) and regions.png cut to the map's free cells; per map and as means.
 * **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
   corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
 
@@ -121,7 +125,8 @@ def _budget(text: str) -> str | float:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all",
-                        choices=["synthetic", "truth", "surgery", "real", "ipa", "types", "stability", "targets", "all"])
+                        choices=["synthetic", "truth", "surgery", "real", "real-gt", "ipa", "types", "stability",
+                                 "targets", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--seeds", default="0,1,2",
                         help="sampler seeds of --subset stability, comma-separated (default 0,1,2)")
@@ -982,7 +987,8 @@ def bench_ipa(args, model, rules) -> dict:
         # methods label them (regions.png labels wall cells too); no ground truth used for it
         free = segmentation_scores(gt, np.where(grid.classes == FREE, seg, 0), restrict_to_gt=False)
         units = segmentation_scores(gt, sm.labels_image.astype(np.int64), restrict_to_gt=False)
-        row = {"map": name, "units": len(sm.unit_ids), "regions": int(len(np.unique(seg)) - (seg == 0).any()),
+        rooms = segmentation_scores(gt, sm.rooms.labels, restrict_to_gt=False)
+        row = {"map": name, "rooms_precision": round(rooms.precision, 4), "rooms_recall": round(rooms.recall, 4), "units": len(sm.unit_ids), "regions": int(len(np.unique(seg)) - (seg == 0).any()),
                "precision": round(pub.precision, 4), "recall": round(pub.recall, 4),
                "precision_restricted": round(res.precision, 4), "recall_restricted": round(res.recall, 4),
                "precision_free": round(free.precision, 4), "recall_free": round(free.recall, 4),
@@ -991,14 +997,60 @@ def bench_ipa(args, model, rules) -> dict:
                "run_s": round(run.seconds, 1), "knowledge": run.notes[0]}
         rows.append(row)
         _save(args, name, sm)
-        _log(args, f"ipa {name}: P {row['precision']:.3f} R {row['recall']:.3f} (restricted "
+        _log(args, f"ipa {name}: rooms P {row['rooms_precision']:.3f} R {row['rooms_recall']:.3f}; "
+                   f"regions P {row['precision']:.3f} R {row['recall']:.3f} (restricted "
                    f"{row['precision_restricted']:.3f}/{row['recall_restricted']:.3f}), {row['units']} units")
-    keys = ("precision", "recall", "precision_restricted", "recall_restricted", "precision_free",
-            "recall_free", "precision_units", "recall_units")
+    keys = ("rooms_precision", "rooms_recall", "precision", "recall", "precision_restricted",
+            "recall_restricted", "precision_free", "recall_free", "precision_units", "recall_units")
     return {"rows": rows, "means": {k: _mean(rows, k) for k in keys},
             "published_real_maps": {"rose2_average_11": PUBLISHED["rose2_real"]["average_11_maps"],
                                     **PUBLISHED["bormann_real_average"]},
             "pixel_rule": "grey >= 250 free, else obstacle (free_thresh=0.0197, occupied_thresh=0.0198)"}
+
+
+REAL_GT = ROOT / "bench" / "data" / "real-gt"
+
+
+def bench_real_gt(args, model, rules) -> dict:
+    from semmap_pp.cells import FREE
+    from semmap_pp.evaluate import protocol_scores, read_segmentation, read_segmentation_truth
+    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
+    rows = []
+    for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
+        name = folder.name
+        if not _keep(name, args):
+            continue
+        inputs = load_inputs(folder / "map.yaml", model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
+        try:
+            run, clock = _run(inputs, _settings(model, args), args.quiet)
+        except MapFailed as exc:
+            rows.append({"map": name, "error": str(exc)})
+            _log(args, f"real-gt {name}: FAILED {exc}")
+            continue
+        sm = run.semantic
+        gt = read_segmentation_truth(folder / "gt.png", "rose2")
+        rooms = protocol_scores(gt, sm.rooms.labels)
+        rose2 = protocol_scores(gt, read_segmentation(folder / "rose2.png"))
+        seg, _ = regions_of(sm)
+        regions = protocol_scores(gt, np.where(inputs.grid.classes == FREE, seg, 0))
+        row = {"map": name, "units": len(sm.unit_ids), "rooms": len(sm.rooms.rooms),
+               "rooms_seen_through_door": sum(r.seen_through_door for r in sm.rooms.rooms),
+               "true_rooms": rooms.n_rooms,
+               "precision": round(rooms.precision, 4), "recall": round(rooms.recall, 4),
+               "rose2_precision": round(rose2.precision, 4), "rose2_recall": round(rose2.recall, 4),
+               "regions_free_precision": round(regions.precision, 4),
+               "regions_free_recall": round(regions.recall, 4),
+               "cpr": round(sm.cpr, 4), "run_s": round(run.seconds, 1)}
+        rows.append(row)
+        _save(args, name, sm)
+        _log(args, f"real-gt {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f} | ROSE2 "
+                   f"{row['rose2_precision']:.3f} / {row['rose2_recall']:.3f} | regions cut to free "
+                   f"{row['regions_free_precision']:.3f} / {row['regions_free_recall']:.3f}; "
+                   f"{row['rooms']} rooms, run {row['run_s']} s")
+    keys = ("precision", "recall", "rose2_precision", "rose2_recall", "regions_free_precision",
+            "regions_free_recall", "run_s")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys},
+            "protocol": "ROSE2: truth rooms = one-colour regions > 200 cells, segments whole"}
 
 
 TYPE_MAPS = [("Fr52_original.png", "training_Fr52.png"), ("NLB_original.png", "training_NLB_furniture.png"),
@@ -1063,7 +1115,7 @@ def run(args) -> dict:
     subsets = {"all": ["synthetic", "real", "ipa", "types"],
                "targets": ["synthetic", "truth", "real"]}.get(args.subset, [args.subset])
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
-           "real": bench_real, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
+           "real": bench_real, "real-gt": bench_real_gt, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
     for name in subsets:
         t0 = time.perf_counter()
         out[name] = fns[name](args, model, rules)

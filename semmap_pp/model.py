@@ -214,6 +214,18 @@ class OutsideParams:
 
 
 @dataclass(frozen=True)
+class RoomParams:
+    """``[rooms]``: how rooms.png gives every free cell a room (semmap_pp.outputs.rooms).
+
+    A model file without the table gets these values."""
+
+    min_room_m2: float = 2.0
+    door_max_m: float = 1.6
+    open_share_min: float = 0.6
+    band_m: float = 0.3
+
+
+@dataclass(frozen=True)
 class Model:
     path: Path
     lattice: LatticeParams
@@ -227,6 +239,7 @@ class Model:
     diagnostics: DiagnosticsParams
     kernels: dict  # the [kernels] table: proposal tuning, read by kernels.settings_from_mapping
     outside: OutsideParams = OutsideParams()
+    rooms: RoomParams = RoomParams()
 
     def cells(self, resolution: float) -> CellParams:
         """Convert the model's lengths to whole lattice cells at ``resolution`` metres per cell.
@@ -473,9 +486,19 @@ def load_model(path: str | Path | None = None) -> Model:
             mode=r.choice("outside.mode", OUTSIDE_MODES),
             border_open_min=r.number("outside.border_open_min", lo=0.0, hi=1.0),
             seal_gap_m=r.number("outside.seal_gap_m", positive=True))
+    rooms = RoomParams()        # optional table (model files written before it: the defaults)
+    if r.has("rooms"):
+        if not isinstance(r.raw("rooms"), dict):
+            raise r.error("rooms", "must be a table")
+        rooms = RoomParams(
+            min_room_m2=r.optional("rooms.min_room_m2", rooms.min_room_m2, r.number, positive=True, hi=1e4),
+            door_max_m=r.optional("rooms.door_max_m", rooms.door_max_m, r.number, positive=True, hi=100.0),
+            open_share_min=r.optional("rooms.open_share_min", rooms.open_share_min, r.number,
+                                      lo=0.0, hi=1.0),
+            band_m=r.optional("rooms.band_m", rooms.band_m, r.number, positive=True, hi=100.0))
     return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
                  prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
-                 diagnostics=diagnostics, kernels=dict(kernels), outside=outside)
+                 diagnostics=diagnostics, kernels=dict(kernels), outside=outside, rooms=rooms)
 
 
 def _row(r: _Reader, key: str, raw: list, i: int, n: int) -> np.ndarray:

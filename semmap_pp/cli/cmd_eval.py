@@ -1,5 +1,13 @@
 """``semmap eval DIR --truth T [--json]``: score a run's world.json and labels.png against a truth.
 
+``semmap eval DIR --segmentation GT.png [--format rose2|ipa] [--of FILE]`` scores the run's
+rooms.png (``--of``: another of its label images, or any segmentation image) by the published room
+segmentation protocol: ``rose2`` (default) reads GT.png as one colour per room (ROSE2's
+``gt.png``; rooms of more than 200 cells, every predicted segment counts), ``ipa`` as white rooms
+(Bormann et al.'s ``*_gt_segmentation.png``; rooms and segments of more than 100 cells). Segments
+are taken whole (a segment's cells outside every room lower its precision). A colour image given
+to ``--of`` (ROSE2's ``rose2.png``) is read as one segment per colour.
+
 ``T`` is recognised by name, then by content:
 
 * a synthetic floor (``semmap synth``): its folder, or its ``truth.json`` — units matched by polygon
@@ -31,14 +39,24 @@ import numpy as np
 from semmap_pp.errors import MapError
 
 KINDS = ("synthetic", "ipa-segmentation", "ipa-types")
+SEGMENTATION_FORMATS = ("rose2", "ipa")      # semmap_pp.evaluate.io.SEGMENTATION_FORMATS
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("eval", help="score a run against ground truth (synthetic or ipa)",
                               description=__doc__.splitlines()[0])
     p.add_argument("dir", metavar="DIR", type=Path, help="output folder of `semmap map`")
-    p.add_argument("--truth", required=True, type=Path, metavar="T",
-                   help="synthetic floor folder or truth.json, ipa *_gt_segmentation.png or training_*.png")
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("--truth", type=Path, metavar="T",
+                       help="synthetic floor folder or truth.json, ipa *_gt_segmentation.png or training_*.png")
+    which.add_argument("--segmentation", type=Path, metavar="GT",
+                       help="a room ground truth (colour per room, or ipa white rooms: --format); scores "
+                            "rooms.png by the published protocol")
+    p.add_argument("--format", choices=SEGMENTATION_FORMATS, default="rose2",
+                   help="with --segmentation: how GT is drawn (rose2: a colour per room; ipa: white rooms)")
+    p.add_argument("--of", type=Path, metavar="FILE", default=None,
+                   help="with --segmentation: the segmentation to score (default DIR/rooms.png; a name is "
+                        "looked for in DIR first)")
     p.add_argument("--kind", choices=KINDS, default=None, help="say what T is instead of detecting it")
     p.add_argument("--published", action="store_true",
                    help="segmentation: the published ipa protocol (segments taken whole, not cut to the rooms)")
@@ -177,8 +195,42 @@ def format_text(result: dict) -> str:
     return "\n".join(lines)
 
 
+def segmentation_of(run_dir: Path, of: Path | None) -> Path:
+    """The segmentation file ``--of`` names: DIR/rooms.png by default; a bare name in DIR first."""
+    if of is None:
+        path = run_dir / "rooms.png"
+    elif not of.is_absolute() and (run_dir / of).is_file():
+        path = run_dir / of
+    else:
+        path = of
+    if not path.is_file():
+        raise MapError(path, "missing (expected a segmentation image"
+                             + (", the rooms.png of `semmap map`)" if of is None else ")"))
+    return path
+
+
+def evaluate_segmentation(run_dir: Path, truth: Path, fmt: str = "rose2", of: Path | None = None) -> dict:
+    """Published-protocol precision / recall of a run's rooms.png (or ``of``) against ``truth``."""
+    from semmap_pp.evaluate import protocol_scores, read_segmentation, read_segmentation_truth
+
+    if of is None and not run_dir.is_dir():
+        raise MapError(run_dir, "not a run folder (expected the --out folder of `semmap map`)")
+    pred_path = segmentation_of(run_dir, of)
+    gt = read_segmentation_truth(truth, fmt)
+    pred = read_segmentation(pred_path)
+    _same_shape(pred, gt, pred_path, truth)
+    s = protocol_scores(gt, pred, fmt)
+    return {"run": str(run_dir), "truth": str(truth), "kind": f"{fmt} segmentation",
+            "segmentation": str(pred_path), "protocol": "published", "scores": _seg("", s)}
+
+
 def run(args) -> int:
-    result = evaluate_run(args.dir, args.truth, args.kind, published=args.published)
+    if args.segmentation is not None:
+        result = evaluate_segmentation(args.dir, args.segmentation, args.format, args.of)
+    else:
+        if args.of is not None:
+            raise MapError(args.of, "--of goes with --segmentation")
+        result = evaluate_run(args.dir, args.truth, args.kind, published=args.published)
     if args.json:
         result = dict(result, scores={k: _clean(v) for k, v in result["scores"].items()})
         print(json.dumps(result))

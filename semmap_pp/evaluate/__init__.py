@@ -13,10 +13,12 @@ Definitions and the choices behind them: docs/evaluation.md.
 
 from semmap_pp.evaluate.cpr import (CORRECT_PAIRS, closing_radius_cells, cpr, default_roi, disk,
                                     load_roi)
-from semmap_pp.evaluate.io import (IPA_MIN_REGION_CELLS, ipa_gt_labels, read_ipa_gt,
-                                   read_ipa_types, read_json, read_label_image)
+from semmap_pp.evaluate.io import (IPA_MIN_REGION_CELLS, ROSE2_MIN_ROOM_CELLS, SEGMENTATION_FORMATS,
+                                   colour_room_labels, colour_segment_labels, ipa_gt_labels,
+                                   read_ipa_gt, read_ipa_types, read_json, read_label_image,
+                                   read_segmentation, read_segmentation_truth)
 from semmap_pp.evaluate.segmentation import (OverlapTable, SegmentationScore, iou_matrix,
-                                             overlap_table, scores_from_table,
+                                             overlap_table, protocol_scores, scores_from_table,
                                              segmentation_scores)
 from semmap_pp.evaluate.lshape import recut_l, score_world_either_l
 from semmap_pp.evaluate.truth import WorldScore, match_units, polygon_mask, score_world
@@ -29,6 +31,8 @@ __all__ = [
     "closing_radius_cells", "cpr", "default_roi", "disk", "iou_matrix", "ipa_gt_labels",
     "load_roi", "match_units", "overlap_table", "polygon_mask", "read_ipa_gt", "read_ipa_types",
     "read_json", "read_label_image", "recut_l", "score_world", "score_world_either_l",
-    "scores_from_table", "segmentation_scores",
+    "scores_from_table", "segmentation_scores", "protocol_scores", "ROSE2_MIN_ROOM_CELLS",
+    "SEGMENTATION_FORMATS", "colour_room_labels", "colour_segment_labels", "read_segmentation",
+    "read_segmentation_truth",
     "type_accuracy", "type_map_from_labels",
 ]

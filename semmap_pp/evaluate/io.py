@@ -32,6 +32,11 @@ from semmap_pp.evaluate.types import (TRUTH_CORRIDOR, TRUTH_DOORWAY, TRUTH_OUTSI
 IPA_WHITE_ABOVE = 250
 IPA_MIN_REGION_CELLS = 100
 
+# ROSE2's evaluation (Luperto et al. 2022, after Bormann et al.): ground-truth rooms are the
+# connected regions of one colour of more than 200 cells; every predicted segment counts.
+ROSE2_MIN_ROOM_CELLS = 200
+SEGMENTATION_FORMATS = ("rose2", "ipa")
+
 # Grey values of the ipa place-type images and the truth codes they become.
 IPA_TYPE_PIXELS = {77: TRUTH_ROOM, 115: TRUTH_CORRIDOR, 179: TRUTH_DOORWAY, 0: TRUTH_OUTSIDE}
 
@@ -143,6 +148,115 @@ def read_ipa_gt(path: str | os.PathLike, min_room_cells: int = IPA_MIN_REGION_CE
         raise MapError(path, f"no white (> {IPA_WHITE_ABOVE}) region of more than "
                              f"{min_room_cells} cells: not an ipa ground-truth image")
     return labels
+
+
+def _colour_codes(image: np.ndarray) -> np.ndarray:
+    """One int64 per pixel for its colour (RGB; grey repeated), 0 for black or fully transparent."""
+    image = np.asarray(image)
+    if image.ndim == 2:
+        rgb = np.repeat(image[..., None], 3, axis=2)
+    elif image.ndim == 3 and image.shape[2] in (2, 3, 4):
+        rgb = np.repeat(image[..., :1], 3, axis=2) if image.shape[2] == 2 else image[..., :3]
+    else:
+        raise ValueError(f"not an image array: shape {image.shape}")
+    rgb = rgb.astype(np.int64)
+    code = (rgb[..., 0] << 32) | (rgb[..., 1] << 16) | rgb[..., 2]
+    if image.ndim == 3 and image.shape[2] in (2, 4):
+        code[image[..., -1] == 0] = 0
+    return code
+
+
+def colour_room_labels(image: np.ndarray, min_room_cells: int = ROSE2_MIN_ROOM_CELLS) -> np.ndarray:
+    """Rooms of a colour ground truth (ROSE2's ``gt.png``): every 8-connected region of one colour
+    (black or transparent: no room) of more than ``min_room_cells`` cells, numbered 1..n in the
+    order of their first cell.
+
+    >>> img = np.zeros((2, 5, 3), np.uint8); img[:, :2] = (200, 0, 0); img[:, 3:] = (200, 0, 0)
+    >>> colour_room_labels(img, 0).tolist()        # one colour, two rooms
+    [[1, 1, 0, 2, 2], [1, 1, 0, 2, 2]]
+    """
+    code = _colour_codes(image)
+    _, inv = np.unique(code, return_inverse=True)
+    inv = inv.reshape(code.shape).astype(np.int64) + 1
+    inv[code == 0] = 0
+    # regions of one colour: 8-connected components of equal neighbours
+    out = np.zeros(code.shape, np.int32)
+    n_total = 0
+    objs = ndi.find_objects(inv)
+    for value, sl in enumerate(objs, start=1):
+        if sl is None:
+            continue
+        lab, n = ndi.label(inv[sl] == value, structure=np.ones((3, 3), bool))
+        if n == 0:
+            continue
+        sizes = np.bincount(lab.ravel(), minlength=n + 1)
+        keep = sizes > min_room_cells
+        keep[0] = False
+        new_id = np.zeros(n + 1, np.int32)
+        new_id[keep] = np.arange(n_total + 1, n_total + 1 + int(keep.sum()), dtype=np.int32)
+        n_total += int(keep.sum())
+        sub = out[sl]
+        hit = new_id[lab] > 0
+        sub[hit] = new_id[lab][hit]
+    # number in the order of each room's first cell
+    ids = out.ravel()
+    first = np.unique(ids[ids > 0], return_index=True)
+    order = np.argsort(first[1])
+    lut = np.zeros(n_total + 1, np.int32)
+    lut[first[0][order]] = np.arange(1, order.size + 1, dtype=np.int32)
+    return lut[out]
+
+
+def colour_segment_labels(image: np.ndarray) -> np.ndarray:
+    """Segments of a colour segmentation (ROSE2's ``rose2.png``): one segment per colour, wherever
+    its pixels lie (black or transparent: none), numbered 1..n by colour.
+
+    >>> img = np.zeros((1, 5, 3), np.uint8); img[0, :2] = (9, 9, 9); img[0, 3:] = (9, 9, 9)
+    >>> colour_segment_labels(img).tolist()
+    [[1, 1, 0, 1, 1]]
+    """
+    code = _colour_codes(image)
+    values, inv = np.unique(code, return_inverse=True)
+    inv = inv.reshape(code.shape).astype(np.int32) + (0 if values[0] == 0 else 1)
+    return np.where(code == 0, 0, inv).astype(np.int32)
+
+
+def read_segmentation_truth(path: str | os.PathLike, fmt: str) -> np.ndarray:
+    """Room labels of a segmentation ground truth: ``fmt`` "rose2" (a colour per room,
+    :func:`colour_room_labels`) or "ipa" (white rooms, :func:`read_ipa_gt`).
+
+    Raises
+    ------
+    MapError
+        When the file cannot be read, the format is unknown, or it holds no room.
+    """
+    if fmt == "ipa":
+        return read_ipa_gt(path)
+    if fmt != "rose2":
+        raise MapError(path, f"unknown segmentation format {fmt!r} (expected one of "
+                             f"{', '.join(SEGMENTATION_FORMATS)})")
+    image = read_image(path)
+    try:
+        labels = colour_room_labels(image)
+    except ValueError as exc:
+        raise MapError(path, str(exc)) from None
+    if labels.max() == 0:
+        raise MapError(path, f"no region of one colour of more than {ROSE2_MIN_ROOM_CELLS} cells: "
+                             "not a room ground truth")
+    return labels
+
+
+def read_segmentation(path: str | os.PathLike) -> np.ndarray:
+    """Segments of a prediction file: a single-channel label image (:func:`read_label_image`:
+    rooms.png, regions.png, an ipa segmenter's output) or a colour image, one segment per colour
+    (:func:`colour_segment_labels`: ROSE2's output)."""
+    image = read_image(path)
+    if image.ndim == 2:
+        return read_label_image(path).astype(np.int32)
+    try:
+        return colour_segment_labels(image)
+    except ValueError as exc:
+        raise MapError(path, str(exc)) from None
 
 
 def read_label_image(path: str | os.PathLike) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from semmap_pp.errors import MapError
-from semmap_pp.evaluate.io import IPA_MIN_REGION_CELLS
+from semmap_pp.evaluate.io import IPA_MIN_REGION_CELLS, ROSE2_MIN_ROOM_CELLS
 
 
 class OverlapTable(NamedTuple):
@@ -200,3 +200,20 @@ def segmentation_scores(gt_labels: np.ndarray, pred_labels: np.ndarray, *,
     table = overlap_table(gt_labels, pred_labels, restrict_to_gt=restrict_to_gt,
                           min_room_cells=min_room_cells, min_segment_cells=min_segment_cells)
     return scores_from_table(table)
+
+
+def protocol_scores(gt_labels: np.ndarray, pred_labels: np.ndarray, fmt: str = "rose2") -> SegmentationScore:
+    """The published figures of a segmentation (segments taken whole, not cut to the rooms):
+    ``fmt`` "rose2" (rooms of more than 200 cells, every segment) or "ipa" (rooms and segments of
+    more than 100 cells, Bormann et al.'s benchmark).
+
+    >>> gt = np.zeros((20, 30), int); gt[:, :15] = 1; gt[:, 15:] = 2
+    >>> pred = np.ones((20, 30), int); pred[:, 25:] = 3          # room 2 cut: 10 + 5 columns
+    >>> s = protocol_scores(gt, pred)
+    >>> round(s.precision, 3), round(s.recall, 3)     # (300/500 + 100/100) / 2, (300/300 + 200/300) / 2
+    (0.8, 0.833)
+    """
+    if fmt == "ipa":
+        return segmentation_scores(gt_labels, pred_labels, restrict_to_gt=False)
+    return segmentation_scores(gt_labels, pred_labels, restrict_to_gt=False,
+                               min_room_cells=ROSE2_MIN_ROOM_CELLS, min_segment_cells=0)

@@ -22,7 +22,9 @@ FILES = {
     "world.json": "W*: units (type, type marginals, corners in pixels and metres), doors, objects, "
                   "adjacency, unexplored areas, CPR (schema: docs/world.schema.json)",
     "labels.png": "16-bit unit id per pixel of the input image (walls included), 0 = none",
-    "regions.png": "16-bit region id per pixel: units joined through open walls (rooms as drawn by a person)",
+    "regions.png": "16-bit region id per pixel: units joined through open walls, whole rectangles",
+    "rooms.png": "16-bit room id per pixel (world.json's rooms): every free cell of the building in its room, "
+                 "doors between rooms 0 (the convention of room segmenters)",
     "types.yaml": "the place types as a map layer for ROS map_server (mode raw; codes: 0 none, "
                   "1 room, 2 corridor, 3 hall, 4 other, 5 door), the input map's resolution and origin",
     "types.pgm": "its image: the input image's size, one code per pixel",
@@ -255,8 +257,11 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
                 "Paper Fig. 5b: ellipses are units at their centres, solid edges doors, dashed edges "
                 "adjacency without a door, blue squares objects, magenta squares unexplored areas."),
         _figure(f("regions"), "Regions (regions.png)",
-                "Units joined where the wall between them is open (wider than a door), one colour each: "
-                "the rooms a person would draw."),
+                "Units joined where the wall between them is open (wider than a door), one colour each, "
+                "whole rectangles."),
+        _figure(f("rooms"), "Rooms (rooms.png)",
+                "Every free cell of the building in its room, one colour each; doors between rooms are "
+                "left out. A room no unit covers was seen through its door alone (world.json's rooms)."),
         '<h2 id="spread">Posterior spread</h2>',
         spread_section(run),
         _figure(f("posterior"), "Sampled worlds (posterior.png)",

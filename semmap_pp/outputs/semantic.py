@@ -17,6 +17,8 @@ from semmap_pp.cells import UNIT_TYPES, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL
 from semmap_pp.derive import derive_world
 from semmap_pp.derive.states import interior
 from semmap_pp.evaluate import closing_radius_cells, cpr, default_roi
+from semmap_pp.model import RoomParams
+from semmap_pp.outputs.rooms import Rooms, rooms_of
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,7 @@ class SemanticMap:
     exterior_ids : dict slot -> exterior id (1..m) of the exterior units (not in ``slot_ids``)
     id_record : dict or None, how the unit ids were carried from an earlier world.json
         (:func:`semmap_pp.outputs.ids.carry_ids`; world.json's ``ids``), None when numbered 1..n
+    room_params : the model's ``[rooms]``, how :attr:`rooms` are made
     """
 
     grid: object
@@ -54,6 +57,7 @@ class SemanticMap:
     log_posterior: float
     exterior_ids: dict = field(default_factory=dict)
     id_record: dict | None = None
+    room_params: RoomParams = RoomParams()
 
     @property
     def unit_ids(self) -> list[int]:
@@ -78,6 +82,15 @@ class SemanticMap:
             hit = self.frame.to_image(lat, fill=False)
             hit.setflags(write=False)
             self.__dict__["_door_image"] = hit     # the dataclass is frozen: its own cache
+        return hit
+
+    @property
+    def rooms(self) -> Rooms:
+        """rooms.png's rooms (:func:`semmap_pp.outputs.rooms.rooms_of`), made once."""
+        hit = self.__dict__.get("_rooms")
+        if hit is None:
+            hit = rooms_of(self, self.room_params)
+            self.__dict__["_rooms"] = hit       # the dataclass is frozen: its own cache
         return hit
 
     def units_text(self) -> str:
@@ -154,7 +167,8 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
                                                              grid.resolution))
     rate, _ = cpr(grid.classes, states_img, roi)
     return SemanticMap(grid, frame, world, slot_ids, derived, marginals, labels_lat, states_img,
-                       labels_img, roi, float(rate), float(terms.total), exterior_ids, id_record)
+                       labels_img, roi, float(rate), float(terms.total), exterior_ids, id_record,
+                       posterior.model.rooms)
 
 
 __all__ = ["SemanticMap", "semantic_map", "number_units", "label_lattice",

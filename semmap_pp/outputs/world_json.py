@@ -155,6 +155,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         "objects": objects,
         "unexplored": unexplored,
         "exterior": exterior,
+        "rooms": rooms_list(sm),
         "log_posterior": round(lp, 6) if math.isfinite(lp) else -1e308,
         "cpr": None if not math.isfinite(sm.cpr) else round(sm.cpr, 6),
         "roi": roi_name,
@@ -164,6 +165,15 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         **({"ids": sm.id_record} if sm.id_record is not None else {}),
         "generator": f"semmap_pp {__version__}",
     }
+
+
+def rooms_list(sm) -> list[dict]:
+    """world.json's ``rooms``: each room of rooms.png (:mod:`semmap_pp.outputs.rooms`) with its
+    units, free cells, area, seen share, and whether it was seen through its door alone."""
+    cell_m2 = float(sm.grid.resolution) ** 2
+    return [{"id": r.id, "units": list(r.units), "cells": r.cells, "area_m2": round(r.cells * cell_m2, 4),
+             "seen_share": round(r.seen_share, 4), "seen_through_door": r.seen_through_door}
+            for r in sm.rooms.rooms]
 
 
 _NUMBER_LIST = re.compile(r"\[\s*(-?[\d.eE+-]+(?:,\s*-?[\d.eE+-]+)*)\s*\]")

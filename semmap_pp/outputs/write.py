@@ -19,6 +19,7 @@ from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
 from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
+from semmap_pp.outputs.rooms import write_rooms_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
 from semmap_pp.outputs.types_layer import write_types_layer
@@ -106,7 +107,7 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
 
 def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.ndarray]:
     """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
-    regions.png, the types layer, overlay.png and graph.png (world.json and labels.png are the
+    regions.png, rooms.png, the types layer, overlay.png and graph.png (world.json and labels.png are the
     caller's). Returns the paths, the two figures' PNG bytes, the regions and their image."""
     passages = passage_pairs(sm)
     regions = join_regions(sm.unit_ids, passages)
@@ -114,7 +115,8 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
     graph = world_graph(sm, doc, regions, passages)
     written = [write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)),
                write_graphml(out / "graph.graphml", graph),
-               write_regions_png(out / "regions.png", region_img)]
+               write_regions_png(out / "regions.png", region_img),
+               write_rooms_png(out / "rooms.png", sm.rooms.labels)]
     written.extend(write_types_layer(out, sm, doc))
     pngs = {"overlay": fig.overlay_png(sm, doc), "graph": fig.graph_png(sm, graph)}
     for name, data in pngs.items():
@@ -167,6 +169,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
         atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")
     pngs["regions"] = fig.regions_preview_png(sm, region_img)
+    pngs["rooms"] = fig.regions_preview_png(sm, sm.rooms.labels)
     pngs["roi"] = fig.roi_png(sm, run.inputs.roi_name)
     names = [p.name for p in written] + ["report.html"] + list(written_after)
     files = [n for n in FILES if n in names] + [n for n in names if n not in FILES]
