@@ -284,7 +284,7 @@ def test_report_is_self_contained_and_escapes_inputs(hostile_run):
     out, run, written = hostile_run
     text = (out / "report.html").read_text()
     srcs = re.findall(r'src="([^"]*)"', text)
-    assert len(srcs) == 6 and all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert len(srcs) == 7 and all(s.startswith("data:image/png;base64,") for s in srcs)
     assert "http" not in text and "<link" not in text and "<script" not in text
     assert "&lt;script&gt;alert(1)&lt;/script&gt;.yaml" in text
     assert "<b>rules</b>" not in text and "&lt;b&gt;rules&lt;/b&gt;.lp" in text

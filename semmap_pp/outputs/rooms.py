@@ -168,8 +168,8 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     >>> seeds = np.zeros((6, 9), int); seeds[0:2, :] = 1
     >>> lab, rooms = room_labels(free, seeds, np.zeros_like(free), 1.0,
     ...                          RoomParams(min_room_m2=10.0, door_max_m=2.0))
-    >>> rooms                          # the doorway cell went to the room behind it
-    [(1, 1, 18), (2, 0, 16)]
+    >>> rooms                  # the doorway cell, one band_m step from the corridor, went to it
+    [(1, 1, 19), (2, 0, 15)]
     """
     free = np.asarray(free, bool)
     doors = np.asarray(doors, bool)
