@@ -90,6 +90,25 @@ def test_a_room_seen_through_its_door_is_a_room_of_its_own():
     assert (labels[0:10] == 1).all()                        # the corridor's own strips joined it
 
 
+def test_rays_into_the_open_through_a_window_are_no_room():
+    """The same piece beyond a door-wide opening, once with walls around it (a room seen through its
+    door) and once ending in unknown cells (rays through a window into the open)."""
+    free, seeds = corridor_and_room(door_width=8)
+    walls = ~free
+    walls[12:32, 10:30] = False
+    walls[10:12, :] = True
+    walls[10:12, 16:24] = False
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=walls)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
+    free, seeds = (np.pad(a, ((0, 6), (0, 0))) for a in (free, seeds))   # unknown beyond the fan
+    open_air = np.zeros_like(free)
+    open_air[10:12, 14:26] = True                           # a window's frame, nothing beyond
+    open_air[10:12, 16:24] = False
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=open_air)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[13:32, 10:30] == 0).all()                # not flooded into the corridor either
+
+
 def test_an_opening_wider_than_a_door_joins_the_unit_in_front():
     free, seeds = corridor_and_room(door_width=20)         # 2.0 m > door_max_m 1.6
     labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1)
@@ -134,7 +153,8 @@ def test_seen_share_of_a_full_and_of_a_fan_shaped_room():
 def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
     text = (ROOT / "models" / "default.toml").read_text()
     assert load_model().rooms == RoomParams(**{k: getattr(load_model().rooms, k)
-                                               for k in ("min_room_m2", "door_max_m", "open_share_min")})
+                                               for k in ("min_room_m2", "door_max_m", "open_share_min",
+                                                         "band_m", "walled_min")})
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace("open_share_min = 0.6", "open_share_min = 1.5"))
     with pytest.raises(ModelError, match="rooms.open_share_min"):

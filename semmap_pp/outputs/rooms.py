@@ -7,11 +7,13 @@ made from W* in three steps, all on the input image's cells:
 1. **Seeds.** Every free cell inside a unit's interior (its rectangle less the wall band) takes
    the unit's region (:mod:`semmap_pp.outputs.regions`: units joined by an open wall are one
    region). W*'s door cells are never part of a room: a door separates the rooms it joins.
-2. **Rooms seen through their door.** The free cells no interior covers fall into connected
-   pieces. A piece of at least ``min_room_m2`` that meets the seeded rooms only through openings
-   no wider than a door (``door_max_m`` of ``[rooms]``, in the model file) is a room of its own: a
-   room the robot saw through its door, or entered without W* giving it a unit. It is flagged
-   ``seen_through_door`` in world.json's ``rooms``.
+2. **Rooms seen through their door.** The strips along each interior (up to ``band_m`` along the
+   floor) go to it; the free cells left fall into connected pieces. A piece of at least
+   ``min_room_m2`` that meets the rooms only through openings no wider than a door (``door_max_m``
+   of ``[rooms]``, in the model file) is a room of its own when walls enclose it (occupied cells
+   make at least ``walled_min`` of the non-free cells around it): a room the robot saw through its
+   door, or entered without W* giving it a unit, flagged ``seen_through_door`` in world.json's
+   ``rooms``. Without such walls it is rays into the open through a window or an exit: no room.
 3. **Every other free cell** (rays through a door, an alcove, a strip along a ragged wall) joins
    the room it is nearest to along the free floor, never across a door (a breadth-first
    geodesic flood, 4-connected).
@@ -32,7 +34,7 @@ from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
 from semmap_pp import atomic
-from semmap_pp.cells import FREE
+from semmap_pp.cells import FREE, OCCUPIED
 from semmap_pp.derive.doors import connecting_wall
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
@@ -139,8 +141,18 @@ def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     return np.bincount(seeds[ring], minlength=int(seeds.max(initial=0)) + 1)
 
 
+def _walled_share(piece: np.ndarray, free: np.ndarray, occupied: np.ndarray | None) -> float:
+    """Share of occupied cells among the non-free cells around ``piece`` (8-connected)."""
+    ring = ndi.binary_dilation(piece, _EIGHT) & ~piece & ~free
+    if occupied is None:
+        return 1.0
+    n = int(ring.sum())
+    return float((ring & occupied).sum()) / n if n else 1.0
+
+
 def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
-                params: RoomParams = RoomParams()) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+                params: RoomParams = RoomParams(), occupied: np.ndarray | None = None
+                ) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
     """Rooms of the free cells (see the module docstring).
 
     Parameters
@@ -153,6 +165,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
         W*'s door cells.
     resolution : float
         Metres per cell.
+    occupied : (H, W) bool, optional
+        The map's occupied cells (the other non-free cells are unknown); None: every non-free
+        cell counts as occupied.
 
     Returns
     -------
@@ -196,9 +211,13 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
             piece = pieces[sl] == k
             contact = _contact_widths(piece, near[sl])
             contact[0] = 0
-            if contact.max(initial=0) <= door_cells:
+            if contact.max(initial=0) > door_cells:
+                continue
+            if _walled_share(piece, free[sl], None if occupied is None else occupied[sl]) >= params.walled_min:
                 extra.append(k)
                 seeded[pieces == k] = n_regions + len(extra)
+            else:                  # rays into the open (a window's fan): no room, not flooded either
+                passable = passable & (pieces != k)
     flooded = geodesic_flood(seeded, passable)
     # number the rooms 1..k: the regions first (in order), then the rooms seen through their door
     present = np.bincount(flooded.ravel(), minlength=n_regions + len(extra) + 1)
@@ -278,7 +297,9 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
         door_lat[r0:r1, c0:c1] = True
     seeds = sm.frame.to_image(seeds_lat, fill=0)
     door_img = sm.frame.to_image(door_lat, fill=False)
-    labels, found = room_labels(sm.grid.classes == FREE, seeds, door_img, sm.grid.resolution, params)
+    classes = sm.grid.classes
+    labels, found = room_labels(classes == FREE, seeds, door_img, sm.grid.resolution, params,
+                                occupied=classes == OCCUPIED)
     units_of: dict[int, list[int]] = {}
     for uid, rid in region.items():
         units_of.setdefault(rid, []).append(uid)
