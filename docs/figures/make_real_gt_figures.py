@@ -49,7 +49,7 @@ def main(runs: Path) -> None:
                          fontsize=10)
             ax.axis("off")
         fig.tight_layout()
-        fig.savefig(ROOT / "docs" / "figures" / f"real_gt_{folder.name}.png", dpi=80)
+        fig.savefig(ROOT / "docs" / "figures" / f"real_gt_{folder.name}.png", dpi=110)
         plt.close(fig)
 
 
