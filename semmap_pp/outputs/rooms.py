@@ -94,7 +94,7 @@ def _flood(labels, passable, max_steps):  # pragma: no cover - compiled
     out = labels.copy()
     n = h * w
     steps = np.zeros(n, np.int64)
-    queue = np.empty(n, np.int64)
+    queue = np.empty(n, np.int64)     # cell index; int64: a canvas may exceed 2**31 cells
     head = 0
     tail = 0
     for i in range(h):
@@ -187,7 +187,16 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     [(1, 1, 19), (2, 0, 15)]
     """
     free = np.asarray(free, bool)
-    doors = np.asarray(doors, bool)
+    full = np.zeros(free.shape, np.int32)
+    if not free.any():
+        return full, []
+    # work on the free cells' bounding box (a SLAM map's canvas is mostly unknown)
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    box = (slice(max(rows[0] - 1, 0), rows[-1] + 2), slice(max(cols[0] - 1, 0), cols[-1] + 2))
+    free = free[box]
+    doors = np.asarray(doors, bool)[box]
+    seeds = np.asarray(seeds)[box]
+    occupied = None if occupied is None else np.asarray(occupied, bool)[box]
     passable = free & ~doors
     seeds = np.where(passable, np.asarray(seeds), 0).astype(np.int32)
     n_regions = int(seeds.max(initial=0))
@@ -224,8 +233,8 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     lut = np.zeros(present.size, np.int32)
     kept = [old for old in range(1, present.size) if present[old]]
     lut[kept] = np.arange(1, len(kept) + 1, dtype=np.int32)
-    return lut[flooded], [(int(lut[old]), old if old <= n_regions else 0, int(present[old]))
-                          for old in kept]
+    full[box] = lut[flooded]
+    return full, [(int(lut[old]), old if old <= n_regions else 0, int(present[old])) for old in kept]
 
 
 def seen_share(mask: np.ndarray) -> float:
