@@ -264,3 +264,18 @@ def test_eval_segmentation_errors_are_one_line(run_dir, tmp_path, capsys):
     assert "not the same map" in err and "\n" not in err
     assert main(["eval", str(tmp_path), "--segmentation", str(gt)]) != 0
     assert "rooms.png" in capsys.readouterr().err
+
+
+def test_eval_segmentation_refuses_a_fifo_without_reading_it(run_dir, tmp_path):
+    import os
+    import subprocess
+    import sys
+    fifo = tmp_path / "gt.png"
+    os.mkfifo(fifo)
+    for args in (["--segmentation", str(fifo)], ["--segmentation", str(REAL_GT / "map17" / "gt.png"),
+                                                 "--of", str(fifo)]):
+        p = subprocess.run([sys.executable, "-m", "semmap_pp", "eval", str(run_dir), *args],
+                           capture_output=True, text=True, timeout=120)
+        assert p.returncode == 2
+        assert "gt.png" in p.stderr and "not a regular file" in p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1
