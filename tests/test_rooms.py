@@ -150,6 +150,24 @@ def test_seen_share_of_a_full_and_of_a_fan_shaped_room():
     assert seen_share(fan) < 0.4
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1))
+def test_seen_share_equals_the_hull_of_every_cells_corners(seed):
+    from scipy.spatial import ConvexHull, QhullError
+    rng = np.random.default_rng(seed)
+    mask = rng.random((rng.integers(1, 10), rng.integers(1, 10))) < 0.4
+    if not mask.any():
+        assert seen_share(mask) == 0.0
+        return
+    r, c = np.nonzero(mask)
+    corners = np.unique(np.concatenate([np.stack([r + a, c + b], 1) for a in (0, 1) for b in (0, 1)]), axis=0)
+    try:
+        expected = min(1.0, mask.sum() / ConvexHull(corners).volume)
+    except QhullError:
+        expected = 1.0
+    assert seen_share(mask) == pytest.approx(expected, abs=1e-12)
+
+
 def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
     text = (ROOT / "models" / "default.toml").read_text()
     assert load_model().rooms == RoomParams(**{k: getattr(load_model().rooms, k)

@@ -246,16 +246,21 @@ def seen_share(mask: np.ndarray) -> float:
     >>> m[1:, 1] = False; round(seen_share(m), 3)      # an L of 5 cells; its hull holds 6.5
     0.769
     """
-    r, c = np.nonzero(mask)
-    if r.size == 0:
+    mask = np.asarray(mask, bool)
+    n = int(mask.sum())
+    if n == 0:
         return 0.0
-    corners = np.concatenate([np.stack([r + dr, c + dc], 1) for dr in (0, 1) for dc in (0, 1)])
-    corners = np.unique(corners, axis=0)
+    # the hull of the cells' squares is the hull of each row's outermost squares' corners
+    rows = np.flatnonzero(mask.any(axis=1))
+    first = mask[rows].argmax(axis=1)
+    last = mask.shape[1] - 1 - mask[rows, ::-1].argmax(axis=1)
+    corners = np.concatenate([np.stack([rows + dr, cols], 1)
+                              for dr in (0, 1) for cols in (first, last + 1)])
     try:
         area = ConvexHull(corners).volume
     except QhullError:            # all corners on a line: a hull of no area
         return 1.0
-    return float(min(1.0, r.size / area)) if area > 0 else 1.0
+    return float(min(1.0, n / area)) if area > 0 else 1.0
 
 
 def opening_share(classes: np.ndarray, rp, rq, wall: int) -> float:
