@@ -32,9 +32,8 @@ from semmap_pp.errors import MapError
 DONE_FILE = "resume.npz"
 MAP_SUFFIXES = (".yaml", ".yml", ".png", ".pgm", ".npy")
 #: peak memory of a run, estimated from the cells of the map's known box (``semmap map`` works on
-#: the known part and 2 m around it): a fixed part and bytes per cell. Measured peaks (RSS by
-#: /usr/bin/time, docs/benchmarks.md, "semmap batch"): 0.52-0.68 GB on the real-gt floors of
-#: 0.27-1.1 M cells; 1.6 GB at 4.2 M canvas cells.
+#: the known part and 2 m around it): a fixed part and bytes per cell, an upper bound of the peaks
+#: measured (RSS by /usr/bin/time, docs/benchmarks.md, "semmap batch"), not a model of them.
 PEAK_BASE_BYTES = 0.6e9
 PEAK_BYTES_PER_CELL = 300.0
 
@@ -100,12 +99,17 @@ def expand_maps(items: list[str]) -> list[Path]:
     return out
 
 
-def _unique_names(paths: list[Path]) -> list[str]:
+def _unique_names(paths: list[Path], by_folder: bool = False) -> list[str]:
+    """A folder name per path: its stem; with ``by_folder``, maps that share a stem (a folder per
+    floor, each with its map.yaml) are named by their folder; what still repeats gets -2, -3, ..."""
+    stems = [p.stem if p.suffix else p.name for p in paths]
+    if by_folder:
+        stems = [p.parent.name if stems.count(st) > 1 and p.parent.name else st
+                 for p, st in zip(paths, stems)]
     names, seen = [], {}
-    for p in paths:
-        stem = p.stem if p.suffix else p.name
-        seen[stem] = seen.get(stem, 0) + 1
-        names.append(stem if seen[stem] == 1 else f"{stem}-{seen[stem]}")
+    for st in stems:
+        seen[st] = seen.get(st, 0) + 1
+        names.append(st if seen[st] == 1 else f"{st}-{seen[st]}")
     return names
 
 
@@ -116,7 +120,7 @@ def plan_tasks(maps: list[Path], out: Path, rules: list[str] | None, seeds: list
     rule_names = _unique_names([Path(r) for r in rules]) if rules else [None]
     seed_list = seeds if seeds else [None]
     tasks = []
-    for m, mname in zip(maps, _unique_names(maps)):
+    for m, mname in zip(maps, _unique_names(maps, by_folder=True)):
         for r, rname in zip(rule_list, rule_names):
             for s in seed_list:
                 d = out / mname

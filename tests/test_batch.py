@@ -21,9 +21,11 @@ TINY = ["--chains", "2", "--tune", "2", "--draws", "4", "--n-inner", "5", "--spr
 
 
 def test_tasks_are_laid_out_by_map_rules_and_seed(tmp_path):
-    maps = [Path("a/x.yaml"), Path("b/x.yaml"), Path("y.png")]
-    one = B.plan_tasks(maps, tmp_path, None, None)
-    assert [Path(t.out).relative_to(tmp_path).as_posix() for t in one] == ["x", "x-2", "y"]
+    maps = [Path("a/x.yaml"), Path("b/x.yaml"), Path("y.png"), Path("c/y.pgm")]
+    one = B.plan_tasks(maps, tmp_path, None, None)       # a folder per floor: named by the folder
+    assert [Path(t.out).relative_to(tmp_path).as_posix() for t in one] == ["a", "b", "y", "c"]
+    assert [Path(t.out).name for t in B.plan_tasks([Path("a/x.yaml"), Path("a/x.png")], tmp_path,
+                                                   None, None)] == ["a", "a-2"]
     many = B.plan_tasks(maps[:1], tmp_path, ["rules/table3.lp", "rules/none.lp"], [0, 3])
     assert [Path(t.out).relative_to(tmp_path).as_posix() for t in many] == [
         "x/table3/seed-0", "x/table3/seed-3", "x/none/seed-0", "x/none/seed-3"]
