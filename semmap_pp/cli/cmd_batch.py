@@ -191,14 +191,16 @@ def run(args) -> int:
             if link:
                 print(f"batch: Dask dashboard at {link}", file=sys.stderr)
             before = set(results)
-            todo = _refuse_up_front(B, todo, args, client, results)
+            todo, cost = _refuse_up_front(B, todo, args, client, results)
             for k in results:
                 if k not in before:
                     progress.update(results[k], k)
             summary()
             futures = {}
+            # the largest maps first, so that the last tasks to end are short ones (fewer idle workers)
             for t in todo:
-                f = client.submit(B.run_task, t, extra, args.timeout, pure=False, key=f"semmap-{t.label}-{id(t)}")
+                f = client.submit(B.run_task, t, extra, args.timeout, pure=False,
+                                  key=f"semmap-{t.label}-{id(t)}", priority=int(cost.get(t.map, 0) // 1e6))
                 futures[f] = t
             from distributed import as_completed
             for f in as_completed(list(futures)):
@@ -249,17 +251,19 @@ def _has_bokeh() -> bool:
 
 def _refuse_up_front(B, todo, args, client, results):
     """Tasks whose map cannot be read, or whose estimated peak exceeds every worker's memory
-    limit, fail before anything runs; the rest go on."""
+    limit, fail before anything runs; the rest go on. Returns them and each map's estimated peak
+    (bytes), which also orders them: the largest first."""
     limits = [w.get("memory_limit") or 0 for w in client.scheduler_info().get("workers", {}).values()]
     limit = max(limits) if limits and all(limits) else None
     checked: dict[str, str | None] = {}
+    cost: dict[str, float] = {}
     keep = []
     opts = map_options(args)
     for t in todo:
         if t.map not in checked:
             why = None
             try:
-                peak = B.estimated_peak_bytes(t.map, opts)
+                peak = cost[t.map] = B.estimated_peak_bytes(t.map, opts)
                 if limit and peak > limit:
                     why = (f"{t.map}: estimated peak {peak / 1e9:.1f} GB exceeds the workers' memory "
                            f"limit of {limit / 1e9:.1f} GB")
@@ -271,4 +275,4 @@ def _refuse_up_front(B, todo, args, client, results):
         else:
             results[t.out] = {**B.Result(t.map, t.rules, t.seed, t.out, "failed").__dict__,
                               "error": checked[t.map]}
-    return keep
+    return keep, cost
