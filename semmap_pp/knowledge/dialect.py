@@ -104,27 +104,52 @@ def strip_includes(text: str, path: str) -> tuple[str, list[tuple[str, int, int]
     """Blank out ``#include`` directives (keeping positions) and return them.
 
     clingo's parser would read included files itself, so directives are removed before the text
-    reaches it. Comments and strings are skipped; a directive that is not ``#include "file".``
-    is an error.
+    reaches it. Comments are read as clingo reads them (block comments ``%* ... *%`` nest) and
+    blanked too, so that clingo is handed no comment at all: what it parses is exactly the text
+    checked here, and no directive can hide from this reader in a comment clingo reads otherwise.
+    Strings are skipped; a directive that is not ``#include "file".`` is an error.
 
     Returns
     -------
     text : str
-        The text with each directive replaced by spaces (newlines kept).
+        The text with each directive and each comment replaced by spaces (newlines kept).
     includes : list of (target, line, col)
+
+    Examples
+    --------
+    >>> t, inc = strip_includes('a. %* %* *% #include "x.lp". *% b.', "r.lp")
+    >>> inc, t.split()
+    ([], ['a.', 'b.'])
     """
     out = list(text)
     includes = []
     i, n = 0, len(text)
+
+    def blank(a: int, b: int) -> None:
+        for k in range(a, b):
+            if out[k] != "\n":
+                out[k] = " "
+
     while i < n:
         c = text[i]
         if c == "%":
+            start = i
             if text.startswith("%*", i):
-                j = text.find("*%", i + 2)
-                i = n if j < 0 else j + 2
+                depth, i = 1, i + 2
+                while i < n and depth:
+                    if text.startswith("%*", i):
+                        depth, i = depth + 1, i + 2
+                    elif text.startswith("*%", i):
+                        depth, i = depth - 1, i + 2
+                    else:
+                        i += 1
+                if depth:
+                    line, col = _pos(text, start)
+                    raise RuleError(path, "block comment %* is never closed by *%", line, col)
             else:
                 j = text.find("\n", i)
-                i = n if j < 0 else j + 1
+                i = n if j < 0 else j
+            blank(start, i)
         elif c == '"':
             j = i + 1
             while j < n and text[j] != '"':
@@ -137,9 +162,7 @@ def strip_includes(text: str, path: str) -> tuple[str, list[tuple[str, int, int]
                 raise RuleError(path, '#include must have the form #include "file.lp". '
                                 "(library includes <...> are not allowed)", line, col)
             includes.append((m.group(1), line, col))
-            for k in range(m.start(), m.end()):
-                if out[k] != "\n":
-                    out[k] = " "
+            blank(m.start(), m.end())
             i = m.end()
         else:
             i += 1
@@ -354,6 +377,8 @@ def _read_files(top: Path) -> list[tuple[Path, list]]:
         if path in seen:
             continue
         seen.add(path)
+        if path.exists() and not path.is_file():       # a FIFO or a device is never opened
+            raise RuleError(path, "cannot read rule file: not a regular file")
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -524,7 +549,8 @@ def load_rules(path: str | os.PathLike) -> RuleSet:
     """
     top = Path(path)
     if not top.is_file():
-        raise RuleError(path, "no such rule file")
+        raise RuleError(path, "not a regular file (a rule file is read, never a FIFO or device)"
+                        if top.exists() else "no such rule file")
     top = top.resolve()
     files = _read_files(top)
     kept, _consts, helpers = validate(files)
