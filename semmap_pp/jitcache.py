@@ -26,6 +26,7 @@ import os
 import re
 import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -100,6 +101,32 @@ def prune(current: Path, max_age_days: float = MAX_AGE_DAYS, now: float | None =
     return gone
 
 
+def untrusted(path: Path, stop: Path | None = None) -> str | None:
+    """Why ``path`` (and each parent up to ``stop``, included) cannot be trusted with code this
+    process will load: not owned by this user, or writable by the group or others; None if it can.
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp()); (d / "x").mkdir(mode=0o700)
+    >>> untrusted(d / "x", stop=d) is None or os.stat(d).st_mode & 0o022 != 0
+    True
+    >>> os.chmod(d / "x", 0o777); untrusted(d / "x", stop=d).endswith("writable by other users (mode 777)")
+    True
+    """
+    if not hasattr(os, "getuid"):      # no POSIX owners (Windows): nothing to check against
+        return None
+    uid = os.getuid()
+    p = path
+    while True:
+        st = os.stat(p)
+        if st.st_uid != uid:
+            return f"{p} belongs to another user (uid {st.st_uid})"
+        if st.st_mode & 0o022:
+            return f"{p} is writable by other users (mode {st.st_mode & 0o777:o})"
+        if stop is None or p == stop or p.parent == p:
+            return None
+        p = p.parent
+
+
 def configure(environ=os.environ) -> Path | None:
     """Point numba's cache at :func:`cache_dir` (if it can be created); return the directory used.
 
@@ -110,13 +137,22 @@ def configure(environ=os.environ) -> Path | None:
         path = cache_dir(environ)
         if path is None:
             return None
-        path.mkdir(parents=True, exist_ok=True)
+        path.mkdir(parents=True, exist_ok=True, mode=0o700)
         if not os.access(path, os.W_OK):
             return None
-        os.utime(path)  # in use: keeps it young for prune()
+        why = untrusted(path, stop=path.parent.parent)
+        if why is not None:
+            # numba's index files are pickles: a folder another user can write to could make this
+            # process run their code. Compile into a private folder instead (slower, never theirs).
+            private = Path(tempfile.mkdtemp(prefix="semmap-numba-"))
+            print(f"note: numba cache {path} not used ({why}); compiling into {private}",
+                  file=sys.stderr)
+            path = private
+        else:
+            os.utime(path)  # in use: keeps it young for prune()
+            prune(path)
     except OSError:
         return None  # unreadable source or unwritable cache: numba's default (see above)
-    prune(path)
     environ["NUMBA_CACHE_DIR"] = str(path)
     numba = sys.modules.get("numba")
     if numba is not None:
@@ -124,4 +160,5 @@ def configure(environ=os.environ) -> Path | None:
     return path
 
 
-__all__ = ["ENV", "MAX_AGE_DAYS", "source_digest", "cache_home", "cache_dir", "prune", "configure"]
+__all__ = ["ENV", "MAX_AGE_DAYS", "source_digest", "cache_home", "cache_dir", "prune", "configure",
+           "untrusted"]

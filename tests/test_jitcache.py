@@ -134,3 +134,23 @@ def test_the_package_configures_numba_on_import(tmp_path):
     assert out.returncode == 0, out.stderr
     path = Path(out.stdout.strip())
     assert path == tmp_path / "semmap_pp" / "numba" / source_digest() and path.is_dir()
+
+
+def test_a_cache_others_can_write_to_is_never_used(tmp_path, monkeypatch, capsys):
+    """numba's index files are pickles: a cache folder writable by other users is replaced by a
+    private one (0700), with a note, and nothing in the shared folder is read."""
+    import numba
+
+    monkeypatch.setattr(numba.config, "CACHE_DIR", numba.config.CACHE_DIR)   # restored afterwards
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    os.chmod(shared, 0o777)
+    env = {ENV: str(shared)}
+    used = configure(env)
+    assert used is not None and shared not in used.parents
+    assert os.stat(used).st_mode & 0o077 == 0
+    assert env["NUMBA_CACHE_DIR"] == str(used)
+    assert "not used" in capsys.readouterr().err
+    os.chmod(shared, 0o755)
+    env = {ENV: str(shared)}
+    assert configure(env).parent == shared                 # the user's own folder: used

@@ -137,24 +137,66 @@ def test_template_store_gives_bitwise_the_grounded_templates(tmp_path):
     for ev in evs:
         first.infer(ev)
     assert first.local.groundings > 0 and plain.local.store is None
-    (store,) = tmp_path.glob("templates-*.pkl")
+    (store,) = tmp_path.glob("templates-*.npz")
     second = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
     for ev, r in zip(evs, ref):
         got = second.infer(ev)
         assert got.map_types == r.map_types and got.log_z == r.log_z and got.sale == r.sale
         assert all(np.array_equal(got.types[u], r.types[u]) for u in ev.units)
     assert second.local.groundings == 0
-    store.write_bytes(b"not a pickle")
+    good = store.read_bytes()
+    store.write_bytes(b"not an npz")
     third = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
     assert third.infer(evs[0]).map_types == ref[0].map_types and third.local.groundings > 0
-    import pickle
-    for foreign in (pickle.dumps(["a", "list"]), pickle.dumps(({1: 2}, "not a dict")),
-                    pickle.dumps((1, 2, 3))):   # readable pickles of the wrong shape: ignored too
+    for foreign in _foreign_stores(good, tmp_path):   # readable files of the wrong kind: ignored too
         store.write_bytes(foreign)
         fourth = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
         assert fourth.infer(evs[0]).map_types == ref[0].map_types
+        assert fourth.local.groundings > 0                  # nothing of it was used
     other = KnowledgeEngine(load_rules("rules/none.lp"), method="exact", template_store=tmp_path)
     assert other.local is None or other.local.store != third.local.store
+
+
+def _foreign_stores(good: bytes, tmp_path) -> list[bytes]:
+    """Stores that load but must not be used: another key, a table cut short, a pickled object
+    array, a pickle; each written as bytes."""
+    import io
+    import pickle
+    with np.load(io.BytesIO(good), allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    out = []
+    for change in ({"key": np.array("another")}, {"unit_tables": arrays["unit_tables"][:-1]},
+                   {"pair_shapes": arrays["pair_shapes"] + 1},
+                   {"unit_keys": np.array([object()] * 3, dtype=object)}):
+        buf = io.BytesIO()
+        np.savez(buf, **(arrays | change))
+        out.append(buf.getvalue())
+    out.append(pickle.dumps(({1: 2}, {})))
+    return out
+
+
+def test_a_planted_pickle_in_the_template_store_never_runs(tmp_path, capsys):
+    """A pickle whose loading would run code, planted where the store lives under the store's
+    own name (and under the name stores had before), is never unpickled."""
+    import pickle
+    rules = load_rules(RULES)
+    probe = tmp_path / "ran"
+
+    class Payload:
+        def __reduce__(self):
+            return (open, (str(probe), "w"))
+
+    first = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
+    first.infer(_evidences(1, 3)[0])
+    (store,) = tmp_path.glob("templates-*.npz")
+    for name in (store.name, store.with_suffix(".pkl").name):
+        (tmp_path / name).write_bytes(pickle.dumps(Payload()))
+        again = KnowledgeEngine(rules, method="exact", template_store=tmp_path)
+        again.infer(_evidences(1, 3)[0])
+        assert not probe.exists()
+    assert "template cache ignored" in capsys.readouterr().err
+
+
 
 
 def test_template_store_directory_from_the_environment(monkeypatch, tmp_path):

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-import pickle
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -231,6 +231,68 @@ def _store_key(rules: RuleSet) -> str:
     return h.hexdigest()
 
 
+STORE_FORMAT = "semmap_pp.templates/2"
+
+
+def write_store(fh, key: str, units: dict, pairs: dict) -> None:
+    """The templates as an ``.npz`` of plain arrays: unit keys and tables (concatenated, with
+    offsets), pair keys and their three tables (shapes and one concatenation each)."""
+    ukeys = list(units)
+    pkeys = list(pairs)
+    n = len(SOFT_PREDICATES)
+    utab = [np.asarray(units[k][0], np.float64).reshape(-1) for k in ukeys]
+    arrays = {
+        "format": np.array(STORE_FORMAT), "key": np.array(key),
+        "unit_keys": np.array(ukeys, np.float64).reshape(len(ukeys), n),
+        "unit_k": np.array([int(units[k][1]) for k in ukeys], np.int64),
+        "unit_offsets": np.cumsum([0] + [t.size for t in utab]).astype(np.int64),
+        "unit_tables": np.concatenate(utab) if utab else np.zeros(0),
+        "pair_keys": np.array([list(kp) + list(kq) for kp, kq in pkeys], np.float64).reshape(len(pkeys), 2 * n),
+        "pair_shapes": np.array([np.shape(pairs[k][0]) for k in pkeys], np.int64).reshape(len(pkeys), 2),
+    }
+    for i, name in enumerate(("lse", "mx", "cond")):
+        parts = [np.asarray(pairs[k][i], np.float64).reshape(-1) for k in pkeys]
+        arrays[f"pair_{name}"] = np.concatenate(parts) if parts else np.zeros(0)
+    np.savez(fh, **arrays)
+
+
+def read_store(path, key: str) -> tuple[dict, dict]:
+    """:func:`write_store`'s templates, checked: its format and key, every shape; a ValueError
+    says what is wrong. Read with ``allow_pickle=False`` (an object array is refused)."""
+    n = len(SOFT_PREDICATES)
+    with np.load(path, allow_pickle=False) as z:
+        need = {"format", "key", "unit_keys", "unit_k", "unit_offsets", "unit_tables", "pair_keys",
+                "pair_shapes", "pair_lse", "pair_mx", "pair_cond"}
+        if not need <= set(z.files):
+            raise ValueError("not a template store")
+        if str(z["format"]) != STORE_FORMAT or str(z["key"]) != key:
+            raise ValueError("another format or rule set")
+        uk, k, off, tab = z["unit_keys"], z["unit_k"], z["unit_offsets"], z["unit_tables"]
+        if (uk.ndim != 2 or uk.shape[1] != n or k.shape != (len(uk),) or off.shape != (len(uk) + 1,)
+                or off[0] != 0 or np.any(np.diff(off) < 0) or off[-1] != tab.size or np.any(k < 0)
+                or np.any(k > 62)):
+            raise ValueError("unit tables of the wrong shape")
+        units = {}
+        for i in range(len(uk)):
+            t = tab[off[i]:off[i + 1]].copy()
+            if t.size % (1 << int(k[i])):
+                raise ValueError("a unit table of the wrong size")
+            units[tuple(float(v) for v in uk[i])] = (t, int(k[i]))
+        pk, shp = z["pair_keys"], z["pair_shapes"]
+        if pk.ndim != 2 or pk.shape[1] != 2 * n or shp.shape != (len(pk), 2) or np.any(shp < 0):
+            raise ValueError("pair tables of the wrong shape")
+        sizes = np.prod(shp, axis=1) if len(shp) else np.zeros(0, np.int64)
+        offs = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        tables = [z[f"pair_{name}"] for name in ("lse", "mx", "cond")]
+        if any(t.ndim != 1 or t.size != offs[-1] for t in tables):
+            raise ValueError("pair tables of the wrong size")
+        pairs = {}
+        for i in range(len(pk)):
+            kp, kq = tuple(float(v) for v in pk[i, :n]), tuple(float(v) for v in pk[i, n:])
+            pairs[(kp, kq)] = tuple(t[offs[i]:offs[i + 1]].reshape(tuple(shp[i])).copy() for t in tables)
+    return units, pairs
+
+
 class LocalModel:
     """Templates of one pairwise-local rule set, cached by evidence pattern.
 
@@ -254,23 +316,32 @@ class LocalModel:
         self._raw_reduced: dict = {}
         self.groundings = 0
         self.store = None
+        self.key = ""
+        self._noted = False
         if store is not None:
             try:
-                self.store = Path(store) / f"templates-{_store_key(rules)}.pkl"
+                self.key = _store_key(rules)
+                self.store = Path(store) / f"templates-{self.key}.npz"
             except OSError:
                 self.store = None
             self._load()
 
     def _load(self) -> None:
-        """Add the stored templates (none when there is no readable store)."""
-        if self.store is None:
+        """Add the stored templates (none when there is no readable store). The store is an
+        ``.npz`` of plain arrays read with ``allow_pickle=False``: loading it can never run code.
+        A file that is not a regular file, of another key, or of the wrong shape is ignored (the
+        store is only a cache) with a note on stderr, once."""
+        if self.store is None or not self.store.exists():
             return
         try:
-            with open(self.store, "rb") as fh:
-                units, pairs = pickle.load(fh)
-            if not (isinstance(units, dict) and isinstance(pairs, dict)):
-                return
-        except Exception:   # noqa: BLE001 - any unreadable or foreign file: the store is only a cache
+            if not self.store.is_file():
+                raise ValueError("not a regular file")
+            units, pairs = read_store(self.store, self.key)
+        except Exception as exc:   # noqa: BLE001 - any unreadable or foreign file: the store is only a cache
+            if not self._noted:
+                self._noted = True
+                print(f"note: {self.store}: template cache ignored ({exc}); it is written again",
+                      file=sys.stderr)
             return
         for key, val in units.items():
             self._units.setdefault(key, val)
@@ -286,10 +357,10 @@ class LocalModel:
         units = {k: v for k, v in self._units.items() if self.structure(k) == k}
         tmp = None
         try:
-            self.store.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.store.parent, prefix=".templates-")
+            self.store.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+            fd, tmp = tempfile.mkstemp(dir=self.store.parent, prefix=".templates-", suffix=".npz")
             with os.fdopen(fd, "wb") as fh:
-                pickle.dump((units, dict(self._pairs)), fh, protocol=pickle.HIGHEST_PROTOCOL)
+                write_store(fh, self.key, units, dict(self._pairs))
             os.replace(tmp, self.store)
         except OSError:
             if tmp is not None:
