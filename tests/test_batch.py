@@ -107,10 +107,12 @@ def test_a_rerun_skips_complete_tasks_and_force_redoes_them(batch_run, maps, cap
     assert (out / "intel_corner" / "world.json").stat().st_mtime_ns > before
 
 
-def test_a_task_past_its_timeout_fails_alone(maps, tmp_path):
+def test_a_task_past_its_timeout_fails_alone(maps, tmp_path, capsys):
     out = tmp_path / "t"
     assert main(["batch", str(maps / "intel_corner.yaml"), "--out", str(out), "--workers", "1",
-                 "--progress", "none", "--timeout", "0.5", *TINY]) == 1
+                 "--progress", "plain", "--timeout", "0.5", *TINY]) == 1
+    err = capsys.readouterr().err
+    assert "batch: 1/1 done, intel_corner failed: timed out after 0.5 s (1 failed, 0 running)" in err
     row = json.loads((out / "summary.json").read_text())["tasks"][0]
     assert row["status"] == "failed" and row["error"] == "timed out after 0.5 s"
     assert not B.complete(out / "intel_corner")

@@ -131,17 +131,16 @@ class _Progress:
             self.bar.start()
             self.tid = self.bar.add_task("batch", total=total, note="")
 
-    def update(self, result: dict | None, label: str = "") -> None:
+    def update(self, result: dict | None, label: str = "", running: int | None = None) -> None:
         if result is not None:
             self.done += 1
             self.failed += result["status"] == "failed"
-        running = self.total - self.done
-        note = f"{self.failed} failed, {running} to go"
+        note = f"{self.failed} failed" + ("" if running is None else f", {running} running")
         if self.bar is not None:
             self.bar.update(self.tid, completed=self.done, note=note)
         elif self.mode == "plain" and result is not None:
             err = f": {result['error']}" if result.get("error") else ""
-            print(f"batch: {self.done}/{self.total} {label} {result['status']}{err} ({note})",
+            print(f"batch: {self.done}/{self.total} done, {label} {result['status']}{err} ({note})",
                   file=sys.stderr, flush=True)
 
     def close(self) -> None:
@@ -213,7 +212,11 @@ def run(args) -> int:
                     res = {**B.Result(t.map, t.rules, t.seed, t.out, "failed").__dict__,
                            "error": f"{why} ({name})"}
                 results[t.out] = res
-                progress.update(res, t.label)
+                try:
+                    running = sum(len(v) for v in client.processing().values())
+                except Exception:  # noqa: BLE001 - a scheduler going away: no count
+                    running = None
+                progress.update(res, t.label, running)
                 summary()
     except KeyboardInterrupt:
         interrupted = True
