@@ -599,8 +599,32 @@ def spread_first_draw(run: MapRun | SpreadSample) -> int:
 
 
 def check_out_dir(out: Path, force: bool) -> None:
-    """Refuse a non-empty output directory unless ``force``; refuse a file."""
+    """Refuse a non-empty output directory unless ``force``; refuse a file, a folder under a
+    file, and one this user cannot write to (before any sampling, creating nothing)."""
     if out.exists() and not out.is_dir():
         raise SemmapError(out, "output path exists and is not a directory")
     if out.is_dir() and any(out.iterdir()) and not force:
         raise SemmapError(out, "output directory is not empty (use --force to overwrite)")
+    probe = out.absolute()
+    while not probe.exists():           # the nearest part of the path that exists
+        probe = probe.parent
+    if not probe.is_dir():
+        raise SemmapError(out, f"cannot create the output directory: {probe} is not a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise SemmapError(out, f"cannot write the output directory: {probe} is not writable")
+
+
+def check_inputs_not_outputs(out: Path, inputs: Inputs, output_names) -> None:
+    """Refuse a run whose outputs would overwrite one of its own input files (``--force`` into
+    the folder that holds the map, its image or the ROI under an output's name)."""
+    paths = [inputs.grid.source, inputs.grid.image_path]
+    for p in paths:
+        if p is None:
+            continue
+        p = Path(p)
+        try:
+            if p.resolve().parent == out.resolve() and p.name in output_names:
+                raise SemmapError(p, f"is an input of this run, and --out {out} would overwrite it "
+                                     f"with its own {p.name}; choose another --out")
+        except OSError:
+            continue

@@ -183,7 +183,8 @@ def run(args) -> int:
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
     from semmap_pp.outputs.write import write_all
-    from semmap_pp.pipeline import RunSettings, check_out_dir, run_map
+    from semmap_pp.outputs.report import FILES as OUTPUT_FILES
+    from semmap_pp.pipeline import RunSettings, check_inputs_not_outputs, check_out_dir, run_map
     from semmap_pp.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.resume import write_resume
     from semmap_pp.step import StopFlag
@@ -209,6 +210,7 @@ def run(args) -> int:
         out = args.out
         check_out_dir(out, args.force)
         rules, inputs = target_inputs(args)
+        check_inputs_not_outputs(out, inputs, set(OUTPUT_FILES) | {RESUME_FILE})
         settings = RunSettings.from_model(inputs.model, seed=args.seed or 0, chains=args.chains,
                                           cores=args.cores, tune=args.tune, draws=args.draws,
                                           n_inner=args.n_inner, spread_draws=args.spread_draws)

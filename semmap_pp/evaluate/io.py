@@ -59,6 +59,8 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     MapError
         When the file is missing or is not an image.
     """
+    if os.path.exists(path) and not os.path.isfile(path):     # a FIFO or a device is never opened
+        raise MapError(path, "cannot read image: not a regular file")
     try:
         with Image.open(path) as img:
             img.load()
