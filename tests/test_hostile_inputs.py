@@ -225,7 +225,7 @@ CASES = [
     ("rules-binary-file", lambda d: rules_bytes(d, bytes(range(256))), "cannot read rule file"),
     ("rules-non-ascii-character", lambda d: rules(d, ":- room(U) \u00e9.\n"),
      "not allowed outside comments and strings"),
-    ("rules-dev-zero", rules_device, "no such rule file"),
+    ("rules-dev-zero", rules_device, "not a regular file"),
 ]
 
 
