@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import reprlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -124,6 +125,35 @@ def check_thresholds(path: Path, occupied: float, free: float) -> None:
                              f"({occupied})")
 
 
+class MapYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading a map_server YAML as map_server's yaml-cpp does: a number in
+    scientific notation without a dot or an exponent sign (``5e-2``, ``1e1``) is a number, not a
+    string (YAML 1.2), and a key given twice is an error at its line (yaml-cpp keeps one silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                dup = key in seen
+            except TypeError:           # an unhashable key: the base class reports it
+                dup = False
+            if dup:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {short(key)} is given twice", key_node.start_mark)
+            try:
+                seen.add(key)
+            except TypeError:
+                pass
+        return super().construct_mapping(node, deep=deep)
+
+
+MapYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
 def read_yaml(path: Path) -> dict:
     """The mapping in a map_server YAML file (a regular file of at most ``MAX_YAML_BYTES``)."""
     if not path.is_file():  # a FIFO or device would block or never end
@@ -141,7 +171,7 @@ def read_yaml(path: Path) -> dict:
     if not text.strip():
         raise MapError(path, "empty YAML file (expected map_server keys image, resolution, ...)")
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=MapYamlLoader)   # safe: no Python tags, no code
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = getattr(exc, "problem", None) or str(exc)
