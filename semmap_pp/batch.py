@@ -168,7 +168,7 @@ def world_facts(out: str | os.PathLike) -> dict:
             units[u.get("type")] = units.get(u.get("type"), 0) + 1
         return {"units": units, "doors": len(doc.get("doors", [])), "cpr": doc.get("cpr"),
                 "log_posterior": doc.get("log_posterior")}
-    except (OSError, ValueError, AttributeError, TypeError):
+    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
         return {}
 
 

@@ -34,6 +34,33 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+#: the largest seed: numpy's generators take any, but trace.nc stores it as a 64-bit HDF5 integer
+MAX_SEED = 2 ** 32 - 1
+#: the most kernels per draw: the model's 50 runs in milliseconds; 10^6 in about a minute a draw
+MAX_N_INNER = 1_000_000
+
+
+def seed(text: str) -> int:
+    """A seed in ``[0, MAX_SEED]``.
+
+    >>> seed("7")
+    7
+    """
+    value = non_negative_int(text)
+    if value > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_SEED}, got {text[:24]}"
+                                         f"{'...' if len(text) > 24 else ''}")
+    return value
+
+
+def n_inner(text: str) -> int:
+    """Kernels per draw, in ``[1, MAX_N_INNER]``."""
+    value = positive_int(text)
+    if value > MAX_N_INNER:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_N_INNER:,} kernels per draw, got {value:,}")
+    return value
+
+
 def finite(text: str, what: str = "a number") -> float:
     """``text`` as a finite float, else argparse's error naming ``what`` it should be.
 

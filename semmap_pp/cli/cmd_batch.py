@@ -21,6 +21,7 @@ from semmap_pp.cli.argtypes import non_negative_int, positive_int
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.cmd_map import add_run_length_options
 from semmap_pp.errors import MapError, SemmapError
+from semmap_pp.cli.argtypes import seed as seed_type
 
 #: the options of ``semmap map`` a batch hands to every task: (dest, flag)
 PASSED = (("model", "--model"), ("roi", "--roi"), ("chains", "--chains"), ("cores", "--cores"),
@@ -51,7 +52,7 @@ def register(subparsers) -> None:
                    help="a running Dask scheduler (tcp://host:8786); default: a local cluster")
     p.add_argument("--workers", type=positive_int, default=None, metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
-    p.add_argument("--seeds", type=non_negative_int, nargs="+", default=None, metavar="S",
+    p.add_argument("--seeds", type=seed_type, nargs="+", default=None, metavar="S",
                    help="run every map with each seed (DIR/<map>/seed-<s>/)")
     p.add_argument("--rules", action="append", default=None, metavar="FILE",
                    help="a rule file; give it twice or more to run every map under each (DIR/<map>/<rules>/)")

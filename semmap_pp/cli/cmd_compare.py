@@ -22,6 +22,7 @@ from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.cmd_map import add_run_length_options
 from semmap_pp.cli.runs import add_jobs_option
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
+from semmap_pp.cli.argtypes import seed as seed_type
 
 
 def register(subparsers) -> None:
@@ -34,8 +35,8 @@ def register(subparsers) -> None:
     p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
     p.add_argument("--roi", metavar="MASK", default=None, help="region-of-interest mask for the CPR")
     seeds = p.add_mutually_exclusive_group()
-    seeds.add_argument("--seed", type=_non_negative_int, default=None, help="random seed (default 0)")
-    seeds.add_argument("--seeds", type=_non_negative_int, nargs="+", default=None, metavar="N",
+    seeds.add_argument("--seed", type=seed_type, default=None, help="random seed (default 0)")
+    seeds.add_argument("--seeds", type=seed_type, nargs="+", default=None, metavar="N",
                        help="several seeds: every rule set is run with each, and a table over the seeds "
                             "(mean, sd, range; how far the seeds' W*s agree) comes first")
     add_run_length_options(p)

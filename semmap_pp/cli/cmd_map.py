@@ -22,6 +22,7 @@ from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.argtypes import seconds as _seconds
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
+from semmap_pp.cli.argtypes import n_inner as n_inner_type, seed as seed_type
 
 
 #: Options a resumed run takes from the resume file (giving them with --resume is an error).
@@ -46,7 +47,7 @@ def add_run_length_options(p: argparse.ArgumentParser, draws_help: str = "record
     p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
     p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
     p.add_argument("--draws", type=_positive_int, default=None, help=draws_help)
-    p.add_argument("--n-inner", type=_positive_int, default=None, help="kernels per draw")
+    p.add_argument("--n-inner", type=n_inner_type, default=None, help="kernels per draw")
 
 
 def target_inputs(args: argparse.Namespace):
@@ -66,7 +67,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="output directory (required, except with --resume: default the resumed DIR)")
     add_target_options(p)
-    p.add_argument("--seed", type=_non_negative_int, default=None, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed_type, default=None, help="random seed (default 0)")
     add_run_length_options(p, draws_help="recorded draws per chain (with --resume: this many more per chain)")
     p.add_argument("--spread-draws", type=_non_negative_int, default=None, metavar="N",
                    help="draws per chain of the sample around W* that the spread figures are drawn from "
@@ -158,7 +159,7 @@ def carried_ids_source(run_dir: Path) -> Path | None:
     path = Path(run_dir) / "world.json"
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
         return None
     return path if isinstance(doc, dict) and isinstance(doc.get("ids"), dict) else None
 

@@ -16,17 +16,17 @@ import json
 import sys
 from pathlib import Path
 
-from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.cmd_info import add_map_options
 from semmap_pp.cli.cmd_map import add_run_length_options, add_target_options, target_inputs
 from semmap_pp.cli.runs import add_jobs_option
+from semmap_pp.cli.argtypes import seed as seed_type
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("stability", help="search one map with several seeds and compare the W*s",
                               description=__doc__.splitlines()[0])
     p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
-    p.add_argument("--seeds", type=_non_negative_int, nargs="+", default=[0, 1, 2], metavar="N",
+    p.add_argument("--seeds", type=seed_type, nargs="+", default=[0, 1, 2], metavar="N",
                    help="the seeds, at least two different ones (default 0 1 2)")
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="also write stability.md, stability.json, stability.png")

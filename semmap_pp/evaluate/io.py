@@ -322,6 +322,8 @@ def read_json(path: str | os.PathLike) -> dict:
     MapError
         When the file is missing, is not JSON, or its top level is not an object.
     """
+    if os.path.exists(path) and not os.path.isfile(path):     # a FIFO or a device is never opened
+        raise MapError(path, "cannot read: not a regular file")
     try:
         with open(path, encoding="utf-8") as fh:
             data = json.load(fh)
@@ -329,6 +331,10 @@ def read_json(path: str | os.PathLike) -> dict:
         raise MapError(path, "no such file") from None
     except json.JSONDecodeError as exc:
         raise MapError(path, f"not valid JSON: {exc.msg}", line=exc.lineno, col=exc.colno) from None
+    except RecursionError:
+        raise MapError(path, "not valid JSON here: nested too deeply (thousands of levels)") from None
+    except ValueError as exc:      # an integer of thousands of digits (Python's conversion limit)
+        raise MapError(path, f"not valid JSON here: {str(exc).split(';')[0]}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise MapError(path, f"cannot read: {exc}") from None
     if not isinstance(data, dict):

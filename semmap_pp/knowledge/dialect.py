@@ -121,6 +121,10 @@ def strip_includes(text: str, path: str) -> tuple[str, list[tuple[str, int, int]
     >>> inc, t.split()
     ([], ['a.', 'b.'])
     """
+    nul = text.find("\0")
+    if nul >= 0:       # clingo reads a C string: it would stop there, silently
+        raise RuleError(path, "a NUL byte is not allowed (a rule or evidence file is text)",
+                        *_pos(text, nul))
     out = list(text)
     includes = []
     i, n = 0, len(text)
@@ -551,7 +555,15 @@ def load_rules(path: str | os.PathLike) -> RuleSet:
     if not top.is_file():
         raise RuleError(path, "not a regular file (a rule file is read, never a FIFO or device)"
                         if top.exists() else "no such rule file")
-    top = top.resolve()
+    try:
+        return _load(top.resolve())
+    except RecursionError:
+        raise RuleError(path, "terms or expressions are nested too deeply to be read "
+                              "(thousands of levels)") from None
+
+
+def _load(top: Path) -> RuleSet:
+    """:func:`load_rules` of a resolved regular file."""
     files = _read_files(top)
     kept, _consts, helpers = validate(files)
     check_grounding(kept)

@@ -183,7 +183,8 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
     try:
         stripped, includes = strip_includes(text, path)
     except Exception as exc:  # RuleError from the include lexer
-        raise EvidenceError(path, getattr(exc, "message", str(exc))) from None
+        raise EvidenceError(path, getattr(exc, "message", str(exc)), getattr(exc, "line", None),
+                            getattr(exc, "col", None)) from None
     if includes:
         raise EvidenceError(path, "#include is not allowed in evidence", *includes[0][1:])
     try:  # what clingo's lexer mishandles (non-ASCII aborts the process) is refused first
@@ -232,7 +233,9 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
             unary[atom.name][u] = float(prob.string)
             continue
         if not all(a.type == clingo.SymbolType.Number for a in args):
-            raise _fact_error(path, st, f"evidence arguments must be integers, got {sym}")
+            text = str(sym)
+            text = text if len(text) <= 80 else text[:60] + " ... " + text[-15:]
+            raise _fact_error(path, st, f"evidence arguments must be integers, got {text}")
         nums = [a.number for a in args]
         if sig == ("unit", 1):
             units.append(nums[0])
