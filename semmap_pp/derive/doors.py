@@ -115,6 +115,24 @@ def open_runs(line_open: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
+def wall_strip(classes: np.ndarray, rp, rq, wall: int):
+    """The map's cells on the connecting wall of ``rp`` and ``rq``: ``(strip, (a0, b0, a1, b1),
+    vertical)``, the strip's lines across the wall along axis 1 when ``vertical`` (else axis 0);
+    None without a connecting wall or when it leaves the map (nothing is seen through it)."""
+    cw = connecting_wall(rp, rq, wall)
+    if cw is None:
+        return None
+    (r0, c0, r1, c1), vertical = cw
+    H, W = classes.shape
+    a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
+    if a0 >= a1 or b0 >= b1:
+        return None
+    full_across = (b1 - b0) == (c1 - c0) if vertical else (a1 - a0) == (r1 - r0)
+    if not full_across:
+        return None
+    return classes[a0:a1, b0:b1], (a0, b0, a1, b1), vertical
+
+
 def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
                      q: int = 1) -> tuple[list[Door], list[Door]]:
     """``(doors, passages)`` on the connecting wall of units ``p`` (rectangle ``rp``) and ``q``
@@ -130,21 +148,12 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
     cells : CellParams
         Wall thickness and door width limits in cells.
     """
-    cw = connecting_wall(rp, rq, cells.wall)
-    if cw is None:
+    found = wall_strip(classes, rp, rq, cells.wall)
+    if found is None:
         return [], []
-    (r0, c0, r1, c1), vertical = cw
-    H, W = classes.shape
-    a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, H), min(c1, W)
-    if a0 >= a1 or b0 >= b1:
-        return [], []
-    full_across = (b1 - b0) == (c1 - c0) if vertical else (a1 - a0) == (r1 - r0)
-    if not full_across:  # the wall leaves the map: nothing can be seen through it
-        return [], []
-    strip = classes[a0:a1, b0:b1] == FREE
-    line_open = strip.all(axis=1) if vertical else strip.all(axis=0)
-    walled = classes[a0:a1, b0:b1] == OCCUPIED
-    line_walled = walled.any(axis=1) if vertical else walled.any(axis=0)
+    strip, (a0, b0, a1, b1), vertical = found
+    line_open = (strip == FREE).all(axis=1 if vertical else 0)
+    line_walled = (strip == OCCUPIED).any(axis=1 if vertical else 0)
     doors, passages = [], []
     n_lines = len(line_open)
     for s, e in open_runs(line_open):

@@ -24,22 +24,18 @@ with no room behind it) are 0. ``docs/outputs.md`` compares the convention with 
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numba
 import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
-from semmap_pp import atomic
 from semmap_pp.cells import FREE, OCCUPIED
-from semmap_pp.derive.doors import connecting_wall
+from semmap_pp.derive.doors import wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
 from semmap_pp.outputs.regions import join_regions, passage_pairs
-from semmap_pp.outputs.world_json import png_bytes
 
 _FOUR = ndi.generate_binary_structure(2, 1)
 _EIGHT = np.ones((3, 3), bool)
@@ -79,10 +75,6 @@ class Rooms:
 
     labels: np.ndarray
     rooms: tuple
-
-    def room_of_unit(self) -> dict[int, int]:
-        """The room of every unit id that grew one."""
-        return {u: r.id for r in self.rooms for u in r.units}
 
 
 @numba.njit(cache=True, nogil=True)
@@ -143,9 +135,9 @@ def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:
 
 def _walled_share(piece: np.ndarray, free: np.ndarray, occupied: np.ndarray | None) -> float:
     """Share of occupied cells among the non-free cells around ``piece`` (8-connected)."""
-    ring = ndi.binary_dilation(piece, _EIGHT) & ~piece & ~free
     if occupied is None:
         return 1.0
+    ring = ndi.binary_dilation(piece, _EIGHT) & ~piece & ~free
     n = int(ring.sum())
     return float((ring & occupied).sum()) / n if n else 1.0
 
@@ -198,7 +190,7 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     seeds = np.asarray(seeds)[box]
     occupied = None if occupied is None else np.asarray(occupied, bool)[box]
     passable = free & ~doors
-    seeds = np.where(passable, np.asarray(seeds), 0).astype(np.int32)
+    seeds = np.where(passable, seeds, 0).astype(np.int32)
     n_regions = int(seeds.max(initial=0))
     min_cells = params.min_room_m2 / resolution ** 2
     door_cells = params.door_max_m / resolution
@@ -265,17 +257,13 @@ def seen_share(mask: np.ndarray) -> float:
 
 def opening_share(classes: np.ndarray, rp, rq, wall: int) -> float:
     """Share of the lines across the connecting wall of rectangles ``rp`` and ``rq`` that are
-    open (free all the way across, ``classes`` the lattice's door classes); 0 without a wall."""
-    cw = connecting_wall(rp, rq, wall)
-    if cw is None:
+    open (free all the way across, ``classes`` the lattice's door classes), on the strip
+    :func:`~semmap_pp.derive.doors.wall_strip` finds doors on; 0 without one."""
+    found = wall_strip(classes, rp, rq, wall)
+    if found is None:
         return 0.0
-    (r0, c0, r1, c1), vertical = cw
-    h, w = classes.shape
-    a0, b0, a1, b1 = max(r0, 0), max(c0, 0), min(r1, h), min(c1, w)
-    if a0 >= a1 or b0 >= b1:
-        return 0.0
-    strip = classes[a0:a1, b0:b1] == FREE
-    lines = strip.all(axis=1) if vertical else strip.all(axis=0)
+    strip, _, vertical = found
+    lines = (strip == FREE).all(axis=1 if vertical else 0)
     return float(lines.mean()) if lines.size else 0.0
 
 
@@ -323,11 +311,5 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     return Rooms(labels, rooms)
 
 
-def write_rooms_png(path: str | os.PathLike, image: np.ndarray) -> Path:
-    """rooms.png: 16-bit, the input image's size and frame, room id per pixel, 0 none."""
-    atomic.write_bytes(path, png_bytes(np.asarray(image).astype(np.uint16)))
-    return Path(path)
-
-
 __all__ = ["Room", "Rooms", "room_labels", "room_joins", "rooms_of", "opening_share", "seen_share",
-           "geodesic_flood", "write_rooms_png"]
+           "geodesic_flood"]

@@ -216,6 +216,7 @@ def png_bytes(array: np.ndarray) -> bytes:
 
 
 def write_labels_png(path: str | os.PathLike, labels_image: np.ndarray) -> Path:
-    """labels.png: 16-bit, the input image's size and frame, unit id per cell (walls included), 0 none."""
+    """A 16-bit label image in the input image's size and frame, 0 none: labels.png (unit id per
+    cell, walls included) and rooms.png (room id per free cell)."""
     atomic.write_bytes(path, png_bytes(labels_image.astype(np.uint16)))
     return Path(path)

@@ -19,7 +19,6 @@ from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
 from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
-from semmap_pp.outputs.rooms import write_rooms_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
 from semmap_pp.outputs.types_layer import write_types_layer
@@ -116,7 +115,7 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
     written = [write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)),
                write_graphml(out / "graph.graphml", graph),
                write_regions_png(out / "regions.png", region_img),
-               write_rooms_png(out / "rooms.png", sm.rooms.labels)]
+               write_labels_png(out / "rooms.png", sm.rooms.labels)]
     written.extend(write_types_layer(out, sm, doc))
     pngs = {"overlay": fig.overlay_png(sm, doc), "graph": fig.graph_png(sm, graph)}
     for name, data in pngs.items():
