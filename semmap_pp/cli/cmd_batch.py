@@ -12,12 +12,11 @@ failed. A rerun skips the tasks whose folder holds a whole run (``--force`` redo
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from pathlib import Path
 
-from semmap_pp.cli.argtypes import non_negative_int, positive_int
+from semmap_pp.cli.argtypes import non_negative_int, positive_int, seconds
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.cmd_map import add_run_length_options
 from semmap_pp.errors import MapError, SemmapError
@@ -30,17 +29,6 @@ PASSED = (("model", "--model"), ("roi", "--roi"), ("chains", "--chains"), ("core
           ("occupied_thresh", "--occupied-thresh"), ("free_thresh", "--free-thresh"),
           ("negate", "--negate"), ("resolution", "--resolution"), ("mode", "--mode"),
           ("max_cells", "--max-cells"))
-
-
-def _seconds(text: str) -> float:
-    import argparse
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return v
 
 
 def register(subparsers) -> None:
@@ -61,9 +49,9 @@ def register(subparsers) -> None:
     add_run_length_options(p)
     p.add_argument("--spread-draws", type=non_negative_int, default=None, metavar="N",
                    help="draws per chain of the sample around W* (model file default)")
-    p.add_argument("--budget", type=_seconds, default=None, metavar="SECONDS",
+    p.add_argument("--budget", type=seconds, default=None, metavar="SECONDS",
                    help="each run: stop sampling after SECONDS and keep the draws made")
-    p.add_argument("--timeout", type=_seconds, default=None, metavar="SECONDS",
+    p.add_argument("--timeout", type=seconds, default=None, metavar="SECONDS",
                    help="a task still running after SECONDS fails (its process is killed)")
     p.add_argument("--force", action="store_true", help="redo tasks whose output is complete")
     p.add_argument("--progress", choices=("auto", "rich", "plain", "none"), default="auto",
@@ -107,11 +95,7 @@ def _client(args):
             return Client(args.scheduler, timeout="10s"), None
         except (OSError, TimeoutError) as exc:
             raise MapError(None, f"cannot reach the Dask scheduler at {args.scheduler}: {exc}") from None
-    try:
-        import bokeh  # noqa: F401  (the dashboard needs it)
-        dashboard = ":0"
-    except ImportError:
-        dashboard = None
+    dashboard = ":0" if _has_bokeh() else None
     n = args.workers or os.cpu_count() or 1
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=dashboard, silence_logs=50)
@@ -246,6 +230,7 @@ def run(args) -> int:
 
 
 def _has_bokeh() -> bool:
+    """Whether Dask can serve its dashboard (it needs bokeh)."""
     try:
         import bokeh  # noqa: F401
         return True

@@ -203,16 +203,10 @@ def segmentation_of(run_dir: Path, of: Path | None) -> Path:
         path = run_dir / of
     else:
         path = of
-    _regular(path, "a segmentation image" + (", the rooms.png of `semmap map`" if of is None else ""))
+    if not path.exists():      # a FIFO or device: read_image refuses it without opening it
+        raise MapError(path, "missing (expected a segmentation image"
+                             + (", the rooms.png of `semmap map`)" if of is None else ")"))
     return path
-
-
-def _regular(path: Path, what: str) -> None:
-    """A one-line error unless ``path`` is a regular file (a FIFO or device is never opened)."""
-    if not path.exists():
-        raise MapError(path, f"missing (expected {what})")
-    if not path.is_file():
-        raise MapError(path, f"not a regular file (expected {what})")
 
 
 def evaluate_segmentation(run_dir: Path, truth: Path, fmt: str = "rose2", of: Path | None = None) -> dict:
@@ -222,7 +216,6 @@ def evaluate_segmentation(run_dir: Path, truth: Path, fmt: str = "rose2", of: Pa
     if of is None and not run_dir.is_dir():
         raise MapError(run_dir, "not a run folder (expected the --out folder of `semmap map`)")
     pred_path = segmentation_of(run_dir, of)
-    _regular(truth, "a room ground truth image")
     gt = read_segmentation_truth(truth, fmt)
     pred = read_segmentation(pred_path)
     _same_shape(pred, gt, pred_path, truth)
