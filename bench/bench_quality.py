@@ -181,6 +181,17 @@ def _inputs_from_grid(grid, model, rules):
     return Inputs(grid, model, rules, frame, roi, "default")
 
 
+def _run_or_record(args, inputs, settings, rows: list, row: dict, label: str):
+    """``_run``'s ``(run, clock)``; or, when the run fails, ``row`` with the error appended to
+    ``rows``, the failure logged under ``label``, and None."""
+    try:
+        return _run(inputs, settings, args.quiet)
+    except MapFailed as exc:
+        rows.append({**row, "error": str(exc)})
+        _log(args, f"{label}: FAILED {exc}")
+        return None
+
+
 def time_to_best(run, clock) -> dict:
     """When W* was found (seconds from the call of ``run_map``).
 
@@ -613,12 +624,10 @@ def bench_synthetic(args, model, rules) -> dict:
         t0 = time.perf_counter()
         floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
         settings = _settings(model, args)
-        try:
-            run, clock = _run(inputs, settings, args.quiet)
-        except MapFailed as exc:
-            rows.append({"seed": seed, "error": str(exc)})
-            _log(args, f"synth {seed:3d}: FAILED {exc}")
+        ran = _run_or_record(args, inputs, settings, rows, {"seed": seed}, f"synth {seed:3d}")
+        if ran is None:
             continue
+        run, clock = ran
         sm = run.semantic
         pred = world_dict(sm)
         shared, sc, so = _floor_scores(floor, sm, pred)
@@ -929,12 +938,10 @@ def bench_real(args, model, rules) -> dict:
             continue
         inputs = load_inputs(path, model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
         settings = _settings(model, args)
-        try:
-            run, clock = _run(inputs, settings, args.quiet)
-        except MapFailed as exc:
-            rows.append({"map": path.stem, "error": str(exc)})
-            _log(args, f"real {path.stem}: FAILED {exc}")
+        ran = _run_or_record(args, inputs, settings, rows, {"map": path.stem}, f"real {path.stem}")
+        if ran is None:
             continue
+        run, clock = ran
         sm = run.semantic
         ttb = time_to_best(run, clock)
         row = {"map": path.stem, "bundled": bundled, "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
@@ -972,12 +979,10 @@ def bench_ipa(args, model, rules) -> dict:
             continue
         grid = load_map(map_path, **IPA_FREE)
         inputs = _inputs_from_grid(grid, model, rules)
-        try:
-            run, clock = _run(inputs, _settings(model, args), args.quiet)
-        except MapFailed as exc:
-            rows.append({"map": name, "error": str(exc)})
-            _log(args, f"ipa {name}: FAILED {exc}")
+        ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"ipa {name}")
+        if ran is None:
             continue
+        run, clock = ran
         sm = run.semantic
         gt = read_ipa_gt(gt_path)
         seg, _ = regions_of(sm)
@@ -1021,12 +1026,10 @@ def bench_real_gt(args, model, rules) -> dict:
         if not _keep(name, args):
             continue
         inputs = load_inputs(folder / "map.yaml", model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
-        try:
-            run, clock = _run(inputs, _settings(model, args), args.quiet)
-        except MapFailed as exc:
-            rows.append({"map": name, "error": str(exc)})
-            _log(args, f"real-gt {name}: FAILED {exc}")
+        ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"real-gt {name}")
+        if ran is None:
             continue
+        run, clock = ran
         sm = run.semantic
         gt = read_segmentation_truth(folder / "gt.png", "rose2")
         rooms = protocol_scores(gt, sm.rooms.labels)
@@ -1071,12 +1074,10 @@ def bench_types(args, model, rules) -> dict:
             continue
         grid = load_map(base / map_name, resolution=0.05, **IPA_FREE)
         inputs = _inputs_from_grid(grid, model, rules)
-        try:
-            run, clock = _run(inputs, _settings(model, args), args.quiet)
-        except MapFailed as exc:
-            rows.append({"map": map_name, "error": str(exc)})
-            _log(args, f"types {map_name}: FAILED {exc}")
+        ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": map_name}, f"types {map_name}")
+        if ran is None:
             continue
+        run, clock = ran
         sm = run.semantic
         types = {uid: sm.type_of(uid) for uid in sm.unit_ids}
         pred = type_map_from_labels(sm.labels_image, types)
