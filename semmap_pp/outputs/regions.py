@@ -24,8 +24,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from semmap_pp import atomic
-from semmap_pp.outputs.world_json import png_bytes
+from semmap_pp.outputs.world_json import write_labels_png
 
 
 def join_regions(unit_ids: Sequence[int], pairs: Iterable[tuple[int, int]]) -> dict[int, int]:
@@ -83,9 +82,9 @@ def regions_image(sm, regions: dict[int, int] | None = None) -> np.ndarray:
 
 
 def write_regions_png(path: str | os.PathLike, image: np.ndarray) -> Path:
-    """regions.png: 16-bit, the input image's size and frame, region id per pixel, 0 none."""
-    atomic.write_bytes(path, png_bytes(np.asarray(image).astype(np.uint16)))
-    return Path(path)
+    """regions.png: 16-bit, the input image's size and frame, region id per pixel, 0 none
+    (:func:`~semmap_pp.outputs.world_json.write_labels_png`, as labels.png and rooms.png)."""
+    return write_labels_png(path, np.asarray(image))
 
 
 __all__ = ["join_regions", "passage_pairs", "unit_pairs", "unit_regions", "regions_image",
