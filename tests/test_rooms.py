@@ -297,3 +297,66 @@ def test_eval_segmentation_refuses_a_fifo_without_reading_it(run_dir, tmp_path):
         assert p.returncode == 2
         assert "gt.png" in p.stderr and "not a regular file" in p.stderr
         assert len(p.stderr.strip().splitlines()) == 1
+
+
+# --- units one room across a wide gap ------------------------------------------------------------
+
+def two_units_with_a_partition(gap_cells: int, clutter: bool = False):
+    """Two 40 x 40-cell units side by side (0.05 m cells, 2-cell wall bands) sharing a wall down
+    columns 38-41 that stops ``gap_cells`` short of the bottom wall; ``clutter`` puts a cupboard
+    row across the floor in front of the gap."""
+    from semmap_pp.cells import FREE, OCCUPIED
+    classes = np.full((44, 84), OCCUPIED, np.uint8)
+    classes[2:42, 2:82] = FREE
+    classes[2:42 - gap_cells, 38:42] = OCCUPIED
+    if clutter:
+        classes[42 - gap_cells - 2:42, 30:36] = OCCUPIED
+    return classes, (0, 0, 44, 42), (0, 38, 44, 84)
+
+
+@pytest.mark.parametrize("gap_cells, joined", [(40, True), (36, True), (30, False), (16, False)])
+def test_a_gap_wider_than_a_double_door_is_one_floor(gap_cells, joined):
+    from semmap_pp.cells import FREE
+    from semmap_pp.outputs.rooms import wide_opening
+    classes, rp, rq = two_units_with_a_partition(gap_cells)
+    width = RoomParams().door_max_m / 0.05                       # 32 cells
+    assert wide_opening(classes == FREE, rp, rq, 2, width) is joined
+    assert wide_opening(classes == FREE, rq, rp, 2, width) is joined     # symmetric
+
+
+def test_clutter_in_front_of_a_wide_gap_narrows_it_to_a_door():
+    from semmap_pp.cells import FREE
+    from semmap_pp.outputs.rooms import wide_opening
+    classes, rp, rq = two_units_with_a_partition(36)
+    assert wide_opening(classes == FREE, rp, rq, 2, 32.0)
+    classes, rp, rq = two_units_with_a_partition(36, clutter=True)
+    assert not wide_opening(classes == FREE, rp, rq, 2, 32.0)
+
+
+class _FakeMap:
+    """The parts of a SemanticMap that room_joins reads: two units with one door between them."""
+
+    def __init__(self, classes, rp, rq, types):
+        from types import SimpleNamespace
+        from semmap_pp.derive.doors import Door
+        self.slot_ids = {0: 1, 1: 2}
+        self.world = SimpleNamespace(rects=[rp, rq])
+        self.frame = SimpleNamespace(door_classes=classes, cells=SimpleNamespace(wall=2),
+                                     resolution=0.05)
+        self.derived = SimpleNamespace(doors=[Door(0, 1, (30, 38, 42, 42), True, 12)], passages=[])
+        self._types = dict(zip((1, 2), types))
+
+    def type_of(self, uid):
+        return self._types[uid]
+
+
+@pytest.mark.parametrize("types, gap_cells, one_room", [
+    (("room", "room"), 36, True), (("room", "other"), 36, True),
+    (("room", "room"), 16, False),                    # a door
+    (("corridor", "room"), 36, False), (("room", "hall"), 36, False)])   # a corridor's side
+def test_room_joins_takes_a_wide_gap_between_rooms_but_not_a_corridors(types, gap_cells, one_room):
+    from semmap_pp.outputs.rooms import room_joins
+    classes, rp, rq = two_units_with_a_partition(gap_cells)
+    pairs, doors = room_joins(_FakeMap(classes, rp, rq, types), RoomParams(open_share_min=1.0))
+    assert (pairs == [(1, 2)]) is one_room
+    assert len(doors) == (0 if one_room else 1)

@@ -32,7 +32,7 @@ from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
 from semmap_pp.cells import FREE, OCCUPIED
-from semmap_pp.derive.doors import wall_strip
+from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
 from semmap_pp.outputs.regions import join_regions, passage_pairs
@@ -267,17 +267,80 @@ def opening_share(classes: np.ndarray, rp, rq, wall: int) -> float:
     return float(lines.mean()) if lines.size else 0.0
 
 
+def wide_opening(free: np.ndarray, rp, rq, wall: int, width: float) -> bool:
+    """Whether the free floor joins rectangles ``rp`` and ``rq`` across their connecting wall
+    through a gap at least ``width`` cells wide: a path from one side of the wall to the other,
+    within ``width`` of it, whose cells all lie at least ``width / 2`` from every non-free cell
+    (``free`` the lattice's free cells, its specks made free). A door, or a gap that clutter
+    narrows to a door's width, is no such gap.
+
+    >>> free = np.ones((40, 60), bool); free[:, 29:31] = False       # a wall down column 29-30
+    >>> rp, rq = (0, 0, 40, 31), (0, 29, 40, 60)                       # two units, walls 2 cells
+    >>> free[5:25, 29:31] = True; wide_opening(free, rp, rq, 2, 16.0)  # a 20-cell gap
+    True
+    >>> free[13:25, 29:31] = False; wide_opening(free, rp, rq, 2, 16.0)  # an 8-cell door
+    False
+    """
+    cw = connecting_wall(rp, rq, wall)
+    if cw is None or width <= 0:
+        return False
+    (r0, c0, r1, c1), vertical = cw
+    reach = int(np.ceil(width))
+    # the wall strip and ``width`` of floor on each side of it
+    b0, b1 = (r0, r1) if vertical else (r0 - reach, r1 + reach)
+    d0, d1 = (c0 - reach, c1 + reach) if vertical else (c0, c1)
+    pad = int(np.ceil(width / 2)) + 1
+    H, W = free.shape
+    y0, y1, x0, x1 = max(b0 - pad, 0), min(b1 + pad, H), max(d0 - pad, 0), min(d1 + pad, W)
+    if y0 >= y1 or x0 >= x1:
+        return False
+    clear = ndi.distance_transform_edt(np.pad(free[y0:y1, x0:x1], 1))[1:-1, 1:-1]
+    wide = clear >= width / 2
+    band = np.zeros(wide.shape, bool)
+    band[max(b0, 0) - y0:min(b1, H) - y0, max(d0, 0) - x0:min(d1, W) - x0] = True
+    wide &= band
+    side_a, side_b = np.zeros_like(band), np.zeros_like(band)
+    if vertical:
+        side_a[:, :max(c0 - x0, 0)] = True
+        side_b[:, max(c1 - x0, 0):] = True
+    else:
+        side_a[:max(r0 - y0, 0), :] = True
+        side_b[max(r1 - y0, 0):, :] = True
+    lab, n = ndi.label(wide, _EIGHT)
+    if not n:
+        return False
+    return bool(np.intersect1d(lab[wide & side_a], lab[wide & side_b]).size)
+
+
+#: unit types whose side openings lead into other rooms, however wide (a corridor's, a hall's)
+_THROUGH_TYPES = frozenset({"corridor", "hall"})
+
+
 def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     """Unit-id pairs one room joins, and the doors that stay doors between rooms.
 
     Units joined by a passage (:func:`~semmap_pp.outputs.regions.passage_pairs`) are one room; so
     are two units whose door takes at least ``open_share_min`` of the wall they share: an opening
-    that wide is the open side of one room that W* cut in two, not a door in a wall."""
+    that wide is the open side of one room that W* cut in two, not a door in a wall. So are two
+    units, neither a corridor nor a hall, whose floor meets through a gap wider than a double door
+    (``door_max_m``, :func:`wide_opening`): the open side of a room that a partition, a stub of
+    wall or a row of cupboards half divides. A corridor's or a hall's openings, however wide, lead
+    into the rooms along it."""
     ids, rects, classes = sm.slot_ids, sm.world.rects, sm.frame.door_classes
-    pairs, doors = list(passage_pairs(sm)), []
+    wall = sm.frame.cells.wall
+    width = params.door_max_m / sm.frame.resolution
+    free = None
+    pairs, doors, decided = list(passage_pairs(sm)), [], {}
     for d in sm.derived.doors:
-        if opening_share(classes, rects[d.p], rects[d.q], sm.frame.cells.wall) >= params.open_share_min:
-            pairs.append(tuple(sorted((ids[d.p], ids[d.q]))))
+        pair = tuple(sorted((ids[d.p], ids[d.q])))
+        if pair not in decided:
+            joined = opening_share(classes, rects[d.p], rects[d.q], wall) >= params.open_share_min
+            if not joined and not _THROUGH_TYPES & {sm.type_of(pair[0]), sm.type_of(pair[1])}:
+                free = classes == FREE if free is None else free
+                joined = wide_opening(free, rects[d.p], rects[d.q], wall, width)
+            decided[pair] = joined
+        if decided[pair]:
+            pairs.append(pair)
         else:
             doors.append(d)
     return sorted(set(pairs)), doors
@@ -311,5 +374,5 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     return Rooms(labels, rooms)
 
 
-__all__ = ["Room", "Rooms", "room_labels", "room_joins", "rooms_of", "opening_share", "seen_share",
+__all__ = ["Room", "Rooms", "room_labels", "room_joins", "rooms_of", "opening_share", "seen_share", "wide_opening",
            "geodesic_flood"]
