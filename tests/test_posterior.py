@@ -547,3 +547,79 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path():
             tr.accept(prop)
     assert tr.skipped[1] >= 1
     assert tr.logp == pytest.approx(post.evaluate(tr.world).total, rel=1e-9, abs=0)
+
+
+def _pipeline_target(rules):
+    """The target ``semmap map`` builds for tests/data/maps/intel_corner.yaml
+    (:func:`semmap_pp.pipeline.run_target` of :func:`~semmap_pp.pipeline.load_inputs`), with the
+    rule file ``rules`` (knowledge on) or none (knowledge off)."""
+    from semmap_pp.pipeline import load_inputs, run_target
+
+    root = Path(__file__).resolve().parents[1]
+    kw = {"rules_path": root / "rules" / rules} if rules else {"rules_path": None}
+    post = run_target(load_inputs(root / "tests/data/maps/intel_corner.yaml", **kw))
+    assert post.knowledge_on == (rules is not None)
+    return post
+
+
+def _reference_log_prior(post, world, typ):
+    """:func:`semmap_pp.prior.log_prior` of ``world``'s active units, with the adjacency and the
+    P(SaLe) of the typing ``typ`` (the fixed table by type when its ``sale`` is None)."""
+    from semmap_pp.prior import log_prior
+
+    slots = W.active_slots(world)
+    adj = typ.adj[np.ix_(slots, slots)]
+    types = typ.world.types[slots]
+    sale = (post.fixed.fixed_sale[np.ix_(types, types)] if typ.sale is None
+            else typ.sale[np.ix_(slots, slots)])
+    c = post.cells
+    return log_prior(world.rects[slots], world.capacity, post.frame.shape, c.min_side, c.max_side,
+                     adj, sale, c.resolution, post.model.prior)
+
+
+@pytest.mark.parametrize("rules", [None, "table3.lp"])
+def test_the_log_prior_of_every_number_of_units_is_prior_log_prior(rules):
+    """Mutant class "the one-unit prior" (docs/robustness.md, "Mutants"): on the target the
+    pipeline builds, ``Posterior.prior_n(K)[n]`` equals :func:`semmap_pp.prior.log_prior` of ``n``
+    units without adjacent pairs for every ``n = 0..K``, ``K`` the model's k_max and twice it (a
+    world's capacity doubles when a birth finds no empty slot), under the model's Poisson and a
+    geometric p_n; and the log prior of a full evaluation and of the tracker (the compiled hot path)
+    equals log_prior, SaLe factor included, for worlds of every size ``n = 0..K``."""
+    post = _pipeline_target(rules)
+    c = post.cells
+    shape = post.frame.shape
+    one = (10, 10, 40, 50)
+    from semmap_pp.prior import log_prior
+
+    for prior in (post.model.prior, dataclasses.replace(post.model.prior, n_prior="geometric", n_mean=4.0)):
+        post.model = dataclasses.replace(post.model, prior=prior)
+        post._prior_n.clear()
+        for K in (post.model.prior.k_max, 2 * post.model.prior.k_max):
+            table = post.prior_n(K)
+            assert table.shape == (K + 1,)
+            for n in range(K + 1):
+                rects = np.array([one] * n).reshape(-1, 4)
+                expected = log_prior(rects, K, shape, c.min_side, c.max_side, np.zeros((n, n), bool),
+                                     np.zeros((n, n)), c.resolution, prior)
+                assert table[n] == pytest.approx(expected, rel=1e-12, abs=1e-9), (K, n)
+    post.model = dataclasses.replace(post.model, prior=MODEL.prior)
+    post._prior_n.clear()
+    # worlds of every size: units added one at a time, evaluated in full and by the tracker
+    rng = np.random.default_rng(55)
+    K = post.model.prior.k_max
+    n_max = K if rules is None else 6      # the engine on 64 overlapping units: too slow for a test
+    world = W.empty(K)
+    tr = post.start(world)
+    assert tr.logprior == pytest.approx(_reference_log_prior(post, world, post.typing(world)))
+    sale_terms = 0
+    for n in range(1, n_max + 1):
+        new = W.add(tr.world, n - 1, random_rect(rng, shape, lo=c.min_side))
+        prop = tr.propose(new, [n - 1])
+        typ = post.typing(new)
+        expected = _reference_log_prior(post, new, typ)
+        assert np.isfinite(expected)
+        assert post.evaluate(new).logprior == pytest.approx(expected, rel=1e-12, abs=1e-9), n
+        assert prop.logprior == pytest.approx(expected, rel=1e-12, abs=1e-9), n
+        tr.accept(prop)
+        sale_terms += expected < post.prior_n(K)[n] - 1e-6
+    assert sale_terms > 0      # the SaLe factor was part of it
