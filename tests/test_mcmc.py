@@ -57,6 +57,49 @@ def test_mh_green_acceptance(old, new, ratio, temp, u, expect):
     assert (tr.world == "new") is expect
 
 
+class FloorTracker(FakeTracker):
+    """:class:`FakeTracker` that takes a floor (as the project's Tracker does) and records it."""
+
+    supports_floor = True
+
+    def propose(self, world, changed, floor=None):
+        self.floor = floor
+        return P(world, self.new_logp)
+
+
+@pytest.mark.parametrize("old,new,ratio,temp", [
+    (0.0, -2.0, 0.5, 2.0),          # log alpha = -1 + 0.5
+    (-10.0, -13.0, -0.4, 3.0),      # -1 - 0.4
+    (5.0, 4.0, 0.3, 0.5),           # T < 1 sharpens: -2 + 0.3
+    (0.0, 1.5, -1.0, 2.5),          # a better world, a ratio against it: 0.6 - 1
+    (0.0, -1.0, 2.5, 4.0),          # -0.25 + 2.5 > 0: always accepted
+    (3.0, -7.0, 4.0, 10.0),         # -1 + 4 > 0
+])
+def test_mh_green_at_a_temperature(old, new, ratio, temp):
+    """Mutant class "MH at T != 1" (docs/robustness.md, "Mutants"): with T != 1 and a nonzero log
+    ratio the acceptance probability is min(1, exp((log pi(W') - log pi(W)) / T + log_ratio))
+    (semmap_pp/mcmc.py): a uniform just below it accepts, just above it rejects; a target that
+    takes a floor gets ``log pi(W) + T (log u - log_ratio)`` and decides the same; and over 20,000
+    seeded uniforms the share accepted is that probability (binomial test)."""
+    alpha = min(1.0, math.exp((new - old) / temp + ratio))
+    below = [alpha * (1 - 1e-9)] + ([] if alpha == 1.0 else [alpha * (1 + 1e-9)])
+    for u, expect in zip(below, (True, False)):
+        for cls in (FakeTracker, FloorTracker):
+            tr = cls(old, new)
+            assert mh_green(FixedRng(u), tr, Proposal("new", ratio, (0,)), temperature=temp) is expect
+            assert (tr.world == "new") is expect
+            if cls is FloorTracker:
+                assert tr.floor == pytest.approx(old + temp * (math.log(u) - ratio), rel=1e-12, abs=1e-12)
+    rng = np.random.default_rng(17)
+    n = 20_000
+    accepted = sum(mh_green(rng, FakeTracker(old, new), Proposal("new", ratio, (0,)), temperature=temp)
+                   for _ in range(n))
+    if alpha == 1.0:
+        assert accepted == n
+    else:
+        assert stats.binomtest(accepted, n, alpha).pvalue > 1e-3
+
+
 def test_none_is_a_rejection():
     tr = FakeTracker(0.0, 0.0)
     assert mh_green(FixedRng(0.0), tr, None) is False and tr.accepted is None
