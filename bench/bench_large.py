@@ -12,6 +12,8 @@ numbers, bytes per cell at the peak, and the ratios between sizes (time per cell
 smallest size: 1.0 means linear). With ``--canvas N`` (default 4000; 0 skips it) a
 ``--canvas-floor`` floor pasted into an N x N canvas of unknown cells, as gmapping writes maps, is
 measured with the model's lattice crop and without (``crop_margin_m = 0``): the ratios of the two.
+``--tiny`` (:data:`TINY`: sizes 200 and 300, a 600-cell canvas) is the check of
+tests/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+#: ``--tiny``: the arguments it sets
+TINY = {"sizes": [200, 300], "canvas": 600, "canvas_floor": 200}
 
 CHILD = r"""
 import json, math, resource, sys, time
@@ -81,6 +85,7 @@ def add_arguments(parser) -> None:
                         help="also a --canvas-floor floor in a canvas of this many cells a side, unknown around it "
                              "(gmapping's default map: 4000), with the model's lattice crop and without; 0: skip")
     parser.add_argument("--canvas-floor", type=int, default=1000, help="side of the floor in the canvas, cells")
+    parser.add_argument("--tiny", action="store_true", help="small maps (a check that it runs)")
 
 
 def synthetic_floor(n: int, angle_deg: float, resolution: float, room_m: float,
@@ -124,6 +129,9 @@ def measure(path: Path, cells: int, model: Path | None = None) -> dict:
 def run(args) -> dict:
     from semmap_pp.grid import write_map
 
+    if args.tiny:
+        for key, value in TINY.items():
+            setattr(args, key, value)
     rng = np.random.default_rng(args.seed)
     rows = []
     with tempfile.TemporaryDirectory() as d:

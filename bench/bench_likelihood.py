@@ -1,10 +1,14 @@
 """Likelihood/posterior speed on a real map: incremental single-unit edits and full evaluations.
 
-``python bench/run.py likelihood --json``. On the cartesium lattice a seeded 20-unit world of
-room-sized rectangles is placed over the known part of the map; a *typical single-unit edit* moves
-one wall of one unit by 1..5 cells (the SHRINK/DILATE kernel), half of the proposals are accepted.
-The same world and the same edits run on a map of four times the area (the lattice tiled 2x2),
-interleaved edit by edit with the 1x map, to show that the cost follows the edit, not the map.
+``python bench/run.py likelihood --json``. On the cartesium lattice (as the sampler sees it: the
+known cells and a margin, :func:`semmap_pp.frame.build_frame_from_classes`) a seeded 20-unit
+world of room-sized rectangles is placed over the known part of the map; a *typical single-unit
+edit* moves one wall of one unit by 1..5 cells (the SHRINK/DILATE kernel), half of the proposals
+are accepted. The same world and the same edits run on a map of four times the area (that lattice
+tiled 2x2), interleaved edit by edit with the 1x map, to show that the cost follows the edit, not
+the map. The world must lie in the prior's support and edits must be evaluated, or the run stops
+with a message (it would time nothing real). ``--tiny`` (:data:`TINY`: 3 units, 50 edits on
+tests/data/maps/intel_corner.yaml) is the check of tests/test_bench_smoke.py that it runs.
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ from semmap_pp.model import load_model
 from semmap_pp.posterior import Posterior
 
 ROOT = Path(__file__).resolve().parents[1]
+#: ``--tiny``: the arguments it sets
+TINY = {"map": str(ROOT / "tests/data/maps/intel_corner.yaml"), "units": 3, "edits": 50, "full": 2}
 
 
 def add_arguments(parser) -> None:
@@ -30,16 +36,20 @@ def add_arguments(parser) -> None:
     parser.add_argument("--edits", type=int, default=5000)
     parser.add_argument("--full", type=int, default=30, help="number of full evaluations")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--tiny", action="store_true", help="a few edits on a small map (a check that it runs)")
 
 
 def random_world(rng, classes, n, capacity, min_side, max_side=200):
-    """``n`` valid rectangles over the bounding box of the known cells."""
+    """``n`` rectangles inside the bounding box of the known cells, sides from ``max(min_side,
+    40)`` up to ``max_side`` (or the box, when it is smaller)."""
     rows, cols = np.nonzero(classes != 1)
     r_lo, r_hi, c_lo, c_hi = rows.min(), rows.max(), cols.min(), cols.max()
+    lo = max(min_side, 40)
+    h_max, w_max = min(max_side, max(int(r_hi - r_lo), lo + 1)), min(max_side, max(int(c_hi - c_lo), lo + 1))
     w = W.empty(capacity)
     for s in range(n):
-        h = int(rng.integers(max(min_side, 40), max_side))
-        wd = int(rng.integers(max(min_side, 40), max_side))
+        h = int(rng.integers(lo, h_max))
+        wd = int(rng.integers(lo, w_max))
         r0 = int(rng.integers(r_lo, max(r_lo + 1, r_hi - h)))
         c0 = int(rng.integers(c_lo, max(c_lo + 1, c_hi - wd)))
         w = W.add(w, s, (r0, c0, r0 + h, c0 + wd))
@@ -87,15 +97,20 @@ def time_edits(posts, world, edits, min_side):
 
 
 def run(args) -> dict:
+    if args.tiny:
+        for key, value in TINY.items():
+            setattr(args, key, value)
     model = load_model()
     grid = load_map(args.map)
     frame0 = build_frame(grid, model)
     lattice = np.asarray(frame0.classes)
     rng = np.random.default_rng(args.seed)
     frame1 = build_frame_from_classes(lattice, grid.resolution, model, theta=0.0)
-    frame4 = build_frame_from_classes(np.tile(lattice, (2, 2)), grid.resolution, model, theta=0.0)
+    # 4x: the 1x lattice tiled (too few cells are unknown around it to crop it again)
+    frame4 = build_frame_from_classes(np.tile(np.asarray(frame1.classes), (2, 2)), grid.resolution,
+                                      model, theta=0.0)
     c = frame1.cells
-    world = random_world(rng, lattice, args.units, model.prior.k_max, c.min_side)
+    world = random_world(rng, np.asarray(frame1.classes), args.units, model.prior.k_max, c.min_side)
     edits = edit_sequence(rng, world, args.edits, c.min_side)
 
     out = {"map": Path(args.map).name, "lattice": list(lattice.shape),
@@ -105,6 +120,9 @@ def run(args) -> dict:
         t0 = time.perf_counter()
         posts[name] = Posterior(frame, model)
         prep = time.perf_counter() - t0
+        if not np.isfinite(posts[name].evaluate(world).logprior):
+            raise SystemExit(f"bench likelihood: the {args.units}-unit world is outside the prior's "
+                             f"support on the {name} lattice {list(frame.shape)}")
         full = []
         for _ in range(args.full):
             t0 = time.perf_counter()
@@ -113,6 +131,9 @@ def run(args) -> dict:
         out[name] = {"lattice": list(frame.shape), "prepare_s": round(prep, 3),
                      "full_eval_ms_median": round(1e3 * statistics.median(full), 3)}
     times, type_changes, errs = time_edits([posts["1x"], posts["4x"]], world, edits, c.min_side)
+    if not times[0]:
+        raise SystemExit(f"bench likelihood: none of the {len(edits)} edits kept the world inside "
+                         f"the {list(frame1.shape)} lattice: nothing was timed")
     for name, t, err in zip(("1x", "4x"), times, errs):
         out[name].update({
             "edit_us_median": round(1e6 * statistics.median(t), 2),

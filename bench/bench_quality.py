@@ -58,6 +58,10 @@ knowledge engine is run again without it (``knowledge`` in its row says so); a m
 ways gets a row with its error message and is left out of the means. **Time to W\\*** is the wall time from the start of
 sampling until the best chain's ``best_logp`` first reached its final value, clocked per draw through
 ``run_map``'s ``callback`` (start worlds and the final semantic map are not included).
+
+``--tiny`` (:data:`TINY`: one synthetic floor, one chain of 2 + 4 draws of 10 kernels; the
+synthetic subset unless ``--subset`` names another) is the check of tests/test_bench_smoke.py
+that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations
@@ -108,6 +112,9 @@ READINGS = (
     ("time_to_wstar_s", "cartesium, polish included", "real", "ubremen-cartesium:time_to_wstar_s"),
 )
 AT_MOST = {"time_to_wstar_s"}      # targets that are upper bounds
+#: ``--tiny``: the arguments it sets
+TINY = {"floors": 1, "first_floor": 1, "chains": 1, "cores": 1, "tune": 2, "draws": 4, "n_inner": 10,
+        "quiet": True}
 
 
 def _budget(text: str) -> str | float:
@@ -156,6 +163,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--model", type=Path, default=None, help="model file (default models/default.toml)")
     parser.add_argument("--rules", type=Path, default=None, help="rule file (default rules/table3.lp)")
+    parser.add_argument("--tiny", action="store_true",
+                        help="one synthetic floor, very short runs (a check that it runs)")
 
 
 # ------------------------------------------------------------------ helpers
@@ -1101,6 +1110,11 @@ def run(args) -> dict:
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
     from semmap_pp.pipeline import DEFAULT_RULES
+    if args.tiny:
+        for key, value in TINY.items():
+            setattr(args, key, value)
+        if args.subset == "all":
+            args.subset = "synthetic"
     if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05)
                          and args.subset not in ("synthetic", "truth", "surgery")):
         raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic, truth and surgery only")

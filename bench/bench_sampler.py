@@ -23,7 +23,9 @@ empty world with the plain loop (``--burn`` kernels) so that it holds units; the
   posterior, ``SampleResult.seconds``: wall time around ``pm.sample``, PyMC's set-up included;
   ``..._per_cpu_s`` the process CPU time around ``sample_worlds``).
 
-``--only knowledge`` runs the burn-in and the knowledge measurement alone.
+``--only knowledge`` runs the burn-in and the knowledge measurement alone. ``--tiny`` runs every
+part once at a few kernels on tests/data/maps/intel_corner.yaml (:data:`TINY`): the check of
+tests/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations
@@ -43,6 +45,10 @@ from semmap_pp.posterior import Posterior
 from semmap_pp.sampling import _FlatTracker, sample_worlds
 
 ROOT = Path(__file__).resolve().parents[1]
+#: ``--tiny``: the arguments it sets
+TINY = {"map": str(ROOT / "tests/data/maps/intel_corner.yaml"), "burn": 50, "kernels": 50, "draws": 2,
+        "n_inner": 5, "knowledge_warm": 10, "knowledge_kernels": 20, "knowledge_pymc_draws": 2,
+        "flat_draws": 20}
 
 
 def add_arguments(parser) -> None:
@@ -61,7 +67,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--knowledge-pymc-draws", type=int, default=60,
                         help="draws of --n-inner kernels through pm.sample with knowledge on "
                         "(0: skip)")
+    parser.add_argument("--flat-draws", type=int, default=2000,
+                        help="draws of one kernel through pm.sample with a constant target (PyMC's cost)")
     parser.add_argument("--only", choices=("all", "knowledge"), default="all")
+    parser.add_argument("--tiny", action="store_true",
+                        help="every part once at a few kernels on a small map (a check that it runs)")
 
 
 class _Flat:
@@ -125,6 +135,9 @@ def knowledge_rate(args, frame, model, data, start) -> dict:
 
 
 def run(args) -> dict:
+    if args.tiny:
+        for key, value in TINY.items():
+            setattr(args, key, value)
     model = load_model()
     frame = build_frame(load_map(args.map), model)
     t0 = time.perf_counter()
@@ -165,7 +178,7 @@ def run(args) -> dict:
     n_pymc = args.draws * args.n_inner
 
     # PyMC's own cost per draw: constant target, one kernel per draw, against the same in a loop
-    n_flat = 2000
+    n_flat = args.flat_draws
     flat = sample_worlds(_Flat(), data, [start], draws=n_flat, tune=0, chains=1, cores=1, n_inner=1,
                          seed=args.seed)
     tr = _FlatTracker(start)

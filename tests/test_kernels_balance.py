@@ -124,3 +124,43 @@ def test_balance_detects_a_wrong_ratio(monkeypatch):
     wrong = [abs(lr - (math.log(q_kernel[(k, j, i)][0]) - math.log(q)))
              for (k, i, j), (q, lr) in q_kernel.items() if (k, j, i) in q_kernel]
     assert max(wrong) > 1e-3
+
+
+@pytest.mark.parametrize("shape", [(3, 5), (5, 3)])
+def test_interchange_balance_where_it_makes_or_breaks_adjacency(shape):
+    """Mutant class "the interchange reverse" (docs/robustness.md, "Mutants"): three units on a
+    3 x 5 lattice (and its transpose), sides 2..4, wall bands shared (g = 1), every slot state
+    enumerated. A unit wide enough to lie under both units of a pair (or none) is attached to
+    one of them fewer or more after their shared wall moves, so INTERCHANGE changes the number
+    of adjacent pairs N_adj in thousands of its moves; each reported log ratio is still
+    log q(reverse) - log q(forward) of the enumerated densities (``log N_adj(W) - log N_adj(W')``
+    included), and the kernel alone keeps a random target in detailed balance."""
+    from semmap_pp.kernels.interchange import n_adjacent
+
+    data = build_data(tiny_classes(shape), min_side=2, wall_cells=1, wall_share=1, max_side=4,
+                      door_min=1, door_max=1, settings=SETTINGS)
+    mix = type(default_mix(SETTINGS))([(KERNELS["interchange"], 1.0)])
+    states = all_states(data, 3)
+    target = TableTarget(np.random.default_rng(11), 3)
+    logpi = np.array([target.evaluate(s) for s in states])
+    pi = np.exp(logpi - logpi.max())
+    pi /= pi.sum()
+    p, q_kernel = transition_matrix(states, data, mix, logpi)
+    n_adj = {}
+
+    def adjacent(i):
+        if i not in n_adj:
+            n_adj[i] = n_adjacent(states[i], data)
+        return n_adj[i]
+
+    changes = 0
+    for (kind, i, j), (q, lr) in q_kernel.items():
+        back = q_kernel.get((kind, j, i))
+        assert back is not None, (states[i], states[j])
+        assert lr == pytest.approx(math.log(back[0]) - math.log(q), abs=1e-9), (states[i], states[j])
+        changes += adjacent(i) != adjacent(j)
+    assert changes > 1000          # 7,176 of the 11,760 moves on the 3 x 5 lattice
+    flow = sparse.diags(pi) @ p
+    diff = abs(flow - flow.T)
+    assert diff.max() <= 1e-12 * abs(flow).max()
+    assert np.max(np.abs(pi @ p - pi)) < 1e-12 * pi.max()

@@ -57,6 +57,49 @@ def test_mh_green_acceptance(old, new, ratio, temp, u, expect):
     assert (tr.world == "new") is expect
 
 
+class FloorTracker(FakeTracker):
+    """:class:`FakeTracker` that takes a floor (as the project's Tracker does) and records it."""
+
+    supports_floor = True
+
+    def propose(self, world, changed, floor=None):
+        self.floor = floor
+        return P(world, self.new_logp)
+
+
+@pytest.mark.parametrize("old,new,ratio,temp", [
+    (0.0, -2.0, 0.5, 2.0),          # log alpha = -1 + 0.5
+    (-10.0, -13.0, -0.4, 3.0),      # -1 - 0.4
+    (5.0, 4.0, 0.3, 0.5),           # T < 1 sharpens: -2 + 0.3
+    (0.0, 1.5, -1.0, 2.5),          # a better world, a ratio against it: 0.6 - 1
+    (0.0, -1.0, 2.5, 4.0),          # -0.25 + 2.5 > 0: always accepted
+    (3.0, -7.0, 4.0, 10.0),         # -1 + 4 > 0
+])
+def test_mh_green_at_a_temperature(old, new, ratio, temp):
+    """Mutant class "MH at T != 1" (docs/robustness.md, "Mutants"): with T != 1 and a nonzero log
+    ratio the acceptance probability is min(1, exp((log pi(W') - log pi(W)) / T + log_ratio))
+    (semmap_pp/mcmc.py): a uniform just below it accepts, just above it rejects; a target that
+    takes a floor gets ``log pi(W) + T (log u - log_ratio)`` and decides the same; and over 20,000
+    seeded uniforms the share accepted is that probability (binomial test)."""
+    alpha = min(1.0, math.exp((new - old) / temp + ratio))
+    below = [alpha * (1 - 1e-9)] + ([] if alpha == 1.0 else [alpha * (1 + 1e-9)])
+    for u, expect in zip(below, (True, False)):
+        for cls in (FakeTracker, FloorTracker):
+            tr = cls(old, new)
+            assert mh_green(FixedRng(u), tr, Proposal("new", ratio, (0,)), temperature=temp) is expect
+            assert (tr.world == "new") is expect
+            if cls is FloorTracker:
+                assert tr.floor == pytest.approx(old + temp * (math.log(u) - ratio), rel=1e-12, abs=1e-12)
+    rng = np.random.default_rng(17)
+    n = 20_000
+    accepted = sum(mh_green(rng, FakeTracker(old, new), Proposal("new", ratio, (0,)), temperature=temp)
+                   for _ in range(n))
+    if alpha == 1.0:
+        assert accepted == n
+    else:
+        assert stats.binomtest(accepted, n, alpha).pvalue > 1e-3
+
+
 def test_none_is_a_rejection():
     tr = FakeTracker(0.0, 0.0)
     assert mh_green(FixedRng(0.0), tr, None) is False and tr.accepted is None
@@ -199,3 +242,85 @@ def test_real_posterior_tracks_its_full_evaluation():
     assert res.accepted.sum() > 5
     full = post.evaluate(tr.world)
     assert tr.logp == pytest.approx(full.total, rel=1e-9, abs=1e-6)
+
+
+def likelihood_off_model(n_mean=1.5):
+    """The default model with the likelihood switched off and the SaLe factor too, so that the
+    project's own Posterior is the prior of units and rectangles alone: every sensor row is the
+    unknown row (every category's gain 0), ψ = 1 (no overlap penalty), no enclosure cost, and no
+    P(SaLe) above the threshold 1; p_n a Poisson of mean ``n_mean``."""
+    import dataclasses
+
+    from semmap_pp.model import load_model
+
+    m = load_model()
+    flat = np.tile(m.sensor.other[cells.WORLD_STATES.index("unknown")], (len(cells.WORLD_STATES), 1))
+    return dataclasses.replace(
+        m, sensor=dataclasses.replace(m.sensor, psi=1.0, corridor=flat, other=flat, enclosure_cost=0.0),
+        prior=dataclasses.replace(m.prior, n_mean=n_mean, sale_threshold=1.0))
+
+
+def test_the_real_posterior_with_the_likelihood_off_samples_the_prior():
+    """Mutant class "the one-unit prior" (docs/robustness.md, "Mutants"): the project's sampler
+    (the five kernels, :func:`mh_green`) on the project's Posterior with the likelihood off
+    (:func:`likelihood_off_model`) recovers the prior exactly: the number of units follows the
+    truncated Poisson ``p_n`` over 0..K, the joint law of (units, corridors) is ``p_n(n)``
+    times a binomial of each unit's corridor share among the valid rectangles (types from the
+    geometry, knowledge off), and a unit's width the share of valid rectangles of that width
+    (chi-square, counts rescaled to the effective sample size)."""
+    from math import comb
+
+    from semmap_pp.cells import UNIT_TYPES
+    from semmap_pp.evidence import GEOMETRY_TYPE, geometry_class
+    from semmap_pp.frame import build_frame_from_classes
+    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.posterior import Posterior
+    from semmap_pp.prior import log_p_n_table
+
+    model = likelihood_off_model()
+    h, w = 10, 30                                   # 2.5 m x 7.5 m at 0.25 m: units of 5..10 x 5..30 cells
+    c = np.full((h, w), cells.FREE, np.uint8)
+    c[0, :] = c[-1, :] = c[:, 0] = c[:, -1] = cells.OCCUPIED
+    c[:, w // 2] = cells.OCCUPIED
+    c[h // 2, w // 2] = cells.FREE
+    frame = build_frame_from_classes(c, 0.25, model, theta=0.0)
+    assert frame.shape == (h, w)
+    post = Posterior(frame, model)
+    data = data_from_frame(frame)
+    K = 4
+    tr = post.start(wm.empty(K))
+    corridor = UNIT_TYPES.index("corridor")
+    n_seen, corr_seen, widths = [], [], []
+
+    def record(i, tracker, ok):
+        if i % 15 == 0:
+            wd = tracker.world
+            n_seen.append(wm.n_units(wd))
+            corr_seen.append(int(np.sum(wd.types[wd.active] == corridor)))
+            widths.extend((wd.rects[wd.active, 3] - wd.rects[wd.active, 1]).tolist())
+
+    res = run_chain(np.random.default_rng(2), tr, default_mix(data.settings), 150_000, data,
+                    callback=record)
+    assert tr.loglik == post.evaluate(wm.empty(K)).loglik     # the likelihood is a constant
+    # number of units: p_n itself
+    p_n = np.exp(log_p_n_table(K, model.prior))
+    obs = np.bincount(n_seen, minlength=K + 1)
+    n_eff = ess(n_seen)
+    assert chisquare_ess(obs, p_n, n_eff) > 1e-3
+    assert n_eff > 500
+    # (units, corridors): p_n(n) C(n, k) q^k (1 - q)^(n - k), q the corridor share of the support
+    lo = frame.cells.min_side
+    sizes = [(a, b) for a in range(lo, h + 1) for b in range(lo, w + 1)]
+    count = np.array([(h - a + 1) * (w - b + 1) for a, b in sizes])
+    types = GEOMETRY_TYPE[geometry_class(np.array([(0, 0, a, b) for a, b in sizes]), 0.25, model.evidence)]
+    q = count[types == corridor].sum() / count.sum()
+    assert 0.1 < q < 0.5
+    cats = [(n, k) for n in range(K + 1) for k in range(n + 1)]
+    p_joint = [p_n[n] * comb(n, k) * q ** k * (1 - q) ** (n - k) for n, k in cats]
+    obs = np.bincount([cats.index(nk) for nk in zip(n_seen, corr_seen)], minlength=len(cats))
+    assert chisquare_ess(obs, p_joint, n_eff) > 1e-3
+    # a unit's width b: (w - b + 1) of the positions of every valid height
+    p_w = np.array([(w - b + 1) for b in range(lo, w + 1)], float)
+    obs = np.bincount(widths, minlength=w + 1)[lo:]
+    assert chisquare_ess(obs, p_w, n_eff * len(widths) / len(n_seen)) > 1e-3
+    assert res.accepted.min() > 20       # every kernel pair moved the chain

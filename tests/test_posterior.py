@@ -259,13 +259,38 @@ def test_pair_openings_equal_the_door_detector():
     assert {d for d, _ in seen} >= {0, 1, 2} and max(p for _, p in seen) >= 1
 
 
+def recorded_bounds(monkeypatch) -> list:
+    """The type-free bound (``posterior._retype_bound``: no types, per category the better gain,
+    SaLe factor at most 1) of every proposal made with a floor from now on, in order."""
+    import semmap_pp.posterior as P
+
+    seen, bound = [], P._retype_bound
+
+    def recording(*args):
+        value = bound(*args)
+        seen.append(float(value))
+        return value
+
+    monkeypatch.setattr(P, "_retype_bound", recording)
+    return seen
+
+
+def assert_below_bound(full, bound):
+    """``full`` (a full evaluation) is at most the upper ``bound`` (to the skip test's 1e-9)."""
+    assert full == -math.inf if bound == -math.inf else full <= bound + 1e-9 * abs(bound), (full, bound)
+
+
 @pytest.mark.parametrize("rule_file", ["table3.lp", "halls_to_corridors.lp"])
-def test_floor_skips_the_provider_only_below_the_bound(rule_file):
+def test_floor_skips_the_provider_only_below_the_bound(rule_file, monkeypatch):
     """With a floor (MH with the uniform drawn first), a proposal comes back unevaluated only
     when its true log posterior is below the floor; otherwise it is the full evaluation; and
     both cases occur along a chain with the engine of table3.lp (templates) and of
     halls_to_corridors.lp (the general path, which since session 25 also gives MAP types
-    without marginals); the tracked log posterior stays the full evaluation."""
+    without marginals); the tracked log posterior stays the full evaluation.
+
+    Mutant class "the knowledge-free bound" (docs/robustness.md, "Mutants"): every skipped
+    proposal is evaluated in full (below its floor and below its type-free bound), and the
+    type-free bound of every proposal is at least its full evaluation."""
     from pathlib import Path
 
     from semmap_pp.kernels import data_from_frame, default_mix
@@ -280,21 +305,26 @@ def test_floor_skips_the_provider_only_below_the_bound(rule_file):
     mix = default_mix(data.settings)
     tr = post.start(W.empty(6))
     rng = np.random.default_rng(5)
+    bounds = recorded_bounds(monkeypatch)
     n_bounded = n_full = 0
     for _ in range(1500):
         _, proposal = mix(rng, tr.world, data)
         if proposal is None:
             continue
         floor = tr.logp + 5.0 * (math.log(rng.random()) - proposal.log_ratio)
+        before = len(bounds)
         prop = tr.propose(proposal.world, proposal.changed_slots, floor=floor)
+        assert len(bounds) == before + 1
         if prop.bounded:
             n_bounded += 1
-            if n_bounded % 10 == 0:
-                assert post.evaluate(proposal.world).total < floor
+            full = post.evaluate(proposal.world).total
+            assert full < floor
+            assert_below_bound(full, bounds[-1])
             with pytest.raises(ValueError):
                 tr.accept(prop)
             continue
         n_full += 1
+        assert_below_bound(prop.logp, bounds[-1])
         if n_full % 5 == 0:
             assert prop.logp == pytest.approx(post.evaluate(proposal.world).total, rel=1e-9, abs=0)
         if prop.logp >= floor:
@@ -319,12 +349,15 @@ class MapNeighbourProvider(NeighbourProvider):
         return NeighbourProvider.infer(self, ev).map_types
 
 
-def test_map_types_bound_skips_only_proposals_below_the_floor():
+def test_map_types_bound_skips_only_proposals_below_the_floor(monkeypatch):
     """The second bound (MAP types from the provider without its marginals: exact likelihood,
     SaLe factor at most 1) skips a proposal only when its full evaluation is below the floor,
     and skips proposals the type-free bound let through; a chain with floors makes the same
-    moves as one without, and asks the provider for marginals less often."""
+    moves as one without, and asks the provider for marginals less often. Every skipped
+    proposal is evaluated in full, and the type-free bound is never below a full evaluation
+    (mutant class "the knowledge-free bound")."""
     runs = []
+    bounds = recorded_bounds(monkeypatch)
     for use_floor in (True, False):
         rng = np.random.default_rng(21)
         provider = MapNeighbourProvider()
@@ -333,17 +366,24 @@ def test_map_types_bound_skips_only_proposals_below_the_floor():
         for s in range(4):
             world = W.add(world, s, random_rect(rng, post.frame.shape))
         tr = post.start(world)
+        ref = Posterior(post.frame, MODEL, NeighbourProvider())   # full evaluations, apart
+        ref.knowledge_on = True                                   # from the provider's count
         moves, checked, evaluated = [], 0, 0
         for _ in range(600):
             new, changed = random_proposal(rng, tr.world, post.frame.shape)
             floor = tr.logp + math.log(rng.random())
-            before = tr.skipped[1]
+            before, n_bounds = tr.skipped[1], len(bounds)
             prop = tr.propose(new, changed, floor=floor if use_floor else None)
+            bound = bounds[-1] if len(bounds) > n_bounds else None
+            assert (bound is not None) == use_floor
             if prop.bounded:
-                if tr.skipped[1] > before and checked < 40:   # skipped by the MAP-types bound
-                    checked += 1
-                    assert post.evaluate(new).total < floor
+                full = ref.evaluate(new).total
+                assert full < floor
+                assert_below_bound(full, bound)
+                checked += tr.skipped[1] > before           # skipped by the MAP-types bound
                 continue
+            if bound is not None:
+                assert_below_bound(prop.logp, bound)
             evaluated += 1
             if evaluated % 10 == 0:
                 assert prop.logp == pytest.approx(post.evaluate(new).total, rel=1e-9, abs=0)
@@ -516,11 +556,14 @@ def test_a_short_piece_of_a_corridor_is_corridor_like_as_part_of_its_space(scope
     assert tr._pieces[6] == (scope == "space")
 
 
-def test_the_map_types_bound_under_a_rule_set_off_the_fast_path():
+def test_the_map_types_bound_under_a_rule_set_off_the_fast_path(monkeypatch):
     """Under rules that are not pairwise-local (the engine's general path) the tracker asks the
     engine for MAP types alone first: along a chain from the data-driven start world of a small
     real map, every proposal that this second bound skips has a true log posterior below its
-    floor, the bound does skip some, and the tracked log posterior stays the full evaluation."""
+    floor, the bound does skip some, and the tracked log posterior stays the full evaluation.
+    The type-free bound is at least the log posterior of every proposal evaluated (mutant class
+    "the knowledge-free bound"; the proposals it skips, most of the 4,000, are not evaluated
+    here, a minute of the general path: the two floor tests above evaluate every one they skip)."""
     from semmap_pp.kernels import data_from_frame, default_mix
     from semmap_pp.pipeline import data_start_world, load_inputs, run_target
 
@@ -534,6 +577,7 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path():
     mix = default_mix(data.settings)
     tr = post.start(data_start_world(inputs))
     rng = np.random.default_rng(5)
+    bounds = recorded_bounds(monkeypatch)
     for _ in range(4000):
         _, proposal = mix(rng, tr.world, data)
         if proposal is None:
@@ -541,9 +585,87 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path():
         floor = tr.logp + math.log(rng.random()) - proposal.log_ratio
         before = tr.skipped[1]
         prop = tr.propose(proposal.world, proposal.changed_slots, floor=floor)
+        if not prop.bounded:
+            assert_below_bound(prop.logp, bounds[-1])
         if tr.skipped[1] > before:
             assert post.evaluate(proposal.world).total < floor
         if not prop.bounded and prop.logp >= floor:
             tr.accept(prop)
     assert tr.skipped[1] >= 1
     assert tr.logp == pytest.approx(post.evaluate(tr.world).total, rel=1e-9, abs=0)
+
+
+def _pipeline_target(rules):
+    """The target ``semmap map`` builds for tests/data/maps/intel_corner.yaml
+    (:func:`semmap_pp.pipeline.run_target` of :func:`~semmap_pp.pipeline.load_inputs`), with the
+    rule file ``rules`` (knowledge on) or none (knowledge off)."""
+    from semmap_pp.pipeline import load_inputs, run_target
+
+    root = Path(__file__).resolve().parents[1]
+    kw = {"rules_path": root / "rules" / rules} if rules else {"rules_path": None}
+    post = run_target(load_inputs(root / "tests/data/maps/intel_corner.yaml", **kw))
+    assert post.knowledge_on == (rules is not None)
+    return post
+
+
+def _reference_log_prior(post, world, typ):
+    """:func:`semmap_pp.prior.log_prior` of ``world``'s active units, with the adjacency and the
+    P(SaLe) of the typing ``typ`` (the fixed table by type when its ``sale`` is None)."""
+    from semmap_pp.prior import log_prior
+
+    slots = W.active_slots(world)
+    adj = typ.adj[np.ix_(slots, slots)]
+    types = typ.world.types[slots]
+    sale = (post.fixed.fixed_sale[np.ix_(types, types)] if typ.sale is None
+            else typ.sale[np.ix_(slots, slots)])
+    c = post.cells
+    return log_prior(world.rects[slots], world.capacity, post.frame.shape, c.min_side, c.max_side,
+                     adj, sale, c.resolution, post.model.prior)
+
+
+@pytest.mark.parametrize("rules", [None, "table3.lp"])
+def test_the_log_prior_of_every_number_of_units_is_prior_log_prior(rules):
+    """Mutant class "the one-unit prior" (docs/robustness.md, "Mutants"): on the target the
+    pipeline builds, ``Posterior.prior_n(K)[n]`` equals :func:`semmap_pp.prior.log_prior` of ``n``
+    units without adjacent pairs for every ``n = 0..K``, ``K`` the model's k_max and twice it (a
+    world's capacity doubles when a birth finds no empty slot), under the model's Poisson and a
+    geometric p_n; and the log prior of a full evaluation and of the tracker (the compiled hot path)
+    equals log_prior, SaLe factor included, for worlds of every size ``n = 0..K``."""
+    post = _pipeline_target(rules)
+    c = post.cells
+    shape = post.frame.shape
+    one = (10, 10, 40, 50)
+    from semmap_pp.prior import log_prior
+
+    for prior in (post.model.prior, dataclasses.replace(post.model.prior, n_prior="geometric", n_mean=4.0)):
+        post.model = dataclasses.replace(post.model, prior=prior)
+        post._prior_n.clear()
+        for K in (post.model.prior.k_max, 2 * post.model.prior.k_max):
+            table = post.prior_n(K)
+            assert table.shape == (K + 1,)
+            for n in range(K + 1):
+                rects = np.array([one] * n).reshape(-1, 4)
+                expected = log_prior(rects, K, shape, c.min_side, c.max_side, np.zeros((n, n), bool),
+                                     np.zeros((n, n)), c.resolution, prior)
+                assert table[n] == pytest.approx(expected, rel=1e-12, abs=1e-9), (K, n)
+    post.model = dataclasses.replace(post.model, prior=MODEL.prior)
+    post._prior_n.clear()
+    # worlds of every size: units added one at a time, evaluated in full and by the tracker
+    rng = np.random.default_rng(55)
+    K = post.model.prior.k_max
+    n_max = K if rules is None else 6      # the engine on 64 overlapping units: too slow for a test
+    world = W.empty(K)
+    tr = post.start(world)
+    assert tr.logprior == pytest.approx(_reference_log_prior(post, world, post.typing(world)))
+    sale_terms = 0
+    for n in range(1, n_max + 1):
+        new = W.add(tr.world, n - 1, random_rect(rng, shape, lo=c.min_side))
+        prop = tr.propose(new, [n - 1])
+        typ = post.typing(new)
+        expected = _reference_log_prior(post, new, typ)
+        assert np.isfinite(expected)
+        assert post.evaluate(new).logprior == pytest.approx(expected, rel=1e-12, abs=1e-9), n
+        assert prop.logprior == pytest.approx(expected, rel=1e-12, abs=1e-9), n
+        tr.accept(prop)
+        sale_terms += expected < post.prior_n(K)[n] - 1e-6
+    assert sale_terms > 0      # the SaLe factor was part of it
