@@ -1,16 +1,23 @@
 """Atomic file output: write to a temporary file in the same folder, then rename.
 
 A reader (or a crash) sees either the previous complete file or the new complete one, never a
-half-written file.
+half-written file. Every output file of the package is written through :func:`write_bytes` (the
+writers build the file's bytes in memory first), so a write that fails (a full disk, a quota, a
+read-only file system) fails in one place: the temporary file is removed, the file under the final
+name is untouched, and a :class:`~semmap_pp.errors.WriteError` says ``cannot write PATH: no space
+left on device``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
 from typing import Iterator
+
+from semmap_pp.errors import WriteError
 
 
 def _umask() -> int:
@@ -19,9 +26,41 @@ def _umask() -> int:
     return mask
 
 
+def reason(exc: OSError) -> str:
+    """The reason of an OSError in a message's words: ``no space left on device``.
+
+    >>> reason(OSError(errno.ENOSPC, "No space left on device"))
+    'no space left on device'
+    """
+    text = os.strerror(exc.errno) if exc.errno else (exc.strerror or str(exc) or type(exc).__name__)
+    return text[:1].lower() + text[1:]
+
+
+def _discard(tmp: str | os.PathLike) -> None:
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
+
+
+def _temporary(path: Path) -> tuple[int, str]:
+    """An open temporary file ``.NAME.XXXXXXXX.tmp`` beside ``path``, with the usual permissions
+    (mkstemp makes 0600)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+    except BaseException:
+        os.close(fd)
+        _discard(tmp)
+        raise
+    return fd, tmp
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success rename it onto ``path``.
+    """Yield a temporary path beside ``path``; on success rename it onto ``path``. For a library
+    that writes a file by name only; an OSError while it writes is a WriteError.
 
     Examples
     --------
@@ -33,25 +72,57 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     'hello'
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
+    try:
+        fd, tmp = _temporary(path)
+        os.close(fd)
+    except OSError as exc:
+        raise WriteError(path, reason(exc)) from None
     tmp_path = Path(tmp)
     try:
         yield tmp_path
         with open(tmp_path, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp_path, path)
+    except OSError as exc:
+        raise WriteError(path, reason(exc)) from None
     finally:
         if tmp_path.exists():
-            tmp_path.unlink()
+            _discard(tmp_path)
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
+    """Write ``data`` to ``path`` atomically: a temporary file beside it, written whole and
+    synced, then renamed onto ``path``.
+
+    Raises
+    ------
+    WriteError
+        When any step fails (``cannot write PATH: no space left on device``); the temporary file
+        is removed and ``path`` is as it was.
+    """
+    path = Path(path)
+    try:
+        fd, tmp = _temporary(path)
+    except OSError as exc:
+        raise WriteError(path, reason(exc)) from None
+    try:
+        try:
+            view = memoryview(data).cast("B")
+            while view:
+                n = os.write(fd, view)
+                if n <= 0:       # a regular file that takes nothing more: the device is full
+                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+                view = view[n:]
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except OSError as exc:
+        _discard(tmp)
+        raise WriteError(path, reason(exc)) from None
+    except BaseException:      # Ctrl-C while writing: no temporary file left behind
+        _discard(tmp)
+        raise
 
 
 def write_text(path: str | os.PathLike, text: str) -> None:

@@ -28,8 +28,9 @@ from pathlib import Path
 from semmap_pp import atomic
 from semmap_pp.errors import MapError
 
-#: the file ``semmap map`` writes last: a task whose folder holds it is complete
-DONE_FILE = "resume.npz"
+#: the file ``semmap map`` writes last (after resume.npz, which it writes first): a task whose
+#: folder holds both is complete
+DONE_FILE = "report.html"
 MAP_SUFFIXES = (".yaml", ".yml", ".png", ".pgm", ".npy")
 #: peak memory of a run, estimated from the cells of the map's known box (``semmap map`` works on
 #: the known part and 2 m around it): a fixed part and bytes per cell, an upper bound of the peaks
@@ -146,9 +147,11 @@ def task_command(task: Task, map_args: list[str]) -> list[str]:
 
 
 def complete(out: str | os.PathLike) -> bool:
-    """Whether a task's folder holds a whole run (``semmap map`` writes :data:`DONE_FILE` last)."""
+    """Whether a task's folder holds a whole run: ``semmap map`` writes resume.npz first and
+    :data:`DONE_FILE` last, so a run stopped while writing (Ctrl-C, a full disk, a kill) lacks
+    one of them."""
     d = Path(out)
-    return (d / DONE_FILE).is_file() and (d / "world.json").is_file()
+    return all((d / name).is_file() for name in ("resume.npz", "world.json", DONE_FILE))
 
 
 def _last_error(stderr: str) -> str:

@@ -42,7 +42,7 @@ from typing import Mapping
 import arviz as az
 import numpy as np
 
-from semmap_pp.atomic import atomic_path
+from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import SemmapError
 
@@ -487,10 +487,10 @@ def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, o
 
 
 def write_trace(tree, path: str | os.PathLike) -> Path:
-    """Write a DataTree as NetCDF atomically (temporary file, then rename)."""
+    """Write a DataTree as NetCDF atomically: made in memory, then written by
+    :func:`semmap_pp.atomic.write_bytes` (a full disk is one WriteError, the old file kept)."""
     path = Path(path)
-    with atomic_path(path) as tmp:
-        tree.to_netcdf(tmp, engine="h5netcdf")
+    atomic.write_bytes(path, tree.to_netcdf(None, engine="h5netcdf"))
     return path
 
 

@@ -54,3 +54,18 @@ class EvidenceError(SemmapError):
 
 class OutputError(SemmapError):
     """An output directory or file cannot be written as asked."""
+
+
+class WriteError(OutputError):
+    """A file cannot be written (a full disk, a quota, a read-only file system): the message is
+    the reason, shown as ``cannot write PATH: reason``."""
+
+    def __str__(self) -> str:
+        return f"cannot write {self.path}: {self.message}"
+
+
+class BusyError(OutputError):
+    """An output folder another run holds (:mod:`semmap_pp.outdir`): shown as ``PATH message``."""
+
+    def __str__(self) -> str:
+        return f"{self.path} {self.message}"

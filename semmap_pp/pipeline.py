@@ -600,10 +600,13 @@ def spread_first_draw(run: MapRun | SpreadSample) -> int:
 
 def check_out_dir(out: Path, force: bool) -> None:
     """Refuse a non-empty output directory unless ``force``; refuse a file, a folder under a
-    file, and one this user cannot write to (before any sampling, creating nothing)."""
+    file, and one this user cannot write to (before any sampling, creating nothing). The lock
+    file of :mod:`semmap_pp.outdir` does not count: a killed run may leave it behind."""
+    from semmap_pp.outdir import LOCK_NAME
+
     if out.exists() and not out.is_dir():
         raise SemmapError(out, "output path exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not force:
+    if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not force:
         raise SemmapError(out, "output directory is not empty (use --force to overwrite)")
     probe = out.absolute()
     while not probe.exists():           # the nearest part of the path that exists

@@ -1,6 +1,6 @@
 """Continuing a run (``semmap map --resume DIR``): the resume file and the draws kept from chains.
 
-``semmap map`` writes ``DIR/resume.npz`` (atomically, after the other files) with everything a
+``semmap map`` writes ``DIR/resume.npz`` (atomically, before the other files) with everything a
 later run needs to go on: the inputs and settings, per chain its start world, its last world, its
 draw count, burn-in length, random state (``bit_generator.state`` after its last draw), knowledge
 phase and best world, and every real draw so far (its scalar stats and its world), so a resumed run *appends* draws to the old ones instead of starting a new trace.

@@ -178,3 +178,86 @@ def test_sigint_during_the_sample_around_wstar_keeps_wstar(floor, tmp_path):
     assert 4 <= lp.shape[1] < DRAWS and np.isfinite(lp).all()
     assert read_trace(out / "trace.nc")["posterior"]["log_posterior"].values.shape[1] == 4   # the whole search
     assert resume_meta(out)["stopped"] == "interrupted"
+
+
+def _check_saved(out, err, code, more):
+    """A run stopped by Ctrl-C while its outputs were written: exit 130, the last line says the
+    search is saved and how to go on, resume.npz and every file written are complete."""
+    from test_faults_kill import check_complete
+
+    assert code == 130, err
+    assert "Traceback" not in err
+    assert err.strip().splitlines()[-1] == (
+        f"semmap: interrupted while writing the outputs: the search is saved in {out / 'resume.npz'}; "
+        f"`semmap map --resume {out}{more}` continues it and writes every file again")
+    names = check_complete(out)
+    assert "resume.npz" in names and "report.html" not in names          # written first; last not reached
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary, no lock
+    return names
+
+
+def test_sigint_while_the_outputs_are_written_keeps_the_search(floor, tmp_path):
+    """The issue's case: Ctrl-C once the outputs are being written (resume.npz has appeared)."""
+    out = tmp_path / "writing"
+    p = subprocess.Popen([sys.executable, "-m", "semmap_pp", "map", str(floor), "--out", str(out), "--chains", "2",
+                          "--cores", "1", "--tune", "2", "--draws", "6", "--n-inner", "5", "--spread-draws", "0",
+                          "--progress", "none"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not (out / "resume.npz").exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.002)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=300)
+    _check_saved(out, err, p.returncode, " --draws N")     # the search was complete: --draws N more
+    assert main(["map", "--resume", str(out), "--draws", "4", "--progress", "none"]) == 0   # and it goes on
+    assert (out / "report.html").is_file() and resume_meta(out)["chains"][0]["draw"] == 12
+
+
+def _sigint_at(name):
+    """An os.write that sends this process SIGINT at the first write of the file ``name``."""
+    import os
+
+    real = os.write
+
+    def write(fd, data):
+        try:
+            where = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            where = ""
+        if Path(where).name.startswith(f".{name}.") and not write.sent:
+            write.sent = True
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(fd, data)
+
+    write.sent = False
+    return write
+
+
+def test_sigint_while_resume_npz_is_written_lets_it_finish(floor, tmp_path, capsys, monkeypatch):
+    import os
+
+    out = tmp_path / "r"
+    monkeypatch.setattr(os, "write", _sigint_at("resume.npz"))
+    code = main(["map", str(floor), "--out", str(out), "--chains", "2", "--cores", "1", "--tune", "2",
+                 "--draws", "6", "--n-inner", "5", "--spread-draws", "0", "--progress", "none"])
+    monkeypatch.undo()
+    err = capsys.readouterr().err
+    assert "semmap: interrupted: finishing resume.npz, then stopping" in err
+    assert _check_saved(out, err, code, " --draws N") == {"resume.npz"}
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler     # the handler put back
+
+
+def test_sigint_while_writing_after_an_interrupted_search_says_resume(interrupted, tmp_path, capsys, monkeypatch):
+    """A search stopped early (the interrupted run's resume file) and Ctrl-C again at graph.graphml:
+    `--resume DIR` alone continues it; the files before graph.graphml are complete."""
+    import os
+    import shutil
+
+    out = tmp_path / "again"
+    shutil.copytree(interrupted[0], out)
+    (out / "report.html").unlink()
+    monkeypatch.setattr(os, "write", _sigint_at("graph.graphml"))
+    code = main(["map", "--resume", str(out), "--budget", "1", "--progress", "none"])
+    monkeypatch.undo()
+    names = _check_saved(out, capsys.readouterr().err, code, "")
+    assert {"world.json", "labels.png", "trace.nc", "diagnostics.txt", "world.geojson"} <= names
+    assert resume_meta(out)["stopped"] == "budget"

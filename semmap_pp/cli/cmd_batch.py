@@ -148,6 +148,14 @@ def run(args) -> int:
         probe.unlink()
     except OSError as exc:
         raise MapError(out, f"cannot write there: {exc.strerror or exc}") from None
+    from semmap_pp.outdir import check_free_space, lock_out_dir, needed_bytes
+    check_free_space(out, needed_bytes())
+    with lock_out_dir(out):      # one batch at a time in DIR (each task's run locks its own folder)
+        return _run_tasks(args, B, maps, out)
+
+
+def _run_tasks(args, B, maps, out: Path) -> int:
+    """The tasks of a batch into ``out``, which the caller holds the lock of; the exit status."""
     tasks = B.plan_tasks(maps, out.resolve(), args.rules, args.seeds)
     extra = map_args(args)
     results: dict[str, dict] = {}

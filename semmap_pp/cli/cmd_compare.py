@@ -60,13 +60,20 @@ def _names(paths: list[Path]) -> list[str]:
 
 
 def run(args) -> int:
+    from semmap_pp.outdir import claimed
+
+    with claimed(args.out, args.force):    # checked and held before any sampling
+        return _run(args)
+
+
+def _run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
                                    compare_table, diffs_section, summarise, typed_sampled_worlds,
                                    wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.pipeline import RunSettings, check_out_dir, load_inputs
+    from semmap_pp.pipeline import RunSettings, load_inputs
     from semmap_pp.stability import Plan
 
     if len(args.rules) < 2:
@@ -74,8 +81,6 @@ def run(args) -> int:
               file=sys.stderr)
         return 2
     seeds = list(dict.fromkeys(args.seeds)) if args.seeds else [0 if args.seed is None else args.seed]
-    if args.out is not None:
-        check_out_dir(args.out, args.force)
     paths = [Path(r) for r in args.rules]
     rule_sets = [load_rules(p) for p in paths]          # every rule file is checked before sampling
     inputs = load_inputs(args.map, model_path=args.model, rules_path=paths[0], roi_path=args.roi,

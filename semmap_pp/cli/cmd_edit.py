@@ -82,6 +82,15 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from semmap_pp.outdir import claimed
+
+    if not args.edits:
+        raise OutputError(args.out, "no edit given (--drop, --merge, --cut, --wall, --add); nothing written")
+    with claimed(args.out, args.force):    # checked, and held until its files are written
+        return _run(args)
+
+
+def _run(args) -> int:
     from semmap_pp.ascent import snap_walls
     from semmap_pp.kernels import data_from_frame
     from semmap_pp.kernels.data import model_settings
@@ -89,13 +98,10 @@ def run(args) -> int:
     from semmap_pp.outputs.semantic import semantic_map
     from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
     from semmap_pp.outputs.write import write_plan
-    from semmap_pp.pipeline import check_out_dir, run_target
+    from semmap_pp.pipeline import run_target
     from semmap_pp.world_edit import apply_edits, edit_origins, id_changes
     from semmap_pp.world_file import pack_world, read_previous_ids, read_world_units
 
-    if not args.edits:
-        raise OutputError(args.out, "no edit given (--drop, --merge, --cut, --wall, --add); nothing written")
-    check_out_dir(args.out, args.force)
     if args.out.is_dir() and args.world.parent.resolve() == args.out.resolve():
         raise OutputError(args.out, "is the directory of WORLD_JSON: its run's other files (trace.nc, "
                                     "report.html) would not match the edited world; write to another "

@@ -2,11 +2,13 @@
 
 Writes ``world.json`` (schema: docs/world.schema.json), ``labels.png`` (16-bit unit ids, the input
 image's frame), ``trace.nc`` (ArviZ: label-invariant summaries and sampler statistics per chain and
-draw), ``diagnostics.txt`` (R-hat, ESS and the verdict), the other outputs of
-:func:`semmap_pp.outputs.write.write_all`, and last ``resume.npz`` (what ``--resume`` needs). Every
-file is written atomically; a non-empty DIR is refused without ``--force``. The same inputs and seed
+draw), ``diagnostics.txt`` (R-hat, ESS and the verdict) and the other outputs of
+:func:`semmap_pp.outputs.write.write_all`, after ``resume.npz`` (what ``--resume`` needs), which
+comes first. Every file is written atomically; a non-empty DIR is refused without ``--force``, and
+a DIR another run is writing into is refused (:mod:`semmap_pp.outdir`). The same inputs and seed
 give the same world.json, unless ``--budget`` (or Ctrl-C) ends sampling early: then the run's
-length depends on the machine. Ctrl-C stops sampling cleanly, writes what was done and exits 130.
+length depends on the machine. Ctrl-C stops sampling cleanly, writes what was done and exits 130;
+a Ctrl-C while the files are written stops the writing once resume.npz is complete (exit 130).
 docs/cli.md has every option.
 """
 
@@ -180,15 +182,10 @@ def _install_sigint(stop):
 
 
 def run(args) -> int:
-    from semmap_pp.cli.progress import Progress
-    from semmap_pp.cli.runs import general_path_note
-    from semmap_pp.errors import SemmapError
-    from semmap_pp.outputs.write import write_all
+    from semmap_pp.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
-    from semmap_pp.pipeline import RunSettings, check_inputs_not_outputs, check_out_dir, run_map
+    from semmap_pp.pipeline import RunSettings, check_inputs_not_outputs, check_out_dir
     from semmap_pp.resume import FILE_NAME as RESUME_FILE
-    from semmap_pp.resume import write_resume
-    from semmap_pp.step import StopFlag
     from semmap_pp.world_file import previous_ids_from_doc, read_run_world
 
     state, starts = None, None
@@ -231,6 +228,26 @@ def run(args) -> int:
         previous_ids = previous_ids_from_doc(doc, ids_from)
         previous_places = _places_or_none(doc, ids_from)   # what the new plan is compared with
 
+    h, w = inputs.grid.shape
+    check_free_space(out, needed_bytes(h * w))
+    with lock_out_dir(out):      # held until every file is written: one run at a time in a folder
+        if state is None or out.resolve() != args.resume.resolve():
+            check_out_dir(out, args.force)     # again under the lock: a run that ended meanwhile may have filled it
+        return _sample_and_write(args, out, inputs, settings, state, rules, starts, previous_ids,
+                                 previous_places, ids_from)
+
+
+def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, previous_ids,
+                      previous_places, ids_from) -> int:
+    """Sample (:func:`semmap_pp.pipeline.run_map`) and write every output into ``out``, which
+    the caller holds the lock of; the exit status."""
+    from semmap_pp.cli.progress import Progress
+    from semmap_pp.cli.runs import general_path_note
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.pipeline import run_map
+    from semmap_pp.resume import FILE_NAME as RESUME_FILE
+    from semmap_pp.step import StopFlag
+
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
@@ -249,30 +266,35 @@ def run(args) -> int:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
                              stop=stop, budget=args.budget, resume=state, starts=starts,
                              previous_ids=previous_ids)
-    except SemmapError as exc:
-        if stop():
+    except BaseException as exc:
+        signal.signal(signal.SIGINT, previous)
+        if isinstance(exc, SemmapError) and stop():
             log(f"semmap: interrupted: nothing written ({exc.message})")
             return 130
         raise
+    try:   # the sampling's handler stays until _write_outputs installs its own: no Ctrl-C loses the run
+        if starts is not None:
+            from semmap_pp.world import n_units
+            result.notes.insert(0, f"every chain started from {args.start} ({n_units(starts[0])} units)")
+        for note in result.notes:
+            log(f"note: {note}")
+        meta = {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
+                "model": str(Path(inputs.model.path).resolve()),
+                "rules": str(Path(rules).resolve()) if rules is not None else None,
+                "roi": None if state is None and args.roi is None else
+                (state.meta["inputs"]["roi"] if state is not None else str(Path(args.roi).resolve())),
+                "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args),
+                "lattice": [int(v) for v in inputs.frame.shape]}
+        written, interrupted = _write_outputs(out, result, rules, meta)
     finally:
         signal.signal(signal.SIGINT, previous)
-    if starts is not None:
-        from semmap_pp.world import n_units
-        result.notes.insert(0, f"every chain started from {args.start} ({n_units(starts[0])} units)")
-    for note in result.notes:
-        log(f"note: {note}")
-    written = write_all(out, result, rules_name=rules.name, rules_path=rules,
-                        written_after=(RESUME_FILE,))
-    meta = {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
-            "model": str(Path(inputs.model.path).resolve()),
-            "rules": str(Path(rules).resolve()) if rules is not None else None,
-            "roi": None if state is None and args.roi is None else
-            (state.meta["inputs"]["roi"] if state is not None else str(Path(args.roi).resolve())),
-            "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args),
-            "lattice": [int(v) for v in inputs.frame.shape]}
-    written.append(write_resume(out, result, meta))
     for path in written:
         print(path)
+    if interrupted:
+        more = " --draws N" if result.search_complete else ""
+        log(f"semmap: interrupted while writing the outputs: the search is saved in {out / RESUME_FILE}; "
+            f"`semmap map --resume {out}{more}` continues it and writes every file again")
+        return 130
     if previous_places is not None:
         resumed = Path(ids_from).resolve() == (out / "world.json").resolve()    # now overwritten
         changes = _changes_since(previous_places, out / "world.json",
@@ -307,3 +329,36 @@ def run(args) -> int:
         log(f"semmap: budget of {args.budget:g} s reached: kept {len(kept_chains)} chain(s) x {kept_draws} "
             f"draws; continue with `semmap map --resume {out}`")
     return 0
+
+
+def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]:
+    """Write ``resume.npz`` first, then every other output (:func:`semmap_pp.outputs.write.write_all`);
+    return the paths written and whether Ctrl-C stopped the writing.
+
+    A Ctrl-C while resume.npz is written lets it finish, then stops; a Ctrl-C after it stops at
+    once. Either way the search is saved, and every file written is complete (each is renamed
+    whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
+    back."""
+    from semmap_pp.outputs.write import write_all
+    from semmap_pp.resume import FILE_NAME as RESUME_FILE
+    from semmap_pp.resume import write_resume
+
+    pressed, saving = [], [True]
+
+    def handler(signum, frame):
+        pressed.append(signum)
+        if not saving[0]:
+            raise KeyboardInterrupt
+        print(f"semmap: interrupted: finishing {RESUME_FILE}, then stopping", file=sys.stderr, flush=True)
+
+    signal.signal(signal.SIGINT, handler)
+    written = []
+    try:
+        written.append(write_resume(out, run, meta))
+        saving[0] = False
+        if pressed:
+            raise KeyboardInterrupt
+        written += write_all(out, run, rules_name=rules.name, rules_path=rules, other_files=(RESUME_FILE,))
+    except KeyboardInterrupt:
+        return written, True
+    return written, False

@@ -41,18 +41,23 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from semmap_pp.outdir import claimed
+
+    with claimed(args.out, args.force):    # checked and held before any sampling
+        return _run(args)
+
+
+def _run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.cli.runs import run_each
     from semmap_pp.outputs.figures import stability_png
-    from semmap_pp.pipeline import RunSettings, check_out_dir
+    from semmap_pp.pipeline import RunSettings
     from semmap_pp.stability import Plan, Stability
 
     seeds = list(dict.fromkeys(args.seeds))
     if len(seeds) < 2:
         print("semmap stability: error: give at least two different --seeds", file=sys.stderr)
         return 2
-    if args.out is not None:
-        check_out_dir(args.out, args.force)
     rules, inputs = target_inputs(args)
     settings = RunSettings.from_model(inputs.model, seed=seeds[0], chains=args.chains, cores=args.cores,
                                       tune=args.tune, draws=args.draws, n_inner=args.n_inner,

@@ -21,6 +21,7 @@ adjacency dilation) and from an exterior unit to every unit it is adjacent to. G
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
@@ -127,9 +128,10 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
 
 
 def write_graphml(path: str | os.PathLike, graph: nx.Graph) -> Path:
-    """Write ``graph`` as GraphML atomically."""
-    with atomic.atomic_path(path) as tmp:
-        nx.write_graphml(graph, tmp, encoding="utf-8", prettyprint=True)
+    """Write ``graph`` as GraphML atomically (made in memory, then :func:`semmap_pp.atomic.write_bytes`)."""
+    buf = io.BytesIO()
+    nx.write_graphml(graph, buf, encoding="utf-8", prettyprint=True)
+    atomic.write_bytes(path, buf.getvalue())
     return Path(path)
 
 

@@ -38,7 +38,7 @@ FILES = {
     "spread.nc": "the same for the sample around W* (the draws posterior.png and posterior_cells.png hold)",
     "diagnostics.txt": "R-hat, ESS and the convergence verdict as text",
     "report.html": "this page",
-    "resume.npz": "what `semmap map --resume DIR` needs to continue the run (written last)",
+    "resume.npz": "what `semmap map --resume DIR` needs to continue the run (written first)",
 }
 
 CSS = """

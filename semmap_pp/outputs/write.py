@@ -84,7 +84,9 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
 
     :mod:`semmap_pp.atomic` writes ``NAME`` through ``.NAME.XXXXXXXX.tmp`` and renames it; a run
     killed (SIGKILL) while writing leaves that file behind. Only temporaries of the output files
-    (:data:`semmap_pp.outputs.report.FILES`) are removed; any other file is left alone.
+    (:data:`semmap_pp.outputs.report.FILES`) are removed; any other file is left alone. Call it
+    only while holding ``out_dir``'s lock (:func:`semmap_pp.outdir.lock_out_dir`): a run that
+    writes into the folder holds it, so no temporary removed here is a live run's.
 
     >>> import tempfile
     >>> d = Path(tempfile.mkdtemp())
@@ -125,7 +127,7 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
 
 
 def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
-              n_worlds: int = N_SAMPLED_WORLDS, written_after: tuple[str, ...] = ()) -> list[Path]:
+              n_worlds: int = N_SAMPLED_WORLDS, other_files: tuple[str, ...] = ()) -> list[Path]:
     """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
 
     Parameters
@@ -138,9 +140,14 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
         Its path as given (diagnostics.txt); ``rules_name`` when omitted.
     n_worlds : int
         Sampled worlds in posterior.png and posterior_cells.png.
-    written_after : tuple of str
-        Names of files the caller writes into ``out_dir`` after this call (``semmap map``:
-        ``resume.npz``); the report lists them with the others.
+    other_files : tuple of str
+        Names of files the caller writes into ``out_dir`` itself (``semmap map``: ``resume.npz``,
+        before this call); the report lists them with the others.
+
+    Every file goes through :func:`semmap_pp.atomic.write_bytes`: a full disk stops the writing
+    with a :class:`~semmap_pp.errors.WriteError` naming the file, and each file written before it
+    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.outdir.lock_out_dir`):
+    the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -170,7 +177,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     pngs["regions"] = fig.regions_preview_png(sm, region_img)
     pngs["rooms"] = fig.regions_preview_png(sm, sm.rooms.labels)
     pngs["roi"] = fig.roi_png(sm, run.inputs.roi_name)
-    names = [p.name for p in written] + ["report.html"] + list(written_after)
+    names = [p.name for p in written] + ["report.html"] + list(other_files)
     files = [n for n in FILES if n in names] + [n for n in names if n not in FILES]
     written.append(write_report(out / "report.html",
                                 report_html(run, doc, pngs, regions, rules_name=rules_name, files=files)))
