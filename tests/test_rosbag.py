@@ -32,7 +32,7 @@ KINDS = ("mcap-folder", "sqlite3-folder", "mcap-file", "ros1")
 # --- bags written here --------------------------------------------------------------------------
 
 def grid_msg(image_values, *, res=0.05, origin=(0.0, 0.0, 0.0), frame="map", stamp=(0, 0), ros1=False,
-             data=None, width=None):
+             data=None, width=None, quat=None):
     """An OccupancyGrid message of int8 values given in image rows (row 0 on top)."""
     ts = TS1 if ros1 else TS2
     t = ts.types
@@ -44,7 +44,8 @@ def grid_msg(image_values, *, res=0.05, origin=(0.0, 0.0, 0.0), frame="map", sta
     ox, oy, yaw = origin
     pose = t["geometry_msgs/msg/Pose"](
         position=t["geometry_msgs/msg/Point"](x=ox, y=oy, z=0.0),
-        orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
+        orientation=t["geometry_msgs/msg/Quaternion"](
+            *(quat if quat is not None else (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)))))
     info = t["nav_msgs/msg/MapMetaData"](map_load_time=time(sec=0, nanosec=0), resolution=res,
                                          width=w if width is None else width, height=h, origin=pose)
     return t[GRID](header=header, info=info,
@@ -266,6 +267,30 @@ def bad_resolution(d: Path):
         r"resolution must be a positive finite number, got 0.0"
 
 
+def nan_resolution(d: Path):
+    return write_bag(d / "rec", "ros1", {"/map": (GRID, [(0, grid_msg([[0]], res=math.nan, ros1=True))])}), [], \
+        r"resolution must be a positive finite number, got nan"
+
+
+def infinite_origin(d: Path):
+    return write_bag(d / "rec", "mcap-folder", {"/map": (GRID, [(0, grid_msg([[0]], origin=(math.inf, 0.0, 0.0)))])}), \
+        [], r"/map message 1: origin position must be finite, got \(inf, 0.0\)"
+
+
+def nan_orientation(d: Path):
+    return write_bag(d / "rec", "mcap-file", {"/map": (GRID, [(0, grid_msg([[0]], quat=(0.0, 0.0, math.nan, 1.0)))])}), \
+        [], r"the map's origin orientation is not finite"
+
+
+def metadata_fifo(d: Path):
+    import os
+
+    path = intel_bag(d / "rec", "mcap-folder")
+    (path / "metadata.yaml").unlink()
+    os.mkfifo(path / "metadata.yaml")
+    return path / "metadata.yaml", [], r"metadata.yaml: is not a regular file"
+
+
 def huge_frame_id(d: Path):
     return write_bag(d / "rec", "mcap-file", {"/map": (GRID, [(0, grid_msg([[0]], frame="f" * 5000))])}), [], \
         r"header frame_id .* is not a frame name"
@@ -275,20 +300,48 @@ BROKEN = [two_map_topics, wrong_type, no_grid_topic, unknown_topic, empty_topic,
           at_past_the_end, at_before_the_first, truncated("mcap-file", 0.6), truncated("ros1", 0.5),
           truncated("mcap-folder", 0.3), truncated("sqlite3-folder", 0.5), no_metadata, no_metadata_sqlite,
           garbage_metadata, empty_bag_file, cells_do_not_match_the_size, too_many_cells, bad_resolution,
-          huge_frame_id]
+          nan_resolution, infinite_origin, nan_orientation, metadata_fifo, huge_frame_id]
 
 
 @pytest.mark.parametrize("build", BROKEN, ids=lambda b: getattr(b, "__name__", "truncated"))
 def test_a_broken_bag_is_one_line_naming_it(tmp_path, capsys, build):
     import re
 
-    path, extra, phrase = build(tmp_path)
+    named, extra, phrase = build(tmp_path)
+    path = named.parent if named.name == "metadata.yaml" else named       # the error names the file
     for argv in (["info", str(path), *extra], ["map", str(path), "--out", str(tmp_path / "out"), *extra]):
         code, line = error_line(capsys, argv)
         assert code == 2
-        assert line.startswith(f"semmap: error: {path}"), line
+        assert line.startswith(f"semmap: error: {named}"), line
         assert re.search(phrase, line), line
     assert not (tmp_path / "out").exists()               # nothing written
+
+
+def test_metadata_larger_than_a_bags_is_refused_unread(tmp_path, monkeypatch):
+    from semmap_pp.grid import rosbag
+
+    path = intel_bag(tmp_path / "rec", "sqlite3-folder")
+    size = (path / "metadata.yaml").stat().st_size
+    monkeypatch.setattr(rosbag, "MAX_METADATA_BYTES", size - 1)
+    with pytest.raises(MapError, match=rf"metadata.yaml: is {size} bytes, more than a bag's metadata holds"):
+        load_map(path)
+
+
+@pytest.mark.parametrize("quat, yaw, note", [
+    ((0.0, 0.0, 0.0, 0.0), 0.0, "the map's origin orientation is the zero quaternion; read as yaw 0"),
+    ((0.0, 0.0, 0.0, 2.0), 0.0, None),                                         # not unit length: normalised
+    ((0.1, 0.0, math.sin(0.3), math.cos(0.3)), None, "the map's origin is tilted (roll or pitch); only its yaw"),
+])
+def test_the_origins_quaternion_gives_its_yaw(tmp_path, quat, yaw, note):
+    path = write_bag(tmp_path / "rec", "mcap-file", {"/map": (GRID, [(0, grid_msg([[0, 100]], quat=quat))])})
+    grid = load_map(path)
+    if yaw is not None:
+        assert grid.origin[2] == yaw
+    else:
+        x, y, z, w = np.array(quat) / np.linalg.norm(quat)
+        assert grid.origin[2] == pytest.approx(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    about_origin = [n for n in grid.notes if "origin" in n]
+    assert about_origin == [] if note is None else (len(about_origin) == 1 and about_origin[0].startswith(note))
 
 
 def test_bad_at_is_argparses_error(capsys):
