@@ -551,3 +551,31 @@ def test_an_input_bag_named_rosbag2_in_the_output_folder_is_refused(tmp_path, ca
     code, line = error_line(capsys, ["map", str(path), "--out", str(tmp_path), "--force", *FAST_RUN])
     assert code == 2 and "is an input of this run, and --out" in line
     assert (path / "metadata.yaml").is_file()
+
+
+# --- the options on every command that takes a map ----------------------------------------------
+
+def test_batch_hands_topic_and_at_to_every_task():
+    from semmap_pp.cli import build_parser
+    from semmap_pp.cli.cmd_batch import map_args
+
+    args = build_parser().parse_args(["batch", "a.bag", "--out", "o", "--topic", "/map", "--at", "12.5"])
+    extra = map_args(args)
+    assert extra[extra.index("--topic") + 1] == "/map" and extra[extra.index("--at") + 1] == "12.5"
+    assert "--topic" not in map_args(build_parser().parse_args(["batch", "a.bag", "--out", "o"]))
+
+
+@pytest.mark.parametrize("command", [["compare", "--rules", "a.lp", "--rules", "b.lp"], ["info"], ["map", "--out", "o"]])
+def test_every_map_command_takes_topic_and_at(command):
+    from semmap_pp.cli import build_parser
+    from semmap_pp.cli.cmd_info import map_options
+
+    name, *rest = command
+    args = build_parser().parse_args([name, "rec.mcap", *rest, "--topic", "/slam/map", "--at", "last"])
+    assert (map_options(args)["topic"], map_options(args)["at"]) == ("/slam/map", "last")
+
+
+def test_resume_refuses_topic_and_at(tmp_path, capsys):
+    for option in (["--topic", "/map"], ["--at", "3"]):
+        assert main(["map", "--resume", str(tmp_path), *option]) == 2
+        assert f"{option[0]} cannot be given with --resume" in capsys.readouterr().err
