@@ -373,6 +373,10 @@ def test_semmap_map_from_a_bag_gives_the_yamls_wstar(bag_runs, intel_corner_wsta
     for key in ("units", "doors", "passages", "adjacency", "rooms", "log_posterior", "cpr"):
         assert doc[key] == yaml_doc[key], key
     assert doc["map"]["topic"] == "/map" and yaml_doc["map"]["frame_id"] == "map"
+    import jsonschema
+
+    schema = json.loads((Path(__file__).resolve().parents[1] / "docs" / "world.schema.json").read_text())
+    jsonschema.validate(doc, schema)
     assert "topic" not in yaml_doc["map"] and yaml_doc["map"]["stamp_ns"] == 0
 
 
