@@ -5,7 +5,8 @@ half-written file. Every output file of the package is written through :func:`wr
 writers build the file's bytes in memory first), so a write that fails (a full disk, a quota, a
 read-only file system) fails in one place: the temporary file is removed, the file under the final
 name is untouched, and a :class:`~semmap_pp.errors.WriteError` says ``cannot write PATH: no space
-left on device``.
+left on device``. A whole directory (:func:`atomic_dir`) is written in a temporary folder beside
+it and renamed into place the same way.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Iterator
@@ -128,3 +130,56 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
 def write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     write_bytes(path, text.encode("utf-8"))
+
+
+def _fsync_tree(top: Path) -> None:
+    """fsync every file under ``top``, then each folder (their entries)."""
+    for folder, _, files in os.walk(top):
+        for name in files:
+            with open(os.path.join(folder, name), "rb") as fh:
+                os.fsync(fh.fileno())
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a path, not yet existing, for the caller to make a whole directory at; on success it
+    replaces ``path`` (a directory or file of that name, if any, goes).
+
+    The path yielded is ``.NAME.XXXXXXXX.tmp/NAME`` beside ``path``: the same name, so a writer that
+    names its files after their folder (a ROS 2 bag's ``NAME.mcap``) names them as at ``path``. Its
+    files are synced, the old ``path`` is moved into the temporary folder, the new directory renamed
+    onto ``path``, and the temporary folder removed. A failure or a crash leaves ``path`` as it was
+    and at most the hidden temporary folder (:func:`semmap_pp.outputs.write.remove_stale_temps`
+    deletes it on the next run into the folder).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> for text in ("one", "two"):
+    ...     with atomic_dir(d / "bag") as tmp:
+    ...         tmp.mkdir()
+    ...         _ = (tmp / "data.txt").write_text(text)
+    >>> (d / "bag" / "data.txt").read_text(), sorted(p.name for p in d.iterdir())
+    ('two', ['bag'])
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        new = holder / path.name
+        yield new
+        if not new.is_dir():
+            raise FileNotFoundError(f"{new} was not made")
+        os.chmod(new, 0o777 & ~_umask())
+        _fsync_tree(new)
+        if path.exists() or path.is_symlink():
+            os.replace(path, holder / ".old")
+        os.replace(new, path)
+    finally:
+        shutil.rmtree(holder, ignore_errors=True)

@@ -68,8 +68,11 @@ class Result:
 
 
 def expand_maps(items: list[str]) -> list[Path]:
-    """The map files ``items`` name: files, folders (their map files: ``*.yaml`` when it holds
-    any, else images) and glob patterns, in order, each once."""
+    """The map files ``items`` name: files, bags, folders (their map files: ``*.yaml`` when it
+    holds any, else images; and the bags in it, files or ROS 2 bag folders) and glob patterns, in
+    order, each once. A ROS 2 bag folder named itself is one map."""
+    from semmap_pp.grid.rosbag import BAG_SUFFIXES, is_bag
+
     out: list[Path] = []
 
     def add(p: Path) -> None:
@@ -78,11 +81,15 @@ def expand_maps(items: list[str]) -> list[Path]:
 
     for item in items:
         p = Path(item)
-        if p.is_dir():
+        if p.is_dir() and is_bag(p):
+            add(p)
+        elif p.is_dir():
             yamls = sorted(q for q in p.iterdir() if q.suffix.lower() in (".yaml", ".yml") and q.is_file())
             found = yamls or sorted(q for q in p.iterdir() if q.suffix.lower() in MAP_SUFFIXES and q.is_file())
+            found += sorted(q for q in p.iterdir() if (q.is_file() and q.suffix.lower() in BAG_SUFFIXES)
+                            or (q.is_dir() and (q / "metadata.yaml").is_file()))
             if not found:
-                raise MapError(p, "folder holds no map (.yaml, .png, .pgm, .npy)")
+                raise MapError(p, "folder holds no map (.yaml, .png, .pgm, .npy, a bag)")
             for q in found:
                 add(q)
         elif p.exists():
@@ -90,7 +97,8 @@ def expand_maps(items: list[str]) -> list[Path]:
                 raise MapError(p, "not a regular file")
             add(p)
         elif any(ch in item for ch in "*?["):
-            hits = sorted(Path(h) for h in globmod.glob(item, recursive=True) if Path(h).is_file())
+            hits = sorted(Path(h) for h in globmod.glob(item, recursive=True)
+                          if Path(h).is_file() or (Path(h) / "metadata.yaml").is_file())
             if not hits:
                 raise MapError(p, "the pattern matches no file")
             for q in hits:

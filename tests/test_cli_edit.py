@@ -17,7 +17,7 @@ from semmap_pp.world_file import read_world_units
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
 SCHEMA = json.loads((ROOT / "docs" / "world.schema.json").read_text())
-PLAN = ["world.json", "labels.png", "regions.png", "rooms.png", "types.yaml", "types.pgm", "world.geojson", "graph.graphml",
+PLAN = ["world.json", "labels.png", "regions.png", "rooms.png", "types.yaml", "types.pgm", "rosbag2", "world.geojson", "graph.graphml",
         "overlay.png", "graph.png"]
 
 

@@ -88,6 +88,20 @@ def non_negative_float(text: str) -> float:
     return value
 
 
+def bag_time(text: str) -> float | str:
+    """``last``, or a finite number of seconds >= 0 since a bag's start (``--at``).
+
+    >>> bag_time("last"), bag_time("12.5")
+    ('last', 12.5)
+    """
+    if text.strip().lower() == "last":
+        return "last"
+    value = finite(text, "'last' or a number of seconds")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 'last' or seconds >= 0 since the bag's start, got {text}")
+    return value
+
+
 def seconds(text: str) -> float:
     """A finite number of seconds > 0 (a time budget, an interval).
 

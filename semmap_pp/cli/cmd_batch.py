@@ -28,7 +28,7 @@ PASSED = (("model", "--model"), ("roi", "--roi"), ("chains", "--chains"), ("core
           ("spread_draws", "--spread-draws"), ("budget", "--budget"),
           ("occupied_thresh", "--occupied-thresh"), ("free_thresh", "--free-thresh"),
           ("negate", "--negate"), ("resolution", "--resolution"), ("mode", "--mode"),
-          ("max_cells", "--max-cells"))
+          ("max_cells", "--max-cells"), ("topic", "--topic"), ("at", "--at"))
 
 
 def register(subparsers) -> None:

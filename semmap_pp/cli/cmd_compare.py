@@ -28,7 +28,7 @@ from semmap_pp.cli.argtypes import seed as seed_type
 def register(subparsers) -> None:
     p = subparsers.add_parser("compare", help="compare knowledge sets (rule files) on one map",
                               description=__doc__.splitlines()[0])
-    p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("map", metavar="MAP", help="map_server YAML, a .png/.pgm/.npy image, or a bag (ROS 2 bag folder, .mcap, ROS 1 .bag)")
     p.add_argument("--rules", action="append", required=True, metavar="FILE",
                    help="a rule file; give it twice or more (e.g. rules/table3.lp and rules/none.lp)")
     p.add_argument("--out", type=Path, metavar="DIR", help="also write compare.md, compare.json, compare.png")

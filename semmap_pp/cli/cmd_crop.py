@@ -28,7 +28,7 @@ def register(subparsers) -> None:
         description="Write the pixels X0 <= x < X1, Y0 <= y < Y1 of MAP as a map_server map whose "
                     "origin keeps every cell's map-frame position (e.g. one wing of a building "
                     "built at another angle, which the run's note locates).")
-    parser.add_argument("map", help="map file: .yaml/.yml (map_server), .png, .pgm or .npy")
+    parser.add_argument("map", help="map file: .yaml/.yml (map_server), .png, .pgm, .npy, or a bag")
     parser.add_argument("--box", type=non_negative_int, nargs=4, required=True,
                         metavar=("X0", "Y0", "X1", "Y1"),
                         help="pixel columns X0..X1-1 and rows Y0..Y1-1 (row 0 at the top)")

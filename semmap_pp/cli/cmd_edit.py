@@ -49,7 +49,7 @@ def register(subparsers) -> None:
                     "score`. Points are map-frame metres (as vertices_m), or image pixels "
                     "[x = column, y = row] with --pixels. Ids as world.json and overlay.png give "
                     "them: 7 or R7/C7/H7/E7; X2 for exterior unit 2.")
-    p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("map", metavar="MAP", help="map_server YAML, a .png/.pgm/.npy image, or a bag (ROS 2 bag folder, .mcap, ROS 1 .bag)")
     p.add_argument("world", metavar="WORLD_JSON", type=Path, help="a world.json written for MAP")
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
                    help="output directory: world.json, labels.png, overlay.png and the other files of "

@@ -1,7 +1,8 @@
 """``semmap info MAP [--json]``: what a map file holds and how its cells classify.
 
 The map options (``--occupied-thresh``, ``--free-thresh``, ``--negate``, ``--resolution``,
-``--mode``, ``--max-cells``) are added by :func:`add_map_options` and turned into
+``--mode``, ``--max-cells``, and a bag's ``--topic`` and ``--at``) are added by
+:func:`add_map_options` and turned into
 :func:`~semmap_pp.grid.load_map` keywords by :func:`map_options`, so other subcommands can offer the
 same ones.
 """
@@ -13,6 +14,7 @@ import json
 import math
 
 from semmap_pp.cells import INPUT_CLASSES, known_box
+from semmap_pp.cli.argtypes import bag_time as _bag_time
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.grid.outside import border_open_share, seal_radius
@@ -36,20 +38,28 @@ def add_map_options(parser: argparse.ArgumentParser) -> None:
                        help=f"refuse larger images (default {MAX_CELLS})")
     group.add_argument("--allow-outside", action="store_true",
                        help="let the YAML's image: be outside the YAML's folder (absolute or ../ path)")
+    bag = parser.add_argument_group("a bag's map (ROS 1 .bag, ROS 2 bag folder, .mcap; other maps ignore these)")
+    bag.add_argument("--topic", metavar="TOPIC", default=None,
+                     help="the nav_msgs/OccupancyGrid topic (default: the bag's one such topic)")
+    bag.add_argument("--at", type=_bag_time, metavar="TIME|last", default=None,
+                     help="the last map message at or before TIME seconds after the bag's start "
+                          "(default: last, the bag's last map message)")
 
 
 def map_options(args: argparse.Namespace) -> dict:
     """:func:`load_map` keyword arguments from the options of :func:`add_map_options`."""
     return {"occupied_thresh": args.occupied_thresh, "free_thresh": args.free_thresh,
             "negate": args.negate, "resolution": args.resolution, "mode": args.mode,
-            "max_cells": args.max_cells, "allow_outside": args.allow_outside}
+            "max_cells": args.max_cells, "allow_outside": args.allow_outside,
+            "topic": getattr(args, "topic", None), "at": getattr(args, "at", None)}
 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "info", help="describe a map: size, resolution, origin, thresholds, cell counts",
-        description="Load a map (map_server YAML, .png, .pgm or .npy) and describe it.")
-    parser.add_argument("map", help="map file: .yaml/.yml (map_server), .png, .pgm or .npy")
+        description="Load a map (map_server YAML, .png, .pgm, .npy or a bag's OccupancyGrid) and describe it.")
+    parser.add_argument("map", help="map file: .yaml/.yml (map_server), .png, .pgm, .npy, or a bag "
+                                    "(ROS 2 bag folder, .mcap, ROS 1 .bag)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--orientation", action="store_true",
                         help="also the lattice's orientation θ0 and the walls at another angle, as "
@@ -89,6 +99,9 @@ def describe(grid: OccupancyGrid) -> dict:
         # around it when the rest is most of the image (docs/model.md)
         "known_box": list(box) if (box := known_box(grid.classes)) is not None else None,
         "notes": list(grid.notes),
+        "topic": grid.topic,            # a bag's map: its topic, frame and header stamp
+        "frame_id": grid.frame_id,
+        "stamp_ns": grid.stamp_ns,
     }
 
 
@@ -97,7 +110,8 @@ def format_text(facts: dict) -> str:
     ox, oy, yaw = facts["origin"]
     lines = [
         f"map         {facts['map']}",
-        f"image       {facts['image']} ({facts['image_format']})",
+        f"image       {facts['image']} ({facts['image_format']})" if facts["image"] is not None else
+        f"input       {facts['image_format']}",
         f"size        {facts['width']} x {facts['height']} cells, "
         f"{facts['width_m']:.2f} x {facts['height_m']:.2f} m",
         f"resolution  {facts['resolution']:g} m/cell",
@@ -129,6 +143,9 @@ def format_text(facts: dict) -> str:
                             if off["note"] else ""))
         else:
             lines.append("off axis    no part of the map runs at another angle")
+    if facts.get("topic"):
+        lines.append(f"message     {facts['topic']}, frame {facts['frame_id']!r}, stamp "
+                     f"{facts['stamp_ns'] // 10**9}.{facts['stamp_ns'] % 10**9:09d} s")
     lines += [f"note        {note}" for note in facts["notes"]]
     return "\n".join(lines)
 

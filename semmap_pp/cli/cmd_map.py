@@ -65,7 +65,7 @@ def target_inputs(args: argparse.Namespace):
 def register(subparsers) -> None:
     p = subparsers.add_parser("map", help="build the semantic map of an occupancy grid",
                               description=__doc__.splitlines()[0])
-    p.add_argument("map", metavar="MAP", nargs="?", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("map", metavar="MAP", nargs="?", help="map_server YAML, a .png/.pgm/.npy image, or a bag (ROS 2 bag folder, .mcap, ROS 1 .bag)")
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="output directory (required, except with --resume: default the resumed DIR)")
     add_target_options(p)
@@ -192,7 +192,8 @@ def run(args) -> int:
     if not spread_draws_ok(args.spread_draws or 0):
         return _usage(f"--spread-draws {SPREAD_DRAWS_RULE}")
     if args.resume is not None:
-        fixed = FIXED_WHEN_RESUMING + ("occupied_thresh", "free_thresh", "negate", "resolution", "mode")
+        fixed = FIXED_WHEN_RESUMING + ("occupied_thresh", "free_thresh", "negate", "resolution", "mode",
+                                       "topic", "at")
         given = [f"--{k.replace('_', '-')}" for k in fixed + ("start",) if getattr(args, k) is not None]
         if given or args.map is not None:
             what = ", ".join(given + (["MAP"] if args.map is not None else []))

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
         description="Score world.json files (a run's W*, or one edited by hand) under the full "
                     "target of MAP: log posterior and its parts, CPR, units per type; the first "
                     "file is the reference the others are compared with.")
-    p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("map", metavar="MAP", help="map_server YAML, a .png/.pgm/.npy image, or a bag (ROS 2 bag folder, .mcap, ROS 1 .bag)")
     p.add_argument("worlds", metavar="WORLD_JSON", nargs="+", type=Path,
                    help="world.json files written for MAP (by `semmap map`, edited or not)")
     add_target_options(p)

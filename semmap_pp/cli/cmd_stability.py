@@ -25,7 +25,7 @@ from semmap_pp.cli.argtypes import seed as seed_type
 def register(subparsers) -> None:
     p = subparsers.add_parser("stability", help="search one map with several seeds and compare the W*s",
                               description=__doc__.splitlines()[0])
-    p.add_argument("map", metavar="MAP", help="map_server YAML, or a .png/.pgm/.npy image")
+    p.add_argument("map", metavar="MAP", help="map_server YAML, a .png/.pgm/.npy image, or a bag (ROS 2 bag folder, .mcap, ROS 1 .bag)")
     p.add_argument("--seeds", type=seed_type, nargs="+", default=[0, 1, 2], metavar="N",
                    help="the seeds, at least two different ones (default 0 1 2)")
     p.add_argument("--out", type=Path, metavar="DIR",

@@ -1,4 +1,4 @@
-"""``load_map``: a map file (YAML, image or ``.npy``) -> :class:`OccupancyGrid`."""
+"""``load_map``: a map file (YAML, image, ``.npy`` or a bag) -> :class:`OccupancyGrid`."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 
 from semmap_pp.errors import MapError
-from semmap_pp.grid import images, meta
+from semmap_pp.grid import images, meta, rosbag
 from semmap_pp.grid.model import OccupancyGrid
 from semmap_pp.grid.pixels import classify_grey
 
@@ -17,17 +17,24 @@ IMAGE_SUFFIXES = (".png", ".pgm", ".npy")
 def load_map(path: str | os.PathLike, *, occupied_thresh: float | None = None,
              free_thresh: float | None = None, negate: int | bool | None = None,
              resolution: float | None = None, mode: str | None = None,
-             max_cells: int = images.MAX_CELLS, allow_outside: bool = False) -> OccupancyGrid:
+             max_cells: int = images.MAX_CELLS, allow_outside: bool = False,
+             topic: str | None = None, at: float | str | None = None) -> OccupancyGrid:
     """Load and classify an occupancy grid map.
 
     Parameters
     ----------
     path : path-like
-        A ROS map_server YAML file (``.yaml``/``.yml``) naming its image, or a bare image
-        (``.png``, ``.pgm``) or 2-D array (``.npy``).
+        A ROS map_server YAML file (``.yaml``/``.yml``) naming its image, a bare image
+        (``.png``, ``.pgm``) or 2-D array (``.npy``), or a bag holding ``nav_msgs/OccupancyGrid``
+        messages: a ROS 2 bag folder, a ``.mcap`` or ``.db3`` file, a ROS 1 ``.bag``
+        (:mod:`semmap_pp.grid.rosbag`).
     occupied_thresh, free_thresh, negate, resolution, mode : optional
         Override the YAML's values, or complete a bare image's (defaults 0.65, 0.196, 0,
-        0.05 m/cell with a note, ``"trinary"``).
+        0.05 m/cell with a note, ``"trinary"``). A bag's message has its own resolution and no
+        negate or mode (its cells are occupancy percentages).
+    topic, at : optional
+        A bag's map topic (default its one ``nav_msgs/OccupancyGrid`` topic) and message
+        (``"last"``, the default, or seconds since the bag's start); other maps ignore them.
     max_cells : int
         Refuse images with more cells (checked from the header, before decoding).
     allow_outside : bool
@@ -56,10 +63,14 @@ def load_map(path: str | os.PathLike, *, occupied_thresh: float | None = None,
     path = Path(path)
     if not path.exists():
         raise MapError(path, "map file does not exist")
-    if path.is_dir():
-        raise MapError(path, "is a directory; expected a map .yaml file, an image or a .npy array")
     if max_cells <= 0:
         raise ValueError(f"max_cells must be positive, got {max_cells}")
+    if rosbag.is_bag(path):
+        return rosbag.load_bag(path, topic=topic, at=at, occupied_thresh=occupied_thresh,
+                               free_thresh=free_thresh, resolution=resolution, max_cells=max_cells)
+    if path.is_dir():
+        raise MapError(path, "is a directory; expected a map .yaml file, an image, a .npy array or a "
+                             "bag (a ROS 2 bag folder holds metadata.yaml)")
     overrides = {"occupied_thresh": occupied_thresh, "free_thresh": free_thresh,
                  "negate": negate, "resolution": resolution, "mode": mode}
     suffix = path.suffix.lower()
@@ -70,7 +81,8 @@ def load_map(path: str | os.PathLike, *, occupied_thresh: float | None = None,
         params = meta.params_for_image(path, overrides)
     else:
         raise MapError(path, f"unsupported map file type {path.suffix or '(no suffix)'!r}; "
-                             f"expected {', '.join(YAML_SUFFIXES + IMAGE_SUFFIXES)}")
+                             f"expected {', '.join(YAML_SUFFIXES + IMAGE_SUFFIXES + rosbag.BAG_SUFFIXES)} "
+                             "or a ROS 2 bag folder")
     decoded = images.decode_image(params.image, max_cells=max_cells)
     height, width = decoded.grey.shape
     meta.check_extent(path, width, height, params.resolution, params.origin)

@@ -45,6 +45,9 @@ class OccupancyGrid:
         How the image was decoded, e.g. ``"PNG L 8-bit"``.
     notes : tuple of str
         Assumptions made while loading (e.g. a default resolution).
+    frame_id, stamp_ns, topic
+        The map message's frame, header stamp (ns) and topic when the map came from a bag
+        (:mod:`semmap_pp.grid.rosbag`); ``"map"``, 0 and None for a YAML or an image.
 
     Examples
     --------
@@ -66,6 +69,9 @@ class OccupancyGrid:
     negate: bool = False
     image_format: str = ""
     notes: tuple[str, ...] = field(default=())
+    frame_id: str = "map"
+    stamp_ns: int = 0
+    topic: str | None = None
 
     def __post_init__(self) -> None:
         classes = np.asarray(self.classes)

@@ -28,6 +28,8 @@ FILES = {
     "types.yaml": "the place types as a map layer for ROS map_server (mode raw; codes: 0 none, "
                   "1 room, 2 corridor, 3 hall, 4 other, 5 door), the input map's resolution and origin",
     "types.pgm": "its image: the input image's size, one code per pixel",
+    "rosbag2": "a ROS 2 bag (MCAP) of the types layer as an OccupancyGrid and the units, doors and graph as "
+               "MarkerArrays, in the input map's frame and stamp, for ros2 bag play, RViz 2 and Foxglove",
     "world.geojson": "W* as GeoJSON in the map's local metric frame (metres, ROS map frame, not WGS84)",
     "graph.graphml": "the abstract model (paper Fig. 5b) for networkx, Gephi or yEd",
     "overlay.png": "W* on the classified map (paper Fig. 5c)",

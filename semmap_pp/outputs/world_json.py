@@ -147,6 +147,8 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         "map": {"image": image, "yaml": yaml_name, "width": int(grid.width), "height": int(grid.height),
                 "resolution": res, "origin": [float(v) for v in grid.origin],
                 "orientation_deg": round(math.degrees(frame.theta), 4),
+                "frame_id": grid.frame_id, "stamp_ns": int(grid.stamp_ns),
+                **({"topic": grid.topic} if grid.topic is not None else {}),
                 "notes": list(grid.notes)},
         "units": units,
         "adjacency": [list(p) for p in adjacency],

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import glob
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
 from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
+from semmap_pp.outputs.ros2 import write_run_bag
 from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
 from semmap_pp.outputs.types_layer import write_types_layer
 from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
@@ -99,7 +101,10 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     for name in FILES:
         for p in out.glob(f".{glob.escape(name)}.*.tmp"):
             try:
-                p.unlink()
+                if p.is_dir() and not p.is_symlink():     # a folder's (atomic.atomic_dir: rosbag2/)
+                    shutil.rmtree(p)
+                else:
+                    p.unlink()
                 gone.append(p)
             except OSError:
                 continue
@@ -108,8 +113,9 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
 
 def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.ndarray]:
     """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
-    regions.png, rooms.png, the types layer, overlay.png and graph.png (world.json and labels.png are the
-    caller's). Returns the paths, the two figures' PNG bytes, the regions and their image."""
+    regions.png, rooms.png, the types layer, the ROS 2 bag rosbag2/, overlay.png and graph.png
+    (world.json and labels.png are the caller's). Returns the paths, the two figures' PNG bytes, the
+    regions and their image."""
     passages = passage_pairs(sm)
     regions = join_regions(sm.unit_ids, passages)
     region_img = regions_image(sm, regions)
@@ -119,6 +125,7 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
                write_regions_png(out / "regions.png", region_img),
                write_labels_png(out / "rooms.png", sm.rooms.labels)]
     written.extend(write_types_layer(out, sm, doc))
+    written.append(write_run_bag(out, sm, doc))
     pngs = {"overlay": fig.overlay_png(sm, doc), "graph": fig.graph_png(sm, graph)}
     for name, data in pngs.items():
         atomic.write_bytes(out / f"{name}.png", data)
