@@ -21,7 +21,7 @@ import re
 import sys
 
 from semmap_pp import __version__
-from semmap_pp.errors import SemmapError
+from semmap_pp.errors import SemmapError, printable
 
 
 _NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
@@ -56,7 +56,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def not_utf8(argv) -> str | None:
+    """The first argument that is not UTF-8 text (a file name of other bytes, which Python keeps as
+    lone surrogates), or None. Names given to semmap go into its outputs (world.json, report.html,
+    trace.nc) and onto stdout, all UTF-8, so such a name is refused before anything is read.
+
+    >>> not_utf8(["map", "m.yaml"]), not_utf8(["map", "/tmp/\\udcff.yaml"])
+    (None, '/tmp/\\udcff.yaml')
+    """
+    for a in argv:
+        text = os.fsdecode(a) if isinstance(a, (bytes, os.PathLike)) else a
+        if isinstance(text, str):
+            try:
+                text.encode("utf-8")
+            except UnicodeEncodeError:
+                return text
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    bad = not_utf8(argv)
+    if bad is not None:
+        print(f"semmap: error: {printable(bad)}: not UTF-8 text (a name of other bytes, shown as \\xNN); "
+              "semmap writes the names it is given into its outputs as UTF-8: rename the file or "
+              "folder", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
