@@ -513,3 +513,33 @@ def test_printable_shows_the_bytes_of_a_name():
     e = SemmapError(os.fsdecode(b"/x/\xfe.yaml"), "cannot read " + os.fsdecode(b"\xfe"), 3, 4)
     assert str(e) == "/x/\\xfe.yaml:3:4: cannot read \\xfe"
 
+
+# ---- tall and thin maps (issue 55's F8) -----------------------------------------------------------
+# A figure's sides follow the map's: 1 x 2000 cells drew 0.7 pixels wide, and matplotlib's PNG writer
+# refused the empty image after world.json was written (no report, no resume.npz).
+
+@pytest.mark.parametrize("shape, walls", [((2000, 1), False), ((4000, 3), True)])
+def test_a_tall_thin_map_runs_to_the_end_with_figures_of_a_minimum_width(tmp_path, capsys, shape, walls):
+    from semmap_pp.outputs.figures import MIN_SIDE_PX
+    from semmap_pp.outputs.report import FILES
+
+    a = np.full(shape, 254, np.uint8)
+    if walls:
+        a[:, 0] = a[:, -1] = 0
+    code, stdout, stderr = run_map([write_map(tmp_path / "m.yaml", a, 0.05)], tmp_path / "out", capsys)
+    assert code == 0, stderr
+    check_world(tmp_path / "out", shape)
+    assert {p.name for p in (tmp_path / "out").iterdir()} >= set(FILES) | {"resume.npz"}
+    for name in ("overlay", "graph", "posterior", "posterior_cells"):
+        w, h = Image.open(tmp_path / "out" / f"{name}.png").size
+        assert w >= MIN_SIDE_PX and h >= 1000, (name, w, h)
+
+
+def test_a_figure_box_of_one_cell_by_thousands_has_both_sides(capsys):
+    from semmap_pp.outputs import figures
+
+    for box in ((0, 5000, 0, 1), (0, 1, 0, 5000), (0, 100_000, 0, 2)):
+        fig, (ax,) = figures._axes(box, extra_h=0.1, long_side=900)
+        w, h = fig.get_size_inches() * figures.DPI
+        assert min(w, h) >= figures.MIN_SIDE_PX - 1e-9
+        assert Image.open(__import__("io").BytesIO(figures.png(fig))).size[0] >= figures.MIN_SIDE_PX
