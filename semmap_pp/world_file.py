@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -119,6 +120,38 @@ def got(x) -> str:
     return f"{_brief(x)} ({kind(x)})" if isinstance(x, str) else kind(x)
 
 
+_SURROGATE_ESCAPE = re.compile(rb"\\u[dD][89a-fA-F]")
+
+
+def lone_surrogate(doc) -> str | None:
+    """The key path (``units[0].type``) of the first string of ``doc`` (keys too) that holds a
+    lone surrogate, which JSON's ``\\ud800`` escapes make and no UTF-8 output can write, or None.
+
+    >>> lone_surrogate({"units": [{"type": "room"}, {"type": "r\\ud800"}]}), lone_surrogate({"a": ["\\U0001f600"]})
+    ('units[1].type', None)
+    """
+    def bad(text: str) -> bool:
+        try:
+            text.encode("utf-8")
+            return False
+        except UnicodeEncodeError:
+            return True
+
+    stack = [("", doc)]
+    while stack:
+        where, x = stack.pop()
+        if isinstance(x, str) and bad(x):
+            return where or "the file"
+        if isinstance(x, dict):
+            for k in reversed(list(x)):
+                if bad(k):
+                    return f"{where or 'the file'}: a key"
+                stack.append((f"{where}.{k}" if where else k, x[k]))
+        elif isinstance(x, list):
+            stack.extend((f"{where}[{i}]", v) for i, v in reversed(list(enumerate(x))))
+    return None
+
+
 def _integer(x) -> bool:
     return isinstance(x, int) and not isinstance(x, bool)
 
@@ -160,6 +193,11 @@ def read_world_doc(path, not_file: str = "not a regular file") -> dict:
     doc = read_json(path)
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise SemmapError(path, f"not a world.json of semmap_pp (expected \"format\": \"{FORMAT}\")")
+    if _SURROGATE_ESCAPE.search(raw):       # "\ud800": JSON escapes a character text cannot hold
+        where = lone_surrogate(doc)
+        if where is not None:
+            raise SemmapError(path, f"{where} holds an escape of half a UTF-16 pair (\\ud800-\\udfff) "
+                                    f"alone, which is no character: not text")
     for keys, most in ((("units", "exterior"), MAX_UNITS), (("doors", "passages"), MAX_OPENINGS)):
         for key in keys:
             if not isinstance(doc.get(key, []), list):

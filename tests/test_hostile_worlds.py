@@ -265,3 +265,22 @@ def test_the_size_message_no_longer_contradicts_itself(floor, floor_doc, tmp_pat
     doc["map"]["width"] = 163
     with pytest.raises(SemmapError, match="written for a 163x116 map at 0.05 m/cell; this map is 162x116"):
         read_world_units(write(tmp_path, doc), floor.frame, floor.grid)
+
+
+@pytest.mark.parametrize("escape, at", [("\\ud800", "units[1].type"), ("x\\udcff", "units[2].type")])
+def test_a_string_that_is_no_text_is_refused_before_it_is_printed(floor, floor_doc, tmp_path, capsys, escape, at):
+    # "\ud800" is valid JSON but no character: `semmap where` printed it and died (UnicodeEncodeError)
+    doc = json.loads(json.dumps(floor_doc))
+    doc["units"][int(at[6])]["type"] = "TYPE"
+    path = tmp_path / "w.json"
+    path.write_text(json.dumps(doc).replace('"TYPE"', f'"{escape}"'))
+    x, y = floor_doc["units"][1]["center_m"]
+    for argv in (["where", str(path), str(x), str(y)], ["diff", str(path), str(path)],
+                 ["route", str(path), "1", "3"]):
+        assert main(argv) == 2
+        assert f"{path}: {at} holds an escape of half a UTF-16 pair" in one_line(capsys)
+    with pytest.raises(SemmapError, match="half a UTF-16 pair"):
+        read_world_units(path, floor.frame, floor.grid)
+    # a whole pair is one character (an emoji): read as any other string
+    path.write_text(json.dumps(doc).replace('"TYPE"', '"room \\ud83d\\ude00"'))
+    assert read_places(path).unit(str(int(at[6]) + 1)).type == "room \U0001f600"
