@@ -160,6 +160,10 @@ CASES = [
     ("yaml-mode-not-a-string", lambda d: (lambda p: ([p], p))(yaml_text(d, GOOD_YAML + "mode: [raw]\n")),
      "mode must be one of"),
     ("yaml-image-empty", lambda d: with_image(d, "''"), "'image' must be a file name"),
+    # issue 55 F7: a YAML's escape names a file of bytes that are not UTF-8 (it exists: it was read)
+    ("yaml-image-escape-not-utf8",
+     lambda d: ((d / os.fsdecode(b"\xff.pgm")).write_bytes(b"P5 2 2 255 ....") and with_image(d, '"\\udcff.pgm"')),
+     "'image' is not UTF-8 text"),
     ("yaml-image-names-a-yaml",
      lambda d: ((d / "other.yaml").write_text(GOOD_YAML) and with_image(d, "other.yaml")[0],
                 d / "other.yaml"), "not an image file"),
