@@ -7,8 +7,9 @@ Modules are discovered, so adding a subcommand never touches this file.
 Every :class:`~semmap_pp.errors.SemmapError` becomes one line on stderr and exit status 2; so does
 running out of memory (a map too large for the machine: docs/robustness.md gives the memory per
 cell). Ctrl-C becomes exit status 130; a reader of stdout that goes away (``semmap diagnose DIR |
-head``) ends the command quietly with status 141, as SIGPIPE would. No traceback reaches the user
-for an input error.
+head``) ends the command quietly with status 141, as SIGPIPE would. An argument that is not UTF-8
+text (a file name of other bytes) is one line and status 2 before the command starts
+(:func:`not_utf8`). No traceback reaches the user for an input error.
 """
 
 from __future__ import annotations
