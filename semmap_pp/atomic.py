@@ -128,8 +128,10 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
 
 
 def write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
-    write_bytes(path, text.encode("utf-8"))
+    """Write ``text`` (UTF-8) to ``path`` atomically. A lone surrogate (a byte of a file name that
+    is not UTF-8, as Python keeps it) is written as the escape ``\\udcff``: JSON reads it back as
+    the same name, a person sees where it was."""
+    write_bytes(path, text.encode("utf-8", "backslashreplace"))
 
 
 def _fsync_tree(top: Path) -> None:

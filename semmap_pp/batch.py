@@ -76,6 +76,11 @@ def expand_maps(items: list[str]) -> list[Path]:
     out: list[Path] = []
 
     def add(p: Path) -> None:
+        try:      # a name found in a folder or by a pattern, as semmap map checks its arguments
+            str(p).encode("utf-8")
+        except UnicodeEncodeError:
+            raise MapError(p, "not UTF-8 text (a name of other bytes, shown as \\xNN); semmap writes "
+                              "the names it is given into its outputs as UTF-8: rename it") from None
         if p not in out:
             out.append(p)
 

@@ -11,6 +11,28 @@ from __future__ import annotations
 import os
 
 
+def printable(text) -> str:
+    """``text`` (a path, or text that holds one) as text that any UTF-8 output takes: a byte of a
+    file name that is not UTF-8 (which Python keeps as a lone surrogate, ``os.fsdecode``) is
+    shown as ``\\xNN``.
+
+    >>> printable("/tmp/\\udcff.png"), printable("caf\\u00e9.yaml")
+    ('/tmp/\\\\xff.png', 'café.yaml')
+    """
+    text = os.fspath(text) if isinstance(text, (str, bytes, os.PathLike)) else str(text)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        pass
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:      # a surrogate no file name gives (a JSON escape "\\ud800")
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 class SemmapError(Exception):
     """A user-facing error: one line naming the file and the problem."""
 
@@ -28,12 +50,12 @@ class SemmapError(Exception):
         return (type(self), (self.path, self.message, self.line, self.col))
 
     def __str__(self) -> str:
-        where = self.path if self.path is not None else "<input>"
+        where = printable(self.path) if self.path is not None else "<input>"
         if self.line is not None:
             where += f":{self.line}"
             if self.col is not None:
                 where += f":{self.col}"
-        return f"{where}: {self.message}"
+        return f"{where}: {printable(self.message)}"
 
 
 class MapError(SemmapError):

@@ -26,7 +26,9 @@ import heapq
 import math
 import os
 import re
+from collections import Counter
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +45,10 @@ EDGE_TOLERANCE_M = 1e-3
 #: that large, and products of such numbers overflow.
 MAX_COORD_M = 1e9
 
+#: The most doors and passages one unit may have. A route looks at every opening of a unit from
+#: each of them, so its cost grows with the square of this; a long corridor of a large building
+#: has some tens.
+MAX_UNIT_OPENINGS = 256
 
 
 def unit_key(text: str) -> str:
@@ -200,11 +206,15 @@ class Places:
             k = unit_key(key)
         except ValueError as exc:
             raise SemmapError(self.path, str(exc)) from None
-        for u in (*self.units, *self.exterior):
-            if u.key == k:
-                return u
+        if k in self.by_key:
+            return self.by_key[k]
         listed = ", ".join(u.label for u in self.units)
         raise SemmapError(self.path, f"no unit {key} in this world (its units: {listed or 'none'})")
+
+    @cached_property
+    def by_key(self) -> dict[str, Unit]:
+        """Unit key (``"7"``, ``"X2"``) -> the unit: the building's units and exterior units."""
+        return {u.key: u for u in (*self.units, *self.exterior)}
 
     def units_at(self, x: float, y: float) -> list[Unit]:
         """Every unit whose rectangle holds the map point: the building's units in the file's
@@ -212,7 +222,16 @@ class Places:
         return [u for u in (*self.units, *self.exterior) if u.holds(x, y)]
 
     def openings_of(self, key: str) -> list[Opening]:
-        return [o for o in self.openings if key in o.units]
+        return [self.openings[i] for i in self._openings_by_unit.get(key, ())]
+
+    @cached_property
+    def _openings_by_unit(self) -> dict[str, list[int]]:
+        """Unit key -> the indices of its openings, in the file's order."""
+        out: dict[str, list[int]] = {}
+        for i, o in enumerate(self.openings):
+            for k in dict.fromkeys(o.units):
+                out.setdefault(k, []).append(i)
+        return out
 
     def route(self, start, goal) -> Route | None:
         """The shortest route from ``start`` to ``goal`` through doors and passages, or None when
@@ -274,9 +293,9 @@ class Places:
             o = self.openings[node]
             here = [(k, o.center) for k in o.units]
         for key, p in here:
-            for i, o in enumerate(self.openings):
-                if key in o.units and i != node:
-                    yield i, key, math.dist(p, o.center)
+            for i in self._openings_by_unit.get(key, ()):
+                if i != node:
+                    yield i, key, math.dist(p, self.openings[i].center)
             if key in goals:
                 yield "G", key, math.dist(p, p1)
 
@@ -308,6 +327,7 @@ def places_from_doc(doc: dict, path: Path | None = None) -> Places:
     from semmap_pp.world_file import corners, finite
 
     found: dict[str, list[Unit]] = {}
+    where: dict[bytes, str] = {}        # a unit's corners -> the first unit with them
     for key, prefix in (("units", ""), ("exterior", "X")):
         listed = doc.get(key, [])
         if not isinstance(listed, list):
@@ -324,11 +344,15 @@ def places_from_doc(doc: dict, path: Path | None = None) -> Places:
             v = corners(path, u, name, "vertices_m")
             if np.abs(v).max() > MAX_COORD_M:
                 raise SemmapError(path, f"{name}: 'vertices_m' lie beyond {MAX_COORD_M:g} m of the origin")
+            same = where.setdefault((v + 0.0).tobytes(), name)     # + 0.0: -0.0 is 0.0
+            if same != name:
+                raise SemmapError(path, f"{name} has the same corners as {same}: a unit given twice "
+                                        f"(remove one)")
             c = _point(u.get("center_m"))     # the file's own centre, else the corners' mean
             out.append(Unit(f"{prefix}{uid}", kind, v,
                             c if c is not None else (float(v[:, 0].mean()), float(v[:, 1].mean()))))
-    keys = [u.key for u in found["units"] + found["exterior"]]
-    twice = sorted({k for k in keys if keys.count(k) > 1})
+    counts = Counter(u.key for u in found["units"] + found["exterior"])
+    twice = sorted(k for k, n in counts.items() if n > 1)
     if twice:
         raise SemmapError(path, f"unit id {twice[0]} is used twice")
     inside = {u.key for u in found["units"]}
@@ -354,8 +378,13 @@ def places_from_doc(doc: dict, path: Path | None = None) -> Places:
             if width is None or width <= 0:
                 raise SemmapError(path, f"{name}: 'width_m' must be a positive number")
             openings.append(Opening(kind, oid, (str(pair[0]), str(pair[1])), xy, width))
+    per_unit = Counter(k for o in openings for k in dict.fromkeys(o.units))
+    busiest = max(per_unit, key=per_unit.get, default=None)
+    if busiest is not None and per_unit[busiest] > MAX_UNIT_OPENINGS:
+        raise SemmapError(path, f"unit {busiest} has {per_unit[busiest]} doors and passages; a unit has "
+                                f"at most {MAX_UNIT_OPENINGS}")
     return Places(path, tuple(found["units"]), tuple(found["exterior"]), tuple(openings), "passages" in doc)
 
 
-__all__ = ["EDGE_TOLERANCE_M", "MAX_COORD_M", "Opening", "Places", "Route", "Step", "TYPE_LETTER", "Unit",
+__all__ = ["EDGE_TOLERANCE_M", "MAX_COORD_M", "MAX_UNIT_OPENINGS", "Opening", "Places", "Route", "Step", "TYPE_LETTER", "Unit",
            "places_from_doc", "read_places", "unit_key"]

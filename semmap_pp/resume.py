@@ -24,12 +24,23 @@ import numpy as np
 
 from semmap_pp import atomic
 from semmap_pp import world as wm
+from semmap_pp.cli.argtypes import MAX_N_INNER, MAX_SEED
 from semmap_pp.errors import SemmapError
 
 FORMAT = "semmap_pp.resume/1"
 FILE_NAME = "resume.npz"
 #: R-hat and ESS need at least this many draws per chain.
 MIN_DRAWS = 4
+#: Bounds of the settings a resume file may hold: ``semmap map``'s own where it has them
+#: (:mod:`semmap_pp.cli.argtypes`), else far beyond any run (a billion draws of one kernel take days).
+MAX_COUNT = 10 ** 9
+MAX_CHAINS = 10_000
+_SETTINGS = {"chains": (1, MAX_CHAINS), "cores": (1, MAX_CHAINS), "tune": (0, MAX_COUNT),
+             "draws": (1, MAX_COUNT), "n_inner": (1, MAX_N_INNER), "seed": (0, MAX_SEED),
+             "spread_draws": (0, MAX_COUNT), "spread_n_inner": (1, MAX_N_INNER)}
+_OPTIONAL_SETTINGS = ("spread_draws", "spread_n_inner")      # older files: RunSettings' defaults
+_MAP_OPTIONS = {"occupied_thresh": float, "free_thresh": float, "negate": int, "resolution": float,
+                "mode": str, "max_cells": int, "allow_outside": bool}
 
 
 def merge_records(history, new) -> list:
@@ -213,8 +224,10 @@ def read_resume(run_dir, extra_draws: int | None = None) -> ResumeState:
         meta = json.loads(str(arrays["meta"]))
     except Exception as exc:   # zip, npy and JSON errors: the user needs one line
         raise SemmapError(path, f"not a readable resume file ({type(exc).__name__}: {exc})") from None
-    if meta.get("format") != FORMAT:
-        raise SemmapError(path, f"unknown resume format {meta.get('format')!r} (expected {FORMAT})")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        shown = _brief(meta.get("format") if isinstance(meta, dict) else meta)
+        raise SemmapError(path, f"unknown resume format {shown} (expected {FORMAT})")
+    check_resume(meta, arrays, path)
     K = int(meta["capacity"])
     starts, last, history = [], [], []
     for c, info in enumerate(meta["chains"]):
@@ -241,3 +254,128 @@ def read_resume(run_dir, extra_draws: int | None = None) -> ResumeState:
         raise SemmapError(path, f"the run is complete ({s['tune']} burn-in + {s['draws']} draws per chain); "
                                 "give --draws N to add N draws per chain")
     return ResumeState(path, meta, starts, last, history, total)
+
+
+def _brief(x) -> str:
+    text = repr(x)
+    return text if len(text) <= 40 else text[:36] + "..."
+
+
+def _integer(path, where: str, v, lo: int, hi: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise SemmapError(path, f"{where} must be an integer from {lo} to {hi}, got {_brief(v)}")
+    return v
+
+
+def _array(path, arrays: dict, name: str, kinds: str, shape: tuple) -> np.ndarray:
+    """``arrays[name]``, refused unless its dtype kind is one of ``kinds`` and its shape is
+    ``shape`` (None: any length there)."""
+    if name not in arrays:
+        raise SemmapError(path, f"the array {name} is missing")
+    a = arrays[name]
+    if a.dtype.kind not in kinds or a.ndim != len(shape) or any(
+            n is not None and m != n for m, n in zip(a.shape, shape)):
+        want = " x ".join("n" if n is None else str(n) for n in shape) or "a scalar"
+        raise SemmapError(path, f"the array {name} is {a.dtype} of shape {a.shape}; expected "
+                                f"{'integers' if kinds == 'iu' else 'booleans' if kinds == 'b' else 'numbers'} "
+                                f"of shape {want}")
+    return a
+
+
+def check_resume(meta: dict, arrays: dict, path) -> None:
+    """Refuse, naming ``path`` and the key, a resume file whose settings, chains or arrays are not
+    of the type, range and shape :func:`write_resume` writes: a seed beyond :data:`MAX_SEED`, a
+    count that is not an integer, a random state numpy does not take, a world array of the wrong
+    dtype or size, a rectangle beyond the lattice. Checked before anything is sampled."""
+    settings = meta.get("settings")
+    known = set(_SETTINGS) | {"anneal"}
+    needed = known - set(_OPTIONAL_SETTINGS)
+    if not isinstance(settings, dict):
+        raise SemmapError(path, f"settings must be an object, got {_brief(settings)}")
+    for key in sorted(needed - set(settings)):
+        raise SemmapError(path, f"settings.{key} is missing")
+    for key in sorted(set(settings) - known, key=str):
+        raise SemmapError(path, f"settings.{_brief(key)[1:-1]} is not a setting of this version "
+                                f"({', '.join(sorted(known))})")
+    for key, (lo, hi) in _SETTINGS.items():
+        if key in settings:
+            _integer(path, f"settings.{key}", settings[key], lo, hi)
+    a = settings["anneal"]
+    if isinstance(a, bool) or not isinstance(a, (int, float)) or not (math.isfinite(a) and a >= 1.0):
+        raise SemmapError(path, f"settings.anneal must be a number of at least 1, got {_brief(a)}")
+    from semmap_pp.model import MAX_K
+
+    K = _integer(path, "capacity", meta.get("capacity"), 1, MAX_K)
+    inputs = meta.get("inputs")
+    if not isinstance(inputs, dict) or not isinstance(inputs.get("map"), str):
+        raise SemmapError(path, "inputs.map must be the map's file name")
+    for key in ("model", "rules", "roi"):
+        if inputs.get(key) is not None and not isinstance(inputs[key], str):
+            raise SemmapError(path, f"inputs.{key} must be a file name or null, got {_brief(inputs[key])}")
+    options = inputs.get("map_options")
+    if not isinstance(options, dict) or not set(options) <= set(_MAP_OPTIONS):
+        raise SemmapError(path, f"inputs.map_options must be an object of {', '.join(_MAP_OPTIONS)}")
+    for key, kind in _MAP_OPTIONS.items():
+        v = options.get(key)
+        ok = v is None or (isinstance(v, kind) if kind in (str, bool) else
+                           not isinstance(v, bool) and isinstance(v, (int, float) if kind is float else int)
+                           and math.isfinite(v))
+        if not ok or (key == "max_cells" and v is not None and v < 1):
+            raise SemmapError(path, f"inputs.map_options.{key} must be {kind.__name__} or null, got {_brief(v)}")
+    lattice = inputs.get("lattice")
+    if lattice is not None:
+        if not (isinstance(lattice, list) and len(lattice) == 2
+                and all(not isinstance(n, bool) and isinstance(n, int) and 1 <= n <= 10 ** 9 for n in lattice)):
+            raise SemmapError(path, f"inputs.lattice must be two positive integers, got {_brief(lattice)}")
+    chains = meta.get("chains")
+    if not isinstance(chains, list) or len(chains) != settings["chains"]:
+        raise SemmapError(path, f"chains must list one entry per chain (settings.chains = "
+                                f"{settings['chains']}), got {len(chains) if isinstance(chains, list) else _brief(chains)}")
+    for c, info in enumerate(chains):
+        where = f"chains[{c}]"
+        if not isinstance(info, dict):
+            raise SemmapError(path, f"{where} must be an object")
+        draw = _integer(path, f"{where}.draw", info.get("draw"), 0, 2 * MAX_COUNT)
+        _integer(path, f"{where}.n_tune", info.get("n_tune"), 0, MAX_COUNT)
+        if not isinstance(info.get("knowledge_on"), bool):
+            raise SemmapError(path, f"{where}.knowledge_on must be true or false, got {_brief(info.get('knowledge_on'))}")
+        worlds = [(f"start_rects_{c}", _array(path, arrays, f"start_rects_{c}", "iu", (K, 4)),
+                   _array(path, arrays, f"start_active_{c}", "b", (K,)))]
+        if draw > 0:
+            worlds += _chain_arrays(path, arrays, c, info, draw, K)
+        if lattice is not None:
+            for name, r, on in worlds:
+                r = r[on]
+                if r.size and not (np.all(r[:, :2] >= 0) and np.all(r[:, 2] <= lattice[0])
+                                   and np.all(r[:, 3] <= lattice[1]) and np.all(r[:, 2:] > r[:, :2])):
+                    raise SemmapError(path, f"{name} holds a unit that is not a rectangle of the run's "
+                                            f"lattice ({lattice[0]} x {lattice[1]} cells)")
+
+
+def _chain_arrays(path, arrays: dict, c: int, info: dict, draw: int, K: int) -> list:
+    """Check what chain ``c`` of a resume file that made ``draw`` draws holds beyond its start;
+    returns its worlds ``(name, rects, active)`` for the lattice check."""
+    where = f"chains[{c}]"
+    best = info.get("best_logp")
+    ok = (not isinstance(best, bool) and isinstance(best, (int, float)) and not math.isnan(best)) \
+        or best in ("inf", "-inf")        # write_resume's spelling of an infinite one
+    if not ok:
+        raise SemmapError(path, f"{where}.best_logp must be a number, got {_brief(best)}")
+    try:
+        np.random.PCG64().state = info.get("rng_state")
+    except (TypeError, ValueError, KeyError, OverflowError, AttributeError) as exc:
+        raise SemmapError(path, f"{where}.rng_state is not a random state numpy takes ({exc})") from None
+    rects = _array(path, arrays, f"rects_{c}", "iu", (None, K, 4))
+    n = rects.shape[0]
+    if n < 1:
+        raise SemmapError(path, f"{where} made {draw} draws but rects_{c} holds none")
+    active = _array(path, arrays, f"active_{c}", "b", (n, K))
+    for stat in ("logp", "burn_in"):
+        if f"stat_{c}_{stat}" not in arrays:
+            raise SemmapError(path, f"the array stat_{c}_{stat} is missing")
+    for name in [k for k in arrays if k.startswith(f"stat_{c}_")]:
+        _array(path, arrays, name, "iufb", (n,))
+    return [(f"rects_{c}", rects.reshape(-1, 4), active.reshape(-1)),
+            (f"best_rects_{c}", _array(path, arrays, f"best_rects_{c}", "iu", (K, 4)),
+             _array(path, arrays, f"best_active_{c}", "b", (K,)))]
+

@@ -32,9 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from semmap_pp.outputs.ids import MIN_IOU, overlap_iou_matrix
+from semmap_pp.outputs.ids import MIN_IOU, greedy_pairs, overlap_pairs
 from semmap_pp.places import Opening, Places, Unit, _rounded, _xy
-from semmap_pp.stability import greedy_matches
 
 #: Two doors or passages (of paired units) are the same opening when their centres lie within the
 #: wider one's width, and at least this far (metres), as the evaluation pairs doors.
@@ -203,20 +202,23 @@ def diff_worlds(old: Places, new: Places, *, tolerance_m: float = TOLERANCE_M,
     if not (math.isfinite(tolerance_m) and tolerance_m >= 0):
         raise ValueError(f"tolerance_m must be a finite number >= 0, got {tolerance_m!r}")
     a, b = (*old.units, *old.exterior), (*new.units, *new.exterior)
-    matches = greedy_matches(overlap_iou_matrix([u.corners for u in a], [v.corners for v in b]), min_iou)
+    overlaps = overlap_pairs([u.corners for u in a], [v.corners for v in b], path=new.path or old.path)
+    matches = greedy_pairs(overlaps, min_iou)
     pairs = tuple(UnitPair(a[i], b[j], v) for i, j, v in matches)
     paired_a, paired_b = {i for i, _, _ in matches}, {j for _, j, _ in matches}
     to_new = {p.old.key: p.new.key for p in pairs}
 
     # openings: those joining paired units, nearest first, each within the wider width (>= 1 m)
     cands = []
+    by_units: dict[frozenset, list[int]] = {}
+    for j, q in enumerate(new.openings):
+        by_units.setdefault(frozenset(q.units), []).append(j)
     for i, o in enumerate(old.openings):
         mapped = {to_new.get(k) for k in o.units}
         if None in mapped:
             continue
-        for j, q in enumerate(new.openings):
-            if set(q.units) != mapped:
-                continue
+        for j in by_units.get(frozenset(mapped), ()):
+            q = new.openings[j]
             d = math.dist(o.center, q.center)
             if d <= max(o.width_m, q.width_m, OPENING_TOL_M):
                 cands.append((d, i, j))
@@ -242,7 +244,7 @@ def _line(verb: str, label: str, rest: str) -> str:
 
 
 def _label(places: Places, key: str) -> str:
-    return next(u.label for u in places.units if u.key == key)
+    return places.by_key[key].label
 
 
 def _between(places: Places, o: Opening) -> str:

@@ -49,6 +49,21 @@ def test_maps_are_files_folders_or_patterns(tmp_path):
         B.expand_maps([str(tmp_path / "nope.yaml")])
 
 
+@pytest.mark.parametrize("found_by", ["folder", "pattern"])
+def test_a_map_found_under_a_name_that_is_not_utf8_stops_the_batch_before_it_starts(tmp_path, capsys, found_by):
+    # the folder's own names are UTF-8 (semmap checks its arguments); one it holds is not (issue 55 F7:
+    # the task's name broke the cluster's messages, and every task failed)
+    (tmp_path / "a.yaml").write_text("")
+    os.close(os.open(os.fsencode(tmp_path) + b"/b\xe9.yaml", os.O_CREAT | os.O_WRONLY))
+    item = str(tmp_path) if found_by == "folder" else str(tmp_path / "*.yaml")
+    with pytest.raises(MapError, match="not UTF-8 text") as exc:
+        B.expand_maps([item])
+    assert str(exc.value).startswith(f"{tmp_path}/b\\xe9.yaml: ")
+    assert main(["batch", item, "--out", str(tmp_path / "out")]) == 2
+    assert "b\\xe9.yaml: not UTF-8 text" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.fixture(scope="module")
 def maps(tmp_path_factory):
     d = tmp_path_factory.mktemp("maps")

@@ -28,7 +28,8 @@ def floor(tmp_path_factory):
 def fake_run(path, units, labels, cpr=0.5, **extra):
     """A run folder holding only what `semmap eval` reads: world.json and labels.png."""
     path.mkdir(parents=True, exist_ok=True)
-    (path / "world.json").write_text(json.dumps(dict({"units": units, "cpr": cpr}, **extra)))
+    (path / "world.json").write_text(json.dumps(dict({"format": "semmap_pp.world/1", "units": units, "cpr": cpr},
+                                                     **extra)))
     write_labels_png(path / "labels.png", np.asarray(labels))
     return path
 
@@ -93,6 +94,20 @@ def test_kind_by_content_when_the_name_says_nothing(tmp_path):
     shutil.copy(IPA / "training_Fr52.png", tmp_path / "b.png")
     assert detect_kind(tmp_path / "a.png") == "ipa-segmentation"
     assert detect_kind(tmp_path / "b.png") == "ipa-types"
+
+
+@pytest.mark.parametrize("world", [
+    '{"format": "semmap_pp.world/1", "units": [' + ",".join(['{"id": 1}'] * 20_001) + "]}",
+    '{"format": "semmap_pp.world/1", "objects": [' + ",".join(["[]"] * 2_000_001) + "]}",
+])
+def test_a_runs_world_json_is_bounded_as_every_world_json_is(tmp_path, capsys, world):
+    # issue 55 F3: a world.json is bounded before anything is built from it, here too
+    run = fake_run(tmp_path / "big", [], np.ones((5, 5)))
+    (run / "world.json").write_text(world)
+    assert main(["eval", str(run), "--truth", str(IPA / "training_Fr52.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"semmap: error: {run / 'world.json'}: ")
+    assert "a world.json holds at most 20000" in err or "too many for a world.json" in err
 
 
 def test_truth_of_another_map_is_a_user_error(floor, tmp_path, capsys):

@@ -77,3 +77,83 @@ def test_seed_and_kernels_per_draw_are_bounded(tmp_path, capsys, argv, what):
     assert exc.value.code == 2
     assert what in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+# ---- a resume.npz holding what semmap map would refuse (issue 55's F9) ------------------------------
+# --seed is bounded on the command line; a resume file brings its own settings, and a seed of 2^64
+# reached the HDF5 writer of trace.nc after sampling (TypeError). Every value is checked when the
+# file is read, before anything is loaded or sampled.
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    import numpy as np
+    from semmap_pp.grid import write_map
+
+    d = tmp_path_factory.mktemp("resumable")
+    yaml = write_map(d / "m.yaml", np.pad(np.full((36, 46), 254, np.uint8), 2), 0.05)
+    assert main(["map", str(yaml), "--out", str(d / "run"), "--chains", "2", "--cores", "1", "--tune", "2",
+                 "--draws", "4", "--n-inner", "5", "--spread-draws", "0", "--progress", "none"]) == 0
+    return d / "run"
+
+
+def _edited_resume(run, tmp_path, edit):
+    import io
+    import shutil
+
+    import numpy as np
+
+    d = tmp_path / "copy"
+    shutil.copytree(run, d)
+    with np.load(d / "resume.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    edit(meta, arrays)
+    arrays["meta"] = np.array(json.dumps(meta))
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    (d / "resume.npz").write_bytes(buf.getvalue())
+    return d
+
+
+def _settings(**kw):
+    return lambda meta, arrays: meta["settings"].update(kw)
+
+
+@pytest.mark.parametrize("edit, what", [
+    (_settings(seed=2 ** 64), "settings.seed must be an integer from 0 to 4294967295, got 18446744073709551616"),
+    (_settings(seed=2 ** 32), "settings.seed must be an integer from 0 to 4294967295, got 4294967296"),
+    (_settings(seed=-1), "settings.seed must be an integer from 0 to 4294967295, got -1"),
+    (_settings(seed="7"), "settings.seed must be an integer from 0 to 4294967295, got '7'"),
+    (_settings(seed=7.0), "settings.seed must be an integer from 0 to 4294967295, got 7.0"),
+    (_settings(n_inner=10 ** 7), "settings.n_inner must be an integer from 1 to 1000000"),
+    (_settings(draws=True), "settings.draws must be an integer from 1 to 1000000000, got True"),
+    (_settings(anneal="hot"), "settings.anneal must be a number of at least 1, got 'hot'"),
+    (_settings(colour=1), "settings.colour is not a setting of this version"),
+    (lambda m, a: m["settings"].pop("tune"), "settings.tune is missing"),
+    (lambda m, a: m.update(capacity=10 ** 12), "capacity must be an integer from 1 to 100000"),
+    (lambda m, a: m["chains"].pop(), "chains must list one entry per chain (settings.chains = 2), got 1"),
+    (lambda m, a: m["chains"][1].update(draw=-3), "chains[1].draw must be an integer"),
+    (lambda m, a: m["chains"][0]["rng_state"]["state"].update(state=2 ** 130),
+     "chains[0].rng_state is not a random state numpy takes"),
+    (lambda m, a: m["chains"][0].update(rng_state="random"), "chains[0].rng_state is not a random state"),
+    (lambda m, a: m["inputs"].update(map=["m.yaml"]), "inputs.map must be the map's file name"),
+    (lambda m, a: m["inputs"]["map_options"].update(max_cells="many"), "inputs.map_options.max_cells must be int"),
+    (lambda m, a: a.update(rects_1=a["rects_1"].astype("float64")),
+     "the array rects_1 is float64 of shape (6, 64, 4); expected integers of shape n x 64 x 4"),
+    (lambda m, a: a.update(active_0=a["active_0"][:, :10]), "the array active_0 is bool of shape (6, 10)"),
+    (lambda m, a: a.pop("best_rects_0"), "the array best_rects_0 is missing"),
+    (lambda m, a: a.update(stat_0_logp=a["stat_0_logp"].astype("U8")), "the array stat_0_logp is <U8"),
+    (lambda m, a: a["start_rects_0"].__setitem__((0, 2), 10 ** 6) or a["start_active_0"].__setitem__(0, True),
+     "start_rects_0 holds a unit that is not a rectangle of the run's lattice"),
+])
+def test_a_resume_file_out_of_range_or_of_the_wrong_type_is_one_line(finished_run, tmp_path, capsys, edit, what):
+    d = _edited_resume(finished_run, tmp_path, edit)
+    assert main(["map", "--resume", str(d), "--draws", "4", "--progress", "none"]) == 2
+    err = _err(capsys)
+    assert err.startswith(f"semmap: error: {d / 'resume.npz'}: ") and what in err, err
+
+
+def test_an_unedited_copy_resumes(finished_run, tmp_path, capsys):
+    d = _edited_resume(finished_run, tmp_path, lambda m, a: None)
+    assert main(["map", "--resume", str(d), "--draws", "4", "--progress", "none"]) == 0
+    capsys.readouterr()

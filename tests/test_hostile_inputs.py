@@ -160,6 +160,10 @@ CASES = [
     ("yaml-mode-not-a-string", lambda d: (lambda p: ([p], p))(yaml_text(d, GOOD_YAML + "mode: [raw]\n")),
      "mode must be one of"),
     ("yaml-image-empty", lambda d: with_image(d, "''"), "'image' must be a file name"),
+    # issue 55 F7: a YAML's escape names a file of bytes that are not UTF-8 (it exists: it was read)
+    ("yaml-image-escape-not-utf8",
+     lambda d: ((d / os.fsdecode(b"\xff.pgm")).write_bytes(b"P5 2 2 255 ....") and with_image(d, '"\\udcff.pgm"')),
+     "'image' is not UTF-8 text"),
     ("yaml-image-names-a-yaml",
      lambda d: ((d / "other.yaml").write_text(GOOD_YAML) and with_image(d, "other.yaml")[0],
                 d / "other.yaml"), "not an image file"),
@@ -424,3 +428,122 @@ def test_subprocess_rules_query_with_non_ascii_evidence(tmp_path):
     (tmp_path / "ev.lp").write_text("unit(1). \u00e9\n")
     result = semmap("rules", "query", ROOT / "rules" / "table3.lp", "--evidence", tmp_path / "ev.lp")
     assert_one_line(result, 2, tmp_path / "ev.lp", "")
+
+
+# ---- names that are not UTF-8 (issue 55's F7) -----------------------------------------------------
+# Linux file names are bytes; Python keeps a byte that is not UTF-8 as a lone surrogate, which no
+# UTF-8 output can hold (the run ended in a UnicodeEncodeError after sampling, an empty folder left).
+# Every argument is checked before anything is read; names that come from elsewhere (a resumed run's
+# absolute paths, made in a folder of such a name) are written as escapes.
+
+NOT_UTF8 = os.fsdecode(b"\xff")       # "\udcff"
+
+
+@pytest.mark.parametrize("where", ["yaml", "image", "out", "out-parent", "start"])
+def test_a_name_that_is_not_utf8_is_refused_before_anything(tmp_path, capsys, where):
+    good = good_map(tmp_path)
+    argv = [str(good), "--out", str(tmp_path / "out"), *FAST]
+    bad = {"yaml": tmp_path / f"m{NOT_UTF8}.yaml", "image": tmp_path / f"{NOT_UTF8}.pgm",
+           "out": tmp_path / f"o{NOT_UTF8}", "out-parent": tmp_path / f"d{NOT_UTF8}" / "out",
+           "start": tmp_path / f"w{NOT_UTF8}.json"}[where]
+    if where == "yaml":
+        bad.write_text(good.read_text())
+        argv[0] = str(bad)
+    elif where == "image":
+        bad.write_bytes((tmp_path / "m.pgm").read_bytes())
+        argv[0] = str(bad)
+    elif where.startswith("out"):
+        argv[2] = str(bad)
+    else:
+        bad.write_text("{}")
+        argv += ["--start", str(bad)]
+    code = main(["map", *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    shown = str(bad).replace(NOT_UTF8, "\\xff")
+    assert err.startswith(f"semmap: error: {shown}: not UTF-8 text"), err
+    err.encode("utf-8")                                  # the message itself prints anywhere
+    assert [p for p in tmp_path.iterdir() if p.is_dir()] == []     # no output folder, nor its parent
+
+
+@pytest.mark.parametrize("command", ["info", "score", "rules-check", "where"])
+def test_every_command_refuses_such_a_name_in_a_real_process(tmp_path, command):
+    d = os.fsencode(tmp_path)
+    name = d + b"/\xfe\xe9.yaml"
+    argv = {"info": [b"info", name], "score": [b"score", name, name],
+            "rules-check": [b"rules", b"check", d + b"/r\xe9.lp"], "where": [b"where", name, b"0", b"0"]}[command]
+    result = subprocess.run([os.fsencode(sys.executable), b"-m", b"semmap_pp", *argv], capture_output=True,
+                            timeout=120, cwd=ROOT)
+    err = result.stderr.decode("utf-8")                 # valid UTF-8: nothing was printed raw
+    assert result.returncode == 2 and result.stdout == b"" and "Traceback" not in err
+    shown = "r\\xe9.lp" if command == "rules-check" else "\\xfe\\xe9.yaml"
+    assert err.count("\n") == 1 and f"{shown}: not UTF-8 text" in err, err
+
+
+def test_a_run_made_in_a_folder_of_such_a_name_resumes(tmp_path):
+    """``semmap map m.yaml --out out`` run inside a folder named b'd\\xfc' works (its arguments are
+    UTF-8) and stores the map's absolute path, which is not; ``--resume out`` writes every output,
+    the name escaped."""
+    folder = os.fsencode(tmp_path) + b"/d\xfc"
+    os.mkdir(folder)
+    write_map(Path(os.fsdecode(folder)) / "m.yaml", np.pad(np.full((36, 46), 254, np.uint8), 2), 0.05)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    run = [sys.executable, "-m", "semmap_pp", "map"]
+    first = subprocess.run([*run, "m.yaml", "--out", "out", *FAST], cwd=folder, env=env, capture_output=True,
+                           text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    out = Path(os.fsdecode(folder)) / "out"
+    meta = json.loads(str(np.load(out / "resume.npz")["meta"]))
+    assert NOT_UTF8 not in meta["inputs"]["map"] and os.fsdecode(b"\xfc") in meta["inputs"]["map"]
+    again = subprocess.run([*run, "--resume", "out", "--draws", "4", "--progress", "none"], cwd=folder,
+                           env=env, capture_output=True, timeout=300)
+    assert again.returncode == 0, again.stderr.decode("utf-8", "replace")[-2000:]
+    assert "Traceback" not in again.stderr.decode("utf-8", "replace")
+    doc = json.loads((out / "world.json").read_text(encoding="utf-8"))
+    jsonschema.validate(doc, SCHEMA)
+    assert (out / "report.html").read_text(encoding="utf-8") and (out / "diagnostics.txt").read_text(encoding="utf-8")
+    import h5py
+
+    with h5py.File(out / "trace.nc", "r") as f:
+        assert f.attrs["map"].endswith("d\\xfc/m.yaml")
+
+
+def test_printable_shows_the_bytes_of_a_name():
+    from semmap_pp.errors import SemmapError, printable
+
+    assert printable(os.fsdecode(b"/m/\xff\xc3\xa9.png")) == "/m/\\xffé.png"
+    assert printable("caf\u00e9") == "caf\u00e9" and printable(None) == "None"
+    assert printable("a\ud800") == "a\\ud800"       # a surrogate no file name gives
+    e = SemmapError(os.fsdecode(b"/x/\xfe.yaml"), "cannot read " + os.fsdecode(b"\xfe"), 3, 4)
+    assert str(e) == "/x/\\xfe.yaml:3:4: cannot read \\xfe"
+
+
+# ---- tall and thin maps (issue 55's F8) -----------------------------------------------------------
+# A figure's sides follow the map's: 1 x 2000 cells drew 0.7 pixels wide, and matplotlib's PNG writer
+# refused the empty image after world.json was written (no report, no resume.npz).
+
+@pytest.mark.parametrize("shape, walls", [((2000, 1), False), ((4000, 3), True)])
+def test_a_tall_thin_map_runs_to_the_end_with_figures_of_a_minimum_width(tmp_path, capsys, shape, walls):
+    from semmap_pp.outputs.figures import MIN_SIDE_PX
+    from semmap_pp.outputs.report import FILES
+
+    a = np.full(shape, 254, np.uint8)
+    if walls:
+        a[:, 0] = a[:, -1] = 0
+    code, stdout, stderr = run_map([write_map(tmp_path / "m.yaml", a, 0.05)], tmp_path / "out", capsys)
+    assert code == 0, stderr
+    check_world(tmp_path / "out", shape)
+    assert {p.name for p in (tmp_path / "out").iterdir()} >= set(FILES) | {"resume.npz"}
+    for name in ("overlay", "graph", "posterior", "posterior_cells"):
+        w, h = Image.open(tmp_path / "out" / f"{name}.png").size
+        assert w >= MIN_SIDE_PX and h >= 1000, (name, w, h)
+
+
+def test_a_figure_box_of_one_cell_by_thousands_has_both_sides(capsys):
+    from semmap_pp.outputs import figures
+
+    for box in ((0, 5000, 0, 1), (0, 1, 0, 5000), (0, 100_000, 0, 2)):
+        fig, (ax,) = figures._axes(box, extra_h=0.1, long_side=900)
+        w, h = fig.get_size_inches() * figures.DPI
+        assert min(w, h) >= figures.MIN_SIDE_PX - 1e-9
+        assert Image.open(__import__("io").BytesIO(figures.png(fig))).size[0] >= figures.MIN_SIDE_PX

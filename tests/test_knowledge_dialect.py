@@ -161,3 +161,53 @@ def test_body_arithmetic_is_fine_when_the_head_variable_also_occurs_plainly(tmp_
                          ":~ near(P,Q), fivish(Q), room(P). [100@0, n, P, Q]\n")
     net = ground(rs, Evidence(units=(1, 2, 3), adj=((1, 2), (2, 3)))).network
     assert net.n_vars >= 3
+
+
+# ---- intervals in facts (issue 55): clingo's idiom for many facts -----------------------------------
+
+NAMED = ":~ unit(U), named(U), not hall(U). [1500@0, named_hall, U]\n"
+
+
+@pytest.mark.parametrize("short, long", [
+    ("named(1..3).\n", "named(1).\nnamed(2).\nnamed(3).\n"),
+    ("named(2..3). far(1..2, 5..6).\nnamed(9..7).\n",
+     "named(2). named(3). far(1,5). far(1,6). far(2,5). far(2,6).\n"),
+])
+def test_interval_facts_of_a_rule_file_are_the_facts_written_out(tmp_path, short, long):
+    extra = ":~ far(P,Q), adj(P,Q). [100@0, far, P, Q]\n" if "far" in short else ""
+    a = check(tmp_path, short + NAMED + extra, "short.lp")
+    b = check(tmp_path, long + NAMED + extra, "long.lp")
+    assert a.program == b.program and a.digest == b.digest       # the same knowledge, the same caches
+    ev = Evidence.build(range(1, 7), rolike={1, 4}, colike={2}, muldoor={3: 0.6}, adj=[(1, 2), (2, 3), (1, 5)])
+    ra, rb = KnowledgeEngine(a).infer(ev), KnowledgeEngine(b).infer(ev)
+    for u in ev.units:
+        assert ra.types[u].tolist() == rb.types[u].tolist()
+    assert ra.log_z == rb.log_z and ra.map_cost == rb.map_cost
+    named = {2, 3} | ({1} if short.startswith("named(1..3)") else set())
+    for u in ev.units:        # the facts took effect: a named unit leans to hall (index 2), unit 6 not
+        assert (ra.types[u][2] > ra.types[6][2] + 0.1) == (u in named), (u, ra.types[u])
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("named(1..1000000000).\n" + NAMED, r"r\.lp:1:1: the intervals of named\(\(1\.\.1000000000\)\) stand for "
+                                        r"1,000,000,000 facts; a file's facts may stand for at most 100,000$"),
+    ("named(1..70000).\nfar(1..40000).\n" + NAMED, r"r\.lp:2:1: the intervals of far.* stand for 40,000 facts, more "
+                                                   r"than the 30,000 left"),
+    ("named(1..N).\n" + NAMED, r"r\.lp:1:7: the bounds of the interval \(1\.\.N\) must be integers"),
+    ("named(U) :- unit(U), U = 1..3.\n" + NAMED, r"r\.lp:1:26: intervals .* are not allowed here"),
+    ("named(1..3) :- unit(1).\n" + NAMED, r"r\.lp:1:7: intervals .* are not allowed here"),
+])
+def test_interval_facts_that_stand_for_too_much_or_sit_in_a_rule_are_one_line(tmp_path, text, pattern):
+    import time
+
+    t0 = time.perf_counter()
+    rejects(tmp_path, text, pattern)
+    assert time.perf_counter() - t0 < 5
+
+
+def test_the_bound_counts_the_included_files_too(tmp_path):
+    (tmp_path / "more.lp").write_text("far(1..60000).\n")
+    msg = rejects(tmp_path, '#include "more.lp".\nnamed(1..60000).\n' + NAMED,
+                  r"the intervals of far.* stand for 60,000 facts, more than the 40,000 left of the 100,000",
+                  where="more.lp:1:1: ")
+    assert "its includes too" in msg

@@ -165,3 +165,57 @@ def test_cli_evidence_of_a_world_gives_its_types_back(intel_corner_wstar, tmp_pa
     assert main(["rules", "evidence", map_path, str(intel_corner_wstar), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is a directory" in err
+
+
+# ---- intervals in facts (issue 55): clingo's idiom for many facts -----------------------------------
+
+@pytest.mark.parametrize("short, long", [
+    ("unit(1..6).", " ".join(f"unit({u})." for u in range(1, 7))),
+    ("unit(1..4). rolike(2..3). adj(1,2..4). muldoor(4..4). halike(3..1).",
+     "unit(1). unit(2). unit(3). unit(4). rolike(2). rolike(3). adj(1,2). adj(1,3). adj(1,4). muldoor(4)."),
+    ('unit(0..3). soft(colike(1..2), "0.6"). adj(0..1, 2..3). muldoor(-1..-2).',
+     'unit(0). unit(1). unit(2). unit(3). soft(colike(1), "0.6"). soft(colike(2), "0.6"). '
+     "adj(0,2). adj(0,3). adj(1,2). adj(1,3)."),
+])
+def test_interval_facts_are_the_facts_they_stand_for(short, long):
+    a, b = evidence_from_facts(short, "ev.lp"), evidence_from_facts(long, "ev.lp")
+    assert a == b
+    eng = KnowledgeEngine.from_file("rules/table3.lp")
+    ra, rb = eng.infer(a), eng.infer(b)
+    for u in b.units:
+        np.testing.assert_array_equal(ra.types[u], rb.types[u])
+    assert ra.log_z == rb.log_z and ra.map_cost == rb.map_cost
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("unit(1..1000000000).", r"ev\.lp:1:1: the intervals of unit\(\(1\.\.1000000000\)\) stand for "
+                             r"1,000,000,000 facts; a file's facts may stand for at most 100,000"),
+    ("unit(1..60000). rolike(1..60000).", r"ev\.lp:1:17: the intervals of rolike.* stand for 60,000 facts, more "
+                                          r"than the 40,000 left of the 100,000"),
+    ("adj(1..1000, 1..1000).", "stand for 1,000,000 facts"),
+    ("unit(1..n).", r"ev\.lp:1:6: the bounds of the interval \(1\.\.n\) must be integers"),
+    ("unit(X..3).", "must be integers"),
+    ("unit(1). rolike(U) :- unit(U), U = 1..3.", "only ground evidence facts"),
+])
+def test_interval_facts_that_stand_for_too_much_or_nothing_ground_are_one_line(text, pattern):
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(EvidenceError, match=pattern):
+        evidence_from_facts(text, "ev.lp")
+    assert time.perf_counter() - t0 < 5
+
+
+def test_cli_query_with_interval_evidence(tmp_path, capsys):
+    (tmp_path / "six.lp").write_text("".join(f"unit({u}).\n" for u in range(1, 7)) + "rolike(1).\nadj(1,2).\n")
+    (tmp_path / "int.lp").write_text("unit(1..6).\nrolike(1).\nadj(1,2).\n")
+    outs = []
+    for name in ("six.lp", "int.lp"):
+        assert main(["rules", "query", "rules/table3.lp", "--evidence", str(tmp_path / name), "--json"]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        outs.append({k: v for k, v in doc.items() if k != "evidence"})
+    assert outs[0] == outs[1]
+    (tmp_path / "big.lp").write_text("unit(1..1000000000).\n")
+    assert main(["rules", "query", "rules/table3.lp", "--evidence", str(tmp_path / "big.lp")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{tmp_path / 'big.lp'}:1:1: the intervals" in err

@@ -114,8 +114,8 @@ def test_a_bad_earlier_world_json_is_one_error_naming_the_file(tmp_path, units, 
 
 
 def test_the_next_id_honours_the_files_own(tmp_path):
-    path = world_json(tmp_path, [{"id": 3, "vertices_m": SQUARE}, {"id": 1, "vertices_m": SQUARE}],
-                      ids={"next": 9})
+    path = world_json(tmp_path, [{"id": 3, "vertices_m": SQUARE},
+                                 {"id": 1, "vertices_m": [[x + 2, y] for x, y in SQUARE]}], ids={"next": 9})
     prev = read_previous_ids(path)
     assert prev.ids == (3, 1) and prev.next_id == 9 and prev.corners_m.shape == (2, 4, 2)
     assert read_previous_ids(world_json(tmp_path, [{"id": 3, "vertices_m": SQUARE}], ids={"next": 2})).next_id == 4

@@ -7,8 +7,9 @@ Modules are discovered, so adding a subcommand never touches this file.
 Every :class:`~semmap_pp.errors.SemmapError` becomes one line on stderr and exit status 2; so does
 running out of memory (a map too large for the machine: docs/robustness.md gives the memory per
 cell). Ctrl-C becomes exit status 130; a reader of stdout that goes away (``semmap diagnose DIR |
-head``) ends the command quietly with status 141, as SIGPIPE would. No traceback reaches the user
-for an input error.
+head``) ends the command quietly with status 141, as SIGPIPE would. An argument that is not UTF-8
+text (a file name of other bytes) is one line and status 2 before the command starts
+(:func:`not_utf8`). No traceback reaches the user for an input error.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import re
 import sys
 
 from semmap_pp import __version__
-from semmap_pp.errors import SemmapError
+from semmap_pp.errors import SemmapError, printable
 
 
 _NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
@@ -56,7 +57,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def not_utf8(argv) -> str | None:
+    """The first argument that is not UTF-8 text (a file name of other bytes, which Python keeps as
+    lone surrogates), or None. Names given to semmap go into its outputs (world.json, report.html,
+    trace.nc) and onto stdout, all UTF-8, so such a name is refused before anything is read.
+
+    >>> not_utf8(["map", "m.yaml"]), not_utf8(["map", "/tmp/\\udcff.yaml"])
+    (None, '/tmp/\\udcff.yaml')
+    """
+    for a in argv:
+        text = os.fsdecode(a) if isinstance(a, (bytes, os.PathLike)) else a
+        if isinstance(text, str):
+            try:
+                text.encode("utf-8")
+            except UnicodeEncodeError:
+                return text
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    bad = not_utf8(argv)
+    if bad is not None:
+        print(f"semmap: error: {printable(bad)}: not UTF-8 text (a name of other bytes, shown as \\xNN); "
+              "semmap writes the names it is given into its outputs as UTF-8: rename the file or "
+              "folder", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -95,7 +95,8 @@ def detect_kind(truth: Path) -> str:
 
 
 def _read_run(run_dir: Path) -> tuple[dict, np.ndarray]:
-    from semmap_pp.evaluate import read_json, read_label_image
+    from semmap_pp.evaluate import read_label_image
+    from semmap_pp.world_file import read_world_doc
 
     if not run_dir.is_dir():
         raise MapError(run_dir, "not a run folder (expected the --out folder of `semmap map`)")
@@ -103,7 +104,7 @@ def _read_run(run_dir: Path) -> tuple[dict, np.ndarray]:
     for f in (world, labels):
         if not f.is_file():
             raise MapError(f, "missing (expected the output of `semmap map`)")
-    return read_json(world), read_label_image(labels)
+    return read_world_doc(world), read_label_image(labels)     # bounded as every world.json read is
 
 
 def _same_shape(pred: np.ndarray, truth: np.ndarray, pred_path: Path, truth_path: Path) -> None:

@@ -156,12 +156,13 @@ def carried_ids_source(run_dir: Path) -> Path | None:
     """``run_dir``'s world.json when its unit ids were carried from an earlier one (it has an
     ``ids`` object): what ``--resume run_dir`` carries them from, so that the resumed run keeps
     them; None otherwise (a file that cannot be read is left to the resume's own checks)."""
-    import json
+    from semmap_pp.errors import SemmapError
+    from semmap_pp.world_file import read_world_doc
 
     path = Path(run_dir) / "world.json"
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        doc = read_world_doc(path)     # bounded as every world.json read is
+    except SemmapError:
         return None
     return path if isinstance(doc, dict) and isinstance(doc.get("ids"), dict) else None
 

@@ -215,6 +215,11 @@ def params_from_yaml(path: Path, doc: dict, overrides: dict, *,
         raise MapError(path, "YAML has no 'image' key (the map image file)")
     if not isinstance(image, str) or not image.strip() or "\0" in image:
         raise MapError(path, f"'image' must be a file name, got {short(image)}")
+    try:     # "\udcff" escapes a byte that is no UTF-8: the name would be written into the outputs
+        image.encode("utf-8")
+    except UnicodeEncodeError:
+        raise MapError(path, "'image' is not UTF-8 text (an escape such as \\udcff of a byte that is "
+                             "none); semmap writes the image's name into its outputs: rename it") from None
     if escapes_folder(image):
         if not allow_outside:
             raise MapError(path, f"image {short(image)} is outside the YAML file's folder "

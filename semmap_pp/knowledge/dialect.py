@@ -15,7 +15,9 @@ Everything else that could run code or reach outside the rules folder is rejecte
 ``@``-terms, ``#external``, ``#program`` other than ``base``, ``#include`` of absolute paths or of
 files outside the folder of the top-level file, choice rules, disjunctions, ``#minimize``,
 ``#heuristic``, ``#project``, ``#edge``, theory atoms, classical negation. So is what could make
-grounding endless or clingo misbehave: intervals ``a..b``, derived atoms whose arguments are not
+grounding endless or clingo misbehave: intervals ``a..b`` outside facts (a fact's intervals are
+written out as the facts they stand for, :func:`expand_facts`, at most
+:data:`MAX_INTERVAL_FACTS` of them), derived atoms whose arguments are not
 constants or variables of positive body atoms outside arithmetic (``c(X+1) :- c(X).``,
 ``adj(Q,P) :- adj(P,Q-5).``), integer literals beyond 32 bits
 (clingo wraps them silently), non-ASCII characters outside comments and strings (clingo aborts
@@ -28,6 +30,7 @@ variables; :mod:`semmap_pp.knowledge.size`). Every problem is a :class:`~semmap_
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -52,6 +55,10 @@ RESERVED_NAMES = {p for p, _ in EVIDENCE_PREDICATES | QUERY_PREDICATES} | {"soft
 WEIGHT_SCALE = 1000          # weak-constraint weights are written in thousandths
 MAX_WEIGHT = 50_000          # w = 50: e^-50 ~ 2e-22; anything stronger should be a hard rule
 MAX_INTEGER = 2**31 - 1      # clingo's integers are 32-bit: a longer literal wraps around silently
+#: The most facts the intervals of the facts of one rule set (a file and its includes) or one
+#: evidence file may stand for (``unit(1..6).`` stands for six); an evidence of the largest world
+#: (100,000 units) lists as many units.
+MAX_INTERVAL_FACTS = 100_000
 
 # Comments, strings, integer literals (not digits inside a name such as w1500 or X2) and
 # non-ASCII characters.
@@ -198,6 +205,83 @@ def check_lexemes(text: str, path: str) -> None:
             raise RuleError(path, f"integer {token[:20]}{'...' if len(token) > 20 else ''} is too "
                             f"large (clingo integers are 32-bit: at most {MAX_INTEGER})",
                             *_pos(text, m.start()))
+
+
+class _Intervals(cast.Transformer):
+    """Collects the intervals of a statement, or (given ``values``) puts one number in each, in
+    the order clingo's transformer visits them."""
+
+    def __init__(self, values=None):
+        self.found, self.values = [], values
+
+    def visit_Interval(self, node):
+        if self.values is None:
+            self.found.append(node)
+            return node
+        return cast.SymbolicTerm(node.location, clingo.Number(next(self.values)))
+
+
+def _bound(term) -> int | None:
+    """An interval's bound as an integer, when it is an integer literal (``3``, ``-3``)."""
+    if term.ast_type == cast.ASTType.SymbolicTerm and term.symbol.type == clingo.SymbolType.Number:
+        return term.symbol.number
+    if (term.ast_type == cast.ASTType.UnaryOperation and term.operator_type == cast.UnaryOperator.Minus
+            and term.argument.ast_type == cast.ASTType.SymbolicTerm
+            and term.argument.symbol.type == clingo.SymbolType.Number):
+        return -term.argument.symbol.number
+    return None
+
+
+def expand_facts(statements: list, path: str, budget: list[int] | None = None,
+                 error: type = RuleError) -> list:
+    """``statements`` with every fact whose atom holds intervals written out as the facts it stands
+    for, as clingo reads them: ``unit(1..3).`` is ``unit(1). unit(2). unit(3).``, ``adj(1..2,3..4).``
+    the four pairs, ``p(3..1).`` none. An interval's bounds must be integer literals. More than
+    ``budget[0]`` facts in all (:data:`MAX_INTERVAL_FACTS`; the list is shared between the files
+    of a rule set and counts down) is an ``error`` at the fact that passes it, before any is made.
+
+    >>> sts = expand_facts(parse_text("unit(1..3). adj(1,2..3). p(X) :- unit(X).", "r.lp"), "r.lp")
+    >>> [str(st) for st in sts[1:]]
+    ['unit(1).', 'unit(2).', 'unit(3).', 'adj(1,2).', 'adj(1,3).', 'p(X) :- unit(X).']
+    """
+    import itertools
+
+    budget = [MAX_INTERVAL_FACTS] if budget is None else budget
+    plans = []                  # per statement: None (kept as it is) or its intervals' ranges
+    for st in statements:       # every count first: a file that stands for too much makes nothing
+        finder = _Intervals()
+        if (st.ast_type == cast.ASTType.Rule and not len(st.body)
+                and st.head.ast_type == cast.ASTType.Literal
+                and st.head.atom.ast_type == cast.ASTType.SymbolicAtom):
+            finder(st)
+        if not finder.found:
+            plans.append(None)
+            continue
+        ranges = []
+        for node in finder.found:
+            lo, hi = _bound(node.left), _bound(node.right)
+            if lo is None or hi is None:
+                raise error(path, f"the bounds of the interval {node} must be integers (a fact's "
+                                  f"interval stands for the facts of each number in it)", *_loc(node))
+            ranges.append(range(lo, hi + 1))
+        count = math.prod(len(r) for r in ranges)
+        if count > budget[0]:
+            text = str(st.head)
+            text = text if len(text) <= 60 else text[:57] + "..."
+            limit = (f"; a file's facts may stand for at most {MAX_INTERVAL_FACTS:,}"
+                     if budget[0] == MAX_INTERVAL_FACTS else
+                     f", more than the {budget[0]:,} left of the {MAX_INTERVAL_FACTS:,} a file's facts "
+                     f"(its includes too) may stand for")
+            raise error(path, f"the intervals of {text} stand for {count:,} facts{limit}", *_loc(st))
+        budget[0] -= count
+        plans.append(ranges)
+    out = []
+    for st, ranges in zip(statements, plans):
+        if ranges is None:
+            out.append(st)
+        else:
+            out.extend(_Intervals(iter(values))(st) for values in itertools.product(*ranges))
+    return out
 
 
 def resolve_include(target: str, including: Path, root: Path, line: int, col: int) -> Path:
@@ -376,6 +460,7 @@ def _read_files(top: Path) -> list[tuple[Path, list]]:
     """Read the top file and its includes (each once), returning parsed statements per file."""
     root = top.parent
     seen, order, stack = set(), [], [top]
+    budget = [MAX_INTERVAL_FACTS]        # the facts the intervals of all the files stand for
     while stack:
         path = stack.pop()
         if path in seen:
@@ -389,7 +474,7 @@ def _read_files(top: Path) -> list[tuple[Path, list]]:
             raise RuleError(path, f"cannot read rule file: {exc}") from None
         stripped, includes = strip_includes(text, str(path))
         check_lexemes(stripped, str(path))
-        statements = parse_text(stripped, str(path))
+        statements = expand_facts(parse_text(stripped, str(path)), str(path), budget)
         order.append((path, statements))
         for target, line, col in reversed(includes):
             stack.append(resolve_include(target, path, root, line, col))
@@ -413,9 +498,9 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                 if node.ast_type == cast.ASTType.TheoryAtom:
                     raise RuleError(path, "theory atoms are not allowed", *_loc(node))
                 if node.ast_type == cast.ASTType.Interval:
-                    raise RuleError(path, f"intervals ({node}) are not allowed: a rule file works "
-                                    "on the units of the evidence and makes no new values",
-                                    *_loc(node))
+                    raise RuleError(path, f"intervals ({node}) are not allowed here: a rule works "
+                                    "on the units of the evidence and makes no new values (a fact "
+                                    "may hold them: p(1..3).)", *_loc(node))
             if t == cast.ASTType.Program:
                 if st.name != "base" or len(st.parameters):
                     raise RuleError(path, f"#program {st.name} is not allowed: only the base "

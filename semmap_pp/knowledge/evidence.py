@@ -19,7 +19,8 @@ import clingo
 import clingo.ast as cast
 
 from semmap_pp.errors import EvidenceError, RuleError
-from semmap_pp.knowledge.dialect import SOFT_PREDICATES, WEIGHT_SCALE, check_lexemes, strip_includes
+from semmap_pp.knowledge.dialect import (SOFT_PREDICATES, WEIGHT_SCALE, check_lexemes, expand_facts,
+                                         strip_includes)
 
 _PROB_RE = re.compile(r"^\d*\.?\d+(?:[eE][-+]?\d+)?$")
 _WHERE = "<evidence>"
@@ -171,8 +172,10 @@ def _fact_error(path, node, message) -> EvidenceError:
 def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
     """Read evidence facts (``unit(1). rolike(1). soft(muldoor(1), "0.7"). adj(1,2).``).
 
-    Only ground facts of the evidence predicates and ``soft/2`` are accepted; anything else is
-    an :class:`~semmap_pp.errors.EvidenceError` ``file:line:col: message``.
+    Only ground facts of the evidence predicates and ``soft/2`` are accepted, intervals of integers
+    in them standing for the facts of each number (``unit(1..6).``, at most
+    :data:`~semmap_pp.knowledge.dialect.MAX_INTERVAL_FACTS` in all); anything else is an
+    :class:`~semmap_pp.errors.EvidenceError` ``file:line:col: message``.
 
     Examples
     --------
@@ -202,7 +205,7 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
             raise EvidenceError(path, m.group(3), int(m.group(1)), int(m.group(2))) from None
         raise EvidenceError(path, "syntax error") from None
     units, unary, adj = [], {n: {} for n in SOFT_PREDICATES}, []
-    for st in statements:
+    for st in expand_facts(statements, path, error=EvidenceError):   # unit(1..6). is six facts
         t = st.ast_type
         if t in (cast.ASTType.Program, cast.ASTType.Comment):
             continue

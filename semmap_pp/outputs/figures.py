@@ -34,6 +34,7 @@ MAGENTA = "#e000e0"
 EXTERIOR = "#d35400"   # exterior units (free space seen outside the building): dashed orange
 TYPE_FACE = {"room": "#fff3b0", "corridor": "#bde0ff", "hall": "#ffd1a6", "other": "#e4e4e4"}
 LONG_SIDE_PX = 1400     # a figure's longer side on screen, in pixels (at DPI)
+MIN_SIDE_PX = 400       # its shorter side at least: a map of 1 x 2000 cells still draws (and reads)
 DPI = 100
 
 
@@ -87,7 +88,8 @@ def side_by_side(sms, *, extra_h: float, panel_px: int = 700):
     x0, x1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
     n = len(sms)
     panel = panel_px / max(y1 - y0, x1 - x0)
-    fig = Figure(figsize=(n * (x1 - x0) * panel / DPI, (y1 - y0) * panel / DPI + extra_h), dpi=DPI)
+    fig = Figure(figsize=(n * max((x1 - x0) * panel, MIN_SIDE_PX) / DPI,
+                          max((y1 - y0) * panel, MIN_SIDE_PX) / DPI + extra_h), dpi=DPI)
     axes = fig.subplots(1, n, squeeze=False).ravel()
     return fig, axes, (y0, y1, x0, x1)
 
@@ -97,7 +99,8 @@ def _axes(box, *, extra_h: float = 0.0, ncols: int = 1, nrows: int = 1, long_sid
     y0, y1, x0, x1 = box
     h, w = (y1 - y0) * nrows, (x1 - x0) * ncols
     scale = long_side / max(h, w)
-    fig = Figure(figsize=(w * scale / DPI, h * scale / DPI + extra_h), dpi=DPI)
+    fig = Figure(figsize=(max(w * scale, MIN_SIDE_PX) / DPI, max(h * scale, MIN_SIDE_PX) / DPI + extra_h),
+                 dpi=DPI)
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel().tolist()
     for ax in axes:
         ax.set_xlim(x0, x1)

@@ -110,6 +110,66 @@ def overlap_iou_matrix(a, b) -> np.ndarray:
     return out
 
 
+#: :func:`overlap_pairs` gives up when the bounding boxes of more than this many pairs per unit
+#: (of the larger list) meet. Two plans of one building meet a unit's own and its neighbours'
+#: (about 9, up to about 16 on a lattice turned by 45 degrees); only units piled on each other
+#: meet more, and every such pair costs a polygon clipping.
+MAX_PAIRS_PER_UNIT = 64
+
+
+def overlap_pairs(a, b, *, path=None) -> list[tuple[int, int, float]]:
+    """``(i, j, iou)`` for every pair of the convex quadrilaterals ``a[i]`` and ``b[j]`` (each
+    (4, 2)) whose :func:`overlap_iou` is positive, by ``i`` then ``j``: the nonzero entries of
+    :func:`overlap_iou_matrix`, without its ``len(a) x len(b)`` array. Raises
+    :class:`~semmap_pp.errors.SemmapError` naming ``path`` when the bounding boxes of more than
+    :data:`MAX_PAIRS_PER_UNIT` pairs per unit meet (units piled on each other), before clipping any.
+
+    >>> sq = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)
+    >>> [(i, j, round(v, 3)) for i, j, v in overlap_pairs([sq, sq + 5.0], [sq + [1.0, 0.0], sq + 5.0])]
+    [(0, 0, 0.333), (1, 1, 1.0)]
+    """
+    a = np.asarray(a, float).reshape(-1, 4, 2)
+    b = np.asarray(b, float).reshape(-1, 4, 2)
+    lo, hi = b.min(axis=1), b.max(axis=1)
+    limit = MAX_PAIRS_PER_UNIT * max(len(a), len(b))
+    near, total = [], 0
+    for c in a:
+        k = np.flatnonzero(np.all(lo <= c.max(axis=0), axis=1) & np.all(hi >= c.min(axis=0), axis=1))
+        total += len(k)
+        if total > limit:
+            raise SemmapError(path, f"more than {limit} pairs of the {len(a)} and {len(b)} units overlap "
+                                    f"(at most {MAX_PAIRS_PER_UNIT} per unit): units piled on each other, "
+                                    f"not a floor plan")
+        near.append(k)
+    out = []
+    for i, ks in enumerate(near):
+        for k in ks.tolist():
+            v = overlap_iou(a[i], b[k])
+            if v > 0:
+                out.append((i, k, v))
+    return out
+
+
+def greedy_pairs(pairs, min_iou: float = MIN_IOU) -> list[tuple[int, int, float]]:
+    """One-to-one matches of :func:`overlap_pairs` ``(i, j, iou)``, greedily from the highest IoU
+    (ties: the lower ``i``, then ``j``), each at least ``min_iou`` (> 0); sorted by ``i``: the
+    matches :func:`semmap_pp.stability.greedy_matches` makes of the whole matrix.
+
+    >>> greedy_pairs([(0, 0, 0.9), (0, 1, 0.6), (1, 0, 0.7), (1, 1, 0.2)])
+    [(0, 0, 0.9)]
+    """
+    out, used_a, used_b = [], set(), set()
+    for i, j, v in sorted(pairs, key=lambda t: (-t[2], t[0], t[1])):
+        if v < min_iou:
+            break
+        if i in used_a or j in used_b:
+            continue
+        used_a.add(i)
+        used_b.add(j)
+        out.append((i, j, float(v)))
+    return sorted(out)
+
+
 def carry_ids(corners_m: dict, order: list, previous, min_iou: float = MIN_IOU) -> tuple[dict, dict]:
     """Unit ids for the units ``corners_m`` (slot -> (4, 2) corners in map-frame metres), carried
     from ``previous`` (:class:`semmap_pp.world_file.PreviousIds`).
@@ -122,8 +182,9 @@ def carry_ids(corners_m: dict, order: list, previous, min_iou: float = MIN_IOU) 
     the file, the next id never used, and which ids were carried, are new and are gone.
     """
     slots = list(corners_m)
-    iou = overlap_iou_matrix([corners_m[s] for s in slots], previous.corners_m)
-    pairs = [(-iou[i, k], previous.ids[k], slots[i]) for i, k in zip(*np.nonzero(iou >= min_iou))]
+    pairs = [(-v, previous.ids[k], slots[i]) for i, k, v in
+             overlap_pairs([corners_m[s] for s in slots], previous.corners_m, path=previous.path)
+             if v >= min_iou]
     slot_ids, taken = {}, set()
     for _, uid, s in sorted(pairs):
         if s not in slot_ids and uid not in taken:

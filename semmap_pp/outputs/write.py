@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from semmap_pp import atomic
+from semmap_pp.errors import printable
 from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
@@ -51,7 +52,7 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
                      roi_name=inputs.roi_name)
     written = [write_world_json(out / "world.json", doc), write_labels_png(out / "labels.png", sm.labels_image)]
     tree = to_datatree(run.summaries, sample_stats=run.sample_stats,
-                       attrs={"map": str(inputs.grid.source), "rules": rules_name, "seed": settings.seed,
+                       attrs={"map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed,
                               "chains": settings.chains, "tune": settings.tune, "draws": settings.draws,
                               "n_inner": settings.n_inner})
     written.append(write_trace(tree, out / "trace.nc"))
@@ -59,7 +60,7 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
     if getattr(run, "spread", None) is not None:
         sp = run.spread
         written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs={
-            "map": str(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
+            "map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
             "chains": settings.chains, "tune": 0, "draws": sp.draws, "n_inner": sp.n_inner,
             "start": "W*"}), spread_nc))
     elif spread_nc.exists():      # an earlier run's, in a directory written again with --force
