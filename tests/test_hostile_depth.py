@@ -138,6 +138,9 @@ def _settings(**kw):
     (lambda m, a: m["chains"][0].update(rng_state="random"), "chains[0].rng_state is not a random state"),
     (lambda m, a: m["inputs"].update(map=["m.yaml"]), "inputs.map must be the map's file name"),
     (lambda m, a: m["inputs"]["map_options"].update(max_cells="many"), "inputs.map_options.max_cells must be int"),
+    (lambda m, a: m["inputs"]["map_options"].update(at=-2.0), "inputs.map_options.at must be float"),
+    (lambda m, a: m["inputs"]["map_options"].update(at="soon"), "inputs.map_options.at must be float"),
+    (lambda m, a: m["inputs"]["map_options"].update(topic=7), "inputs.map_options.topic must be str"),
     (lambda m, a: a.update(rects_1=a["rects_1"].astype("float64")),
      "the array rects_1 is float64 of shape (6, 64, 4); expected integers of shape n x 64 x 4"),
     (lambda m, a: a.update(active_0=a["active_0"][:, :10]), "the array active_0 is bool of shape (6, 10)"),
@@ -157,3 +160,14 @@ def test_an_unedited_copy_resumes(finished_run, tmp_path, capsys):
     d = _edited_resume(finished_run, tmp_path, lambda m, a: None)
     assert main(["map", "--resume", str(d), "--draws", "4", "--progress", "none"]) == 0
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("at", ["last", 1.5, 0])
+def test_a_bags_topic_and_time_in_a_resume_file_are_read(finished_run, tmp_path, at):
+    """A run from a bag stores its --topic and --at (docs/cli.md): the checks take them."""
+    from semmap_pp.resume import read_resume
+
+    d = _edited_resume(finished_run, tmp_path,
+                       lambda m, a: m["inputs"]["map_options"].update(topic="/map", at=at))
+    state = read_resume(d, extra_draws=4)
+    assert state is not None
