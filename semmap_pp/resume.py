@@ -41,6 +41,7 @@ _SETTINGS = {"chains": (1, MAX_CHAINS), "cores": (1, MAX_CHAINS), "tune": (0, MA
 _OPTIONAL_SETTINGS = ("spread_draws", "spread_n_inner")      # older files: RunSettings' defaults
 _MAP_OPTIONS = {"occupied_thresh": float, "free_thresh": float, "negate": int, "resolution": float,
                 "mode": str, "max_cells": int, "allow_outside": bool, "topic": str, "at": float}
+_MAP_OPTION_MIN = {"max_cells": 1, "at": 0}       # a bag's --at: seconds since its start, or "last"
 
 
 def merge_records(history, new) -> list:
@@ -317,12 +318,12 @@ def check_resume(meta: dict, arrays: dict, path) -> None:
         raise SemmapError(path, f"inputs.map_options must be an object of {', '.join(_MAP_OPTIONS)}")
     for key, kind in _MAP_OPTIONS.items():
         v = options.get(key)
-        if key == "at" and v == "last":          # a bag's --at: "last" or seconds since its start
+        if v is None or (key == "at" and v == "last"):
             continue
-        ok = v is None or (isinstance(v, kind) if kind in (str, bool) else
-                           not isinstance(v, bool) and isinstance(v, (int, float) if kind is float else int)
-                           and math.isfinite(v))
-        if not ok or (key in ("max_cells", "at") and v is not None and v < (1 if key == "max_cells" else 0)):
+        ok = (isinstance(v, kind) if kind in (str, bool) else
+              not isinstance(v, bool) and isinstance(v, (int, float) if kind is float else int)
+              and math.isfinite(v) and v >= _MAP_OPTION_MIN.get(key, -math.inf))
+        if not ok:
             raise SemmapError(path, f"inputs.map_options.{key} must be {kind.__name__} or null, got {_brief(v)}")
     lattice = inputs.get("lattice")
     if lattice is not None:
