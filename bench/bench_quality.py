@@ -46,6 +46,10 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   licence: LICENSE-ROSE2 there) with their hand-drawn room truth. rooms.png is scored by the ROSE2
   protocol (:func:`semmap_pp.evaluate.protocol_scores`), and so, with the same code, are ROSE2's own
   published output (``rose2.png``) and regions.png cut to the map's free cells; per map and as means.
+* **partial**: two partial explorations of each real-gt floor (``bench/partial_maps.py``: the robot
+  drove through the corridors and 30 % or 60 % of the rooms and saw the others only through their
+  doors), rooms.png scored by the ROSE2 protocol on the free cells the partial map holds. ROSE2's
+  output exists for the full floors only.
 * **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
   corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
 
@@ -132,7 +136,7 @@ def _budget(text: str) -> str | float:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all",
-                        choices=["synthetic", "truth", "surgery", "real", "real-gt", "ipa", "types", "stability",
+                        choices=["synthetic", "truth", "surgery", "real", "real-gt", "partial", "ipa", "types", "stability",
                                  "targets", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--seeds", default="0,1,2",
@@ -1065,6 +1069,43 @@ def bench_real_gt(args, model, rules) -> dict:
             "protocol": "ROSE2: truth rooms = one-colour regions > 200 cells, segments whole"}
 
 
+def bench_partial(args, model, rules) -> dict:
+    """rooms.png on partial explorations of the real-gt floors (:mod:`partial_maps`)."""
+    import tempfile
+    import partial_maps
+    from semmap_pp.evaluate import protocol_scores, read_segmentation_truth
+    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="semmap-partial-") as tmp:
+        for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
+            truth = read_segmentation_truth(folder / "gt.png", "rose2")
+            for explored, seed in partial_maps.EXPLORATIONS:
+                name = f"{folder.name}@{explored:g}"
+                if not _keep(name, args):
+                    continue
+                out = Path(tmp) / f"{folder.name}-{seed}"
+                gt = partial_maps.write(folder, out, explored, seed, truth)
+                inputs = load_inputs(out / "map.yaml", model_path=args.model,
+                                     rules_path=args.rules or DEFAULT_RULES)
+                ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name},
+                                     f"partial {name}")
+                if ran is None:
+                    continue
+                sm = ran[0].semantic
+                sc = protocol_scores(gt, sm.rooms.labels)
+                row = {"map": name, "explored": explored, "units": len(sm.unit_ids),
+                       "rooms": len(sm.rooms.rooms),
+                       "rooms_seen_through_door": sum(r.seen_through_door for r in sm.rooms.rooms),
+                       "true_rooms": sc.n_rooms, "precision": round(sc.precision, 4),
+                       "recall": round(sc.recall, 4), "run_s": round(ran[0].seconds, 1)}
+                rows.append(row)
+                _save(args, name.replace("@", "_"), sm)
+                _log(args, f"partial {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f}; "
+                           f"{row['rooms']} rooms ({row['rooms_seen_through_door']} seen through their door)")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in ("precision", "recall", "run_s")},
+            "protocol": "ROSE2 on the partial map's free cells: truth rooms = regions > 200 cells"}
+
+
 TYPE_MAPS = [("Fr52_original.png", "training_Fr52.png"), ("NLB_original.png", "training_NLB_furniture.png"),
              ("lab_c_furnitures_original.png", "training_lab_c_furnitures.png"),
              ("lab_d_furnitures_original.png", "training_lab_d_furniture.png"),
@@ -1130,7 +1171,7 @@ def run(args) -> dict:
     subsets = {"all": ["synthetic", "real", "ipa", "types"],
                "targets": ["synthetic", "truth", "real"]}.get(args.subset, [args.subset])
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
-           "real": bench_real, "real-gt": bench_real_gt, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
+           "real": bench_real, "real-gt": bench_real_gt, "partial": bench_partial, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
     for name in subsets:
         t0 = time.perf_counter()
         out[name] = fns[name](args, model, rules)

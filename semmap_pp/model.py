@@ -224,6 +224,7 @@ class RoomParams:
     open_share_min: float = 0.6
     band_m: float = 0.3
     walled_min: float = 0.2
+    wall_blur_m: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -497,7 +498,8 @@ def load_model(path: str | Path | None = None) -> Model:
             open_share_min=r.optional("rooms.open_share_min", rooms.open_share_min, r.number,
                                       lo=0.0, hi=1.0),
             band_m=r.optional("rooms.band_m", rooms.band_m, r.number, positive=True, hi=100.0),
-            walled_min=r.optional("rooms.walled_min", rooms.walled_min, r.number, lo=0.0, hi=1.0))
+            walled_min=r.optional("rooms.walled_min", rooms.walled_min, r.number, lo=0.0, hi=1.0),
+            wall_blur_m=r.optional("rooms.wall_blur_m", rooms.wall_blur_m, r.number, lo=0.0, hi=10.0))
     return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
                  prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
                  diagnostics=diagnostics, kernels=dict(kernels), outside=outside, rooms=rooms)

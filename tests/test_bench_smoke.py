@@ -14,6 +14,7 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
@@ -75,3 +76,35 @@ def test_bench_likelihood_times_edits_on_the_cartesium_lattice(seed, units, caps
     assert one["lattice"] != result["lattice"]          # cropped: the case that failed
     assert one["edits_timed"] >= 35 and four["edits_timed"] == one["edits_timed"]
     assert one["edit_us_median"] > 0 and one["incremental_vs_full_rel_err"] < 1e-9
+
+
+def test_the_partial_subset_runs_on_one_exploration(capsys, monkeypatch):
+    result = bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "partial",
+                   "--maps", "freiburg_building52@0.3")
+    (row,) = result["partial"]["rows"]
+    assert row["map"] == "freiburg_building52@0.3" and 0 < row["precision"] <= 1 and 0 < row["recall"] <= 1
+
+
+def test_partial_explorations_see_part_of_the_floor_and_are_reproducible(monkeypatch):
+    """bench/partial_maps.py: the partial map keeps the full map's grey values on the cells its
+    rays reached and is unknown (205) elsewhere; its truth is the floor's on the free cells it
+    holds; rooms the robot did not enter are seen in part (through their doors); the same
+    arguments give the same map, and entering more rooms sees more."""
+    monkeypatch.setattr(sys, "path", [str(BENCH), *sys.path])
+    import partial_maps
+    from semmap_pp.evaluate import read_segmentation_truth
+    folder = BENCH / "data" / "real-gt" / "freiburg_building52"
+    truth = read_segmentation_truth(folder / "gt.png", "rose2")
+    part, meta, gt = partial_maps.explore(folder, 0.3, 1, truth)
+    again, _, gt2 = partial_maps.explore(folder, 0.3, 1, truth)
+    assert (part == again).all() and (gt == gt2).all()
+    from PIL import Image
+    full = np.asarray(Image.open(folder / "map.png").convert("L"))
+    seen = part != 205
+    assert (part[seen] == full[seen]).all() and 0.2 < seen.mean() / (full != 205).mean() < 1.0
+    free = (255.0 - part) / 255.0 < float(meta["free_thresh"])
+    assert (gt[~free] == 0).all() and set(np.unique(gt)) <= set(np.unique(truth))
+    shares = [(gt == t).sum() / (truth == t).sum() for t in np.unique(truth) if t and (truth == t).sum() > 200]
+    assert min(shares) < 0.8 and max(shares) > 0.95           # some rooms seen in part, some whole
+    more, _, _ = partial_maps.explore(folder, 0.6, 1, truth)
+    assert (more != 205).sum() > seen.sum()

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 from PIL import Image
+from scipy import ndimage as ndi
 
 from semmap_pp.cli import main
 from semmap_pp.errors import ModelError
@@ -109,6 +110,46 @@ def test_rays_into_the_open_through_a_window_are_no_room():
     assert (labels[13:32, 10:30] == 0).all()                # not flooded into the corridor either
 
 
+def fan_beyond_a_door(far_wall: bool):
+    """A corridor (rows 0..9) with a wall (rows 10..11) and a 0.8 m door, and beyond the door a fan
+    of rays widening into a room the robot never entered: its sides unseen (unknown cells), and,
+    with ``far_wall``, the room's far wall (row 34) behind a one-cell margin of blur (row 33, neither
+    free nor occupied); without it the rays end in unknown cells. 0.1 m cells."""
+    free = np.zeros((40, 60), bool)
+    occupied = np.zeros_like(free)
+    free[0:10, :] = True
+    occupied[10:12, :] = True
+    occupied[10:12, 26:34] = False
+    free[10:12, 26:34] = True
+    for r in range(12, 33):
+        half = 4 + (r - 12) // 2
+        free[r, 30 - half:30 + half] = True
+    if far_wall:
+        occupied[34, 10:50] = True
+    seeds = np.zeros(free.shape, np.int32)
+    seeds[1:9, 1:59] = 1
+    return free, seeds, occupied
+
+
+def test_a_fan_into_a_room_seen_through_its_door_is_a_room_and_one_into_the_open_is_not():
+    """The fan's sides are unseen, so most non-free cells around it are unknown whatever lies
+    beyond; what tells a room from the open is where its rays end: on the room's far wall (read
+    through the map's blur, ``wall_blur_m``), or nowhere."""
+    free, seeds, occupied = fan_beyond_a_door(far_wall=True)
+    ring = ndi.binary_dilation(free[12:], np.ones((3, 3), bool)) & ~free[12:]
+    assert (ring & occupied[12:]).sum() < 0.2 * ring.sum()          # walled by the old count: no
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
+    assert (labels[13:33][free[13:33]] == 2).all()
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1,
+                                RoomParams(wall_blur_m=0.0), occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]         # the blur hides the wall
+    free, seeds, occupied = fan_beyond_a_door(far_wall=False)
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[13:33] == 0).all()
+
+
 def test_an_opening_wider_than_a_door_joins_the_unit_in_front():
     free, seeds = corridor_and_room(door_width=20)         # 2.0 m > door_max_m 1.6
     labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1)
@@ -172,7 +213,7 @@ def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
     text = (ROOT / "models" / "default.toml").read_text()
     assert load_model().rooms == RoomParams(**{k: getattr(load_model().rooms, k)
                                                for k in ("min_room_m2", "door_max_m", "open_share_min",
-                                                         "band_m", "walled_min")})
+                                                         "band_m", "walled_min", "wall_blur_m")})
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace("open_share_min = 0.6", "open_share_min = 1.5"))
     with pytest.raises(ModelError, match="rooms.open_share_min"):
