@@ -628,6 +628,22 @@ def seen_by_class(pred: dict, truth: dict, matches: dict) -> dict:
     return out
 
 
+def _rooms_vs_truth(sm, truth_labels) -> dict:
+    """rooms.png against the synthetic truth's units (its free cells; the ROSE2 protocol), and its
+    rooms seen through a door that lie mostly outside every true unit (fans outside the building
+    taken for rooms)."""
+    from semmap_pp.cells import FREE
+    from semmap_pp.evaluate import protocol_scores
+    truth = np.asarray(truth_labels).astype(np.int64)
+    if truth.shape != sm.grid.classes.shape:
+        return {}
+    lab = sm.rooms.labels
+    sc = protocol_scores(np.where(sm.grid.classes == FREE, truth, 0), lab)
+    outside = sum(1 for r in sm.rooms.rooms if r.seen_through_door and (truth[lab == r.id] > 0).mean() <= 0.5)
+    return {"rooms_precision": round(sc.precision, 4), "rooms_recall": round(sc.recall, 4),
+            "rooms_outside": outside}
+
+
 def bench_synthetic(args, model, rules) -> dict:
     from semmap_pp.evaluate import score_world
     from semmap_pp.outputs import world_dict
@@ -661,6 +677,7 @@ def bench_synthetic(args, model, rules) -> dict:
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "unit_f1_with_exterior": round(sx.unit_f1, 4),
+               **_rooms_vs_truth(sm, floor.truth_labels),
                "observed_units": len(observed_truth(floor.truth)["units"]),
                "type_accuracy_observed": _r4(so.type_accuracy),
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
@@ -679,13 +696,15 @@ def bench_synthetic(args, model, rules) -> dict:
                                          "type_accuracy", "door_f1", "unit_f1_observed",
                                          "type_accuracy_observed", "door_f1_observed", "unit_f1_either_l",
                                          "type_accuracy_either_l", "door_f1_either_l", "unit_f1_visible",
-                                         "type_accuracy_visible", "door_f1_visible", "seconds")}
+                                         "type_accuracy_visible", "door_f1_visible", "rooms_precision",
+                                         "rooms_recall", "seconds")}
     errors = {k: sum(r["errors"][k] for r in rows if "errors" in r)
               for k in next((r["errors"] for r in rows if "errors" in r), {})}
     door_errors = {k: sum(r["door_errors"][k] for r in rows if "door_errors" in r)
                    for k in next((r["door_errors"] for r in rows if "door_errors" in r), {})}
     errors |= {"pred_units": sum(r["units"] for r in rows if "units" in r),
                "pred_exterior": sum(r.get("exterior", 0) for r in rows),
+               "rooms_outside": sum(r.get("rooms_outside", 0) for r in rows),
                "true_units": sum(r["true_units"] for r in rows if "true_units" in r)}
     routes = [r["routes"] for r in rows if "routes" in r]
     ratios = np.concatenate([r["route_ratios"] for r in routes]) if routes else np.zeros(0)
@@ -1094,7 +1113,7 @@ def bench_partial(args, model, rules) -> dict:
                 sm = ran[0].semantic
                 sc = protocol_scores(gt, sm.rooms.labels)
                 row = {"map": name, "explored": explored, "units": len(sm.unit_ids),
-                       "rooms": len(sm.rooms.rooms),
+                       "exterior_units": len(sm.exterior_ids), "rooms": len(sm.rooms.rooms),
                        "rooms_seen_through_door": sum(r.seen_through_door for r in sm.rooms.rooms),
                        "true_rooms": sc.n_rooms, "precision": round(sc.precision, 4),
                        "recall": round(sc.recall, 4), "run_s": round(ran[0].seconds, 1)}

@@ -224,7 +224,7 @@ class RoomParams:
     open_share_min: float = 0.6
     band_m: float = 0.3
     walled_min: float = 0.2
-    wall_blur_m: float = 0.1
+    wall_blur_m: float = 0.05
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,7 @@ def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
     elif name == "quality":
         (row,) = result["synthetic"]["rows"]
         assert row["seed"] == 1 and 0 < row["cpr"] <= 1
+        assert 0 < row["rooms_precision"] <= 1 and 0 < row["rooms_recall"] <= 1 and row["rooms_outside"] >= 0
     elif name == "sampler":
         assert result["knowledge_pymc_kernels"] == 10 and result["knowledge_tracker_error"] < 1e-9
 

@@ -133,19 +133,20 @@ def fan_beyond_a_door(far_wall: bool):
 
 def test_a_fan_into_a_room_seen_through_its_door_is_a_room_and_one_into_the_open_is_not():
     """The fan's sides are unseen, so most non-free cells around it are unknown whatever lies
-    beyond; what tells a room from the open is where its rays end: on the room's far wall (read
-    through the map's blur, ``wall_blur_m``), or nowhere."""
+    beyond; what tells a room from the open is its far wall, read through the map's blur
+    (``wall_blur_m``): without the wall, or without the blur, too few cells around it are walls."""
     free, seeds, occupied = fan_beyond_a_door(far_wall=True)
     ring = ndi.binary_dilation(free[12:], np.ones((3, 3), bool)) & ~free[12:]
-    assert (ring & occupied[12:]).sum() < 0.2 * ring.sum()          # walled by the old count: no
-    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=occupied)
+    assert (ring & occupied[12:]).sum() < 0.2 * ring.sum()          # occupied cells alone: too few
+    blur = RoomParams(wall_blur_m=0.1)                               # one 0.1 m cell
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
     assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
     assert (labels[13:33][free[13:33]] == 2).all()
     labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1,
                                 RoomParams(wall_blur_m=0.0), occupied=occupied)
     assert [(k, region) for k, region, _ in rooms] == [(1, 1)]         # the blur hides the wall
     free, seeds, occupied = fan_beyond_a_door(far_wall=False)
-    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=occupied)
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
     assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
     assert (labels[13:33] == 0).all()
 

@@ -10,13 +10,13 @@ made from W* in three steps, all on the input image's cells:
 2. **Rooms seen through their door.** The strips along each interior (up to ``band_m`` along the
    floor) go to it; the free cells left fall into connected pieces. A piece of at least
    ``min_room_m2`` that meets the rooms only through openings no wider than a door (``door_max_m``
-   of ``[rooms]``, in the model file) is a room of its own when its rays end on walls: of the
-   non-free cells where rays entering it through that opening stop (not the unseen cells beside a
-   fan's outermost rays), at least ``walled_min`` lie within ``wall_blur_m`` of an occupied cell
+   of ``[rooms]``, in the model file) is a room of its own when walls enclose it: at least
+   ``walled_min`` of the non-free cells around it (not the specks inside it) lie within
+   ``wall_blur_m`` of an occupied cell
    (a SLAM map blurs its walls into a margin of cells neither free nor occupied). That is a room
    the robot saw through its door, or entered without W* giving it a unit, flagged
-   ``seen_through_door`` in world.json's ``rooms``. Rays into the open through a window or an exit
-   end nowhere: no room.
+   ``seen_through_door`` in world.json's ``rooms``. Without such walls it is rays into the open
+   through a window or an exit: no room.
 3. **Every other free cell** (rays through a door, an alcove, a strip along a ragged wall) joins
    the room it is nearest to along the free floor, never across a door (a breadth-first
    geodesic flood, 4-connected).
@@ -136,35 +136,19 @@ def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     return np.bincount(seeds[ring], minlength=int(seeds.max(initial=0)) + 1)
 
 
-def _ray_end_share(piece: np.ndarray, free: np.ndarray, occupied: np.ndarray | None, entry: np.ndarray,
-                   reach: int) -> float:
-    """Share of the cells where rays entering ``piece`` through ``entry`` end that are walls.
-
-    The non-free cells around ``piece`` (8-connected) are where its rays stopped (a ray's end: the
-    cell one step back from it towards the entry lies in ``piece``) or its sides (the unseen cells
-    beside the outermost rays of a fan). A ray's end counts as a wall when an occupied cell lies
-    within ``reach`` cells of it (a SLAM map blurs its walls into a margin of cells neither free nor
-    occupied)."""
+def _walled_share(piece: np.ndarray, free: np.ndarray, occupied: np.ndarray | None, reach: int) -> float:
+    """Share of the non-free cells around ``piece`` (8-connected, its holes filled: specks and
+    furniture inside it are no walls around it) that lie within ``reach`` cells of an occupied cell
+    (a SLAM map blurs its walls into a margin of cells neither free nor occupied)."""
     if occupied is None:
         return 1.0
+    piece = ndi.binary_fill_holes(piece)
     ring = ndi.binary_dilation(piece, _EIGHT) & ~piece & ~free
-    ys, xs = np.nonzero(ring)
-    if not ys.size:
+    n = int(ring.sum())
+    if not n:
         return 1.0
     near = ndi.binary_dilation(occupied, _EIGHT, iterations=reach) if reach > 0 else occupied
-    ey, ex = np.nonzero(entry)
-    if not ey.size:                 # no room beside it: every cell around it counts
-        return float(near[ys, xs].mean())
-    cy, cx = ey.mean(), ex.mean()
-    dy, dx = ys - cy, xs - cx
-    norm = np.hypot(dy, dx)
-    norm[norm == 0] = 1.0
-    by = np.clip(np.rint(ys - 1.5 * dy / norm).astype(int), 0, piece.shape[0] - 1)
-    bx = np.clip(np.rint(xs - 1.5 * dx / norm).astype(int), 0, piece.shape[1] - 1)
-    end = piece[by, bx]
-    if not end.any():
-        return float(near[ys, xs].mean())
-    return float(near[ys[end], xs[end]].mean())
+    return float((ring & near).sum()) / n
 
 
 def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
@@ -243,8 +227,7 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
             if contact.max(initial=0) > door_cells:
                 continue
             occ_sl = None if occupied is None else occupied[sl]
-            entry = ndi.binary_dilation(piece, _FOUR) & ~piece & (near[sl] > 0)
-            if _ray_end_share(piece, free[sl], occ_sl, entry, blur) >= params.walled_min:
+            if _walled_share(piece, free[sl], occ_sl, blur) >= params.walled_min:
                 extra.append(k)
                 seeded[pieces == k] = n_regions + len(extra)
             else:                  # rays into the open (a window's fan): no room, not flooded either
