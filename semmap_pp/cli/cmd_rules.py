@@ -67,8 +67,9 @@ def register(subparsers) -> None:
                             "types); the units' cells are read from labels.png beside the "
                             "world.json")
     label.add_argument("--truth-values", default=None, metavar="GREY=TYPE,...",
-                       help="the grey value of each type in --truth (default 77=room,115=corridor, "
-                            "the ipa place-type images)")
+                       help="the grey value of each type in --truth, several types joined by | "
+                            "(the cell is of one of them; default 77=room|hall|other,115=corridor: "
+                            "the ipa place-type images, whose rooms are room-like places)")
     label.add_argument("--model", metavar="FILE", default=None,
                        help="model file (default models/default.toml): the evidence thresholds")
     add_map_options(label)
@@ -320,7 +321,7 @@ def _label(args) -> int:
                                        f"world.json): {exc}") from None
         truth = read_truth_image(args.truth, values, unit_image.shape)
         counts, uncovered = cell_counts(unit_image, truth, sorted(ids))
-        text += label_facts(majority_labels(counts), counts, uncovered,
+        text += label_facts(majority_labels(counts, values), counts, uncovered,
                             comment=f"the majority type of each unit's cells in {args.truth}")
     try:
         atomic.write_text(args.out, text)

@@ -28,38 +28,45 @@ from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import MapError, SemmapError
 
 #: The grey values of the ipa place-type images (``/work/shared/data/ipa-types/training_*.png``):
-#: 77 room, 115 corridor; every other value (doorway 179, obstacle 0) labels nothing.
-IPA_VALUES = {77: "room", 115: "corridor"}
+#: 77 room, 115 corridor; every other value (doorway 179, obstacle 0) labels nothing. The ipa
+#: truth knows rooms and corridors only, and its score reads a hall or an *other* as a room
+#: (:mod:`semmap_pp.evaluate.types`), so its room is the label set room | hall | other.
+IPA_VALUES = {77: ("room", "hall", "other"), 115: ("corridor",)}
 
 
 def parse_values(text: str) -> dict:
-    """``"77=room,115=corridor"`` as ``{77: "room", 115: "corridor"}``.
+    """``"77=room|hall|other,115=corridor"`` as ``{77: ("room", "hall", "other"), 115:
+    ("corridor",)}``: a grey value's cells are of one of the types named (the first one is the
+    type their cells are counted as).
 
-    >>> parse_values("77=room, 115=corridor")
-    {77: 'room', 115: 'corridor'}
+    >>> parse_values("77=room|other, 115=corridor")
+    {77: ('room', 'other'), 115: ('corridor',)}
     """
     out = {}
     for part in text.split(","):
         if not part.strip():
             continue
         grey, sep, name = part.partition("=")
-        name = name.strip()
+        names = tuple(n.strip() for n in name.split("|"))
         try:
             value = int(grey)
         except ValueError:
             value = None
-        if not sep or value is None or not 0 <= value <= 65535 or name not in UNIT_TYPES:
+        if (not sep or value is None or not 0 <= value <= 65535
+                or not all(n in UNIT_TYPES for n in names) or len(set(names)) != len(names)):
             raise SemmapError(None, f"--truth-values takes GREY=TYPE pairs (TYPE one of "
-                                    f"{', '.join(UNIT_TYPES)}), got {part.strip()!r}")
-        out[value] = name
+                                    f"{', '.join(UNIT_TYPES)}, or several joined by |), got "
+                                    f"{part.strip()!r}")
+        out[value] = names
     if not out:
         raise SemmapError(None, "--truth-values names no GREY=TYPE pair")
     return out
 
 
 def read_truth_image(path, values: dict, shape=None) -> np.ndarray:
-    """A per-cell type image as type indices (``UNIT_TYPES``), -1 where its grey value is not
-    one of ``values``; its size must be ``shape`` (the map's) when given."""
+    """A per-cell type image as type indices (``UNIT_TYPES``; a grey value's first type), -1
+    where its grey value is not one of ``values``; its size must be ``shape`` (the map's) when
+    given."""
     from semmap_pp.evaluate.io import grey, read_image
     image = read_image(path)
     if image.ndim == 3:
@@ -69,8 +76,8 @@ def read_truth_image(path, values: dict, shape=None) -> np.ndarray:
         raise MapError(path, f"the type image is {image.shape[1]} x {image.shape[0]} pixels, the "
                              f"map {shape[1]} x {shape[0]}")
     out = np.full(image.shape, -1, np.int8)
-    for grey_value, name in values.items():
-        out[image == grey_value] = UNIT_TYPES.index(name)
+    for grey_value, names in values.items():
+        out[image == grey_value] = UNIT_TYPES.index(names[0])
     if not (out >= 0).any():
         raise MapError(path, f"no pixel has one of the grey values {sorted(values)}")
     return out
@@ -92,19 +99,25 @@ def cell_counts(unit_image: np.ndarray, truth: np.ndarray, units) -> tuple[dict,
     return {u: table[k] for k, u in enumerate(units, 1)}, table[0]
 
 
-def majority_labels(counts: dict) -> dict:
-    """Unit -> the type index most of its labelled cells have (the first of ``UNIT_TYPES`` on a
-    tie); units without a labelled cell are left out."""
-    return {u: int(np.argmax(c)) for u, c in counts.items() if c.sum() > 0}
+def majority_labels(counts: dict, values: dict | None = None) -> dict:
+    """Unit -> the label set (type indices) of the type most of its labelled cells have (the
+    first of ``UNIT_TYPES`` on a tie): that type's set in ``values`` (grey -> type names, as
+    :func:`parse_values` gives; default the type alone). Units without a labelled cell are left
+    out."""
+    sets = {UNIT_TYPES.index(n[0]): tuple(sorted(UNIT_TYPES.index(m) for m in n))
+            for n in (values or {}).values()}
+    return {u: sets.get(int(np.argmax(c)), (int(np.argmax(c)),))
+            for u, c in counts.items() if c.sum() > 0}
 
 
 def world_labels(world_path) -> dict:
-    """Unit id -> type index from a world.json's ``type`` fields (units without one left out)."""
+    """Unit id -> (type index,) from a world.json's ``type`` fields (units without one left
+    out)."""
     doc = json.loads(Path(world_path).read_text(encoding="utf-8"))
     out = {}
     for u in doc.get("units", []):
         if isinstance(u, dict) and u.get("type") in UNIT_TYPES and isinstance(u.get("id"), int):
-            out[u["id"]] = UNIT_TYPES.index(u["type"])
+            out[u["id"]] = (UNIT_TYPES.index(u["type"]),)
     return out
 
 
@@ -112,7 +125,7 @@ def label_facts(labels: dict, counts: dict | None = None, uncovered=None, commen
     """The label part of a labelled example (see the module docstring)."""
     lines = [f"% {comment}"] if comment else []
     for u in sorted(labels):
-        lines.append(f"label({u}, {UNIT_TYPES[labels[u]]}).")
+        lines.append(" ".join(f"label({u}, {UNIT_TYPES[t]})." for t in labels[u]))
     for u in sorted(counts or {}):
         for k, n in enumerate(counts[u]):
             if n:
@@ -153,11 +166,11 @@ def synthetic_example(seed: int, model=None) -> str:
     relabel = {name: {u + 1: p for u, p in ev.unary(name)} for name in SOFT_PREDICATES}
     ev = Evidence.build([u + 1 for u in ev.units], adj=[(p + 1, q + 1) for p, q in ev.adj],
                         **relabel)
-    labels = {k + 1: UNIT_TYPES.index(u["type"]) for k, u in enumerate(seen)}
+    labels = {k + 1: (UNIT_TYPES.index(u["type"]),) for k, u in enumerate(seen)}
     counts = {}
     for k, (r0, c0, r1, c1) in enumerate(rects):
         c = np.zeros(4, np.int64)
-        c[labels[k + 1]] = (int(r1) - int(r0)) * (int(c1) - int(c0))
+        c[labels[k + 1][0]] = (int(r1) - int(r0)) * (int(c1) - int(c0))
         counts[k + 1] = c
     head = (f"% synthetic floor {seed} (semmap_pp.synth.generate_floor): its {len(seen)} seen true "
             f"units as the world, the evidence the engine computes for it (model "

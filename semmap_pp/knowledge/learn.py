@@ -211,8 +211,10 @@ class Example:
     ----------
     path : str
     evidence : Evidence
-    labels : dict int -> int
-        Unit -> index in :data:`~semmap_pp.cells.UNIT_TYPES` of its true type.
+    labels : dict int -> tuple of int
+        Unit -> the indices in :data:`~semmap_pp.cells.UNIT_TYPES` its true type is one of (one
+        ``label`` fact: that type; several: any of them, e.g. room, hall or other for a truth
+        that knows rooms and corridors only).
     cells : dict int -> ndarray (4,)
         Unit -> its truth cells of each type (empty when the file gives none).
     uncovered : ndarray (4,)
@@ -224,6 +226,11 @@ class Example:
     labels: dict
     cells: dict = field(default_factory=dict)
     uncovered: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
+
+    def __post_init__(self):
+        # a single type index stands for the set of that type alone
+        self.labels = {u: tuple(sorted(set(t))) if isinstance(t, (tuple, list, set, frozenset))
+                       else (int(t),) for u, t in self.labels.items()}
 
 
 def _type_index(sym, path, st) -> int:
@@ -244,14 +251,14 @@ def _count(sym, path, st) -> int:
 def example_from_text(text: str, path: str) -> Example:
     """A labelled example from the text of a labelled evidence file: the evidence facts of
     ``semmap rules evidence`` (:func:`~semmap_pp.knowledge.evidence.evidence_from_facts`) plus
-    ``label(U, T).`` facts, and optionally ``cells(U, T, N).`` and ``uncovered(T, N).``
+    ``label(U, T).`` facts (several for one unit: its type is one of them), and optionally ``cells(U, T, N).`` and ``uncovered(T, N).``
     (:data:`LABEL_PREDICATES`). Errors are :class:`~semmap_pp.errors.EvidenceError`
     ``file:line:col: message``.
 
     >>> ex = example_from_text("unit(1). unit(2). rolike(1). adj(1,2). label(1, room). "
     ...                        "label(2, corridor). cells(1, room, 40).", "ex.lp")
     >>> ex.labels, ex.cells[1].tolist()
-    ({1: 0, 2: 1}, [40, 0, 0, 0])
+    ({1: (0,), 2: (1,)}, [40, 0, 0, 0])
     """
     try:
         stripped, includes = strip_includes(text, path)
@@ -289,10 +296,7 @@ def example_from_text(text: str, path: str) -> Example:
                                     st.location.begin.line, st.location.begin.column)
             u, t = args[0].number, _type_index(args[1], path, st)
             if sym.name == "label":
-                if u in labels and labels[u] != t:
-                    raise EvidenceError(path, f"unit {u} has two labels",
-                                        st.location.begin.line, st.location.begin.column)
-                labels[u] = t
+                labels[u] = tuple(sorted(set(labels.get(u, ())) | {t}))
             else:
                 cells.setdefault(u, np.zeros(4, np.int64))[t] += _count(args[2], path, st)
         _blank(lines, st.location)
@@ -386,7 +390,7 @@ class _Network:
                 self.fixed.append((tuple(s), -(w / WEIGHT_SCALE) * np.asarray(t, np.float64)))
         self.n_rules = len(sr.ids)
         index = {u: i for i, u in enumerate(self.units)}
-        self.clamp = {index[u]: t for u, t in ex.labels.items()}
+        self.clamp = {index[u]: tuple(t) for u, t in ex.labels.items()}
 
     def groundings(self) -> np.ndarray:
         """Ground tuples of each rule in this network (those a world can violate)."""
@@ -397,17 +401,28 @@ class _Network:
 
 
 def _reduce(scope, table, clamp, new_index):
-    """``table`` over ``scope`` with the clamped variables fixed: (reduced scope, table)."""
+    """``table`` over ``scope`` with the variables clamped to one state fixed (``clamp``: var ->
+    state): (reduced scope, table)."""
     idx = tuple(clamp[v] if v in clamp else slice(None) for v in scope)
     rest = tuple(new_index[v] for v in scope if v not in clamp)
     return rest, table[idx]
 
 
+def _split_clamp(clamp: dict) -> tuple[dict, dict]:
+    """``clamp`` (var -> allowed states) as (var -> its one state, var -> allowed states of the
+    variables that may take several)."""
+    one = {v: s[0] for v, s in clamp.items() if len(s) == 1}
+    many = {v: s for v, s in clamp.items() if len(s) > 1}
+    return one, many
+
+
 class _Term:
     """log Z and the expected rule counts of an example's network with some type variables
-    clamped, as functions of the rule weights (one junction tree, built once)."""
+    clamped (var -> the states allowed), as functions of the rule weights (one junction tree,
+    built once)."""
 
-    def __init__(self, net: _Network, clamp: dict, max_states: int):
+    def __init__(self, net: _Network, clamp_sets: dict, max_states: int):
+        clamp, many = _split_clamp(clamp_sets)
         free = [v for v in range(len(net.card)) if v not in clamp]
         new_index = {v: i for i, v in enumerate(free)}
         self.card = [net.card[v] for v in free]
@@ -415,7 +430,12 @@ class _Term:
         fixed, stack = {}, {}
         self.const_fixed = 0.0
         self.const_counts = np.zeros(k)
-        for s, t in net.fixed:
+        masks = []
+        for v, states in many.items():
+            m = np.full(net.card[v], -np.inf)
+            m[list(states)] = 0.0
+            masks.append(((v,), m))
+        for s, t in net.fixed + masks:
             rs, rt = _reduce(s, t, clamp, new_index)
             if not rs:
                 self.const_fixed += float(rt)
@@ -473,7 +493,7 @@ class ExampleLikelihood:
         index = {u: i for i, u in enumerate(net.units)}
         clamps: dict = {}
         for e in examples:
-            key = tuple(sorted((index[u], t) for u, t in e.labels.items()))
+            key = tuple(sorted((index[u], tuple(t)) for u, t in e.labels.items()))
             clamps[key] = clamps.get(key, 0) + 1
         self.count = len(examples)
         self.n_labels = sum(len(e.labels) for e in examples)
@@ -481,7 +501,7 @@ class ExampleLikelihood:
         for (k, _n), (_n2, term) in zip(clamps.items(), self.observed):
             if not np.isfinite(term.value(np.zeros(net.n_rules))[0]):
                 bad = next(e.path for e in examples
-                           if tuple(sorted((index[u], t) for u, t in e.labels.items())) == k)
+                           if tuple(sorted((index[u], tuple(t)) for u, t in e.labels.items())) == k)
                 raise EvidenceError(bad, "the labels break the hard rules of the rule file: no "
                                          "world has them")
         self.free = None
@@ -718,11 +738,11 @@ def correct_cells(t_true: int, t_pred: int) -> bool:
 
 def score(ex: Example, types: dict) -> dict:
     """How well ``types`` (unit -> type index) match ``ex``: unit accuracy over the labelled
-    units, and when the example has cell counts the per-cell accuracy (cells of no unit count as
+    units (right when the type is among the unit's labels), and when the example has cell counts the per-cell accuracy (cells of no unit count as
     wrong) and the recall of room and corridor cells, as :func:`semmap_pp.evaluate.type_accuracy`
     scores a type map against the ipa truth."""
     lab = ex.labels
-    unit_acc = (sum(types[u] == t for u, t in lab.items()) / len(lab)) if lab else float("nan")
+    unit_acc = (sum(types[u] in t for u, t in lab.items()) / len(lab)) if lab else float("nan")
     out = {"units": len(lab), "unit_accuracy": unit_acc}
     if ex.cells:
         good = np.zeros(4)
