@@ -292,43 +292,52 @@ def _evidence(args) -> int:
 
 
 def _label(args) -> int:
-    import numpy as np
-    from PIL import Image
-
     from semmap_pp import atomic
-    from semmap_pp.errors import MapError
-    from semmap_pp.knowledge.labelled import (IPA_VALUES, cell_counts, label_facts,
-                                              majority_labels, parse_values, read_truth_image,
-                                              world_labels)
+    from semmap_pp.knowledge.labelled import parse_values
     from semmap_pp.pipeline import load_inputs
 
     _check_out_file(args.out)
     inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))
-    text = world_evidence_facts(inputs, args.world)
-    ids = set(world_labels(args.world)) | _unit_ids(args.world)
-    if args.truth is None:
-        labels = world_labels(args.world)
-        if not labels:
-            raise EvidenceError(args.world, "no unit has a type; give --truth IMAGE")
-        text += label_facts(labels, comment=f"the types of {args.world}")
-    else:
-        values = parse_values(args.truth_values) if args.truth_values else IPA_VALUES
-        labels_png = args.world.parent / "labels.png"
-        try:
-            unit_image = np.asarray(Image.open(labels_png))
-        except (OSError, ValueError) as exc:
-            raise MapError(labels_png, f"cannot read the units' cells (labels.png beside the "
-                                       f"world.json): {exc}") from None
-        truth = read_truth_image(args.truth, values, unit_image.shape)
-        counts, uncovered = cell_counts(unit_image, truth, sorted(ids))
-        text += label_facts(majority_labels(counts, values), counts, uncovered,
-                            comment=f"the majority type of each unit's cells in {args.truth}")
+    values = parse_values(args.truth_values) if args.truth_values else None
+    text = labelled_example_text(inputs, args.world, args.truth, values)
     try:
         atomic.write_text(args.out, text)
     except OSError as exc:
         raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
     print(args.out)
     return 0
+
+
+def labelled_example_text(inputs, world_path, truth=None, values=None) -> str:
+    """A labelled example (:mod:`semmap_pp.knowledge.labelled`) of the world.json at
+    ``world_path`` on ``inputs``' map: its evidence (:func:`world_evidence_facts`) and labels,
+    from the per-cell type image ``truth`` (grey values ``values``, default the ipa ones; the
+    units' cells from labels.png beside the world.json) or else from the world.json's types."""
+    import numpy as np
+    from PIL import Image
+
+    from semmap_pp.errors import MapError
+    from semmap_pp.knowledge.labelled import (IPA_VALUES, cell_counts, label_facts,
+                                              majority_labels, read_truth_image, world_labels)
+
+    world_path = Path(world_path)
+    text = world_evidence_facts(inputs, world_path)
+    if truth is None:
+        labels = world_labels(world_path)
+        if not labels:
+            raise EvidenceError(world_path, "no unit has a type; give --truth IMAGE")
+        return text + label_facts(labels, comment=f"the types of {world_path}")
+    values = values or IPA_VALUES
+    labels_png = world_path.parent / "labels.png"
+    try:
+        unit_image = np.asarray(Image.open(labels_png))
+    except (OSError, ValueError) as exc:
+        raise MapError(labels_png, f"cannot read the units' cells (labels.png beside the "
+                                   f"world.json): {exc}") from None
+    grid_truth = read_truth_image(truth, values, unit_image.shape)
+    counts, uncovered = cell_counts(unit_image, grid_truth, sorted(_unit_ids(world_path)))
+    return text + label_facts(majority_labels(counts, values), counts, uncovered,
+                              comment=f"the majority type of each unit's cells in {truth}")
 
 
 def _unit_ids(world_path) -> set:
