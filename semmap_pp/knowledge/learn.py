@@ -791,8 +791,9 @@ def rewritten_text(sr: SoftRules, values, notes: dict | None = None, header=()) 
             continue
         k = p.end_line - 1
         lines[k] = _NOTE_RE.sub("", lines[k]) + f"  % learned: {note}"
-    while lines and lines[0].startswith(HEADER[:2] + " learned"):
-        lines.pop(0)
+    if lines and lines[0].startswith(HEADER):        # the header of an earlier learning
+        while lines and lines[0].startswith("%% "):
+            lines.pop(0)
     return "\n".join([*header, *lines])
 
 
@@ -809,13 +810,17 @@ def learned_text(result: Learned, data_desc: str) -> str:
         notes[j] = (f"w = {w:.3f} +- {se:.3f} s.e.{bound}, file {result.start[j]:.3f}, "
                     f"{g} ground tuples in the data")
     methods = sorted(set(result.methods.values()))
-    header = [f"{HEADER} from {data_desc}: {result.n_examples} examples, {result.n_labels} "
+    header = [f"{HEADER} (docs/rules.md, \"Learning weights\"). Data: {data_desc}; "
+              f"{result.n_examples} examples, {result.n_labels} "
               f"labelled units, {'/'.join(methods)} likelihood, Gaussian prior sigma "
               f"{result.sigma:g} around the {'weights of the input file' if result.prior_mean == 'file' else 'zero weight'};",
               f"%% log likelihood {result.start_log_likelihood:.3f} with the input weights, "
               f"{result.log_likelihood:.3f} with the learned ones. Each learned weight's comment "
               "gives its standard error."]
-    return rewritten_text(sr, result.values, notes, header)
+    import textwrap
+    text = " ".join(h[3:] if h.startswith("%% ") else h for h in header)
+    return rewritten_text(sr, result.values, notes,
+                          ["%% " + w for w in textwrap.wrap(text, 94, break_on_hyphens=False)])
 
 
 def cross_validate(sr: SoftRules, examples, **settings) -> dict:
