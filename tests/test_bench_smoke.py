@@ -37,7 +37,7 @@ def bench(capsys, monkeypatch, *argv) -> dict:
 
 
 def test_every_benchmark_is_tested():
-    assert NAMES == ["batch", "knowledge", "large", "likelihood", "quality", "sampler"]
+    assert NAMES == ["batch", "knowledge", "large", "learn", "likelihood", "quality", "sampler"]
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -53,6 +53,10 @@ def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
     elif name == "large":
         assert [m["cells"] for m in result["sizes"]] == [200 ** 2, 300 ** 2]
         assert result["canvas"]["crop"]["lattice"] != result["canvas"]["whole"]["lattice"]
+    elif name == "learn":
+        assert [r["map"] for r in result["rows"]] == ["synth-0", "synth-1", "synth-2"]
+        assert all(0 <= r["accuracy_learned"] <= 1 for r in result["rows"])
+        assert len(result["weights_all"]) == 19
     elif name == "likelihood":
         for k in ("1x", "4x"):
             assert result[k]["edits_timed"] >= 40 and result[k]["incremental_vs_full_rel_err"] < 1e-9

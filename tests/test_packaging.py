@@ -48,7 +48,8 @@ def wheel(tmp_path_factory) -> Path:
 def test_the_checkout_serves_its_own_folders():
     assert shipped("rules") == ROOT / "rules" and shipped("models") == ROOT / "models"
     assert DEFAULT_RULES == ROOT / "rules" / "table3.lp" and DEFAULT_MODEL == ROOT / "models" / "default.toml"
-    assert [f.name for f in rule_files()] == ["halls_to_corridors.lp", "none.lp", "table3.lp"]
+    assert [f.name for f in rule_files()] == ["halls_to_corridors.lp", "none.lp", "table3.lp",
+                                              "table3_learned.lp"]
     assert [f.name for f in evidence_files()] == ["small_floor.lp"]
     with pytest.raises(ValueError, match="not a shipped folder"):
         shipped("data")

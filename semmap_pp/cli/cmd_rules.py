@@ -49,6 +49,68 @@ def register(subparsers) -> None:
                       help="model file (default models/default.toml): the evidence thresholds")
     add_map_options(evid)
     evid.set_defaults(func=_evidence)
+    label = sub.add_parser("label", help="a world's evidence with true types: a labelled example "
+                                         "for `rules learn`",
+                           description="Write a labelled example for `semmap rules learn`: the "
+                                       "evidence of a world.json (as `semmap rules evidence` writes "
+                                       "it) and the true type of each unit, label(U, T). The types "
+                                       "come from a per-cell type image (--truth: each unit takes "
+                                       "the majority type of its labelled cells, and the cell "
+                                       "counts are kept for per-cell scores) or, without --truth, "
+                                       "from the world.json's own type fields (correct them first).")
+    label.add_argument("map", metavar="MAP", help="the map the world.json was written for")
+    label.add_argument("world", metavar="WORLD_JSON", type=Path, help="a world.json written for MAP")
+    label.add_argument("--out", type=Path, metavar="FILE.lp", required=True,
+                       help="the labelled example to write")
+    label.add_argument("--truth", type=Path, metavar="IMAGE", default=None,
+                       help="a per-cell type image of the map's size (default: the world.json's "
+                            "types); the units' cells are read from labels.png beside the "
+                            "world.json")
+    label.add_argument("--truth-values", default=None, metavar="GREY=TYPE,...",
+                       help="the grey value of each type in --truth, several types joined by | "
+                            "(the cell is of one of them; default 77=room|hall|other,115=corridor: "
+                            "the ipa place-type images, whose rooms are room-like places)")
+    label.add_argument("--model", metavar="FILE", default=None,
+                       help="model file (default models/default.toml): the evidence thresholds")
+    add_map_options(label)
+    label.set_defaults(func=_label)
+    synth = sub.add_parser("label-synth", help="labelled examples of synthetic floors (their truth)",
+                           description="Write one labelled example per synthetic floor "
+                                       "(semmap synth's generator): the seen true units as the "
+                                       "world, the evidence the engine computes for it, the true "
+                                       "types as labels.")
+    synth.add_argument("--floors", type=int, default=10, metavar="N", help="number of floors (10)")
+    synth.add_argument("--first", type=int, default=0, metavar="SEED", help="first seed (0)")
+    synth.add_argument("--out", type=Path, required=True, metavar="DIR",
+                       help="folder for synth-SEED.lp")
+    synth.add_argument("--model", metavar="FILE", default=None, help="model file")
+    synth.set_defaults(func=_label_synth)
+    learn = sub.add_parser("learn", help="learn the soft rules' weights from labelled examples",
+                           description="Learn the weights of a rule file's soft rules by maximum "
+                                       "likelihood of the labelled types (pseudo-likelihood where a "
+                                       "network is too dense), with a Gaussian prior on each weight, "
+                                       "and write the file with the learned weights, each with its "
+                                       "standard error in a comment (docs/rules.md, 'Learning "
+                                       "weights').")
+    learn.add_argument("file", metavar="RULES", help="rule file (.lp) whose soft weights to learn")
+    learn.add_argument("--data", nargs="+", required=True, metavar="FILE_OR_DIR",
+                       help="labelled examples (.lp, as `semmap rules label` writes them), or "
+                            "folders of them")
+    learn.add_argument("--out", type=Path, metavar="FILE.lp", default=None,
+                       help="the learned rule file to write (needed unless --cv)")
+    learn.add_argument("--sigma", type=float, default=None, metavar="S",
+                       help="standard deviation of the Gaussian prior on each weight, in MLN units "
+                            "(default 1.0: semmap_pp.knowledge.learn.SIGMA)")
+    learn.add_argument("--prior-mean", choices=("file", "zero"), default="file",
+                       help="centre of the prior: the file's weights (default) or 0")
+    learn.add_argument("--objective", choices=("auto", "exact", "pseudo"), default="auto",
+                       help="exact likelihood, pseudo-likelihood, or auto: exact unless an "
+                            "example's junction tree is too large (default auto)")
+    learn.add_argument("--cv", action="store_true",
+                       help="leave each example out in turn, learn on the rest and score the "
+                            "left-out one (per-cell accuracy when it has cell counts)")
+    learn.add_argument("--json", action="store_true", help="print one JSON object")
+    learn.set_defaults(func=_learn)
     listing = sub.add_parser("list", help="the shipped rule files and model file, and where they are",
                              description="List the rule files and the model file that ship with "
                                          "semmap_pp, with their paths and what each is: copy one, edit "
@@ -226,4 +288,143 @@ def _evidence(args) -> int:
     except OSError as exc:
         raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
     print(args.out)
+    return 0
+
+
+def _label(args) -> int:
+    from semmap_pp import atomic
+    from semmap_pp.knowledge.labelled import parse_values
+    from semmap_pp.pipeline import load_inputs
+
+    _check_out_file(args.out)
+    inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))
+    values = parse_values(args.truth_values) if args.truth_values else None
+    text = labelled_example_text(inputs, args.world, args.truth, values)
+    try:
+        atomic.write_text(args.out, text)
+    except OSError as exc:
+        raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
+    print(args.out)
+    return 0
+
+
+def labelled_example_text(inputs, world_path, truth=None, values=None) -> str:
+    """A labelled example (:mod:`semmap_pp.knowledge.labelled`) of the world.json at
+    ``world_path`` on ``inputs``' map: its evidence (:func:`world_evidence_facts`) and labels,
+    from the per-cell type image ``truth`` (grey values ``values``, default the ipa ones; the
+    units' cells from labels.png beside the world.json) or else from the world.json's types."""
+    import numpy as np
+    from PIL import Image
+
+    from semmap_pp.errors import MapError
+    from semmap_pp.knowledge.labelled import (IPA_VALUES, cell_counts, label_facts,
+                                              majority_labels, read_truth_image, world_labels)
+
+    world_path = Path(world_path)
+    text = world_evidence_facts(inputs, world_path)
+    if truth is None:
+        labels = world_labels(world_path)
+        if not labels:
+            raise EvidenceError(world_path, "no unit has a type; give --truth IMAGE")
+        return text + label_facts(labels, comment=f"the types of {world_path}")
+    values = values or IPA_VALUES
+    labels_png = world_path.parent / "labels.png"
+    try:
+        unit_image = np.asarray(Image.open(labels_png))
+    except (OSError, ValueError) as exc:
+        raise MapError(labels_png, f"cannot read the units' cells (labels.png beside the "
+                                   f"world.json): {exc}") from None
+    grid_truth = read_truth_image(truth, values, unit_image.shape)
+    counts, uncovered = cell_counts(unit_image, grid_truth, sorted(_unit_ids(world_path)))
+    return text + label_facts(majority_labels(counts, values), counts, uncovered,
+                              comment=f"the majority type of each unit's cells in {truth}")
+
+
+def _unit_ids(world_path) -> set:
+    doc = json.loads(Path(world_path).read_text(encoding="utf-8"))
+    return {u["id"] for u in doc.get("units", []) if isinstance(u, dict) and isinstance(u.get("id"), int)}
+
+
+def _check_out_file(out) -> None:
+    if out.is_dir() or str(out).endswith(("/", "\\")):
+        raise OutputError(out, "is a directory; --out names the file to write")
+
+
+def _label_synth(args) -> int:
+    from semmap_pp import atomic
+    from semmap_pp.knowledge.labelled import synthetic_example
+    from semmap_pp.model import load_model
+
+    if args.floors < 1 or args.first < 0:
+        raise SemmapError(None, "--floors must be at least 1 and --first at least 0")
+    if args.out.exists() and not args.out.is_dir():
+        raise OutputError(args.out, "is not a directory; --out names the folder to write into")
+    model = load_model(args.model)
+    for seed in range(args.first, args.first + args.floors):
+        path = args.out / f"synth-{seed}.lp"
+        try:
+            atomic.write_text(path, synthetic_example(seed, model))
+        except OSError as exc:
+            raise OutputError(path, f"cannot write: {exc.strerror or exc}") from None
+        print(path)
+    return 0
+
+
+def _learn(args) -> int:
+    from semmap_pp import atomic
+    from semmap_pp.knowledge import learn as lm
+
+    if args.out is None and not args.cv:
+        raise SemmapError(None, "semmap rules learn needs --out FILE.lp (or --cv)")
+    if args.out is not None:
+        _check_out_file(args.out)
+    sigma = lm.SIGMA if args.sigma is None else args.sigma
+    sr = lm.soft_rules(args.file)
+    files = lm.data_files(args.data)
+    examples = [lm.read_example(f) for f in files]
+    settings = dict(sigma=sigma, prior_mean=args.prior_mean, objective=args.objective)
+    out: dict = {"rules": args.file, "data": [str(f) for f in files], "sigma": sigma}
+    if args.cv:
+        out["cv"] = lm.cross_validate(sr, examples, **settings)
+    if args.out is not None:
+        result = lm.learn(sr, examples, **settings)
+        desc = ", ".join(str(d) for d in args.data)
+        try:
+            atomic.write_text(args.out, lm.learned_text(result, desc))
+        except OSError as exc:
+            raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
+        out["weights"] = [
+            {"name": p.name, "file": int(p.value), "learned": int(round(v * 1000)),
+             "se": None if se != se else round(float(se), 4), "ground_tuples": int(g),
+             "learned_here": p.learnable, "at_bound": b}
+            for p, v, se, g, b in zip(sr.params, result.values, result.se, result.groundings,
+                                       result.at_bound)]
+        out["log_likelihood"] = {"file": result.start_log_likelihood, "learned": result.log_likelihood}
+        out["methods"] = sorted(set(result.methods.values()))
+        out["out"] = str(args.out)
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    if "weights" in out:
+        print(f"{len(examples)} examples, {sum(len(e.labels) for e in examples)} labelled units, "
+              f"{'/'.join(out['methods'])} likelihood, prior sigma {sigma:g} around the "
+              f"{'file' if args.prior_mean == 'file' else 'zero'} weights")
+        width = max(len(w["name"]) for w in out["weights"])
+        print(f"{'weight':<{width}}  {'file':>6}  {'learned':>7}  {'s.e.':>6}  ground tuples")
+        for w in out["weights"]:
+            se = "-" if w["se"] is None else f"{w['se'] * 1000:6.0f}"
+            note = "" if w["learned_here"] else "  (in an included file: kept)"
+            note += "  (at the bound)" if w["at_bound"] else ""
+            print(f"{w['name']:<{width}}  {w['file']:>6}  {w['learned']:>7}  {se:>6}  "
+                  f"{w['ground_tuples']}{note}")
+        ll = out["log_likelihood"]
+        print(f"log likelihood {ll['file']:.3f} -> {ll['learned']:.3f}; wrote {args.out}")
+    if "cv" in out:
+        print("leave one out: each example typed by the weights learned without it")
+        for row in out["cv"]["rows"]:
+            kind = "cells" if "cell_accuracy_file" in row else "units"
+            a, b = (row["cell_accuracy_file"], row["cell_accuracy_learned"]) if kind == "cells" \
+                else (row["unit_accuracy_file"], row["unit_accuracy_learned"])
+            print(f"  {row['example']}: {kind} accuracy {a:.4f} with the file's weights, "
+                  f"{b:.4f} learned without it")
     return 0

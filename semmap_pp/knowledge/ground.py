@@ -339,7 +339,12 @@ def _with_soft_weights(net: Network, ev: Evidence) -> Network:
     return replace(net, soft=net.soft + extra) if extra else net
 
 
-def _build(path: str, ev: Evidence, obs: _Observer, max_states: int | None = None) -> Network:
+def _build(path: str, ev: Evidence, obs: _Observer, max_states: int | None = None,
+           tags: list | None = None) -> Network:
+    """The :class:`Network` of the ground program ``obs`` recorded; with ``tags`` (a list),
+    the weak-constraint priority of each soft factor is appended to it in the order of
+    ``Network.soft`` (:mod:`semmap_pp.knowledge.learn` grounds each soft rule at a priority of
+    its own to tell the rules' factors apart)."""
     units = ev.units
     unit_index = {u: i for i, u in enumerate(units)}
     facts, choice = set(), set()
@@ -408,6 +413,8 @@ def _build(path: str, ev: Evidence, obs: _Observer, max_states: int | None = Non
                 offset += int(w) if bool(t) else 0
             elif t.any() and w != 0:
                 soft.append((scope, t, int(w)))
+                if tags is not None:
+                    tags.append(_priority)
     hard += ev_.aux_hard
     card = np.array(ev_.card, dtype=np.int64)
     return Network(path, tuple(units), card, names + ev_.aux_names, sale, hard, soft, offset,
