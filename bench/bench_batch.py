@@ -57,7 +57,7 @@ def _batch(maps, out: Path, workers: int, extra: list[str]) -> float:
 def run(args) -> dict:
     from distributed import Client, LocalCluster
 
-    from semmap_pp import batch as B
+    from semmap_pp.run import batch as B
 
     if args.tiny:
         for key, value in TINY.items():

@@ -35,11 +35,11 @@ CHILD = r"""
 import json, math, resource, sys, time
 t0 = time.perf_counter()
 from semmap_pp.evaluate import closing_radius_cells, default_roi
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import load_map
-from semmap_pp.kernels import data_from_frame
-from semmap_pp.kernels.data import model_settings
-from semmap_pp.likelihood import prepare
+from semmap_pp.sampler.kernels import data_from_frame
+from semmap_pp.sampler.kernels.data import model_settings
+from semmap_pp.target.likelihood import prepare
 from semmap_pp.model import load_model
 
 def rss_kib():

@@ -1,7 +1,7 @@
 """Likelihood/posterior speed on a real map: incremental single-unit edits and full evaluations.
 
 ``python bench/run.py likelihood --json``. On the cartesium lattice (as the sampler sees it: the
-known cells and a margin, :func:`semmap_pp.frame.build_frame_from_classes`) a seeded 20-unit
+known cells and a margin, :func:`semmap_pp.lattice.frame.build_frame_from_classes`) a seeded 20-unit
 world of room-sized rectangles is placed over the known part of the map; a *typical single-unit
 edit* moves one wall of one unit by 1..5 cells (the SHRINK/DILATE kernel), half of the proposals
 are accepted. The same world and the same edits run on a map of four times the area (that lattice
@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from semmap_pp import world as W
-from semmap_pp.frame import build_frame, build_frame_from_classes
+from semmap_pp.lattice.frame import build_frame, build_frame_from_classes
 from semmap_pp.grid import load_map
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
+from semmap_pp.target.posterior import Posterior
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ``--tiny``: the arguments it sets

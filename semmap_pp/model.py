@@ -30,10 +30,10 @@ from semmap_pp.resources import DEFAULT_MODEL
 
 SIZE_MEASURES = ("short_side", "long_side", "area")
 # Whose doors count towards MulDoor: the unit's own, or for a corridor-like unit those of the
-# space it forms with the units joined to it by open passages (semmap_pp.evidence.muldoor_counts).
+# space it forms with the units joined to it by open passages (semmap_pp.target.geometry_evidence.muldoor_counts).
 MULDOOR_SCOPES = ("unit", "space")
 #: [evidence] colike_scope: each unit's own Table 4 class, or room-like pieces of a corridor space
-#: corridor-like (semmap_pp.evidence.space_colike)
+#: corridor-like (semmap_pp.target.geometry_evidence.space_colike)
 COLIKE_SCOPES = ("unit", "space")
 N_PRIORS = ("poisson", "geometric")
 #: [outside] mode: read the free space outside the building as unknown when enough of the map's
@@ -122,7 +122,7 @@ class EvidenceParams:
     multiple_doors: int
     muldoor_scope: str = "unit"
     #: "space": room-like units joined by open passages to a corridor-like unit at most
-    #: space_width_ratio times as wide are corridor-like (semmap_pp.evidence.space_colike)
+    #: space_width_ratio times as wide are corridor-like (semmap_pp.target.geometry_evidence.space_colike)
     colike_scope: str = "unit"
     space_width_ratio: float = 2.0
 
@@ -194,10 +194,10 @@ class DiagnosticsParams:
     rhat_max: float
     ess_min: float
     #: Adjacent rooms whose connecting walls differ by more than this (metres) are a topological
-    #: defect (semmap_pp.derive.defects); a missing key means 2 * prior.sale_sigma_m.
+    #: defect (semmap_pp.target.defects); a missing key means 2 * prior.sale_sigma_m.
     defect_tolerance_m: float
     #: A W* unit whose interior holds at least this share of the map's wall-like cells gets a note
-    #: (semmap_pp.derive.walls_inside: the map probably shows the outside as free); a missing key
+    #: (semmap_pp.target.walls_inside: the map probably shows the outside as free); a missing key
     #: means 0.5, 1.0 switches the note off.
     walls_inside_max: float = 0.5
 
@@ -215,7 +215,7 @@ class OutsideParams:
 
 @dataclass(frozen=True)
 class RoomParams:
-    """``[rooms]``: how rooms.png gives every free cell a room (semmap_pp.outputs.rooms).
+    """``[rooms]``: how rooms.png gives every free cell a room (semmap_pp.semantic.rooms).
 
     A model file without the table gets these values."""
 

@@ -15,10 +15,10 @@ import numpy as np
 
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
-from semmap_pp.outputs import semantic_map
-from semmap_pp.posterior import Posterior
+from semmap_pp.semantic.semantic_map import semantic_map
+from semmap_pp.target.posterior import Posterior
 
 RECTS = {"A": (4, 4, 70, 56), "B": (4, 54, 70, 106), "C": (4, 104, 70, 156), "D": (68, 4, 110, 56)}
 
@@ -47,7 +47,7 @@ def floor_world():
 
 
 def literal_floor(model, source=None):
-    """The floor's semantic map (:class:`semmap_pp.outputs.SemanticMap`) under ``model``."""
+    """The floor's semantic map (:class:`semmap_pp.semantic.semantic_map.SemanticMap`) under ``model``."""
     g = floor_grid(source)
     f = build_frame(g, model)
     return semantic_map(g, f, Posterior(f, model), floor_world())

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from semmap_pp import batch as B
+from semmap_pp.run import batch as B
 from semmap_pp.cli import main
 from semmap_pp.errors import MapError
 

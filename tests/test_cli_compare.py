@@ -141,7 +141,7 @@ def test_a_rule_set_off_the_fast_path_is_named_once_before_the_runs(monkeypatch,
     general path once, before the first run; a pairwise-local one gets no note."""
     import types
 
-    import semmap_pp.pipeline as pipeline
+    import semmap_pp.run.pipeline as pipeline
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
 

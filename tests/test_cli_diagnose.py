@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from semmap_pp.cli import main
-from semmap_pp.diagnostics import to_datatree, write_trace
+from semmap_pp.sampler.diagnostics import to_datatree, write_trace
 
 
 def write_run(path, shift=0.0, seed=0):

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from semmap_pp.cli import main
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import load_map
 from semmap_pp.model import load_model
-from semmap_pp.world_file import read_world_units
+from semmap_pp.plans.world_file import read_world_units
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"

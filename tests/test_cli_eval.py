@@ -11,7 +11,7 @@ from semmap_pp.cli import main
 from semmap_pp.cli.cmd_eval import detect_kind
 from semmap_pp.evaluate import read_ipa_gt, read_ipa_types, read_label_image
 from semmap_pp.evaluate.types import TRUTH_CORRIDOR, TRUTH_ROOM
-from semmap_pp.outputs import write_labels_png
+from semmap_pp.semantic.world_json import write_labels_png
 
 ROOT = Path(__file__).resolve().parents[1]
 IPA = ROOT / "tests" / "data" / "ipa"

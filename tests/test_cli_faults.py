@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from semmap_pp.cli import main
-from semmap_pp.diagnostics import read_trace
+from semmap_pp.sampler.diagnostics import read_trace
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = json.loads((ROOT / "docs" / "world.schema.json").read_text())

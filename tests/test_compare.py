@@ -9,11 +9,11 @@ import pytest
 
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN
-from semmap_pp.compare import (ACROSS_QUANTITIES, AcrossSeeds, RuleSetSummary, across_dict, across_table,
+from semmap_pp.studies.compare import (ACROSS_QUANTITIES, AcrossSeeds, RuleSetSummary, across_dict, across_table,
                                compare_dict, compare_table, spread_of, summarise, wall_disagreement,
                                wall_spread)
 from semmap_pp.evaluate import closing_radius_cells, default_roi
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
 from semmap_pp.model import load_model
 
@@ -94,7 +94,7 @@ def test_spread_of_is_mean_sample_sd_and_range_of_the_finite_values():
 
 
 def _plan(seed, logp, rects):
-    from semmap_pp.stability import Plan
+    from semmap_pp.studies.stability import Plan
     return Plan(seed, tuple(range(1, len(rects) + 1)), tuple(rects), ("room",) * len(rects), logp, 0.9, 1.0)
 
 
@@ -136,8 +136,8 @@ def two_rooms_grid():
 
 
 def test_summarise_a_tiny_run():
-    from semmap_pp.compare import typed_sampled_worlds
-    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.studies.compare import typed_sampled_worlds
+    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
 
     g = two_rooms_grid()
     f = build_frame(g, MODEL)
@@ -159,8 +159,8 @@ def test_summarise_a_tiny_run():
 def test_conditional_wall_sd_is_the_exact_gibbs_conditional_of_each_wall():
     """Against a brute force over full evaluations: each side of each unit moved by -k..k cells,
     the offsets weighed by exp(log π) (invalid worlds by 0), the standard deviation taken."""
-    from semmap_pp.compare import conditional_wall_sd
-    from semmap_pp.posterior import Posterior
+    from semmap_pp.studies.compare import conditional_wall_sd
+    from semmap_pp.target.posterior import Posterior
 
     post = Posterior(build_frame(two_rooms_grid(), MODEL), MODEL, None)
     # a map this clear pins every wall to one position (sd 0); with the evidence per cell scaled

@@ -5,7 +5,7 @@ import pytest
 
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.derive.defects import count_defects, topological_defects
+from semmap_pp.target.defects import count_defects, topological_defects
 from semmap_pp.model import load_model
 
 ROOM, CORRIDOR = UNIT_TYPES.index("room"), UNIT_TYPES.index("corridor")

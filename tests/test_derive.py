@@ -14,8 +14,8 @@ from semmap_pp.derive.adjacency import adjacency_matrix, adjacency_raster
 from semmap_pp.derive.doors import doors_between
 from semmap_pp.derive.states import cell_states, find_objects
 from semmap_pp.derive.unexplored import find_unexplored
-from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.likelihood import wall_like
+from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.target.likelihood import wall_like
 from semmap_pp.model import CellParams, load_model
 
 CELLS = CellParams(resolution=0.05, wall=1, object_max_extent=4, door_min=2, door_max=4,

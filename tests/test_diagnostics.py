@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from semmap_pp import diagnostics as dg
+from semmap_pp.sampler import diagnostics as dg
 from semmap_pp.errors import SemmapError
 
 

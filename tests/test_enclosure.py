@@ -1,4 +1,4 @@
-"""Tests of the enclosure term (semmap_pp.likelihood.enclosure_loglik, ``[sensor] enclosure_*``):
+"""Tests of the enclosure term (semmap_pp.target.likelihood.enclosure_loglik, ``[sensor] enclosure_*``):
 its value against a plain numpy count, its meaning on a room and a ray fan, and the tracker's
 incremental target against the full evaluation with the term switched on."""
 
@@ -10,11 +10,11 @@ import pytest
 
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.likelihood import (SEEN_MIN, X_FREE, X_OBJECTLIKE, X_WALLLIKE, enclosure_loglik,
+from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.target.likelihood import (SEEN_MIN, X_FREE, X_OBJECTLIKE, X_WALLLIKE, enclosure_loglik,
                                   prepare)
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
+from semmap_pp.target.posterior import Posterior
 
 DEFAULT = load_model()
 ON = dataclasses.replace(DEFAULT, sensor=dataclasses.replace(
@@ -154,8 +154,8 @@ def room_with_window_fan():
 def test_the_ascent_keeps_a_unit_over_a_ray_fan_only_with_the_term_off(model, kept):
     """Without the term the per-cell model pays for covering the fan (+1,182 nats); with it the
     unit costs thousands and the ascent's removals drop it. The room is kept either way."""
-    from semmap_pp.ascent import _Ascent
-    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.sampler.ascent import _Ascent
+    from semmap_pp.sampler.kernels import data_from_frame
 
     frame = build_frame_from_classes(room_with_window_fan(), 0.05, model, theta=0.0)
     post = Posterior(frame, model)

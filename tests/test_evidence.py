@@ -1,9 +1,9 @@
-"""Tests of semmap_pp.evidence: Table 4 classes, soft evidence, facts, providers."""
+"""Tests of semmap_pp.target.geometry_evidence: Table 4 classes, soft evidence, facts, providers."""
 
 import numpy as np
 import pytest
 
-from semmap_pp.evidence import (COLIKE, HALIKE, ROLIKE, FixedProvider, build_evidence,
+from semmap_pp.target.geometry_evidence import (COLIKE, HALIKE, ROLIKE, FixedProvider, build_evidence,
                                 geometry_class, geometry_probabilities)
 from semmap_pp.model import load_model
 
@@ -73,7 +73,7 @@ def test_fixed_provider_types_and_sale():
 
 
 def test_scalar_geometry_class_equals_the_vectorised_one():
-    from semmap_pp.evidence import geometry_class_one
+    from semmap_pp.target.geometry_evidence import geometry_class_one
     rng = np.random.default_rng(1)
     rects = np.stack([np.zeros(500, int), np.zeros(500, int),
                       rng.integers(20, 400, 500), rng.integers(20, 400, 500)], 1)
@@ -85,7 +85,7 @@ def test_scalar_geometry_class_equals_the_vectorised_one():
 
 def test_soft_evidence_takes_few_values():
     """Soft probabilities are quantised: many unit sizes near a boundary give few distinct values."""
-    from semmap_pp.evidence import unit_geometry
+    from semmap_pp.target.geometry_evidence import unit_geometry
     values = set()
     for h in range(40, 80):
         for w in range(120, 220):
@@ -100,7 +100,7 @@ def test_soft_evidence_takes_few_values():
 def test_geometry_table_equals_unit_geometry_size_by_size():
     """The sampler's block-vectorised size table gives exactly unit_geometry's items (hard and
     soft, every size measure), including block edges and sizes below the first block."""
-    from semmap_pp.evidence import GEOMETRY_BLOCK, GeometryTable, unit_geometry
+    from semmap_pp.target.geometry_evidence import GEOMETRY_BLOCK, GeometryTable, unit_geometry
     rng = np.random.default_rng(3)
     b = GEOMETRY_BLOCK
     for measure in ("short_side", "long_side", "area"):
@@ -123,7 +123,7 @@ def test_muldoor_counts_equal_a_reference_over_random_door_and_passage_graphs():
 
     import networkx as nx
 
-    from semmap_pp.evidence import muldoor_counts
+    from semmap_pp.target.geometry_evidence import muldoor_counts
 
     rng = np.random.default_rng(5)
     grouped = 0
@@ -165,7 +165,7 @@ def _pieces_reference(passage, short, classes, ratio):
 
 
 def test_corridor_pieces_equal_their_definition_whatever_the_order_of_the_units():
-    from semmap_pp.evidence import space_colike
+    from semmap_pp.target.geometry_evidence import space_colike
 
     rng = np.random.default_rng(11)
     found = 0
@@ -193,7 +193,7 @@ def test_patched_knowledge_evidence_equals_the_evidence_built_anew():
     changed between hard and soft, MulDoor flags, pairs dropped and added) give the evidence
     knowledge_evidence builds from the edited world itself; the parts not edited are kept as
     the same objects."""
-    from semmap_pp.evidence import knowledge_evidence, patch_knowledge_evidence
+    from semmap_pp.target.geometry_evidence import knowledge_evidence, patch_knowledge_evidence
 
     rng = np.random.default_rng(2)
 

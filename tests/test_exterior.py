@@ -15,13 +15,14 @@ from PIL import Image
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.derive.exterior import find_exterior, side_shares
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
 from semmap_pp.model import load_model
-from semmap_pp.outputs import semantic_map, world_dict, write_labels_png
+from semmap_pp.semantic.semantic_map import semantic_map
+from semmap_pp.semantic.world_json import world_dict, write_labels_png
 from semmap_pp.outputs.geojson import geojson_dict
 from semmap_pp.outputs.graphml import world_graph
-from semmap_pp.posterior import Posterior
+from semmap_pp.target.posterior import Posterior
 
 SCHEMA = json.loads((Path(__file__).parents[1] / "docs" / "world.schema.json").read_text())
 MODEL = load_model()

@@ -31,8 +31,8 @@ import pytest
 from PIL import Image
 
 from semmap_pp.cli import main
-from semmap_pp.diagnostics import read_trace
-from semmap_pp.pipeline import RunSettings, load_inputs, run_map
+from semmap_pp.sampler.diagnostics import read_trace
+from semmap_pp.run.pipeline import RunSettings, load_inputs, run_map
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"

@@ -1,4 +1,4 @@
-"""Tests of semmap_pp.frame: orientation estimate, lattice resampling, coordinate maps."""
+"""Tests of semmap_pp.lattice.frame: orientation estimate, lattice resampling, coordinate maps."""
 
 import dataclasses
 import math
@@ -8,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame_from_classes, estimate_orientation, off_axis_note, off_axis_walls
+from semmap_pp.lattice.frame import build_frame_from_classes, estimate_orientation, off_axis_note, off_axis_walls
 from semmap_pp.model import load_model
 
 MODEL = load_model()
@@ -129,7 +129,7 @@ def test_without_a_crop_margin_the_lattice_is_the_whole_image():
 
 
 def test_a_crop_that_would_keep_most_of_the_lattice_is_not_made():
-    from semmap_pp.frame import CROP_MAX_SHARE, known_window
+    from semmap_pp.lattice.frame import CROP_MAX_SHARE, known_window
 
     c = rooms()                                   # 40-60 unknown cells around the known ones
     win = known_window(c, round(MODEL.lattice.crop_margin_m / 0.05))
@@ -206,7 +206,7 @@ def test_the_note_names_the_share_and_both_angles_and_can_be_switched_off(square
 
 def test_the_run_gets_the_note_and_world_json_s_map_notes_too(tmp_path, square_wing):
     from semmap_pp.grid import write_map
-    from semmap_pp.pipeline import load_inputs
+    from semmap_pp.run.pipeline import load_inputs
     from semmap_pp.synth import generate_floor
     both = _side_by_side(square_wing, generate_floor(5, units=8, rotation_deg=30.0).classes)
     image = np.where(both == FREE, 254, np.where(both == OCCUPIED, 0, 205)).astype(np.uint8)

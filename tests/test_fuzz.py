@@ -86,7 +86,7 @@ EVIDENCE = Evidence.build([1, 2, 3], rolike={1}, colike={2: 0.7}, halike={3}, mu
 def _world_map():
     """A 4 x 3 m room (0.05 m cells) and its lattice, for the world.json target (built once)."""
     from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-    from semmap_pp.frame import build_frame
+    from semmap_pp.lattice.frame import build_frame
     from semmap_pp.grid import OccupancyGrid
 
     m = np.full((70, 90), UNKNOWN, np.uint8)
@@ -100,7 +100,7 @@ def _world_map():
 def _seed_world() -> bytes:
     import json
 
-    from semmap_pp.outputs.world_json import FORMAT
+    from semmap_pp.semantic.world_json import FORMAT
     grid, frame = _world_map()
     r0, c0 = frame.crop[:2] if frame.crop is not None else (0, 0)
     units = []
@@ -227,10 +227,10 @@ def check_world_bytes(data: bytes) -> None:
     ``semmap diff`` (the file against itself: the same plan), and in
     metres as the earlier world of ``--ids-from``, whose ids then number a one-unit world."""
     from semmap_pp import world as wm
-    from semmap_pp.outputs.ids import MAX_ID, carry_ids
-    from semmap_pp.places import read_places
-    from semmap_pp.world_diff import diff_worlds
-    from semmap_pp.world_file import read_previous_ids, read_start_world
+    from semmap_pp.semantic.ids import MAX_ID, carry_ids
+    from semmap_pp.plans.places import read_places
+    from semmap_pp.plans.diff import diff_worlds
+    from semmap_pp.plans.world_file import read_previous_ids, read_start_world
 
     COUNT["cases"] += 1
     grid, frame = _world_map()
@@ -384,8 +384,8 @@ def test_mutated_model_file(args):
 def test_the_seed_world_reads_back():
     """The world.json target's seed is a valid world: mutations start from something that loads."""
     from semmap_pp import world as wm
-    from semmap_pp.places import read_places
-    from semmap_pp.world_file import read_start_world
+    from semmap_pp.plans.places import read_places
+    from semmap_pp.plans.world_file import read_start_world
 
     grid, frame = _world_map()
     with tempfile.TemporaryDirectory() as d:

@@ -102,7 +102,7 @@ def _validate(doc):
 def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     """End to end: the map file as a renderer that marks every crossed cell free writes it; the
     run reads the sea as unknown, says so, and W* holds the two rooms, not one unit over all."""
-    from semmap_pp.pipeline import RunSettings, load_inputs, run_map
+    from semmap_pp.run.pipeline import RunSettings, load_inputs, run_map
     from semmap_pp import world as W
 
     path = save_grid(grid_of(building()), tmp_path / "sea.yaml")
@@ -112,7 +112,7 @@ def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     run = run_map(inputs, RunSettings.from_model(inputs.model, seed=1, chains=1, cores=1, tune=5,
                                                  draws=5), log=lambda m: None)
     assert run.notes[0] == inputs.notes[0]
-    from semmap_pp.outputs.world_json import world_dict
+    from semmap_pp.semantic.world_json import world_dict
     doc = world_dict(run.semantic)
     assert doc["map"]["notes"] == [inputs.notes[0]]        # programs reading world.json see it too
     _validate(doc)

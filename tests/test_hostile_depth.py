@@ -165,7 +165,7 @@ def test_an_unedited_copy_resumes(finished_run, tmp_path, capsys):
 @pytest.mark.parametrize("at", ["last", 1.5, 0])
 def test_a_bags_topic_and_time_in_a_resume_file_are_read(finished_run, tmp_path, at):
     """A run from a bag stores its --topic and --at (docs/cli.md): the checks take them."""
-    from semmap_pp.resume import read_resume
+    from semmap_pp.sampler.resume import read_resume
 
     d = _edited_resume(finished_run, tmp_path,
                        lambda m, a: m["inputs"]["map_options"].update(topic="/map", at=at))

@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import semmap_pp.world_file as wf
+import semmap_pp.plans.world_file as wf
 from semmap_pp.cli import main
 from semmap_pp.errors import SemmapError
 from semmap_pp.model import load_model
-from semmap_pp.outputs import dumps, world_dict
-from semmap_pp.places import read_places
-from semmap_pp.world_diff import diff_worlds
-from semmap_pp.world_file import read_previous_ids, read_start_world, read_world_units
+from semmap_pp.semantic.world_json import dumps, world_dict
+from semmap_pp.plans.places import read_places
+from semmap_pp.plans.diff import diff_worlds
+from semmap_pp.plans.world_file import read_previous_ids, read_start_world, read_world_units
 
 from literal_floor import literal_floor
 
@@ -92,7 +92,7 @@ def test_an_exterior_unit_over_a_unit_is_one_too(floor, floor_doc, tmp_path):
 # ---- more units than the map holds, units piled on each other -------------------------------------
 
 def test_the_lattice_bounds_the_number_of_units(floor, floor_doc, tmp_path):
-    from semmap_pp.world_file import lattice_fit
+    from semmap_pp.plans.world_file import lattice_fit
 
     c = floor.frame.cells
     fit = lattice_fit(floor.frame.shape, c.min_side, c.wall)
@@ -142,7 +142,7 @@ def test_units_that_share_walls_are_not_piled(floor, floor_doc, tmp_path):
 @pytest.fixture(scope="module")
 def intel_unit(tmp_path_factory):
     """A world.json of the intel corner holding one lattice unit (the file the issue copied)."""
-    from semmap_pp.pipeline import load_inputs
+    from semmap_pp.run.pipeline import load_inputs
 
     inputs = load_inputs(INTEL, rules_path=None)
     f = inputs.frame
@@ -225,7 +225,7 @@ def test_units_piled_on_each_other_stop_a_diff_before_it_pairs_them(floor_doc, t
     assert "pairs of the 2000 and 2000 units overlap (at most 64 per unit)" in one_line(capsys)
     assert time.perf_counter() - t0 < 30
     # the pairs a diff of real plans needs are the nonzero entries of the matrix it replaces
-    from semmap_pp.outputs.ids import overlap_iou_matrix, overlap_pairs
+    from semmap_pp.semantic.ids import overlap_iou_matrix, overlap_pairs
 
     places = read_places(write(tmp_path, floor_doc))
     a = [u.corners for u in places.units]

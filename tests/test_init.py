@@ -2,7 +2,7 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.init import dispersed_world, greedy_rectangles, largest_rectangle, start_world
+from semmap_pp.sampler.start_worlds import dispersed_world, greedy_rectangles, largest_rectangle, start_world
 
 
 def corridor_with_rooms():

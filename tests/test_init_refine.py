@@ -4,12 +4,12 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
-from semmap_pp.ascent import align_walls, refine_world
-from semmap_pp.kernels import build_data, data_from_frame
+from semmap_pp.sampler.ascent import align_walls, refine_world
+from semmap_pp.sampler.kernels import build_data, data_from_frame
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
+from semmap_pp.target.posterior import Posterior
 
 
 def two_rooms() -> np.ndarray:
@@ -77,7 +77,7 @@ def test_a_merge_trims_the_unit_that_blocks_its_box(monkeypatch):
     """The hall in two pieces (a strip along its right wall) and a third unit over the space seen
     through the window and the hall's top right corner: merging the two pieces is only a gain
     when the third unit is cut back to the hall's top wall (a wall line), which the merge does."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(hall_with_window())
     start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (60, 70, 120, 102)),
@@ -104,7 +104,7 @@ def test_a_merge_swallows_a_third_piece_that_lies_inside_its_box(monkeypatch):
     main piece and either strip piece holds the other strip piece whole, so the merge drops it
     (before, a unit the box swallowed blocked the merge and the hall stayed in pieces: synthetic
     floor 7, docs/quality.md)."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(hall_with_window())
     start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (40, 70, 100, 102)),
@@ -127,7 +127,7 @@ def test_a_merge_trims_a_unit_only_along_a_wall_line():
     right room. Their box would cut the right room back at a column of open floor (no wall line
     there), so the merge is refused, although the target would take it (intel's rooms and
     corridor ends were merged into one hall that way; docs/sampler.md)."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())
     start = wm.add(wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 60)), 1, (2, 58, 82, 100)),
@@ -163,7 +163,7 @@ def test_a_merge_trims_a_unit_by_a_wall_band_without_asking_for_a_wall_line():
     and the merge needs no wall line there (synthetic floor 4's corridor stayed in two pieces,
     its door into a room leaving less than half the wall a line; docs/quality.md). A box that
     would trim the room deeper still needs the line."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(corridor_over_room())
     room = (58, 98, 122, 162)
@@ -199,7 +199,7 @@ def test_an_l_shaped_pair_is_cut_the_other_way_along_a_wall_when_that_raises_log
     and the tall room's bottom as the other, the wall between them inside it): the recut makes
     the tall room one unit and the short room the other; from there no recut helps, and a recut
     whose new cut crosses open floor is not tried."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(room_and_alcove_room())
     wrong = wm.add(wm.add(wm.empty(8), 0, (0, 60, 22, 124)), 1, (20, 0, 94, 124))
@@ -251,7 +251,7 @@ def test_bridges_join_a_corridor_across_the_unit_that_spans_it_and_a_room():
     """Two corridor pieces and one unit over the rest of the corridor and the room: no removal,
     wall move, merge or split raises log p, but joining the pieces across that unit (cut back to
     the room) does."""
-    from semmap_pp.ascent import _Ascent
+    from semmap_pp.sampler.ascent import _Ascent
 
     model = load_model()
     grid = OccupancyGrid(corridor_and_room(), np.zeros((130, 300), np.float32), 0.05)
@@ -290,7 +290,7 @@ def corridor_and_two_rooms(crossing_wall: bool) -> np.ndarray:
 
 
 def _two_rooms_ascent(crossing_wall: bool):
-    from semmap_pp.ascent import _Ascent
+    from semmap_pp.sampler.ascent import _Ascent
 
     model = load_model()
     m = corridor_and_two_rooms(crossing_wall)
@@ -330,10 +330,10 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
     world and its log p are those of the ascent without floors."""
     from pathlib import Path
 
-    from semmap_pp.ascent import _Ascent
+    from semmap_pp.sampler.ascent import _Ascent
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.pipeline import TargetFactory
-    from semmap_pp.posterior import Tracker
+    from semmap_pp.run.pipeline import TargetFactory
+    from semmap_pp.target.posterior import Tracker
 
     model = load_model()
     m = corridor_and_two_rooms(crossing_wall=False)
@@ -380,7 +380,7 @@ def l_of_walls(T=50, V=80, H=40, O=45) -> np.ndarray:
 
 
 def test_a_room_in_an_l_of_walls_is_cut_out_by_two_cuts_when_no_single_cut_helps():
-    from semmap_pp.ascent import _Ascent
+    from semmap_pp.sampler.ascent import _Ascent
 
     m = l_of_walls()
     model = load_model()
@@ -432,7 +432,7 @@ def test_start_worlds_have_room_for_a_building_larger_than_k_max():
     import dataclasses
 
     from semmap_pp.evaluate import default_roi
-    from semmap_pp.pipeline import Inputs, start_worlds
+    from semmap_pp.run.pipeline import Inputs, start_worlds
 
     m = row_of_rooms(6)
     grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
@@ -452,7 +452,7 @@ def test_the_ascents_validity_test_equals_its_definition():
     """``_Ascent.valid``'s test (the prior's compiled ``all_valid``) against ``world.is_valid``
     plus the longest side, on random worlds (rectangles past the lattice, inverted, too small,
     too long, inactive)."""
-    from semmap_pp.prior import all_valid
+    from semmap_pp.target.prior import all_valid
     rng = np.random.default_rng(0)
     seen = set()
     for _ in range(3000):
@@ -471,7 +471,7 @@ def test_the_ascents_validity_test_equals_its_definition():
 def test_the_fragments_a_grown_unit_swallows_equal_their_definition():
     """``_Ascent.absorb``'s compiled selection against its definition (the thin units other than
     the grown one with at least ``share`` of their area inside it) on random worlds."""
-    from semmap_pp.ascent import _swallowed
+    from semmap_pp.sampler.ascent import _swallowed
     rng = np.random.default_rng(1)
     found = 0
     for _ in range(3000):
@@ -496,7 +496,7 @@ def test_a_wall_off_its_line_moves_with_both_its_edges():
     """Both rooms' edges on the shared wall 8 cells right of it: each edge alone cannot move (it
     opens a gap of free space or runs into the other room), the wall moved as a whole can, and
     W*'s polish (``shared_walls=True``) takes it."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())
     right = [(2, 2, 82, 72), (2, 70, 82, 142)]
@@ -518,7 +518,7 @@ def test_a_birth_that_does_not_pay_leaves_the_world_as_it_was(monkeypatch):
     """A tentative birth is polished by wall moves, which may swallow units; when the whole does
     not raise log p the world before the birth comes back, swallowed units included (the undo
     used to remove the new unit only, so a failed birth could lower log p)."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())
     start = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 72)), 1, (2, 70, 82, 142))
@@ -544,7 +544,7 @@ def test_a_birth_that_does_not_pay_leaves_the_world_as_it_was(monkeypatch):
 def test_a_focused_pass_visits_the_focus_only():
     """Wall moves ``within`` a set of slots visit only those units; ``near`` adds the units
     within two wall bands."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())
     off = wm.add(wm.add(wm.empty(8), 0, (2, 5, 82, 72)), 1, (2, 70, 82, 139))   # outer walls 3 cells in
@@ -566,8 +566,8 @@ def test_a_wall_move_reaches_as_many_walls_on_a_finer_map():
     evidence as wide as the wall band (4 cells), so a wall fills 8 of the peaks: the 8 peaks of
     0.05 m reach 1 wall of the row, the 16 of ``ascent_peaks(8, 0.025)`` reach 2 (docs/quality.md,
     What changed 30)."""
-    from semmap_pp.ascent import _Ascent, ascent_peaks
-    from semmap_pp.frame import build_frame_from_classes
+    from semmap_pp.sampler.ascent import _Ascent, ascent_peaks
+    from semmap_pp.lattice.frame import build_frame_from_classes
 
     model = load_model()
     m = np.full((60, 760), FREE, np.uint8)
@@ -594,7 +594,7 @@ def test_after_whole_walls_moved_the_joining_moves_run_again(monkeypatch):
     (merges among them) run again, since a moved wall may open a merge, but no split; when no
     whole wall moves, one pass is all. From a local maximum, with the whole-wall phase made to
     report a move once: two passes of the merges instead of one, one of the splits."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())
     wrong = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 80)), 1, (2, 78, 82, 142))
@@ -627,7 +627,7 @@ def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
     """The room inside an L of walls needs two cuts at once: the start ascent (refine_world, as
     the pipeline's knowledge-free start runs it) makes them, W*'s polish does not try them
     (ascent.polish; docs/quality.md What changed 35) and keeps what single moves give."""
-    from semmap_pp.ascent import polish
+    from semmap_pp.sampler.ascent import polish
 
     m = l_of_walls()
     model = load_model()
@@ -647,7 +647,7 @@ def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
 def test_w_stars_polish_leaves_the_births_to_the_start_ascent(monkeypatch):
     """The start ascent (refine_world) tries births, the boxes of the birth table over free space
     no unit covers; W*'s polish does not (ascent.polish; docs/quality.md What changed 36)."""
-    from semmap_pp import ascent
+    from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())
     left_only = wm.add(wm.empty(8), 0, (2, 2, 82, 72))      # the left room on its walls

@@ -10,8 +10,8 @@ from scipy import stats
 
 from semmap_pp import cells
 from semmap_pp import world as wm
-from semmap_pp.kernels import KERNELS, KernelSettings, Mix, build_data
-from semmap_pp.kernels.common import world_key
+from semmap_pp.sampler.kernels import KERNELS, KernelSettings, Mix, build_data
+from semmap_pp.sampler.kernels.common import world_key
 
 SET = KernelSettings(local_radius=2, birth_jitter=1, box_jitter=1, wall_line_min=3)
 

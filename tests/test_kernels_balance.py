@@ -17,8 +17,8 @@ from scipy.sparse import csgraph
 
 from semmap_pp import cells
 from semmap_pp import world as wm
-from semmap_pp.kernels import KERNELS, KernelSettings, build_data, default_mix
-from semmap_pp.kernels.common import world_key
+from semmap_pp.sampler.kernels import KERNELS, KernelSettings, build_data, default_mix
+from semmap_pp.sampler.kernels.common import world_key
 from standin import TableTarget
 
 SETTINGS = KernelSettings(local_radius=1, birth_jitter=1, box_jitter=1, wall_line_min=2)
@@ -112,7 +112,7 @@ def test_detailed_balance_of_the_mix(shape, capacity, g, big):
 
 def test_balance_detects_a_wrong_ratio(monkeypatch):
     """The check above can fail: a merge that forgets the number of mergeable pairs breaks balance."""
-    sm = importlib.import_module("semmap_pp.kernels.split_merge")  # the module, not the kernel
+    sm = importlib.import_module("semmap_pp.sampler.kernels.split_merge")  # the module, not the kernel
 
     data = build_data(tiny_classes((4, 4)), min_side=2, wall_cells=1, settings=SETTINGS)
     states = all_states(data, 2)
@@ -135,7 +135,7 @@ def test_interchange_balance_where_it_makes_or_breaks_adjacency(shape):
     of adjacent pairs N_adj in thousands of its moves; each reported log ratio is still
     log q(reverse) - log q(forward) of the enumerated densities (``log N_adj(W) - log N_adj(W')``
     included), and the kernel alone keeps a random target in detailed balance."""
-    from semmap_pp.kernels.interchange import n_adjacent
+    from semmap_pp.sampler.kernels.interchange import n_adjacent
 
     data = build_data(tiny_classes(shape), min_side=2, wall_cells=1, wall_share=1, max_side=4,
                       door_min=1, door_max=1, settings=SETTINGS)

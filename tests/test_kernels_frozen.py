@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from semmap_pp import world as wm
-from semmap_pp.kernels import KERNELS, Mix, build_data
+from semmap_pp.sampler.kernels import KERNELS, Mix, build_data
 
 FIXTURE = Path(__file__).parent / "data" / "kernels_frozen.npz"
 N_PER_KERNEL = 2000
@@ -73,7 +73,7 @@ def _walk_worlds(data, capacity, steps=3000, every=60):
 
 
 def write_fixture() -> None:
-    from semmap_pp.frame import build_frame
+    from semmap_pp.lattice.frame import build_frame
     from semmap_pp.grid import load_map
     from semmap_pp.model import load_model
 
@@ -125,7 +125,7 @@ if __name__ == "__main__":
 
 
 def test_compiled_pairs_match_the_python_reference(frozen):
-    from semmap_pp.kernels.common import attach_pairs, attach_pairs_py
+    from semmap_pp.sampler.kernels.common import attach_pairs, attach_pairs_py
 
     _, data, worlds = frozen
     rng = np.random.default_rng(3)
@@ -142,7 +142,7 @@ def test_compiled_pairs_match_the_python_reference(frozen):
 def test_compiled_allocate_q_matches_the_numpy_reference(frozen):
     import importlib
 
-    ad = importlib.import_module("semmap_pp.kernels.allocate_delete")
+    ad = importlib.import_module("semmap_pp.sampler.kernels.allocate_delete")
 
     _, data, worlds = frozen
     rng = np.random.default_rng(4)
@@ -170,7 +170,7 @@ def test_compiled_allocate_q_matches_the_numpy_reference(frozen):
 
 
 def test_compiled_helpers_match_their_references(frozen):
-    from semmap_pp.kernels import common
+    from semmap_pp.sampler.kernels import common
 
     _, data, worlds = frozen
     rng = np.random.default_rng(5)
@@ -202,7 +202,7 @@ def test_compiled_helpers_match_their_references(frozen):
 
 
 def test_compiled_pairwise_sum_is_numpys_sum():
-    from semmap_pp.kernels.common import _pair_q, pairwise_sum, position_q
+    from semmap_pp.sampler.kernels.common import _pair_q, pairwise_sum, position_q
 
     rng = np.random.default_rng(6)
     for n in list(range(0, 300)) + [511, 512, 513, 1023, 1400, 1601, 2048, 3001, 5000]:

@@ -209,7 +209,7 @@ def test_a_unit_on_the_corridor_ratio_boundary_gets_its_most_probable_type():
     # multiple doors. Maximising the three soft atoms too would pick "no class" (0.525^2 0.95,
     # the likeliest atom state), which no rule reads, and type the unit by tie-breaking (room,
     # the first). Summed out, the MAP is the marginals' argmax, corridor (aces' corridor pieces).
-    from semmap_pp.evidence import soft_probabilities
+    from semmap_pp.target.geometry_evidence import soft_probabilities
     from semmap_pp.model import load_model
     # a 1.15 x 3.45 m unit at 0.05 m (23 x 69 cells: aces' piece east of its roundabout)
     p = soft_probabilities(np.array([[0, 0, 23, 69]]), 0.05, load_model().evidence)[0]

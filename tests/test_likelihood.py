@@ -1,4 +1,4 @@
-"""Tests of semmap_pp.likelihood: the sensor model's semantics and full == incremental."""
+"""Tests of semmap_pp.target.likelihood: the sensor model's semantics and full == incremental."""
 
 import math
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.likelihood import (R_INTERIOR, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN,
+from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.target.likelihood import (R_INTERIOR, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN,
                                   X_WALLLIKE, Change, CoverTracker, category, changed_box,
                                   cover_counts, full_loglik, full_tallies, prepare, wall_like)
 from semmap_pp.model import load_model
@@ -251,7 +251,7 @@ def test_incremental_equals_full_over_10000_random_edits():
 def test_slot_world_delta_equals_full_tallies():
     """The sampler's compiled path (:func:`world_delta` over slot arrays, several slots edited at
     once: moves, births, deaths, corridor flips) gives exactly the tallies of a full count."""
-    from semmap_pp.likelihood import world_delta
+    from semmap_pp.target.likelihood import world_delta
 
     rng = np.random.default_rng(31)
     checked = 0

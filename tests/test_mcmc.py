@@ -9,8 +9,8 @@ from scipy import stats
 
 from semmap_pp import cells
 from semmap_pp import world as wm
-from semmap_pp.kernels import KernelSettings, Proposal, build_data, default_mix
-from semmap_pp.mcmc import mh_green, run_chain
+from semmap_pp.sampler.kernels import KernelSettings, Proposal, build_data, default_mix
+from semmap_pp.sampler.mcmc import mh_green, run_chain
 from standin import CachedTarget, PriorTarget
 
 
@@ -78,7 +78,7 @@ class FloorTracker(FakeTracker):
 def test_mh_green_at_a_temperature(old, new, ratio, temp):
     """Mutant class "MH at T != 1" (docs/robustness.md, "Mutants"): with T != 1 and a nonzero log
     ratio the acceptance probability is min(1, exp((log pi(W') - log pi(W)) / T + log_ratio))
-    (semmap_pp/mcmc.py): a uniform just below it accepts, just above it rejects; a target that
+    (semmap_pp/sampler/mcmc.py): a uniform just below it accepts, just above it rejects; a target that
     takes a floor gets ``log pi(W) + T (log u - log_ratio)`` and decides the same; and over 20,000
     seeded uniforms the share accepted is that probability (binomial test)."""
     alpha = min(1.0, math.exp((new - old) / temp + ratio))
@@ -188,7 +188,7 @@ def test_placement_slot_term_shifts_the_number_of_units():
 def test_prior_recovery_detects_a_biased_kernel(monkeypatch):
     """The same check fails when births forget the free-slot count (a wrong ratio)."""
     import importlib
-    ar = importlib.import_module("semmap_pp.kernels.add_remove")
+    ar = importlib.import_module("semmap_pp.sampler.kernels.add_remove")
     orig = ar.add_log_ratio
     monkeypatch.setattr(ar, "add_log_ratio",
                         lambda n, k, rect, data: orig(n, k, rect, data) - math.log(k - n))
@@ -221,10 +221,10 @@ def test_incremental_target_matches_full_after_100k_kernels():
 
 def test_real_posterior_tracks_its_full_evaluation():
     """With the project's Posterior: incremental log posterior equals a full evaluation."""
-    from semmap_pp.frame import build_frame_from_classes
-    from semmap_pp.kernels import data_from_frame
+    from semmap_pp.lattice.frame import build_frame_from_classes
+    from semmap_pp.sampler.kernels import data_from_frame
     from semmap_pp.model import load_model
-    from semmap_pp.posterior import Posterior
+    from semmap_pp.target.posterior import Posterior
 
     model = load_model()
     c = np.full((60, 80), cells.UNKNOWN, np.uint8)
@@ -271,11 +271,11 @@ def test_the_real_posterior_with_the_likelihood_off_samples_the_prior():
     from math import comb
 
     from semmap_pp.cells import UNIT_TYPES
-    from semmap_pp.evidence import GEOMETRY_TYPE, geometry_class
-    from semmap_pp.frame import build_frame_from_classes
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.posterior import Posterior
-    from semmap_pp.prior import log_p_n_table
+    from semmap_pp.target.geometry_evidence import GEOMETRY_TYPE, geometry_class
+    from semmap_pp.lattice.frame import build_frame_from_classes
+    from semmap_pp.sampler.kernels import data_from_frame
+    from semmap_pp.target.posterior import Posterior
+    from semmap_pp.target.prior import log_p_n_table
 
     model = likelihood_off_model()
     h, w = 10, 30                                   # 2.5 m x 7.5 m at 0.25 m: units of 5..10 x 5..30 cells

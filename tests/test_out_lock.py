@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from semmap_pp.cli import main
-from semmap_pp.outdir import LOCK_NAME, lock_out_dir
+from semmap_pp.run.outdir import LOCK_NAME, lock_out_dir
 from test_faults_kill import check_complete
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,7 +95,7 @@ def test_a_lock_left_by_a_killed_run_does_not_block(tmp_path, capsys):
     """flock goes with its process: the lock file of a SIGKILLed holder (still there, with its
     pid) lets the next run in, without --force when the folder holds nothing else."""
     out = tmp_path / "run"
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from semmap_pp.outdir import lock_out_dir; "
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from semmap_pp.run.outdir import lock_out_dir; "
                                f"lock_out_dir({str(out)!r}); print('held', flush=True); time.sleep(600)"],
                               stdout=subprocess.PIPE, text=True, cwd=ROOT)
     assert holder.stdout.readline().strip() == "held"

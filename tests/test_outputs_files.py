@@ -17,16 +17,16 @@ import pytest
 from PIL import Image
 
 from semmap_pp.cells import FREE, OCCUPIED
-from semmap_pp.diagnostics import SUMMARIES, convergence
+from semmap_pp.sampler.diagnostics import SUMMARIES, convergence
 from semmap_pp.model import load_model
-from semmap_pp.outputs import dumps, world_dict
+from semmap_pp.semantic.world_json import dumps, world_dict
 from semmap_pp.outputs import figures
 from semmap_pp.outputs.geojson import geojson_dict, ring_area, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
-from semmap_pp.outputs.regions import (join_regions, passage_pairs, regions_image,
+from semmap_pp.semantic.regions import (join_regions, passage_pairs, regions_image,
                                        unit_regions, write_regions_png)
 from semmap_pp.outputs.write import write_all
-from semmap_pp.pipeline import Inputs, MapRun, RunSettings
+from semmap_pp.run.pipeline import Inputs, MapRun, RunSettings
 
 from literal_floor import literal_floor
 
@@ -248,10 +248,10 @@ def test_figures_are_pngs_of_sane_size(hostile_run):
 
 
 def test_posterior_cells_see_the_spread(hostile_run):
-    from semmap_pp.outputs.spread import cell_probabilities
+    from semmap_pp.sampler.spread import cell_probabilities
 
     _, run, _ = hostile_run
-    from semmap_pp.pipeline import sampled_worlds
+    from semmap_pp.run.pipeline import sampled_worlds
     worlds = sampled_worlds(run, 1000)
     p_wall, p_type = cell_probabilities(run.semantic.frame.shape, worlds, wall=2)
     assert len(worlds) == 12
@@ -263,9 +263,9 @@ def test_posterior_cells_see_the_spread(hostile_run):
 def test_repeated_worlds_are_counted_as_often_as_they_occur(hostile_run):
     """accumulate rasterises a repeated world once and counts it k times: the counts equal those of
     adding every world one by one."""
-    from semmap_pp.diagnostics import SpreadAccumulator
-    from semmap_pp.outputs.spread import accumulate, rasterise, sampled_box
-    from semmap_pp.pipeline import sampled_worlds
+    from semmap_pp.sampler.diagnostics import SpreadAccumulator
+    from semmap_pp.sampler.spread import accumulate, rasterise, sampled_box
+    from semmap_pp.run.pipeline import sampled_worlds
 
     _, run, _ = hostile_run
     ws = sampled_worlds(run, 1000)

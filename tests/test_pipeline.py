@@ -6,13 +6,13 @@ import pytest
 from semmap_pp import world as W
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.evaluate import closing_radius_cells, default_roi
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
-from semmap_pp.kernels import data_from_frame
+from semmap_pp.sampler.kernels import data_from_frame
 from semmap_pp.model import load_model
-from semmap_pp.outputs import semantic_map
-from semmap_pp.pipeline import DEFAULT_RULES, LatticeCPR, TargetFactory, run_target
-from semmap_pp.posterior import Posterior
+from semmap_pp.semantic.semantic_map import semantic_map
+from semmap_pp.run.pipeline import DEFAULT_RULES, LatticeCPR, TargetFactory, run_target
+from semmap_pp.target.posterior import Posterior
 
 MODEL = load_model()
 
@@ -49,7 +49,7 @@ def test_tally_cpr_equals_image_cpr_without_doors(rects):
 
 def test_knowledge_switches_on_in_burn_in_and_stays_on_for_recorded_draws():
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.sampling import sample_worlds
+    from semmap_pp.sampler.sampling import sample_worlds
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -69,7 +69,7 @@ def test_knowledge_switches_on_in_burn_in_and_stays_on_for_recorded_draws():
 
 
 def test_run_map_keeps_recorded_worlds():
-    from semmap_pp.pipeline import Inputs, RunSettings, run_map, sampled_worlds
+    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map, sampled_worlds
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -93,7 +93,7 @@ def test_run_map_keeps_recorded_worlds():
 def test_timing_text_leaves_compiling_draws_out_of_the_rate():
     from types import SimpleNamespace as NS
 
-    from semmap_pp.pipeline import MapRun
+    from semmap_pp.run.pipeline import MapRun
 
     def text(*chains):
         return MapRun.timing_text(NS(seconds=2.0, kernels_per_second=1000.0, settings=NS(n_inner=10),
@@ -109,7 +109,7 @@ def test_timing_text_leaves_compiling_draws_out_of_the_rate():
 
 
 def test_run_map_starts_every_chain_from_the_given_world():
-    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -133,7 +133,7 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
     import dataclasses
 
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
 
     g = rooms_grid(door=True)
     rules = load_rules(DEFAULT_RULES)
@@ -159,7 +159,7 @@ def test_a_unit_over_the_building_and_its_free_surroundings_gets_a_note():
     """The map shows the space around two rooms as free (as a rendering that marks every crossed
     cell free would): one unit over everything holds the rooms' walls inside it, and W* gets a
     note saying what is wrong with the map; the two rooms as units get none."""
-    from semmap_pp.pipeline import _walls_inside_note
+    from semmap_pp.run.pipeline import _walls_inside_note
 
     c = rooms_grid().classes.copy()
     c[c == UNKNOWN] = FREE
@@ -184,7 +184,7 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
     few draws): the spread figures' worlds come from the other chain only, and sampled_worlds
     draws from the chains it is given."""
     from semmap_pp.outputs.write import posterior_worlds
-    from semmap_pp.pipeline import Inputs, RunSettings, run_map, sampled_worlds, spread_chains
+    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map, sampled_worlds, spread_chains
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -222,8 +222,8 @@ def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():
     """A ROS canvas: the same map padded with unknown cells. The lattice covers the known cells and
     the model's crop margin, so the run sees the same lattice: the same W*, log posterior and CPR,
     its pixel coordinates shifted by the padding, and labels.png as big as the input."""
-    from semmap_pp.outputs.world_json import world_dict
-    from semmap_pp.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.semantic.world_json import world_dict
+    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
 
     def run(pad):
         g = rooms_grid(door=True)
@@ -253,7 +253,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     (paper Fig. 7). W*, its log posterior and the search's draws are those of the run without the
     sample; the spread figures' worlds come from the sample; a run stopped early has none."""
     from semmap_pp.outputs.write import posterior_worlds
-    from semmap_pp.pipeline import Inputs, RunSettings, figure_source, run_map
+    from semmap_pp.run.pipeline import Inputs, RunSettings, figure_source, run_map
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -316,7 +316,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     assert early.stopped == "budget" and early.spread is None and figure_source(early) is early
     # Ctrl-C as the sample around W* begins (or while W* is polished): W* is kept, the run counts
     # as interrupted, and the figures use the search's draws
-    from semmap_pp.step import StopFlag
+    from semmap_pp.sampler.step import StopFlag
     for when in ("polishing W*", "sampling around W*"):
         stop = StopFlag()
 

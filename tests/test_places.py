@@ -1,4 +1,4 @@
-"""semmap_pp.places and `semmap where` / `semmap route`: the unit at a map point and routes through
+"""semmap_pp.plans.places and `semmap where` / `semmap route`: the unit at a map point and routes through
 doors and passages, on the literal floor (tests/literal_floor.py: A | B a door, B : C open, A / D a
 closed wall), on random grids of rooms against a brute-force search, and on broken files."""
 
@@ -13,8 +13,8 @@ from hypothesis import given, settings, strategies as st
 from semmap_pp.cli import main
 from semmap_pp.errors import SemmapError
 from semmap_pp.model import load_model
-from semmap_pp.outputs import dumps, world_dict
-from semmap_pp.places import Unit, read_places
+from semmap_pp.semantic.world_json import dumps, world_dict
+from semmap_pp.plans.places import Unit, read_places
 
 from literal_floor import literal_floor
 
@@ -254,9 +254,9 @@ def test_a_two_cell_speck_in_a_doorway_keeps_the_route(tmp_path):
     (``[world] door_speck_m2``) keep the door, and the route A -> C with it; one-cell specks (a
     model file without the key) lose both."""
     from semmap_pp.cells import OCCUPIED
-    from semmap_pp.frame import build_frame
-    from semmap_pp.outputs import semantic_map
-    from semmap_pp.posterior import Posterior
+    from semmap_pp.lattice.frame import build_frame
+    from semmap_pp.semantic.semantic_map import semantic_map
+    from semmap_pp.target.posterior import Posterior
 
     from literal_floor import floor_grid, floor_world
 
@@ -298,12 +298,12 @@ def test_units_facing_across_free_floor_are_joined_by_a_passage(tmp_path):
     as a person draws them); a model file without the key lists none."""
     from semmap_pp import world as W
     from semmap_pp.cells import FREE, OCCUPIED
-    from semmap_pp.frame import build_frame
+    from semmap_pp.lattice.frame import build_frame
     from semmap_pp.grid import OccupancyGrid
-    from semmap_pp.outputs import semantic_map
+    from semmap_pp.semantic.semantic_map import semantic_map
     from semmap_pp.outputs.graphml import world_graph
-    from semmap_pp.outputs.regions import unit_regions
-    from semmap_pp.posterior import Posterior
+    from semmap_pp.semantic.regions import unit_regions
+    from semmap_pp.target.posterior import Posterior
 
     c = np.full((60, 100), OCCUPIED, np.uint8)
     c[4:56, 4:96] = FREE

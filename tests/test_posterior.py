@@ -1,4 +1,4 @@
-"""Tests of semmap_pp.posterior: the Tracker agrees with the full evaluation, types included."""
+"""Tests of semmap_pp.target.posterior: the Tracker agrees with the full evaluation, types included."""
 
 import dataclasses
 import math
@@ -9,11 +9,11 @@ import pytest
 
 from semmap_pp import world as W
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.evidence import FixedResult, build_evidence
-from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.posterior import Posterior
+from semmap_pp.target.geometry_evidence import FixedResult, build_evidence
+from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.target.posterior import Posterior
 from semmap_pp.model import load_model
-from semmap_pp.prior import log_p_n, log_p_rect_const, log_slots
+from semmap_pp.target.prior import log_p_n, log_p_rect_const, log_slots
 
 MODEL = load_model()
 
@@ -163,9 +163,9 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels(monkey
     (the property does not depend on the temperature)."""
     from pathlib import Path
 
-    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.sampler.kernels import data_from_frame, default_mix
     from semmap_pp.knowledge import KnowledgeEngine
-    from semmap_pp.mcmc import run_chain
+    from semmap_pp.sampler.mcmc import run_chain
 
     engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules/table3.lp")
     # fewer soft units than the default model (each new soft probability costs the engine a
@@ -262,7 +262,7 @@ def test_pair_openings_equal_the_door_detector():
 def recorded_bounds(monkeypatch) -> list:
     """The type-free bound (``posterior._retype_bound``: no types, per category the better gain,
     SaLe factor at most 1) of every proposal made with a floor from now on, in order."""
-    import semmap_pp.posterior as P
+    import semmap_pp.target.posterior as P
 
     seen, bound = [], P._retype_bound
 
@@ -293,7 +293,7 @@ def test_floor_skips_the_provider_only_below_the_bound(rule_file, monkeypatch):
     type-free bound of every proposal is at least its full evaluation."""
     from pathlib import Path
 
-    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.sampler.kernels import data_from_frame, default_mix
     from semmap_pp.knowledge import KnowledgeEngine
 
     engine = KnowledgeEngine.from_file(Path(__file__).resolve().parents[1] / "rules" / rule_file)
@@ -405,10 +405,10 @@ def test_same_evidence_shortcut_is_exact_and_makes_the_same_moves(monkeypatch):
     makes exactly the moves of one without it (table3.lp engine, floors passed)."""
     from pathlib import Path
 
-    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.sampler.kernels import data_from_frame, default_mix
     from semmap_pp.knowledge import KnowledgeEngine
-    from semmap_pp.mcmc import run_chain
-    from semmap_pp.posterior import Tracker
+    from semmap_pp.sampler.mcmc import run_chain
+    from semmap_pp.target.posterior import Tracker
 
     rules = Path(__file__).resolve().parents[1] / "rules/table3.lp"
     frame = build_frame_from_classes(knowledge_floor(), 0.25, MODEL, theta=0.0)
@@ -448,10 +448,10 @@ def test_patched_evidence_equals_the_evidence_built_in_full(monkeypatch):
     engine, the corridor-space scopes of the default model)."""
     from pathlib import Path
 
-    from semmap_pp.kernels import data_from_frame, default_mix
+    from semmap_pp.sampler.kernels import data_from_frame, default_mix
     from semmap_pp.knowledge import KnowledgeEngine
-    from semmap_pp.mcmc import run_chain
-    from semmap_pp.posterior import Tracker
+    from semmap_pp.sampler.mcmc import run_chain
+    from semmap_pp.target.posterior import Tracker
 
     rules = Path(__file__).resolve().parents[1] / "rules/table3.lp"
     model = dataclasses.replace(MODEL, world=dataclasses.replace(MODEL.world, wall_min_cells=1))
@@ -564,8 +564,8 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path(monkeypatch):
     The type-free bound is at least the log posterior of every proposal evaluated (mutant class
     "the knowledge-free bound"; the proposals it skips, most of the 4,000, are not evaluated
     here, a minute of the general path: the two floor tests above evaluate every one they skip)."""
-    from semmap_pp.kernels import data_from_frame, default_mix
-    from semmap_pp.pipeline import data_start_world, load_inputs, run_target
+    from semmap_pp.sampler.kernels import data_from_frame, default_mix
+    from semmap_pp.run.pipeline import data_start_world, load_inputs, run_target
 
     root = Path(__file__).resolve().parents[1]
     inputs = load_inputs(root / "tests/data/maps/intel_corner.yaml",
@@ -597,9 +597,9 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path(monkeypatch):
 
 def _pipeline_target(rules):
     """The target ``semmap map`` builds for tests/data/maps/intel_corner.yaml
-    (:func:`semmap_pp.pipeline.run_target` of :func:`~semmap_pp.pipeline.load_inputs`), with the
+    (:func:`semmap_pp.run.pipeline.run_target` of :func:`~semmap_pp.run.pipeline.load_inputs`), with the
     rule file ``rules`` (knowledge on) or none (knowledge off)."""
-    from semmap_pp.pipeline import load_inputs, run_target
+    from semmap_pp.run.pipeline import load_inputs, run_target
 
     root = Path(__file__).resolve().parents[1]
     kw = {"rules_path": root / "rules" / rules} if rules else {"rules_path": None}
@@ -609,9 +609,9 @@ def _pipeline_target(rules):
 
 
 def _reference_log_prior(post, world, typ):
-    """:func:`semmap_pp.prior.log_prior` of ``world``'s active units, with the adjacency and the
+    """:func:`semmap_pp.target.prior.log_prior` of ``world``'s active units, with the adjacency and the
     P(SaLe) of the typing ``typ`` (the fixed table by type when its ``sale`` is None)."""
-    from semmap_pp.prior import log_prior
+    from semmap_pp.target.prior import log_prior
 
     slots = W.active_slots(world)
     adj = typ.adj[np.ix_(slots, slots)]
@@ -626,7 +626,7 @@ def _reference_log_prior(post, world, typ):
 @pytest.mark.parametrize("rules", [None, "table3.lp"])
 def test_the_log_prior_of_every_number_of_units_is_prior_log_prior(rules):
     """Mutant class "the one-unit prior" (docs/robustness.md, "Mutants"): on the target the
-    pipeline builds, ``Posterior.prior_n(K)[n]`` equals :func:`semmap_pp.prior.log_prior` of ``n``
+    pipeline builds, ``Posterior.prior_n(K)[n]`` equals :func:`semmap_pp.target.prior.log_prior` of ``n``
     units without adjacent pairs for every ``n = 0..K``, ``K`` the model's k_max and twice it (a
     world's capacity doubles when a birth finds no empty slot), under the model's Poisson and a
     geometric p_n; and the log prior of a full evaluation and of the tracker (the compiled hot path)
@@ -635,7 +635,7 @@ def test_the_log_prior_of_every_number_of_units_is_prior_log_prior(rules):
     c = post.cells
     shape = post.frame.shape
     one = (10, 10, 40, 50)
-    from semmap_pp.prior import log_prior
+    from semmap_pp.target.prior import log_prior
 
     for prior in (post.model.prior, dataclasses.replace(post.model.prior, n_prior="geometric", n_mean=4.0)):
         post.model = dataclasses.replace(post.model, prior=prior)

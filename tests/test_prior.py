@@ -1,4 +1,4 @@
-"""Tests of semmap_pp.prior: proper unit-parameter and count priors, the SaLe factor."""
+"""Tests of semmap_pp.target.prior: proper unit-parameter and count priors, the SaLe factor."""
 
 import itertools
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from semmap_pp.model import load_model
-from semmap_pp.prior import (connecting_length_difference, log_p_n, log_p_n_table, log_p_rect,
+from semmap_pp.target.prior import (connecting_length_difference, log_p_n, log_p_n_table, log_p_rect,
                              log_prior, log_slots, n_rects, rect_faults, rects_valid,
                              sale_log_factor)
 
@@ -77,7 +77,7 @@ def test_log_prior_adds_its_parts():
 
 
 def test_compiled_slot_sale_sum_equals_the_reference():
-    from semmap_pp.prior import sale_log_factor_slots
+    from semmap_pp.target.prior import sale_log_factor_slots
     rng = np.random.default_rng(4)
     table = load_model().knowledge.fixed_sale
     for _ in range(50):

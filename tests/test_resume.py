@@ -6,13 +6,13 @@ import pytest
 from semmap_pp import cells
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
-from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.kernels import data_from_frame
+from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.sampler.kernels import data_from_frame
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
-from semmap_pp.resume import _rectangle, keep_common_draws, merge_records
-from semmap_pp.sampling import ChainRecord, sample_worlds
-from semmap_pp.step import StopFlag
+from semmap_pp.target.posterior import Posterior
+from semmap_pp.sampler.resume import _rectangle, keep_common_draws, merge_records
+from semmap_pp.sampler.sampling import ChainRecord, sample_worlds
+from semmap_pp.sampler.step import StopFlag
 
 CAP = 6
 

@@ -1,4 +1,4 @@
-"""rooms.png and world.json's rooms (semmap_pp.outputs.rooms), the ROSE2 / ipa segmentation
+"""rooms.png and world.json's rooms (semmap_pp.semantic.rooms), the ROSE2 / ipa segmentation
 protocol (semmap_pp.evaluate.protocol_scores) and `semmap eval DIR --segmentation GT`."""
 
 import json
@@ -15,7 +15,7 @@ from semmap_pp.errors import ModelError
 from semmap_pp.evaluate import (colour_room_labels, colour_segment_labels, protocol_scores,
                                 read_segmentation, read_segmentation_truth)
 from semmap_pp.model import RoomParams, load_model
-from semmap_pp.outputs.rooms import geodesic_flood, room_labels, seen_share
+from semmap_pp.semantic.rooms import geodesic_flood, room_labels, seen_share
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL_GT = ROOT / "bench" / "data" / "real-gt"
@@ -317,7 +317,7 @@ def two_units_with_a_partition(gap_cells: int, clutter: bool = False):
 @pytest.mark.parametrize("gap_cells, joined", [(40, True), (36, True), (30, False), (16, False)])
 def test_a_gap_wider_than_a_double_door_is_one_floor(gap_cells, joined):
     from semmap_pp.cells import FREE
-    from semmap_pp.outputs.rooms import wide_opening
+    from semmap_pp.semantic.rooms import wide_opening
     classes, rp, rq = two_units_with_a_partition(gap_cells)
     width = RoomParams().door_max_m / 0.05                       # 32 cells
     assert wide_opening(classes == FREE, rp, rq, 2, width) is joined
@@ -326,7 +326,7 @@ def test_a_gap_wider_than_a_double_door_is_one_floor(gap_cells, joined):
 
 def test_clutter_in_front_of_a_wide_gap_narrows_it_to_a_door():
     from semmap_pp.cells import FREE
-    from semmap_pp.outputs.rooms import wide_opening
+    from semmap_pp.semantic.rooms import wide_opening
     classes, rp, rq = two_units_with_a_partition(36)
     assert wide_opening(classes == FREE, rp, rq, 2, 32.0)
     classes, rp, rq = two_units_with_a_partition(36, clutter=True)
@@ -355,7 +355,7 @@ class _FakeMap:
     (("room", "room"), 16, False),                    # a door
     (("corridor", "room"), 36, False), (("room", "hall"), 36, False)])   # a corridor's side
 def test_room_joins_takes_a_wide_gap_between_rooms_but_not_a_corridors(types, gap_cells, one_room):
-    from semmap_pp.outputs.rooms import room_joins
+    from semmap_pp.semantic.rooms import room_joins
     classes, rp, rq = two_units_with_a_partition(gap_cells)
     pairs, doors = room_joins(_FakeMap(classes, rp, rq, types), RoomParams(open_share_min=1.0))
     assert (pairs == [(1, 2)]) is one_room

@@ -154,7 +154,7 @@ def test_topic_and_at_pick_the_message(tmp_path):
 
 
 def test_a_bag_folder_is_one_map_for_batch(tmp_path):
-    from semmap_pp.batch import expand_maps
+    from semmap_pp.run.batch import expand_maps
 
     a = intel_bag(tmp_path / "maps" / "floor_a", "mcap-folder")
     b = intel_bag(tmp_path / "maps" / "floor_b", "ros1")

@@ -1,4 +1,4 @@
-"""W*s of several seeds compared (semmap_pp.stability, `semmap stability`)."""
+"""W*s of several seeds compared (semmap_pp.studies.stability, `semmap stability`)."""
 
 import json
 import math
@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from semmap_pp.cli import main
-from semmap_pp.stability import (Plan, Stability, iou_matrix, match_units, pairwise_f1, unit_agreement,
+from semmap_pp.studies.stability import (Plan, Stability, iou_matrix, match_units, pairwise_f1, unit_agreement,
                                  unit_f1)
 
 ROOT = Path(__file__).resolve().parents[1]

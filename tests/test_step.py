@@ -8,12 +8,12 @@ import pytest
 
 from semmap_pp import cells
 from semmap_pp import world as wm
-from semmap_pp.frame import build_frame_from_classes
-from semmap_pp.kernels import data_from_frame
+from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.sampler.kernels import data_from_frame
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
-from semmap_pp.sampling import sample_worlds
-from semmap_pp.step import WorldStep, point_to_world, world_model, world_to_point
+from semmap_pp.target.posterior import Posterior
+from semmap_pp.sampler.sampling import sample_worlds
+from semmap_pp.sampler.step import WorldStep, point_to_world, world_model, world_to_point
 
 CAP = 6
 
@@ -101,7 +101,7 @@ def test_parallel_chains_are_forked_on_linux_unless_told_otherwise(problem, monk
 
     import pymc as pm
 
-    import semmap_pp.sampling as sampling
+    import semmap_pp.sampler.sampling as sampling
 
     seen = []
 

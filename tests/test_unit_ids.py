@@ -16,8 +16,8 @@ from PIL import Image
 
 from semmap_pp.cli import main
 from semmap_pp.errors import SemmapError
-from semmap_pp.outputs.ids import carry_ids, overlap_iou
-from semmap_pp.world_file import PreviousIds, read_previous_ids
+from semmap_pp.semantic.ids import carry_ids, overlap_iou
+from semmap_pp.plans.world_file import PreviousIds, read_previous_ids
 
 from conftest import FAST_RUN, INTEL_CORNER
 

@@ -1,4 +1,4 @@
-"""semmap_pp.world_diff and `semmap diff`: units paired by place (not id) between two world.json
+"""semmap_pp.plans.diff and `semmap diff`: units paired by place (not id) between two world.json
 files, on the literal floor (tests/literal_floor.py: A | B a door, B : C open, A / D a closed wall)
 edited in known ways, against its own mirror image, and on broken input."""
 
@@ -11,9 +11,9 @@ from hypothesis import given, settings, strategies as st
 
 from semmap_pp.cli import main
 from semmap_pp.model import load_model
-from semmap_pp.outputs import dumps, world_dict
-from semmap_pp.places import places_from_doc
-from semmap_pp.world_diff import TOLERANCE_M, diff_worlds
+from semmap_pp.semantic.world_json import dumps, world_dict
+from semmap_pp.plans.places import places_from_doc
+from semmap_pp.plans.diff import TOLERANCE_M, diff_worlds
 
 from literal_floor import literal_floor
 

@@ -1,4 +1,4 @@
-"""``semmap_pp.world_edit``: hand edits by unit id and map point, on a rotated lattice with a moved
+"""``semmap_pp.plans.edit``: hand edits by unit id and map point, on a rotated lattice with a moved
 origin, in metres and in pixels."""
 
 import numpy as np
@@ -7,9 +7,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from semmap_pp.errors import SemmapError
-from semmap_pp.frame import build_frame_from_classes
+from semmap_pp.lattice.frame import build_frame_from_classes
 from semmap_pp.model import load_model
-from semmap_pp.world_edit import EDITS, Edit, apply_edits, check_args, edit_origins, id_changes, to_lattice, unit_key
+from semmap_pp.plans.edit import EDITS, Edit, apply_edits, check_args, edit_origins, id_changes, to_lattice, unit_key
 
 RES = 0.05
 

@@ -10,8 +10,8 @@ import pytest
 
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
-from semmap_pp.pipeline import load_inputs
-from semmap_pp.world_file import read_start_world
+from semmap_pp.run.pipeline import load_inputs
+from semmap_pp.plans.world_file import read_start_world
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
@@ -56,7 +56,7 @@ def test_a_world_json_comes_back_as_the_worlds_lattice_rectangles(run_dir, input
 
 
 def test_the_capacity_stops_at_max_k(run_dir, inputs, monkeypatch):
-    import semmap_pp.world_file as wf
+    import semmap_pp.plans.world_file as wf
 
     n = wm.n_units(read_start_world(run_dir / "world.json", inputs.frame, inputs.grid, 64))
     monkeypatch.setattr(wf, "MAX_K", n)

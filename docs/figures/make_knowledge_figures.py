@@ -46,11 +46,11 @@ sys.path.insert(0, str(ROOT))
 
 from semmap_pp import atomic  # noqa: E402
 from semmap_pp import world as W  # noqa: E402
-from semmap_pp.compare import (compare_dict, compare_png, mean_wall_sd_m, summarise,  # noqa: E402
+from semmap_pp.studies.compare import (compare_dict, compare_png, mean_wall_sd_m, summarise,  # noqa: E402
                                typed_sampled_worlds)
-from semmap_pp.derive.defects import ROOM, count_defects, topological_defects  # noqa: E402
+from semmap_pp.target.defects import ROOM, count_defects, topological_defects  # noqa: E402
 from semmap_pp.knowledge import load_rules  # noqa: E402
-from semmap_pp.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402
+from semmap_pp.run.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402
 
 RULES = {"table3": ROOT / "rules" / "table3.lp", "none": ROOT / "rules" / "none.lp"}
 ORANGE = "#ff8c00"
@@ -91,8 +91,8 @@ def spread_numbers(run, worlds, reference) -> dict:
     ``reference`` is :func:`reference_target`: defects are also counted with table3's typing for both
     rule sets (none.lp types every unit room, so its own typing counts every adjacent pair).
     """
-    from semmap_pp.compare import wall_spread
-    from semmap_pp.outputs.spread import cell_probabilities, typed_worlds, wall_disagreement_m2
+    from semmap_pp.studies.compare import wall_spread
+    from semmap_pp.sampler.spread import cell_probabilities, typed_worlds, wall_disagreement_m2
 
     frame, model = run.inputs.frame, run.inputs.model
     c = frame.cells
@@ -182,7 +182,7 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
 
 
 def run_rule_sets(map_path, model_path, seed, draws, n_inner, chains, n_worlds, start_mode):
-    from semmap_pp.outputs.spread import typed_worlds
+    from semmap_pp.sampler.spread import typed_worlds
 
     base = load_inputs(map_path, model_path=model_path, rules_path=RULES["table3"])
     model = base.model

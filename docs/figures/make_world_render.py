@@ -28,10 +28,10 @@ from semmap_pp import world as W  # noqa: E402
 from semmap_pp.atomic import atomic_path, write_text  # noqa: E402
 from semmap_pp.cells import OCCUPIED, UNIT_TYPES, UNKNOWN, W_FREE, W_OBJECT, W_WALL  # noqa: E402
 from semmap_pp.derive import derive_world  # noqa: E402
-from semmap_pp.frame import build_frame  # noqa: E402
+from semmap_pp.lattice.frame import build_frame  # noqa: E402
 from semmap_pp.grid import load_map  # noqa: E402
 from semmap_pp.model import load_model  # noqa: E402
-from semmap_pp.posterior import Posterior  # noqa: E402
+from semmap_pp.target.posterior import Posterior  # noqa: E402
 
 # (r0, c0, r1, c1) on the lattice, read off a gridded picture of the lattice map.
 HAND_WORLD = [

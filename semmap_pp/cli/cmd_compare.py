@@ -2,9 +2,9 @@
 
 Runs ``semmap map``'s sampling once per rule file with the same map, model, seed and run lengths,
 then prints a Markdown table (CPR, log posterior, R-hat and ESS of the summaries, posterior wall
-spread, topological defects; see :mod:`semmap_pp.compare`). With ``--seeds`` it does so for each
+spread, topological defects; see :mod:`semmap_pp.studies.compare`). With ``--seeds`` it does so for each
 seed and first prints every quantity's mean, sd and range over the seeds, with how far each rule
-set's W*s agree between seeds (:class:`semmap_pp.compare.AcrossSeeds`). With ``--out DIR`` it also
+set's W*s agree between seeds (:class:`semmap_pp.studies.compare.AcrossSeeds`). With ``--out DIR`` it also
 writes ``compare.md``, ``compare.json`` and ``compare.png`` (the sampled worlds of each run drawn
 thin, side by side; of the first seed), each atomically. Ctrl-C stops and writes nothing (exit 130).
 """
@@ -60,7 +60,7 @@ def _names(paths: list[Path]) -> list[str]:
 
 
 def run(args) -> int:
-    from semmap_pp.outdir import claimed
+    from semmap_pp.run.outdir import claimed
 
     with claimed(args.out, args.force):    # checked and held before any sampling
         return _run(args)
@@ -68,13 +68,13 @@ def run(args) -> int:
 
 def _run(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
+    from semmap_pp.studies.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
                                    compare_table, diffs_section, summarise, typed_sampled_worlds,
                                    wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.pipeline import RunSettings, load_inputs
-    from semmap_pp.stability import Plan
+    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.studies.stability import Plan
 
     if len(args.rules) < 2:
         print("semmap compare: error: give --rules at least twice (the knowledge sets to compare)",

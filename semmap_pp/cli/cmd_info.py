@@ -152,8 +152,8 @@ def format_text(facts: dict) -> str:
 
 def orientation(grid: OccupancyGrid, model) -> dict:
     """θ0 of the lattice ``semmap map`` would build (degrees) and the walls at another angle
-    (:func:`semmap_pp.frame.off_axis_walls`; ``note``: whether the run would say so)."""
-    from semmap_pp.frame import lattice_orientation, off_axis_noted, off_axis_walls
+    (:func:`semmap_pp.lattice.frame.off_axis_walls`; ``note``: whether the run would say so)."""
+    from semmap_pp.lattice.frame import lattice_orientation, off_axis_noted, off_axis_walls
 
     params = model.lattice
     theta = lattice_orientation(grid.classes, params)

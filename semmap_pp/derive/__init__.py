@@ -7,7 +7,7 @@ Examples
 >>> import numpy as np
 >>> from semmap_pp import world as W
 >>> from semmap_pp.model import load_model
->>> from semmap_pp.frame import build_frame_from_classes
+>>> from semmap_pp.lattice.frame import build_frame_from_classes
 >>> cls = np.full((40, 80), 2, np.uint8); cls[2:38, 2:78] = 0   # free inside outer walls
 >>> cls[:, 38:42] = 2; cls[10:26, 38:42] = 0                    # a wall with a door
 >>> frame = build_frame_from_classes(cls, 0.05, load_model(), theta=0.0)

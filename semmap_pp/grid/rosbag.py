@@ -24,7 +24,7 @@ import numpy as np
 
 from semmap_pp.errors import MapError
 from semmap_pp.grid import meta
-from semmap_pp.grid.model import OccupancyGrid
+from semmap_pp.grid.occupancy import OccupancyGrid
 from semmap_pp.grid.pixels import classify
 
 #: The message type of a map (rosbags' name for ROS 1's ``nav_msgs/OccupancyGrid`` too).

@@ -362,7 +362,7 @@ AGREEMENT_COLOURS = {"every seed": "#1a9850", "some seeds": "#f39c12", "no other
 
 
 def agreement_class(u) -> str:
-    """The :data:`AGREEMENT_COLOURS` key of a :class:`~semmap_pp.stability.UnitAgreement`."""
+    """The :data:`AGREEMENT_COLOURS` key of a :class:`~semmap_pp.studies.stability.UnitAgreement`."""
     if u.agreed:
         return "every seed"
     return "some seeds" if u.found else "no other seed"
@@ -371,7 +371,7 @@ def agreement_class(u) -> str:
 def stability_png(sm, agreement, seeds) -> bytes:
     """stability.png: the reference W* (``sm``) on the light classified map, each unit filled in
     the colour of how many other seeds' W*s hold it (:func:`agreement_class`), with its id and
-    ``found/others``; ``agreement`` are :class:`~semmap_pp.stability.UnitAgreement` rows."""
+    ``found/others``; ``agreement`` are :class:`~semmap_pp.studies.stability.UnitAgreement` rows."""
     box = crop_box(sm)
     fig, (ax,) = _axes(box, extra_h=0.7)
     _show(ax, classified_rgb(sm.grid.classes, light=True), box)
@@ -406,7 +406,7 @@ def diff_png(diff) -> bytes:
     units are drawn solid, coloured by what happened to them (unchanged grey, moved orange, retyped
     blue, added green), OLD's moved and removed units dashed (removed in red), and the doors and
     passages that went (red x) or came (green +); labels are NEW's, OLD's for a removed unit
-    (:class:`semmap_pp.world_diff.WorldDiff`)."""
+    (:class:`semmap_pp.plans.diff.WorldDiff`)."""
     def ring(u):
         v = np.asarray(u.corners, float)
         return np.vstack([v, v[:1]])

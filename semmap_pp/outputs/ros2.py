@@ -71,7 +71,7 @@ class BagPlan:
 
 
 def _pixel_to_metres(doc_map: dict, px: np.ndarray) -> np.ndarray:
-    """Map-frame metres of continuous pixel coordinates ``[x, y]`` (as :mod:`semmap_pp.frame`)."""
+    """Map-frame metres of continuous pixel coordinates ``[x, y]`` (as :mod:`semmap_pp.lattice.frame`)."""
     res, (ox, oy, yaw), h = doc_map["resolution"], doc_map["origin"], doc_map["height"]
     u, v = px[:, 0] * res, (h - px[:, 1]) * res
     c, s = math.cos(yaw), math.sin(yaw)
@@ -79,7 +79,7 @@ def _pixel_to_metres(doc_map: dict, px: np.ndarray) -> np.ndarray:
 
 
 def _finite_list(value, n: int) -> list[float] | None:
-    from semmap_pp.world_file import finite
+    from semmap_pp.plans.world_file import finite
 
     vals = [finite(v) for v in value] if isinstance(value, list) and len(value) == n else None
     return None if vals is None or None in vals else vals
@@ -93,7 +93,7 @@ def plan_from_doc(doc: dict, codes: np.ndarray, *, path=None, frame_id: str | No
     ``"map"`` and 0 when it has none). A unit, door, adjacent pair or map field that is not as
     semmap map writes it is one :class:`~semmap_pp.errors.SemmapError` naming ``path``.
     """
-    from semmap_pp.places import places_from_doc
+    from semmap_pp.plans.places import places_from_doc
 
     m = doc.get("map")
     if not isinstance(m, dict):
@@ -296,7 +296,7 @@ def read_types_layer(run_dir: Path) -> np.ndarray:
 def export_run(run_dir: str | os.PathLike) -> Path:
     """Write ``run_dir/rosbag2`` again from the run's world.json and types.pgm (``semmap export
     ros2``); return the folder."""
-    from semmap_pp.world_file import read_world_doc
+    from semmap_pp.plans.world_file import read_world_doc
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():

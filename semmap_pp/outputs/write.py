@@ -1,4 +1,4 @@
-"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.pipeline.MapRun`.
+"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.run.pipeline.MapRun`.
 
 Each file is written atomically (:mod:`semmap_pp.atomic`): a reader, or a crash, sees the previous
 complete file or the new one. world.json, labels.png, trace.nc and diagnostics.txt come first, so
@@ -20,12 +20,12 @@ from semmap_pp.errors import printable
 from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
-from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
+from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
-from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
+from semmap_pp.sampler.spread import cell_probabilities, typed_worlds
 from semmap_pp.outputs.types_layer import write_types_layer
-from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
+from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
 
 #: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
 N_SAMPLED_WORLDS = 1000
@@ -45,7 +45,7 @@ def diagnostics_text(run, rules_path) -> str:
 
 def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
     """world.json, labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
-    from semmap_pp.diagnostics import to_datatree, write_trace
+    from semmap_pp.sampler.diagnostics import to_datatree, write_trace
 
     inputs, settings, sm = run.inputs, run.settings, run.semantic
     doc = world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
@@ -72,10 +72,10 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
 
 def posterior_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
-    draws: :func:`semmap_pp.pipeline.figure_source`), from its chains in the best chain's mode
-    (:func:`semmap_pp.pipeline.spread_chains`) after the draws in which they were still settling
-    (:func:`semmap_pp.pipeline.spread_first_draw`), typed as the sampler typed them."""
-    from semmap_pp.pipeline import figure_source, run_target, sampled_worlds, spread_chains, spread_first_draw
+    draws: :func:`semmap_pp.run.pipeline.figure_source`), from its chains in the best chain's mode
+    (:func:`semmap_pp.run.pipeline.spread_chains`) after the draws in which they were still settling
+    (:func:`semmap_pp.run.pipeline.spread_first_draw`), typed as the sampler typed them."""
+    from semmap_pp.run.pipeline import figure_source, run_target, sampled_worlds, spread_chains, spread_first_draw
 
     src = figure_source(run)
     return typed_worlds(run_target(run.inputs),
@@ -88,7 +88,7 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     :mod:`semmap_pp.atomic` writes ``NAME`` through ``.NAME.XXXXXXXX.tmp`` and renames it; a run
     killed (SIGKILL) while writing leaves that file behind. Only temporaries of the output files
     (:data:`semmap_pp.outputs.report.FILES`) are removed; any other file is left alone. Call it
-    only while holding ``out_dir``'s lock (:func:`semmap_pp.outdir.lock_out_dir`): a run that
+    only while holding ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`): a run that
     writes into the folder holds it, so no temporary removed here is a live run's.
 
     >>> import tempfile
@@ -154,7 +154,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
 
     Every file goes through :func:`semmap_pp.atomic.write_bytes`: a full disk stops the writing
     with a :class:`~semmap_pp.errors.WriteError` naming the file, and each file written before it
-    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.outdir.lock_out_dir`):
+    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`):
     the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
     """
     out = Path(out_dir)
@@ -167,7 +167,7 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     plan, pngs, regions, region_img = write_plan(out, sm, doc)
     written += plan
 
-    from semmap_pp.pipeline import figure_source
+    from semmap_pp.run.pipeline import figure_source
 
     worlds = posterior_worlds(run, n_worlds)
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
