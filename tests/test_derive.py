@@ -52,7 +52,8 @@ def test_door_is_a_run_of_free_cells_on_the_shared_wall():
 def test_a_speck_in_a_doorway_does_not_cut_the_door():
     """Doors are looked for on the map with its specks made free (``doorway_classes``): up to
     ``speck`` touching non-free cells, not part of a wall."""
-    from semmap_pp.derive.doors import door_count, doorway_classes
+    from semmap_pp.derive.doors import door_count
+    from semmap_pp.lattice.frame import doorway_classes
     import dataclasses
 
     wide = dataclasses.replace(CELLS, door_min=4, door_max=6)

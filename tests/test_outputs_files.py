@@ -25,8 +25,8 @@ from semmap_pp.outputs.geojson import geojson_dict, ring_area, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
 from semmap_pp.semantic.regions import (join_regions, passage_pairs, regions_image,
                                        unit_regions, write_regions_png)
-from semmap_pp.outputs.write import write_all
-from semmap_pp.run.pipeline import Inputs, MapRun, RunSettings
+from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_all
+from semmap_pp.run.pipeline import Inputs, MapRun, RunSettings, posterior_worlds
 
 from literal_floor import literal_floor
 
@@ -187,7 +187,7 @@ def hostile_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("out")
     (out / ".world.json.x1y2z3w4.tmp").write_text('{"units": [')   # left by a killed earlier run
     run = make_run(sm)
-    written = write_all(out, run, rules_name="<b>rules</b>.lp")
+    written = write_all(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), rules_name="<b>rules</b>.lp")
     return out, run, written
 
 
@@ -310,7 +310,8 @@ def test_report_and_diagnostics_name_chains_in_separate_modes(floor, hostile_run
     report = convergence(summaries, rhat_max=1.05, ess_min=100)
     (c, gap), = report.separated_chains()
     assert c == 2 and 990 < gap < 1010
-    write_all(tmp_path, dataclasses.replace(run, summaries=summaries, report=report), rules_name="r.lp")
+    again = dataclasses.replace(run, summaries=summaries, report=report)
+    write_all(tmp_path, again, posterior_worlds(again, N_SAMPLED_WORLDS), rules_name="r.lp")
     note = report.separation_note()
     assert note.startswith("chains in separate modes: chain 2's mean log posterior lies")
     assert note in (tmp_path / "diagnostics.txt").read_text().splitlines()

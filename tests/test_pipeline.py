@@ -183,7 +183,7 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
     """A chain started with one room missing stays thousands of nats below the other (n_inner=1, a
     few draws): the spread figures' worlds come from the other chain only, and sampled_worlds
     draws from the chains it is given."""
-    from semmap_pp.outputs.write import posterior_worlds
+    from semmap_pp.run.pipeline import posterior_worlds
     from semmap_pp.run.pipeline import Inputs, RunSettings, run_map, sampled_worlds, spread_chains
 
     g = rooms_grid(door=True)
@@ -252,7 +252,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     """With spread_draws > 0, run_map samples again after the search: every chain starts at W*
     (paper Fig. 7). W*, its log posterior and the search's draws are those of the run without the
     sample; the spread figures' worlds come from the sample; a run stopped early has none."""
-    from semmap_pp.outputs.write import posterior_worlds
+    from semmap_pp.run.pipeline import posterior_worlds
     from semmap_pp.run.pipeline import Inputs, RunSettings, figure_source, run_map
 
     g = rooms_grid(door=True)

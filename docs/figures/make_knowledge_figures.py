@@ -20,7 +20,7 @@ It writes, into ``--out`` (default ``docs/figures``):
   whose connecting walls differ by more than ``[diagnostics] defect_tolerance_m``) has its two
   connecting walls drawn in orange and a magenta dashed circle (the paper's Fig. 6);
 * ``knowledge_fig7.png`` — up to ``--worlds`` sampled worlds (default 1000, evenly thinned over chains
-  and draws) drawn with thin lines over the map, one panel per rule set (``compare.compare_png``);
+  and draws) drawn with thin lines over the map, one panel per rule set (``outputs.figures.compare_png``);
 * ``knowledge_table.md`` / ``knowledge_table.json`` — per rule set: W* (units, CPR, log posterior,
   defects) and the sampled worlds (defects, spread measures, R-hat, ESS), see docs/knowledge_comparison.md.
 
@@ -46,8 +46,9 @@ sys.path.insert(0, str(ROOT))
 
 from semmap_pp import atomic  # noqa: E402
 from semmap_pp import world as W  # noqa: E402
-from semmap_pp.studies.compare import (compare_dict, compare_png, mean_wall_sd_m, summarise,  # noqa: E402
-                               typed_sampled_worlds)
+from semmap_pp.outputs.figures import compare_png  # noqa: E402
+from semmap_pp.studies.compare import (compare_dict, mean_wall_sd_m, summarise,  # noqa: E402
+                                       typed_sampled_worlds)
 from semmap_pp.target.defects import ROOM, count_defects, topological_defects  # noqa: E402
 from semmap_pp.knowledge import load_rules  # noqa: E402
 from semmap_pp.run.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402

@@ -16,13 +16,13 @@ import json
 import sys
 from pathlib import Path
 
-from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
+from semmap_pp.cli.argtypes import seed as seed_type
+from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.cmd_map import add_run_length_options
 from semmap_pp.cli.runs import add_jobs_option
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
-from semmap_pp.cli.argtypes import seed as seed_type
 
 
 def register(subparsers) -> None:
@@ -68,9 +68,10 @@ def run(args) -> int:
 
 def _run(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.studies.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
-                                   compare_table, diffs_section, summarise, typed_sampled_worlds,
-                                   wstar_diffs)
+    from semmap_pp.outputs.figures import compare_png
+    from semmap_pp.studies.compare import (AcrossSeeds, across_dict, across_table, compare_dict,
+                                           compare_table, diffs_section, summarise, typed_sampled_worlds,
+                                           wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
     from semmap_pp.run.pipeline import RunSettings, load_inputs

@@ -22,8 +22,8 @@ from semmap_pp.cli.cmd_info import add_map_options
 from semmap_pp.cli.cmd_map import add_target_options, target_inputs
 from semmap_pp.cli.cmd_score import print_scores, score_world, scores_of
 from semmap_pp.errors import OutputError
-from semmap_pp.plans.places import unit_key
 from semmap_pp.plans.edit import Edit
+from semmap_pp.plans.places import unit_key
 
 
 #: How far (metres) the edited units' walls may move to the map's best position: a point read off

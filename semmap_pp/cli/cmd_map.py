@@ -19,12 +19,12 @@ import signal
 import sys
 from pathlib import Path
 
+from semmap_pp.cli.argtypes import n_inner as n_inner_type, seed as seed_type
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.argtypes import seconds as _seconds
 from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
-from semmap_pp.cli.argtypes import n_inner as n_inner_type, seed as seed_type
 
 
 #: Options a resumed run takes from the resume file (giving them with --resume is an error).
@@ -185,7 +185,8 @@ def _install_sigint(stop):
 def run(args) -> int:
     from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
-    from semmap_pp.run.pipeline import RunSettings, check_inputs_not_outputs, check_out_dir
+    from semmap_pp.run.outdir import check_out_dir
+    from semmap_pp.run.pipeline import RunSettings, check_inputs_not_outputs
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.plans.world_file import previous_ids_from_doc, read_run_world
 
@@ -341,7 +342,8 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     once. Either way the search is saved, and every file written is complete (each is renamed
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
-    from semmap_pp.outputs.write import write_all
+    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_all
+    from semmap_pp.run.pipeline import posterior_worlds
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.resume import write_resume
 
@@ -360,7 +362,8 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         saving[0] = False
         if pressed:
             raise KeyboardInterrupt
-        written += write_all(out, run, rules_name=rules.name, rules_path=rules, other_files=(RESUME_FILE,))
+        written += write_all(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), rules_name=rules.name,
+                             rules_path=rules, other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
         return written, True
     return written, False

@@ -31,7 +31,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from semmap_pp.cells import OCCUPIED, UNKNOWN, known_box
+from scipy import ndimage
+
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, known_box
 from semmap_pp.model import CellParams, LatticeParams, Model
 
 
@@ -118,6 +120,30 @@ def _orientation_of_points(x: np.ndarray, y: np.ndarray, params: LatticeParams) 
     if theta <= -period / 2:
         theta += period
     return float(theta)
+
+
+def doorway_classes(classes: np.ndarray, speck_cells: int) -> np.ndarray:
+    """``classes`` with every *speck* made FREE: a non-free cell whose 8-connected component of
+    non-free cells has at most ``speck_cells`` cells (a chair leg and the unseen cell behind it;
+    a wall, a jamb or a closed leaf is a longer line of cells). Doors are looked for on these.
+
+    >>> m = np.array([[0, 0, 0, 0, 0], [0, 2, 0, 0, 2], [0, 1, 0, 0, 2], [0, 0, 0, 0, 2]], np.uint8)
+    >>> doorway_classes(m, 2).tolist()
+    [[0, 0, 0, 0, 0], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2]]
+    >>> doorway_classes(m, 1).tolist() == m.tolist()
+    True
+    """
+    blocked = classes != FREE
+    labels, n = ndimage.label(blocked, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return classes
+    size = np.bincount(labels.ravel(), minlength=n + 1)
+    small = size <= speck_cells
+    small[0] = False
+    out = classes.copy()
+    out[small[labels]] = FREE
+    return out
+
 
 
 @dataclass(frozen=True)
@@ -244,9 +270,8 @@ class Frame:
 
     @functools.cached_property
     def door_classes(self) -> np.ndarray:
-        """``classes`` with specks made free (:func:`semmap_pp.derive.doors.doorway_classes`): the
-        cells doors and passages are looked for on."""
-        from semmap_pp.derive.doors import doorway_classes
+        """``classes`` with specks made free (:func:`doorway_classes`): the cells doors and passages
+        are looked for on."""
         return doorway_classes(self.classes, self.cells.door_speck)
 
     def _centres(self):

@@ -31,6 +31,7 @@ import numpy as np
 
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.semantic.regions import unit_regions
 from semmap_pp.semantic.world_json import world_dict
 
 FORMAT = "semmap_pp.geojson/1"
@@ -77,7 +78,6 @@ def geojson_dict(sm, doc: dict | None = None, regions: dict[int, int] | None = N
     """
     doc = world_dict(sm) if doc is None else doc
     if regions is None:
-        from semmap_pp.semantic.regions import unit_regions
         regions = unit_regions(sm)
     features = []
     for u in doc["units"]:

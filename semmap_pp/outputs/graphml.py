@@ -30,6 +30,7 @@ import numpy as np
 
 from semmap_pp import atomic
 from semmap_pp.cells import TYPE_LETTER, UNIT_TYPES
+from semmap_pp.semantic.regions import join_regions, passage_pairs, unit_pairs
 from semmap_pp.semantic.world_json import world_dict
 
 
@@ -75,7 +76,6 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
         Unit id -> region id; ``passages`` the unit-id pairs with an open wall
         (:mod:`semmap_pp.semantic.regions`; computed when omitted).
     """
-    from semmap_pp.semantic.regions import join_regions, passage_pairs, unit_pairs
 
     doc = world_dict(sm) if doc is None else doc
     passages = set(map(tuple, passage_pairs(sm) if passages is None else passages))

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from semmap_pp import __version__, atomic
 from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.sampler.diagnostics import chains_phrase, format_rhat
 
 #: What each output file holds (name -> one line), in the order the report lists them.
 FILES = {
@@ -128,7 +129,6 @@ def units_table(doc: dict, regions: dict[int, int]) -> str:
 
 
 def convergence_table(report) -> str:
-    from semmap_pp.sampler.diagnostics import format_rhat
 
     rows, classes = [], []
     for q in report.quantities:
@@ -162,7 +162,6 @@ def spread_text(rep) -> str:
     >>> spread_text(convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10))
     "Drawn from chains 1, 3, the best chain's mode; chain 2 left out: its mean log posterior lies far below (Convergence)."
     """
-    from semmap_pp.sampler.diagnostics import chains_phrase
 
     mode = rep.mode_chains()
     left = [c for c in range(1, rep.n_chains + 1) if c not in mode]

@@ -20,11 +20,12 @@ from semmap_pp.errors import printable
 from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
-from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
-from semmap_pp.sampler.spread import cell_probabilities, typed_worlds
 from semmap_pp.outputs.types_layer import write_types_layer
+from semmap_pp.sampler.diagnostics import to_datatree, write_trace
+from semmap_pp.sampler.spread import cell_probabilities
+from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
 
 #: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
@@ -45,7 +46,6 @@ def diagnostics_text(run, rules_path) -> str:
 
 def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
     """world.json, labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
-    from semmap_pp.sampler.diagnostics import to_datatree, write_trace
 
     inputs, settings, sm = run.inputs, run.settings, run.semantic
     doc = world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
@@ -68,18 +68,6 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
     atomic.write_text(out / "diagnostics.txt", diagnostics_text(run, rules_path))
     written.append(out / "diagnostics.txt")
     return written, doc
-
-
-def posterior_worlds(run, n: int) -> list:
-    """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
-    draws: :func:`semmap_pp.run.pipeline.figure_source`), from its chains in the best chain's mode
-    (:func:`semmap_pp.run.pipeline.spread_chains`) after the draws in which they were still settling
-    (:func:`semmap_pp.run.pipeline.spread_first_draw`), typed as the sampler typed them."""
-    from semmap_pp.run.pipeline import figure_source, run_target, sampled_worlds, spread_chains, spread_first_draw
-
-    src = figure_source(run)
-    return typed_worlds(run_target(run.inputs),
-                        sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))
 
 
 def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
@@ -134,20 +122,22 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
     return written, pngs, regions, region_img
 
 
-def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
-              n_worlds: int = N_SAMPLED_WORLDS, other_files: tuple[str, ...] = ()) -> list[Path]:
+def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str, rules_path=None,
+              other_files: tuple[str, ...] = ()) -> list[Path]:
     """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
 
     Parameters
     ----------
     out_dir : path
     run : MapRun
+    worlds : list of World
+        The typed sampled worlds of posterior.png and posterior_cells.png, from the run's sample
+        around W* when it has one (:func:`semmap_pp.run.pipeline.posterior_worlds`, usually
+        :data:`N_SAMPLED_WORLDS` of them): the run hands them over typed, outputs only draw them.
     rules_name : str
         The rule file's name (world.json, trace.nc, report).
     rules_path : path, optional
         Its path as given (diagnostics.txt); ``rules_name`` when omitted.
-    n_worlds : int
-        Sampled worlds in posterior.png and posterior_cells.png.
     other_files : tuple of str
         Names of files the caller writes into ``out_dir`` itself (``semmap map``: ``resume.npz``,
         before this call); the report lists them with the others.
@@ -167,11 +157,9 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     plan, pngs, regions, region_img = write_plan(out, sm, doc)
     written += plan
 
-    from semmap_pp.run.pipeline import figure_source
-
-    worlds = posterior_worlds(run, n_worlds)
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
-    mode = figure_source(run).report.within_mode      # the draws the worlds come from
+    source = run.spread if run.spread is not None else run   # the draws the worlds come from
+    mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
     pngs |= {
         "posterior": fig.posterior_png(sm, worlds, ess),
@@ -192,4 +180,4 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     return written
 
 
-__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "write_plan", "diagnostics_text", "posterior_worlds"]
+__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "write_plan", "diagnostics_text"]

@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from semmap_pp.semantic.ids import MIN_IOU, greedy_pairs, overlap_pairs
 from semmap_pp.plans.places import Opening, Places, Unit, _rounded, _xy
+from semmap_pp.semantic.ids import MIN_IOU, greedy_pairs, overlap_pairs
 
 #: Two doors or passages (of paired units) are the same opening when their centres lie within the
 #: wider one's width, and at least this far (metres), as the evaluation pairs doors.

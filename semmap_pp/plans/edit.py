@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from semmap_pp.errors import SemmapError
-from semmap_pp.sampler.kernels.split_merge import pieces
 from semmap_pp.plans.places import unit_key
+from semmap_pp.sampler.kernels.split_merge import pieces
 from semmap_pp.target.prior import rect_faults
 
 #: The edits and the number of arguments each takes (``None``: one id or more).

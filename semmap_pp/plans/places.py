@@ -35,6 +35,7 @@ import numpy as np
 
 from semmap_pp.cells import TYPE_LETTER
 from semmap_pp.errors import SemmapError
+from semmap_pp.plans.world_file import corners, finite, read_run_world
 
 _ID = re.compile(r"^([RCHEX]?)(\d+)$", re.IGNORECASE)
 
@@ -302,7 +303,6 @@ class Places:
 
 def _point(value) -> tuple[float, float] | None:
     """``[x, y]`` as two finite floats, or None."""
-    from semmap_pp.plans.world_file import finite
 
     xy = [finite(v) for v in value] if isinstance(value, list) and len(value) == 2 else None
     if xy is None or None in xy or max(abs(xy[0]), abs(xy[1])) > MAX_COORD_M:
@@ -313,7 +313,6 @@ def _point(value) -> tuple[float, float] | None:
 def read_places(path: str | os.PathLike) -> Places:
     """The units, exterior units, doors and passages of the world.json at ``path`` (or in the
     folder ``path``, a run's), checked as :func:`places_from_doc` says."""
-    from semmap_pp.plans.world_file import read_run_world
 
     path, doc = read_run_world(path)
     return places_from_doc(doc, Path(path))
@@ -324,7 +323,6 @@ def places_from_doc(doc: dict, path: Path | None = None) -> Places:
     ``type`` and four finite ``vertices_m``; each door and passage an integer ``id``, two
     ``units`` of the file, a finite ``center_m`` and ``width_m``; coordinates lie within
     :data:`MAX_COORD_M`. Anything else is one :class:`SemmapError` naming ``path``."""
-    from semmap_pp.plans.world_file import corners, finite
 
     found: dict[str, list[Unit]] = {}
     where: dict[bytes, str] = {}        # a unit's corners -> the first unit with them

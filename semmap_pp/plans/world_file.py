@@ -35,10 +35,11 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
+from semmap_pp.evaluate.io import read_json
 from semmap_pp.model import MAX_K
-from semmap_pp.target.prior import rect_faults
 from semmap_pp.semantic.ids import MAX_ID
 from semmap_pp.semantic.world_json import FORMAT
+from semmap_pp.target.prior import rect_faults
 
 #: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
 #: world.json rounds pixel coordinates to 3 decimals, so a unit of this lattice lies within 0.001;
@@ -171,7 +172,6 @@ def corners(path, item, name: str, key: str = "vertices_px") -> np.ndarray:
 def read_world_doc(path, not_file: str = "not a regular file") -> dict:
     """The top-level object of the world.json at ``path``, refused when it is not a regular
     file (``not_file`` says so), is larger than :data:`MAX_BYTES`, or is not of :data:`FORMAT`."""
-    from semmap_pp.evaluate.io import read_json
 
     p = Path(path)
     if p.exists() and not p.is_file():   # a directory, FIFO or device would fail or block

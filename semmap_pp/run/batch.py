@@ -14,11 +14,13 @@ tasks end, ``summary.json``, ``summary.csv`` and ``index.html`` (:func:`write_su
 from __future__ import annotations
 
 import csv
+import ctypes
 import glob as globmod
 import html
 import io
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -26,7 +28,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from semmap_pp import atomic
+from semmap_pp.cells import known_box
 from semmap_pp.errors import MapError
+from semmap_pp.grid import load_map
+from semmap_pp.grid.rosbag import BAG_SUFFIXES, is_bag
 
 #: the file ``semmap map`` writes last (after resume.npz, which it writes first): a task whose
 #: folder holds both is complete
@@ -71,7 +76,6 @@ def expand_maps(items: list[str]) -> list[Path]:
     """The map files ``items`` name: files, bags, folders (their map files: ``*.yaml`` when it
     holds any, else images; and the bags in it, files or ROS 2 bag folders) and glob patterns, in
     order, each once. A ROS 2 bag folder named itself is one map."""
-    from semmap_pp.grid.rosbag import BAG_SUFFIXES, is_bag
 
     out: list[Path] = []
 
@@ -192,14 +196,12 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child before e
     """Linux: the run is killed when the worker that started it dies (a killed worker leaves no
     run behind writing into the folder its retry writes)."""
     try:
-        import ctypes
         ctypes.CDLL(None).prctl(1, 9)          # PR_SET_PDEATHSIG, SIGKILL
     except (OSError, AttributeError):
         pass
 
 
 def _kill_group(p: subprocess.Popen) -> None:
-    import signal
     try:
         os.killpg(p.pid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
@@ -236,8 +238,6 @@ def run_task(task: Task, map_args: list[str], timeout: float | None = None) -> d
 def estimated_peak_bytes(map_path: str, map_options: dict | None = None) -> float:
     """A run's estimated peak memory (:data:`PEAK_BASE_BYTES` + :data:`PEAK_BYTES_PER_CELL` per
     cell of the map's known box)."""
-    from semmap_pp.cells import known_box
-    from semmap_pp.grid import load_map
 
     grid = load_map(map_path, **(map_options or {}))
     box = known_box(grid.classes)

@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-from semmap_pp.errors import BusyError, OutputError
+from semmap_pp.errors import BusyError, OutputError, SemmapError
 
 LOCK_NAME = ".semmap.lock"
 #: what every run's files take at least (report.html with its figures, trace.nc, resume.npz)
@@ -175,17 +175,32 @@ def lock_out_dir(out: str | os.PathLike) -> OutLock:
     return lock
 
 
+def check_out_dir(out: Path, force: bool) -> None:
+    """Refuse a non-empty output directory unless ``force``; refuse a file, a folder under a
+    file, and one this user cannot write to (before any sampling, creating nothing). The lock
+    file (:data:`LOCK_NAME`) does not count: a killed run may leave it behind."""
+    if out.exists() and not out.is_dir():
+        raise SemmapError(out, "output path exists and is not a directory")
+    if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not force:
+        raise SemmapError(out, "output directory is not empty (use --force to overwrite)")
+    probe = out.absolute()
+    while not probe.exists():           # the nearest part of the path that exists
+        probe = probe.parent
+    if not probe.is_dir():
+        raise SemmapError(out, f"cannot create the output directory: {probe} is not a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise SemmapError(out, f"cannot write the output directory: {probe} is not writable")
+
+
 @contextlib.contextmanager
 def claimed(out: str | os.PathLike | None, force: bool, need: int = BASE_BYTES) -> Iterator[OutLock | None]:
     """An output folder checked and held for a command's run: refused when it is not one to
-    write (:func:`semmap_pp.run.pipeline.check_out_dir`: a file, not writable, not empty without
+    write (:func:`check_out_dir`: a file, not writable, not empty without
     ``force``), when its file system lacks ``need`` bytes, or when another run holds it; then
     locked (:func:`lock_out_dir`) and checked again under the lock. ``out`` None: nothing."""
     if out is None:
         yield None
         return
-    from semmap_pp.run.pipeline import check_out_dir
-
     out = Path(out)
     check_out_dir(out, force)
     check_free_space(out, need)
@@ -206,11 +221,11 @@ def _remove_empty(created: list[Path]) -> None:
 
 def _fcntl():
     try:
-        import fcntl
+        import fcntl             # POSIX only: imported where a lock is taken, so Windows still runs
     except ImportError:                   # no flock (Windows): one run per folder is the user's care
         return None
     return fcntl
 
 
-__all__ = ["LOCK_NAME", "BASE_BYTES", "BYTES_PER_CELL", "OutLock", "lock_out_dir", "claimed",
+__all__ = ["LOCK_NAME", "check_out_dir", "BASE_BYTES", "BYTES_PER_CELL", "OutLock", "lock_out_dir", "claimed",
            "check_free_space", "needed_bytes"]

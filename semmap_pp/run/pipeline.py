@@ -19,25 +19,34 @@ from __future__ import annotations
 import math
 import os
 import time
+from math import isfinite
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.sampler.diagnostics import SUMMARIES, ConvergenceReport, convergence
 from semmap_pp.errors import MapError, ModelError, SemmapError
 from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
-from semmap_pp.lattice.frame import Frame, build_frame, off_axis_note
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
-from semmap_pp.sampler.ascent import polish, refine_world
-from semmap_pp.sampler.start_worlds import dispersed_world, start_world
-from semmap_pp.target.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
+from semmap_pp.grid.outside import clear_outside
+from semmap_pp.knowledge import KnowledgeEngine, load_rules
+from semmap_pp.lattice.frame import Frame, build_frame, off_axis_note
 from semmap_pp.model import Model, load_model
-from semmap_pp.semantic.semantic_map import SemanticMap, semantic_map
-from semmap_pp.semantic.ids import carried_text
-from semmap_pp.target.posterior import Posterior
 from semmap_pp.resources import DEFAULT_RULES
+from semmap_pp.sampler.ascent import polish, refine_world
+from semmap_pp.sampler.diagnostics import SUMMARIES, ConvergenceReport, convergence
+from semmap_pp.sampler.kernels import data_from_frame, default_mix
+from semmap_pp.sampler.kernels.data import model_settings
+from semmap_pp.sampler.resume import keep_common_draws, merge_records
+from semmap_pp.sampler.sampling import sample_worlds
+from semmap_pp.sampler.spread import typed_worlds
+from semmap_pp.sampler.start_worlds import dispersed_world, start_world
+from semmap_pp.semantic.ids import carried_text
+from semmap_pp.semantic.semantic_map import SemanticMap, semantic_map
+from semmap_pp.target.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
+from semmap_pp.target.posterior import Posterior
+from semmap_pp.target.walls_inside import walls_inside
 
 
 @dataclass(frozen=True)
@@ -57,8 +66,6 @@ class Inputs:
 def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path=None,
                 map_options: dict | None = None) -> Inputs:
     """Read and validate the map, model, rules and region of interest (each error names its file)."""
-    from semmap_pp.grid.outside import clear_outside
-    from semmap_pp.knowledge import load_rules
 
     grid = load_map(map_path, **(map_options or {}))
     model = load_model(model_path)
@@ -85,9 +92,7 @@ def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> No
     the cell limit: a mistaken resolution of nanometres per cell would otherwise ask for exabytes.
     The ``[kernels]`` table is read here too, so that a bad value is reported before sampling.
     """
-    from math import isfinite
 
-    from semmap_pp.sampler.kernels.data import model_settings
 
     try:
         c = model.cells(grid.resolution)
@@ -119,7 +124,6 @@ class TargetFactory:
     def __call__(self) -> Posterior:
         engine = None
         if self.rules is not None:
-            from semmap_pp.knowledge import KnowledgeEngine
             engine = KnowledgeEngine(self.rules)
         return Posterior(self.frame, self.model, engine)
 
@@ -338,8 +342,6 @@ def data_start_world(inputs: Inputs) -> wm.World:
     clean = wm.empty(base.capacity)
     for i, s in enumerate(ok):
         clean = wm.add(clean, i, base.rects[s])
-    from semmap_pp.sampler.kernels import data_from_frame
-    from semmap_pp.sampler.kernels.data import model_settings
     ks = model_settings(model)
     if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/sampler/ascent.py)
         clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
@@ -373,10 +375,6 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         The units of an earlier world.json whose ids W*'s units carry over where they are the
         same place (:mod:`semmap_pp.semantic.ids`); W* itself is the same as without.
     """
-    from semmap_pp.sampler.kernels import data_from_frame, default_mix
-    from semmap_pp.sampler.kernels.data import model_settings
-    from semmap_pp.sampler.resume import merge_records
-    from semmap_pp.sampler.sampling import sample_worlds
 
     model, frame = inputs.model, inputs.frame
     kernel_settings = model_settings(model)
@@ -493,7 +491,6 @@ def _sample_around(run: MapRun, factory, data, mix, *, planned: bool, log, stop,
 def _collect(records, model: Model, *, draws_option: str = "--draws"):
     """The draws every kept chain has (:func:`semmap_pp.sampler.resume.keep_common_draws`) as arrays:
     ``(kept chains, draws per chain, summaries, sample_stats, convergence report, samples, notes)``."""
-    from semmap_pp.sampler.resume import keep_common_draws
 
     kept_chains, n_kept, recorded, notes = keep_common_draws(records)
     summaries = {"log_posterior": np.stack([records[c].stats["logp"][recorded[c]] for c in kept_chains])}
@@ -517,7 +514,6 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     ``settings.spread_n_inner`` kernels under the full target (no burn-in; knowledge on from the
     first draw when W* passes the coverage threshold, as it does once the search has switched it on).
     The seed is the run's plus one, so the sample's random draws are not the search's."""
-    from semmap_pp.sampler.sampling import sample_worlds
 
     model = inputs.model
     log(f"sampling around W*: {settings.chains} chains x {settings.spread_draws} draws x "
@@ -553,7 +549,6 @@ def figure_source(run: MapRun):
 def _walls_inside_note(sm, post, model) -> str | None:
     """A note when a unit of W* holds ``[diagnostics] walls_inside_max`` or more of the map's
     wall-like cells inside its walls (:mod:`semmap_pp.target.walls_inside`), else None."""
-    from semmap_pp.target.walls_inside import walls_inside
     slots = sorted(sm.slot_ids) + sorted(sm.exterior_ids)
     if not slots:
         return None
@@ -598,23 +593,14 @@ def spread_first_draw(run: MapRun | SpreadSample) -> int:
     return mode.first_draw if mode is not None else 0
 
 
-def check_out_dir(out: Path, force: bool) -> None:
-    """Refuse a non-empty output directory unless ``force``; refuse a file, a folder under a
-    file, and one this user cannot write to (before any sampling, creating nothing). The lock
-    file of :mod:`semmap_pp.run.outdir` does not count: a killed run may leave it behind."""
-    from semmap_pp.run.outdir import LOCK_NAME
-
-    if out.exists() and not out.is_dir():
-        raise SemmapError(out, "output path exists and is not a directory")
-    if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not force:
-        raise SemmapError(out, "output directory is not empty (use --force to overwrite)")
-    probe = out.absolute()
-    while not probe.exists():           # the nearest part of the path that exists
-        probe = probe.parent
-    if not probe.is_dir():
-        raise SemmapError(out, f"cannot create the output directory: {probe} is not a directory")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise SemmapError(out, f"cannot write the output directory: {probe} is not writable")
+def posterior_worlds(run, n: int) -> list:
+    """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
+    draws: :func:`figure_source`), from its chains in the best chain's mode
+    (:func:`spread_chains`) after the draws in which they were still settling
+    (:func:`spread_first_draw`), typed as the sampler typed them."""
+    src = figure_source(run)
+    return typed_worlds(run_target(run.inputs),
+                        sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))
 
 
 def check_inputs_not_outputs(out: Path, inputs: Inputs, output_names) -> None:

@@ -38,6 +38,8 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.model import MAX_K
 from semmap_pp.target.prior import all_valid
+from semmap_pp.sampler.kernels.shrink_dilate import wall_range
+from semmap_pp.sampler.kernels.common import band_weights, line_cum
 
 #: The ascent grows a full world's capacity up to this many slots (the model's bound on k_max).
 MAX_CAPACITY = MAX_K
@@ -209,7 +211,6 @@ class _Ascent:
     def positions(self, rect, side: int) -> list:
         """The candidate positions of wall ``side`` of ``rect``, ascending, its own left out:
         local steps and line-evidence peaks within the range that keeps the unit valid."""
-        from semmap_pp.sampler.kernels.shrink_dilate import wall_range
         _, lo, hi, w = wall_range(rect, side, self.data)
         x = int(rect[side])
         cand = {x + d for d in range(-self.local, self.local + 1)} | set(_line_peaks(w, lo, self.peaks))
@@ -521,7 +522,6 @@ class _Ascent:
     def cuts(self, rect) -> list[tuple[list, list]]:
         """The two pieces of ``rect`` cut at each of its three strongest interior wall lines per
         axis (the pieces share the wall band)."""
-        from semmap_pp.sampler.kernels.common import band_weights, line_cum
         d = self.data
         m, t, g = d.min_side, d.wall_cells, d.wall_share
         rect = [int(v) for v in rect]

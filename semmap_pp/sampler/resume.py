@@ -24,15 +24,18 @@ import numpy as np
 
 from semmap_pp import atomic
 from semmap_pp import world as wm
-from semmap_pp.cli.argtypes import MAX_N_INNER, MAX_SEED
 from semmap_pp.errors import SemmapError
+from semmap_pp.model import MAX_K
+from semmap_pp.sampler.sampling import ChainRecord
+from semmap_pp.sampler.sampling import MAX_N_INNER, MAX_SEED
 
 FORMAT = "semmap_pp.resume/1"
 FILE_NAME = "resume.npz"
 #: R-hat and ESS need at least this many draws per chain.
 MIN_DRAWS = 4
 #: Bounds of the settings a resume file may hold: ``semmap map``'s own where it has them
-#: (:mod:`semmap_pp.cli.argtypes`), else far beyond any run (a billion draws of one kernel take days).
+#: (:mod:`semmap_pp.sampler.sampling`, which :mod:`semmap_pp.cli.argtypes` applies), else far beyond
+#: any run (a billion draws of one kernel take days).
 MAX_COUNT = 10 ** 9
 MAX_CHAINS = 10_000
 _SETTINGS = {"chains": (1, MAX_CHAINS), "cores": (1, MAX_CHAINS), "tune": (0, MAX_COUNT),
@@ -46,7 +49,6 @@ _MAP_OPTION_MIN = {"max_cells": 1, "at": 0}       # a bag's --at: seconds since 
 
 def merge_records(history, new) -> list:
     """Per chain, the earlier real draws followed by the new ones (``ChainRecord`` lists)."""
-    from semmap_pp.sampler.sampling import ChainRecord
 
     out = []
     for old, rec in zip(history, new):
@@ -132,7 +134,7 @@ class ResumeState:
         return max(self.total_draws - d for d in self.done())
 
     def chain_starts(self) -> dict:
-        from semmap_pp.sampler.step import ChainStart
+        from semmap_pp.sampler.step import ChainStart  # step imports PyMC (about 1 s): not at import
 
         out = {}
         for i, c in enumerate(self.meta["chains"]):
@@ -211,8 +213,7 @@ def read_resume(run_dir, extra_draws: int | None = None) -> ResumeState:
     ``extra_draws`` None continues to the stored plan (``tune + draws`` per chain); a number asks for
     that many recorded draws per chain beyond the longest chain's.
     """
-    from semmap_pp.sampler.sampling import ChainRecord
-    from semmap_pp.sampler.step import ChainStart
+    from semmap_pp.sampler.step import ChainStart  # step imports PyMC (about 1 s): not at import
 
     path = Path(run_dir) / FILE_NAME
     if not Path(run_dir).is_dir():
@@ -304,7 +305,6 @@ def check_resume(meta: dict, arrays: dict, path) -> None:
     a = settings["anneal"]
     if isinstance(a, bool) or not isinstance(a, (int, float)) or not (math.isfinite(a) and a >= 1.0):
         raise SemmapError(path, f"settings.anneal must be a number of at least 1, got {_brief(a)}")
-    from semmap_pp.model import MAX_K
 
     K = _integer(path, "capacity", meta.get("capacity"), 1, MAX_K)
     inputs = meta.get("inputs")

@@ -29,6 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from semmap_pp import world as wm
+from semmap_pp.errors import SemmapError
 
 #: How ``pm.sample`` starts the processes of parallel chains when the caller names none: "fork"
 #: on Linux, the start method of Python 3.12 and 3.13 there, which the project's speed figures
@@ -37,6 +38,11 @@ from semmap_pp import world as wm
 #: data/maps/ubremen-cartesium.yaml`` took 17.6 s instead of 6.0 s, the same W*; docs/sampler.md).
 #: None elsewhere: PyMC's own choice (forkserver on Intel macOS, fork on Apple silicon).
 DEFAULT_MP_CONTEXT = "fork" if sys.platform.startswith("linux") else None
+
+#: the largest seed: numpy's generators take any, but trace.nc stores it as a 64-bit HDF5 integer
+MAX_SEED = 2 ** 32 - 1
+#: the most kernels per draw: the model's 50 runs in milliseconds; 10^6 in about a minute a draw
+MAX_N_INNER = 1_000_000
 
 
 class ChainRecord(NamedTuple):
@@ -110,7 +116,7 @@ class _Recorder:
         self.sequential = sequential
 
     def __call__(self, trace=None, draw=None):
-        from semmap_pp.sampler.step import draw_info
+        from semmap_pp.sampler.step import draw_info  # step imports PyMC (about 1 s): not at import
 
         stats = draw.stats[0]
         c = int(stats["chain"])
@@ -131,7 +137,7 @@ class _Recorder:
                 raise KeyboardInterrupt  # PyMC ends the chain(s) and keeps what was recorded
 
     def records(self) -> list[ChainRecord]:
-        from semmap_pp.sampler.step import ChainStart
+        from semmap_pp.sampler.step import ChainStart  # step imports PyMC (about 1 s): not at import
 
         out = []
         for rows in self.draws:
@@ -190,11 +196,10 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     -------
     SampleResult
     """
-    import pymc as pm
+    import pymc as pm  # PyMC takes about 1 s to import: only when chains are sampled
     from pymc.sampling.parallel import ParallelSamplingError
 
-    from semmap_pp.errors import SemmapError
-    from semmap_pp.sampler.step import WorldStep, world_model, world_to_point
+    from semmap_pp.sampler.step import WorldStep, world_model, world_to_point  # imports PyMC
 
     starts = list(starts)
     if not starts:

@@ -18,7 +18,9 @@ from semmap_pp.derive import derive_world
 from semmap_pp.derive.states import interior
 from semmap_pp.evaluate import closing_radius_cells, cpr, default_roi
 from semmap_pp.model import RoomParams
+from semmap_pp.semantic.ids import carry_ids
 from semmap_pp.semantic.rooms import Rooms, rooms_of
+from semmap_pp.semantic.world_json import rect_corners_m
 
 
 @dataclass(frozen=True)
@@ -142,8 +144,6 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
     ``posterior.evaluate(world)`` when the caller has it already; ``previous``: the units of an
     earlier world.json (:func:`semmap_pp.plans.world_file.read_previous_ids`) whose ids to carry over,
     instead of numbering the units 1..n."""
-    from semmap_pp.semantic.ids import carry_ids
-    from semmap_pp.semantic.world_json import rect_corners_m
 
     terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world

@@ -42,12 +42,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
 from semmap_pp import world as W
-from semmap_pp.target.defects import count_defects
+from semmap_pp.plans.diff import diff_worlds
+from semmap_pp.plans.places import places_from_doc
+from semmap_pp.run.pipeline import figure_source, posterior_worlds, run_target, spread_first_draw
 from semmap_pp.sampler.diagnostics import SpreadAccumulator, format_rhat
+from semmap_pp.sampler.spread import accumulate, wall_disagreement_m2
+from semmap_pp.semantic.world_json import world_dict
+from semmap_pp.studies.stability import Stability
+from semmap_pp.target.defects import count_defects
 
 
 @dataclass(frozen=True)
@@ -124,14 +131,12 @@ def mean_wall_sd_m(post, world) -> float:
 
 def typed_sampled_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode, typed by its own
-    target (knowledge on when it had rules): :func:`semmap_pp.outputs.write.posterior_worlds`."""
-    from semmap_pp.outputs.write import posterior_worlds
+    target (knowledge on when it had rules): :func:`semmap_pp.run.pipeline.posterior_worlds`."""
 
     return posterior_worlds(run, n)
 
 
 def _accumulate(worlds, shape, wall: int) -> SpreadAccumulator:
-    from semmap_pp.sampler.spread import accumulate
 
     return accumulate(worlds, shape, wall)[0]
 
@@ -143,7 +148,6 @@ def wall_spread(worlds, shape, wall: int) -> float:
 
 def wall_disagreement(worlds, shape, wall: int, resolution: float) -> float:
     """Expected area (m²) where two of ``worlds`` disagree about wall (``Σ 2p(1-p)`` · cell area)."""
-    from semmap_pp.sampler.spread import wall_disagreement_m2
 
     return wall_disagreement_m2(_accumulate(worlds, shape, wall).p_wall(), resolution)
 
@@ -156,8 +160,6 @@ def summarise(run, name: str, rules: str, worlds) -> RuleSetSummary:
     defects = count_defects(worlds, c.resolution, c.wall, c.adjacency_dilation, tol)
     best = count_defects([run.world], c.resolution, c.wall, c.adjacency_dilation, tol)
     q = run.report.quantities
-    from semmap_pp.sampler.spread import wall_disagreement_m2
-    from semmap_pp.run.pipeline import figure_source, run_target, spread_first_draw
 
     acc = _accumulate(worlds, frame.shape, c.wall)
     src = figure_source(run)          # the sample around W*, or the search's own draws
@@ -227,11 +229,7 @@ def compare_dict(rows: list[RuleSetSummary], *, map_path: str, settings: dict) -
 def wstar_diffs(runs: list, names: list[str]) -> list:
     """The W* of every rule set after the first against the first's, unit by unit
     (:func:`semmap_pp.plans.diff.diff_worlds`: retyped, moved, removed, added units and openings)."""
-    from pathlib import Path
 
-    from semmap_pp.semantic.world_json import world_dict
-    from semmap_pp.plans.places import places_from_doc
-    from semmap_pp.plans.diff import diff_worlds
 
     plans = [places_from_doc(world_dict(r.semantic), Path(f"W* of {n}")) for r, n in zip(runs, names)]
     return [diff_worlds(plans[0], p) for p in plans[1:]]
@@ -242,27 +240,6 @@ def diffs_section(diffs: list, seed: int | None = None) -> str:
     which = f", seed {seed}" if seed is not None else ""
     return (f"## W* unit by unit (`semmap diff`{which})\n\n"
             + "\n\n".join(f"```\n{d.text()}\n```" for d in diffs))
-
-
-def compare_png(runs: list, worlds: list, rows: list[RuleSetSummary]) -> bytes:
-    """compare.png: the sampled worlds of each run drawn thin on the map, side by side (paper Fig. 7)."""
-    from semmap_pp.outputs.figures import classified_rgb, png, side_by_side, world_lines
-
-    fig, axes, (y0, y1, x0, x1) = side_by_side([r.semantic for r in runs], extra_h=0.6)
-    for ax, run, ws, row in zip(axes, runs, worlds, rows):
-        ax.imshow(classified_rgb(run.semantic.grid.classes, light=True)[y0:y1, x0:x1],
-                  extent=(x0, x1, y1, y0), interpolation="nearest")
-        ax.add_collection(world_lines(run.semantic.frame, ws))
-        ax.set_xlim(x0, x1)
-        ax.set_ylim(y1, y0)
-        ax.set_aspect("equal")
-        ax.set_xticks([])
-        ax.set_yticks([])
-        ax.set_title(f"{row.name}: {row.n_worlds} worlds, walls disagree on "
-                     f"{_fmt(row.wall_disagreement_m2, '.2f')} m², defects {_fmt(row.defects_mean, '.2f')}",
-                     fontsize=9)
-    fig.subplots_adjust(0.01, 0.01, 0.99, 1 - 0.5 / fig.get_figheight(), wspace=0.03)
-    return png(fig)
 
 
 #: The quantities of :class:`RuleSetSummary` summed up over seeds: (field, table label, format).
@@ -310,7 +287,6 @@ class AcrossSeeds:
     def of(cls, seeds, rows, plans) -> "AcrossSeeds":
         """From one rule set's summaries and :class:`~semmap_pp.studies.stability.Plan` s (W*s), both
         in the order of ``seeds`` (at least two)."""
-        from semmap_pp.studies.stability import Stability
 
         if len(seeds) < 2 or not len(seeds) == len(rows) == len(plans):
             raise ValueError("AcrossSeeds needs one summary and one plan for each of two or more seeds")
@@ -374,4 +350,4 @@ def across_dict(cols: list[AcrossSeeds]) -> list[dict]:
 
 
 __all__ = ["RuleSetSummary", "AcrossSeeds", "ACROSS_QUANTITIES", "spread_of", "across_table", "across_dict", "conditional_wall_sd", "mean_wall_sd_m", "typed_sampled_worlds", "wall_spread", "wall_disagreement", "summarise", "compare_table",
-           "compare_dict", "compare_png"]
+           "compare_dict"]
