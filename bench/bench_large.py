@@ -13,7 +13,7 @@ smallest size: 1.0 means linear). With ``--canvas N`` (default 4000; 0 skips it)
 ``--canvas-floor`` floor pasted into an N x N canvas of unknown cells, as gmapping writes maps, is
 measured with the model's lattice crop and without (``crop_margin_m = 0``): the ratios of the two.
 ``--tiny`` (:data:`TINY`: sizes 200 and 300, a 600-cell canvas) is the check of
-tests/test_bench_smoke.py that the benchmark runs, not a measurement.
+tests/integration/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations

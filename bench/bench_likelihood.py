@@ -8,7 +8,7 @@ are accepted. The same world and the same edits run on a map of four times the a
 tiled 2x2), interleaved edit by edit with the 1x map, to show that the cost follows the edit, not
 the map. The world must lie in the prior's support and edits must be evaluated, or the run stops
 with a message (it would time nothing real). ``--tiny`` (:data:`TINY`: 3 units, 50 edits on
-tests/data/maps/intel_corner.yaml) is the check of tests/test_bench_smoke.py that it runs.
+tests/data/maps/intel_corner.yaml) is the check of tests/integration/test_bench_smoke.py that it runs.
 """
 
 from __future__ import annotations

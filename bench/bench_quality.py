@@ -60,7 +60,7 @@ sampling until the best chain's ``best_logp`` first reached its final value, clo
 ``run_map``'s ``callback`` (start worlds and the final semantic map are not included).
 
 ``--tiny`` (:data:`TINY`: one synthetic floor, one chain of 2 + 4 draws of 10 kernels; the
-synthetic subset unless ``--subset`` names another) is the check of tests/test_bench_smoke.py
+synthetic subset unless ``--subset`` names another) is the check of tests/integration/test_bench_smoke.py
 that the benchmark runs, not a measurement.
 """
 

@@ -25,7 +25,7 @@ empty world with the plain loop (``--burn`` kernels) so that it holds units; the
 
 ``--only knowledge`` runs the burn-in and the knowledge measurement alone. ``--tiny`` runs every
 part once at a few kernels on tests/data/maps/intel_corner.yaml (:data:`TINY`): the check of
-tests/test_bench_smoke.py that the benchmark runs, not a measurement.
+tests/integration/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The literal floor of tests/test_outputs_files.py and tests/test_places.py (0.05 m cells, walls 2
+"""The literal floor of tests/unit/test_outputs_files.py and tests/integration/test_places.py (0.05 m cells, walls 2
 cells, doors 10..50 cells)::
 
     +------+------+------+      A | B : a 1 m door          -> separate regions, edge "door"

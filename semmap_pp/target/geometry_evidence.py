@@ -430,7 +430,7 @@ GEOMETRY_BLOCK = 16
 def unit_geometry_block(heights, widths, resolution: float, params) -> list:
     """``[unit_geometry(h, w, resolution, params) for h, w in zip(heights, widths)]`` in one
     vectorised evaluation (the same elementwise floating-point operations, so equal item by
-    item; tests/test_evidence.py checks it). Sizes are positive."""
+    item; tests/unit/test_evidence.py checks it). Sizes are positive."""
     n = len(heights)
     rects = np.zeros((n, 4), dtype=np.int64)
     rects[:, 2] = heights
@@ -528,7 +528,7 @@ def patch_knowledge_evidence(ev, items: Mapping, muldoor: Mapping, adj_drop, adj
     ``muldoor`` a unit to whether it now has MulDoor (a unit that goes and had it: False);
     ``adj_drop`` and ``adj_add`` are the adjacent pairs ``(p, q)``, ``p < q``, that go and come.
     Every other part of ``ev`` is kept.
-    Equal to the evidence built in full (tests/test_evidence.py); the parts of ``ev`` that do not
+    Equal to the evidence built in full (tests/unit/test_evidence.py); the parts of ``ev`` that do not
     change are the same objects, so comparing and hashing them stays cheap.
 
     Examples

@@ -542,7 +542,7 @@ class Tracker:
         evidence (:func:`~semmap_pp.target.geometry_evidence.patch_knowledge_evidence`): the changed slots and the
         slots whose corridor-piece or MulDoor flag changed get their entries anew, and the
         changed slots' adjacency rows their pairs. Equal to the evidence built in full
-        (tests/test_posterior.py)."""
+        (tests/unit/test_posterior.py)."""
         cur = self._typ
         get = self.post._geometry.get
         active, rects = world.active, world.rects

@@ -104,7 +104,7 @@ def log_slots(n: int, capacity: int) -> float:
     A set of ``n`` distinct units has density ``n! p_n(n) prod p_rect`` (any of its ``n!`` orders),
     and ``K! / (K - n)!`` slot states hold it; dividing the first by the second leaves
     ``p_n(n) prod p_rect / C(K, n)`` per slot state. Dividing by ``K! / (K - n)!`` alone would make
-    the number of units follow ``p_n(n) / n!`` instead (tests/test_mcmc.py shows both).
+    the number of units follow ``p_n(n) / n!`` instead (tests/unit/test_mcmc.py shows both).
     """
     return math.lgamma(capacity + 1) - math.lgamma(capacity - n + 1) - math.lgamma(n + 1)
 

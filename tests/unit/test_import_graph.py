@@ -8,6 +8,7 @@ folder, from the foundations at the root, and from the folders before its own in
 from __future__ import annotations
 
 import ast
+import functools
 import io
 import tokenize
 from pathlib import Path
@@ -88,12 +89,18 @@ def target_stage(dotted: str) -> str | None:
     return first if (PACKAGE / first).is_dir() else ""
 
 
+@functools.cache
+def package_imports() -> tuple:
+    """``(path, parts, imports)`` of every module of the package, read once per test process."""
+    return tuple((path, parts, tuple(imports(path, parts))) for path, parts in modules())
+
+
 def folder_edges():
-    for path, parts in modules():
+    for path, parts, found in package_imports():
         src = stage_of(parts)
         if parts == ("__main__",):
             src = "cli"
-        for target, line, in_function, note in imports(path, parts):
+        for target, line, in_function, note in found:
             dst = target_stage(target)
             if dst is not None and dst != src:
                 yield src, dst, f"{path.relative_to(PACKAGE.parent)}:{line}", in_function, note
@@ -152,10 +159,10 @@ def test_no_cycle_between_folders():
 
 def test_in_function_imports_say_why():
     bare = []
-    for path, parts in modules():
+    for path, parts, found in package_imports():
         if stage_of(parts) in LAZY_FOLDERS:
             continue
-        for target, line, in_function, note in imports(path, parts):
+        for target, line, in_function, note in found:
             if in_function and not note:
                 bare.append(f"{path.relative_to(PACKAGE.parent)}:{line}: {target}")
     assert not bare, ("imports inside functions without a comment saying why (hoist them to the top "

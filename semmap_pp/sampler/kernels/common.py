@@ -248,7 +248,7 @@ def _block_sum(a, lo, n):  # pragma: no cover - compiled
 def pairwise_sum(a, lo, n):  # pragma: no cover - compiled
     """``a[lo:lo + n].sum()`` exactly as numpy forms it (its pairwise summation: blocks of at most
     128 summed in eight running sums, longer ranges split in halves at a multiple of 8 and the two
-    sums added), so a compiled total equals numpy's bit for bit (tests/test_kernels_frozen.py
+    sums added), so a compiled total equals numpy's bit for bit (tests/unit/test_kernels_frozen.py
     checks it against ``np.sum``). The halving runs on an explicit stack (no recursion)."""
     if n <= 128:
         return _block_sum(a, lo, n)
