@@ -111,7 +111,7 @@ def _resume_inputs(args):
     inputs = load_inputs(m["map"], model_path=m["model"],
                          rules_path=Path(m["rules"]) if m["rules"] else None, roi_path=m["roi"],
                          map_options=m["map_options"])
-    lattice = m.get("lattice")   # written since session 17; the worlds are in its cells
+    lattice = m.get("lattice")   # absent from older files; the worlds are in its cells
     if lattice is not None and tuple(lattice) != tuple(inputs.frame.shape):
         raise SemmapError(Path(args.resume) / "resume.npz",
                           f"written for a lattice of {lattice[0]} x {lattice[1]} cells, but the map and "
@@ -342,7 +342,7 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     once. Either way the search is saved, and every file written is complete (each is renamed
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
-    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_all
+    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_posterior, write_wstar
     from semmap_pp.run.pipeline import posterior_worlds
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.resume import write_resume
@@ -362,8 +362,9 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         saving[0] = False
         if pressed:
             raise KeyboardInterrupt
-        written += write_all(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), rules_name=rules.name,
-                             rules_path=rules, other_files=(RESUME_FILE,))
+        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules)
+        written += write_posterior(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), wstar,
+                                   rules_name=rules.name, other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
         return written, True
     return written, False

@@ -12,6 +12,7 @@ import glob
 import os
 import shutil
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -122,31 +123,22 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
     return written, pngs, regions, region_img
 
 
-def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str, rules_path=None,
-              other_files: tuple[str, ...] = ()) -> list[Path]:
-    """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
+class WstarFiles(NamedTuple):
+    """What :func:`write_wstar` wrote and :func:`write_posterior` needs: the paths, the world.json
+    document, the figures' PNG bytes so far, the regions and their image."""
 
-    Parameters
-    ----------
-    out_dir : path
-    run : MapRun
-    worlds : list of World
-        The typed sampled worlds of posterior.png and posterior_cells.png, from the run's sample
-        around W* when it has one (:func:`semmap_pp.run.pipeline.posterior_worlds`, usually
-        :data:`N_SAMPLED_WORLDS` of them): the run hands them over typed, outputs only draw them.
-    rules_name : str
-        The rule file's name (world.json, trace.nc, report).
-    rules_path : path, optional
-        Its path as given (diagnostics.txt); ``rules_name`` when omitted.
-    other_files : tuple of str
-        Names of files the caller writes into ``out_dir`` itself (``semmap map``: ``resume.npz``,
-        before this call); the report lists them with the others.
+    written: list
+    doc: dict
+    pngs: dict
+    regions: dict
+    region_img: np.ndarray
 
-    Every file goes through :func:`semmap_pp.atomic.write_bytes`: a full disk stops the writing
-    with a :class:`~semmap_pp.errors.WriteError` naming the file, and each file written before it
-    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`):
-    the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
-    """
+
+def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None) -> WstarFiles:
+    """The files of W* (world.json, labels.png, trace.nc, spread.nc, diagnostics.txt and the plan
+    files of :func:`write_plan`) into ``out_dir``, created if missing. The first half of
+    :func:`write_all`: a caller that makes the sampled worlds only now (``semmap map``) has these
+    complete before it rebuilds the run's target for them."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
@@ -156,7 +148,17 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
 
     plan, pngs, regions, region_img = write_plan(out, sm, doc)
     written += plan
+    return WstarFiles(written, doc, pngs, regions, region_img)
 
+
+def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
+                    other_files: tuple[str, ...] = ()) -> list[Path]:
+    """posterior.png, posterior_cells.png and report.html, after :func:`write_wstar`; the paths
+    written, those of ``wstar`` first. The second half of :func:`write_all`."""
+    out = Path(out_dir)
+    sm = run.semantic
+    written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
+        wstar.regions, wstar.region_img
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
@@ -180,4 +182,35 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
     return written
 
 
-__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "write_plan", "diagnostics_text"]
+def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str, rules_path=None,
+              other_files: tuple[str, ...] = ()) -> list[Path]:
+    """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written:
+    :func:`write_wstar`, then :func:`write_posterior`.
+
+    Parameters
+    ----------
+    out_dir : path
+    run : MapRun
+    worlds : list of World
+        The typed sampled worlds of posterior.png and posterior_cells.png, from the run's sample
+        around W* when it has one (:func:`semmap_pp.run.pipeline.posterior_worlds`, usually
+        :data:`N_SAMPLED_WORLDS` of them): the run hands them over typed, outputs only draw them.
+    rules_name : str
+        The rule file's name (world.json, trace.nc, report).
+    rules_path : path, optional
+        Its path as given (diagnostics.txt); ``rules_name`` when omitted.
+    other_files : tuple of str
+        Names of files the caller writes into ``out_dir`` itself (``semmap map``: ``resume.npz``,
+        before this call); the report lists them with the others.
+
+    Every file goes through :func:`semmap_pp.atomic.write_bytes`: a full disk stops the writing
+    with a :class:`~semmap_pp.errors.WriteError` naming the file, and each file written before it
+    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`):
+    the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
+    """
+    wstar = write_wstar(out_dir, run, rules_name=rules_name, rules_path=rules_path)
+    return write_posterior(out_dir, run, worlds, wstar, rules_name=rules_name, other_files=other_files)
+
+
+__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core",
+           "write_plan", "diagnostics_text"]
