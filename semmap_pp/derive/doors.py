@@ -1,4 +1,4 @@
-"""Doors: runs of free cells on the wall two adjacent units share (paper Sec. III-B, DESIGN.md).
+"""Doors: runs of free cells on the wall two adjacent units share (paper Sec. III-B, docs/model.md).
 
 For two units ``p`` and ``q`` the *connecting wall* is the strip between their facing wall bands:
 when they sit side by side along the columns (their column gap exceeds their row gap) it is the
@@ -13,10 +13,10 @@ lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an ope
 two units are one space), a shorter one a gap in a noisy wall. A run that reaches within ``wall``
 cells of both ends of the strip has no jamb on the shared wall — the whole boundary the two units
 share is open, as where a corridor ends in a hall — and is an open passage too, whatever its width
-(docs/quality.md, session 6). A jamb is a wall the map shows: lines closed by unknown cells alone
+(docs/model.md). A jamb is a wall the map shows: lines closed by unknown cells alone
 (no occupied cell: the unseen margin along a wall, where a corridor narrows) count as reached, so
 a corridor piece meeting the next through its whole seen width is joined by a passage
-(docs/quality.md, What changed 40). Passages are not doors, but their cells are open: the
+(CHANGELOG.md, quality change 40). Passages are not doors, but their cells are open: the
 world's cell states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
 
 Examples

@@ -1,6 +1,6 @@
 """World cell states WALL / FREE / OBJECT / UNKNOWN on the lattice, and the objects of each unit.
 
-Output definition (DESIGN.md, the paper): a cell outside every unit is UNKNOWN; a cell in some
+Output definition (the paper; docs/outputs.md): a cell outside every unit is UNKNOWN; a cell in some
 unit's wall band is WALL, unless it is a door or passage cell (FREE: where the wall two units
 share is open); an interior cell is OBJECT when the
 input is unknown (the paper: "unknown cells of the input map that are located within a unit are

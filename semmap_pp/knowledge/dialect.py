@@ -367,7 +367,7 @@ def check_head_terms(symbol, body, path) -> None:
     grounding endless (e.g. ``chain(X+1) :- chain(X).``), and no head variable that clingo
     solves from an arithmetic body term, which computes new values just the same
     (``adj(Q,P) :- adj(P,Q-5).`` derives ``adj(7,1)`` from ``adj(1,2)``, then ``adj(6,7)``,
-    without end; found by ``bench/fuzz.py`` in session 30).
+    without end; found by ``bench/fuzz.py``).
     """
     bound = set()
     for lit in body:

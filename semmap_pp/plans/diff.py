@@ -1,4 +1,4 @@
-"""What changed between two world.json files (``semmap diff OLD NEW``).
+"""The changes between two world.json files (``semmap diff OLD NEW``).
 
 Two semantic maps of one building differ when the map grew between two runs of a robot, when a rule
 file or the model file was edited, when another seed was used, or when a person edited the world by

@@ -6,7 +6,7 @@ world.json's ``vertices_m``, ``center_m`` and the openings' ``center_m`` are. A 
 rectangle of its four ``vertices_m`` (walls included), so a point on the wall two units share lies
 in both. Units are joined by their **doors** and **passages** (open stretches of a shared wall,
 where a corridor was cut into pieces or opens into a hall, and free floor between two units that
-do not touch; world.json's ``passages`` since session 36; an older file has none, and
+do not touch; world.json's ``passages``; a file of an older semmap_pp has none, and
 :attr:`Places.has_passages` says so).
 
 A route (:meth:`Places.route`) is the shortest chain of straight segments from the start through

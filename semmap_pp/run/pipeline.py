@@ -135,7 +135,7 @@ def run_target(inputs: Inputs) -> Posterior:
     return post
 
 
-# Which (extended input code, region) pairs count as correctly explained (DESIGN.md, CPR): the sampler's
+# Which (extended input code, region) pairs count as correctly explained (docs/evaluation.md, CPR): the sampler's
 # cell categories are x + N_X * (region + 3 * corridor).
 _CORRECT = np.zeros((N_X, 3), bool)
 _CORRECT[X_UNKNOWN, R_OUT] = True

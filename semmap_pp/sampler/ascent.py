@@ -53,8 +53,8 @@ def ascent_peaks(n: int, resolution: float) -> int:
     """How many line-evidence peaks a wall move tries at ``resolution`` metres per cell: ``n`` at
     0.05 m and coarser, ``n`` times 0.05 m / ``resolution`` on finer maps. A finer map draws a
     wall in more lines of cells, each a peak of its own (at 0.025 m a 0.15 m wall is two lines
-    with an unknown core), so ``n`` peaks reach fewer walls there (docs/quality.md, What changed
-    30). Coarser maps keep ``n``: fewer peaks at 0.1 m helped the floors scanned at 0.1 m and hurt
+    with an unknown core), so ``n`` peaks reach fewer walls there (CHANGELOG.md, quality
+    change 30). Coarser maps keep ``n``: fewer peaks at 0.1 m helped the floors scanned at 0.1 m and hurt
     the floors pooled to 0.1 m.
 
     >>> [ascent_peaks(8, r) for r in (0.0125, 0.025, 0.04, 0.05, 0.1)], ascent_peaks(0, 0.025)
@@ -613,7 +613,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         units (removals, wall moves, merges, bridges) run again, since a moved wall may open a
         merge (synthetic floor 27's corridor in two pieces, joined for +287.6 nats); splits,
         recuts and births do not (with them aces' south corridor came out in three pieces;
-        docs/quality.md What changed 33).
+        CHANGELOG.md, quality change 33).
 
     Returns
     -------
@@ -673,8 +673,8 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     L-shaped walls with two cuts and covers free space by births already; in the polish, under a
     rule file off the fast path, the second cuts took two thirds of its time on cartesium and the
     births a third on aces. Without the double cuts no W* of the 30 synthetic floors, the ipa
-    types plans, cartesium, aces or freiburg-079 changed (docs/quality.md, What changed 35);
-    without the births too, no W* measured changed at all (What changed 36)."""
+    types plans, cartesium, aces or freiburg-079 changed (CHANGELOG.md, quality change 35);
+    without the births too, no W* measured changed at all (quality change 36)."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
                         double_cuts=False, births=False)
 

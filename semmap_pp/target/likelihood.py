@@ -75,7 +75,7 @@ def wall_like(occupied: np.ndarray, object_max_extent: int, tolerance: int = 0,
     is one straight run), with gaps of at most ``gap`` cells along the line closed; a morphological
     opening with a line of ``object_max_extent + 1`` cells keeps the runs that are long enough,
     and an occupied cell within ``tolerance`` rows of such a run is wall-like. The same along the
-    columns. Such a cell belongs to something too long to be an object (DESIGN.md), so inside a
+    columns. Such a cell belongs to something too long to be an object (docs/model.md), so inside a
     unit it is a mismatch (an interior wall), not an object. ``tolerance = gap = 0`` is the strict
     rule: one straight run of ``object_max_extent + 1`` cells.
 

@@ -1,5 +1,5 @@
 """bench_quality.error_breakdown and door_breakdown: each unmatched unit and each missed or extra
-door lands in exactly one class (docs/quality.md, "Where unit and door F1 are lost")."""
+door lands in exactly one class (docs/quality.md, "Synthetic floors": where unit F1 is lost)."""
 
 from semmap_pp.evaluate import score_world
 
@@ -108,7 +108,7 @@ def test_the_real_subset_scores_the_bundled_maps_then_the_shared_ones_not_bundle
 
 def test_rows_that_fell_back_to_knowledge_off_are_listed():
     # a row whose knowledge engine failed was run with the geometry's fixed types: the subset's
-    # result lists it (knowledge_off), so its numbers are not read as the rules' (session 24)
+    # result lists it (knowledge_off), so its numbers are not read as the rules'
     rows = [{"seed": 0, "knowledge": "knowledge: on"},
             {"seed": 4, "knowledge": "knowledge: off (engine failed: RuleError: x.lp: ...)"},
             {"map": "NLB", "knowledge": "knowledge: off (engine failed: ...)"}, {"seed": 5, "error": "e"}]

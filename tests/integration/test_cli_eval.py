@@ -118,7 +118,7 @@ def test_truth_of_another_map_is_a_user_error(floor, tmp_path, capsys):
 
 
 def test_an_l_cut_the_other_way_is_scored_both_ways(tmp_path, capsys):
-    from tests.test_evaluate_lshape import A2, B2, prediction, truth
+    from test_evaluate_lshape import A2, B2, prediction, truth
     t = dict(truth(), height=75, width=75, resolution=0.05)
     (tmp_path / "t").mkdir()
     (tmp_path / "t" / "truth.json").write_text(json.dumps(t))

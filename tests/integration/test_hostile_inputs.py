@@ -220,12 +220,12 @@ CASES = [
     ("rules-recursion-without-end", lambda d: rules(d, "c(X) :- unit(X).\nc(X+1) :- c(X).\n"),
      "must be a variable or a constant"),
     # clingo solves Q from Q-5: adj(1,2) gives adj(7,1), then adj(6,7), ... without end (it
-    # passed `semmap rules check` and hung `semmap map`; found by bench/fuzz.py in session 30)
+    # passed `semmap rules check` and hung `semmap map`; found by bench/fuzz.py)
     ("rules-recursion-through-body-arithmetic", lambda d: rules(d, "adj(Q,P) :- adj(P,Q-5).\n"),
      "head variable Q must occur in a positive body atom, outside arithmetic"),
     ("rules-six-free-unit-variables", lambda d: rules(
         d, ":~ unit(A), unit(B), unit(C), unit(D), unit(E), unit(F), room(A). [1@0, m, A, B, C, D, E, F]\n"),
-     "over the limit of 2,000,000"),     # ran without end before session 26's grounding bound
+     "over the limit of 2,000,000"),     # ran without end without the grounding bound
     ("rules-binary-file", lambda d: rules_bytes(d, bytes(range(256))), "cannot read rule file"),
     ("rules-non-ascii-character", lambda d: rules(d, ":- room(U) \u00e9.\n"),
      "not allowed outside comments and strings"),

@@ -201,7 +201,7 @@ def test_limit_can_be_raised_for_a_map_just_over_it(tmp_path):
 
 def test_a_npy_header_the_interpreter_chokes_on_is_one_line(tmp_path, monkeypatch):
     """CPython 3.12.1's tokenizer, given a header with null bytes, can leave its error set and the
-    call fails with SystemError (once in 28,590 mutated images, bench/fuzz.py, session 37)."""
+    call fails with SystemError (once in 28,590 mutated images, bench/fuzz.py)."""
     path = tmp_path / "a.npy"
     np.save(path, np.zeros((4, 4), np.uint8))
 

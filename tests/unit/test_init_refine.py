@@ -564,8 +564,8 @@ def test_a_focused_pass_visits_the_focus_only():
 def test_a_wall_move_reaches_as_many_walls_on_a_finer_map():
     """At 0.025 m a thick wall is drawn as two lines of cells, each line a plateau of the line
     evidence as wide as the wall band (4 cells), so a wall fills 8 of the peaks: the 8 peaks of
-    0.05 m reach 1 wall of the row, the 16 of ``ascent_peaks(8, 0.025)`` reach 2 (docs/quality.md,
-    What changed 30)."""
+    0.05 m reach 1 wall of the row, the 16 of ``ascent_peaks(8, 0.025)`` reach 2 (CHANGELOG.md, quality
+    change 30)."""
     from semmap_pp.sampler.ascent import _Ascent, ascent_peaks
     from semmap_pp.lattice.frame import build_frame_from_classes
 
@@ -626,7 +626,7 @@ def test_after_whole_walls_moved_the_joining_moves_run_again(monkeypatch):
 def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
     """The room inside an L of walls needs two cuts at once: the start ascent (refine_world, as
     the pipeline's knowledge-free start runs it) makes them, W*'s polish does not try them
-    (ascent.polish; docs/quality.md What changed 35) and keeps what single moves give."""
+    (ascent.polish; CHANGELOG.md, quality change 35) and keeps what single moves give."""
     from semmap_pp.sampler.ascent import polish
 
     m = l_of_walls()
@@ -646,7 +646,7 @@ def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
 
 def test_w_stars_polish_leaves_the_births_to_the_start_ascent(monkeypatch):
     """The start ascent (refine_world) tries births, the boxes of the birth table over free space
-    no unit covers; W*'s polish does not (ascent.polish; docs/quality.md What changed 36)."""
+    no unit covers; W*'s polish does not (ascent.polish; CHANGELOG.md, quality change 36)."""
     from semmap_pp.sampler import ascent
 
     post, data = knowledge_free(two_rooms())

@@ -287,7 +287,7 @@ def test_floor_skips_the_provider_only_below_the_bound(rule_file, monkeypatch):
     """With a floor (MH with the uniform drawn first), a proposal comes back unevaluated only
     when its true log posterior is below the floor; otherwise it is the full evaluation; and
     both cases occur along a chain with the engine of table3.lp (templates) and of
-    halls_to_corridors.lp (the general path, which since session 25 also gives MAP types
+    halls_to_corridors.lp (the general path, which also gives MAP types
     without marginals); the tracked log posterior stays the full evaluation.
 
     Mutant class "the knowledge-free bound" (docs/robustness.md, "Mutants"): every skipped
