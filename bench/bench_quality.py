@@ -886,7 +886,7 @@ def bench_stability(args, model, rules) -> dict:
     units found with their type under every seed, and the others, each counted with how many of
     them match a true unit (IoU >= 0.5, as the synthetic subset scores them)."""
     from semmap_pp.semantic.world_json import world_dict
-    from semmap_pp.studies.stability import Plan, Stability
+    from semmap_pp.studies.stability import SeedPlan, Stability
     seeds = [int(v) for v in str(args.seeds).split(",") if v.strip()]
     if len(set(seeds)) < 2:
         raise SystemExit("--seeds needs at least two different seeds")
@@ -902,7 +902,7 @@ def bench_stability(args, model, rules) -> dict:
             except MapFailed as exc:
                 _log(args, f"synth {f:3d} seed {seed}: FAILED {exc}")
                 break
-            plans.append(Plan.from_semantic(seed, run.semantic, clock[-1][0]))
+            plans.append(SeedPlan.from_semantic(seed, run.semantic, clock[-1][0]))
             sms.append(run.semantic)
         if len(plans) < len(set(seeds)):
             rows.append({"floor": f, "error": "a seed failed"})

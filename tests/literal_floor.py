@@ -13,7 +13,7 @@ Ids follow reading order of the unit centres: A = 1, B = 2, C = 3, D = 4.
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
@@ -40,9 +40,9 @@ def floor_grid(source=None):
 
 
 def floor_world():
-    w = W.empty(6)
+    w = wm.empty(6)
     for slot, key in zip((0, 2, 3, 5), "ABCD"):  # slots scattered: ids must not depend on them
-        w = W.add(w, slot, RECTS[key])
+        w = wm.add(w, slot, RECTS[key])
     return w
 
 

@@ -45,7 +45,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from semmap_pp import atomic  # noqa: E402
-from semmap_pp import world as W  # noqa: E402
+from semmap_pp import world as wm  # noqa: E402
 from semmap_pp.outputs.figures import compare_png  # noqa: E402
 from semmap_pp.studies.compare import (compare_dict, mean_wall_sd_m, summarise,  # noqa: E402
                                        typed_sampled_worlds)
@@ -76,7 +76,7 @@ def sample_from(inputs, model, seed: int, start, draws: int, n_inner: int, chain
 
 def all_rooms(world):
     """``world`` with every active unit typed room: defects of the geometry alone, whatever the typing."""
-    return W.with_types(world, np.full(world.capacity, ROOM))
+    return wm.with_types(world, np.full(world.capacity, ROOM))
 
 
 def reference_target(inputs):
@@ -99,7 +99,7 @@ def spread_numbers(run, worlds, reference) -> dict:
     c = frame.cells
     tol = model.diagnostics.defect_tolerance_m
     p_wall, _ = cell_probabilities(frame.shape, worlds, c.wall)
-    units = np.array([W.n_units(w) for w in worlds])
+    units = np.array([wm.n_units(w) for w in worlds])
     geo = count_defects([all_rooms(w) for w in worlds], c.resolution, c.wall, c.adjacency_dilation, tol)
     typed = count_defects(worlds, c.resolution, c.wall, c.adjacency_dilation, tol)
     ref = count_defects(typed_worlds(reference, worlds), c.resolution, c.wall, c.adjacency_dilation, tol)
@@ -148,7 +148,7 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
         ax.imshow(classified_rgb(sm.grid.classes, light=True)[y0:y1, x0:x1], extent=(x0, x1, y1, y0),
                   interpolation="nearest")
         ax.add_collection(LineCollection(world_outlines(frame, [world]), colors="tab:blue", linewidths=1.2))
-        for s in W.active_slots(world):
+        for s in wm.active_slots(world):
             x, y = frame.rect_vertices_px(world.rects[s]).mean(axis=0)
             t = int(world.types[s])
             letter = TYPE_LETTER[("room", "corridor", "hall", "other")[t]] if t >= 0 else "?"
@@ -171,7 +171,7 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-        ax.set_title(f"{name}: W* with {W.n_units(world)} units, CPR {sm.cpr:.3f}, "
+        ax.set_title(f"{name}: W* with {wm.n_units(world)} units, CPR {sm.cpr:.3f}, "
                      f"{len(defects)} topological defect(s)", fontsize=9)
     handles = [Line2D([], [], color="tab:blue", label="unit of W*"),
                Line2D([], [], color=ORANGE, lw=3, label="connecting walls of a defect (adjacent rooms, "
@@ -234,7 +234,7 @@ def main(argv=None) -> int:
                 s = summarise(o["sample"], name, RULES[name].name, o["worlds"])
                 print(json.dumps({"seed": seed, "rules": name, "draws": args.draws, "n_inner": args.n_inner,
                                   "start": args.start, "wstar_cpr": round(float(o["find"].semantic.cpr), 4),
-                                  "wstar_units": W.n_units(o["find"].world),
+                                  "wstar_units": wm.n_units(o["find"].world),
                                   "wstar_defects": len(topological_defects(
                                       o["find"].world, *_defect_args(o["find"]))),
                                   "wstar_defects_table3_typing": len(topological_defects(
@@ -256,7 +256,7 @@ def main(argv=None) -> int:
     atomic.write_bytes(args.out / "knowledge_fig6.png", fig6_png(finds, names))
     atomic.write_bytes(args.out / "knowledge_fig7.png", compare_png(samples, worlds, rows))
 
-    wstar = {n: {"units": W.n_units(out[n]["find"].world), "cpr": round(float(out[n]["find"].semantic.cpr), 4),
+    wstar = {n: {"units": wm.n_units(out[n]["find"].world), "cpr": round(float(out[n]["find"].semantic.cpr), 4),
                  "log_posterior": round(float(out[n]["find"].semantic.log_posterior), 1),
                  "defects": len(topological_defects(out[n]["find"].world, *_defect_args(out[n]["find"]))),
                  "defects_all_adjacent": len(topological_defects(all_rooms(out[n]["find"].world),

@@ -75,7 +75,7 @@ def _run(args) -> int:
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
     from semmap_pp.run.pipeline import RunSettings, load_inputs
-    from semmap_pp.studies.stability import Plan
+    from semmap_pp.studies.stability import SeedPlan
 
     if len(args.rules) < 2:
         print("semmap compare: error: give --rules at least twice (the knowledge sets to compare)",
@@ -118,7 +118,7 @@ def _run(args) -> int:
     cols = []
     if several:
         cols = [AcrossSeeds.of(seeds, [rows[j] for _r, _w, rows in per_seed],
-                               [Plan.from_semantic(seed, runs[j].semantic, runs[j].seconds)
+                               [SeedPlan.from_semantic(seed, runs[j].semantic, runs[j].seconds)
                                 for seed, (runs, _w, _rows) in zip(seeds, per_seed)])
                 for j in range(n)]
         text = "\n\n".join([f"## Across seeds\n\n{across_table(cols)}"]

@@ -52,7 +52,7 @@ def _run(args) -> int:
     from semmap_pp.cli.runs import run_each
     from semmap_pp.outputs.figures import stability_png
     from semmap_pp.run.pipeline import RunSettings
-    from semmap_pp.studies.stability import Plan, Stability
+    from semmap_pp.studies.stability import SeedPlan, Stability
 
     seeds = list(dict.fromkeys(args.seeds))
     if len(seeds) < 2:
@@ -71,7 +71,7 @@ def _run(args) -> int:
                                           for seed in seeds], workers=args.jobs)
     if done is None:
         return 130
-    plans = [Plan.from_semantic(seed, r.semantic, seconds) for seed, (r, seconds) in zip(seeds, done)]
+    plans = [SeedPlan.from_semantic(seed, r.semantic, seconds) for seed, (r, seconds) in zip(seeds, done)]
     semantic = [r.semantic for r, _ in done]
     result = Stability.of(plans)
     table = result.table()

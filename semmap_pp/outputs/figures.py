@@ -229,9 +229,9 @@ def outline_counts(worlds) -> tuple[np.ndarray, np.ndarray]:
     """The distinct unit rectangles of ``worlds`` (n, 4), in order of first appearance, and in how
     many of the worlds each appears (n,).
 
-    >>> from semmap_pp import world as W
-    >>> a = W.add(W.add(W.empty(3), 0, (0, 0, 9, 9)), 1, (0, 8, 9, 20))
-    >>> b = W.replace(a, 1, (0, 8, 9, 22))
+    >>> from semmap_pp import world as wm
+    >>> a = wm.add(wm.add(wm.empty(3), 0, (0, 0, 9, 9)), 1, (0, 8, 9, 20))
+    >>> b = wm.replace(a, 1, (0, 8, 9, 22))
     >>> rects, n = outline_counts([a, a, b])
     >>> rects.tolist(), n.tolist()
     ([[0, 0, 9, 9], [0, 8, 9, 20], [0, 8, 9, 22]], [3, 2, 1])

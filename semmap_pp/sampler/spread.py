@@ -7,9 +7,9 @@ Only the box that some sampled unit touches is accumulated, then placed back on 
 
 Examples
 --------
->>> from semmap_pp import world as W
->>> a = W.add(W.empty(2), 0, (0, 0, 4, 4), type_index=0)
->>> b = W.add(W.empty(2), 0, (0, 0, 4, 6), type_index=1)
+>>> from semmap_pp import world as wm
+>>> a = wm.add(wm.empty(2), 0, (0, 0, 4, 4), type_index=0)
+>>> b = wm.add(wm.empty(2), 0, (0, 0, 4, 6), type_index=1)
 >>> p_wall, p_type = cell_probabilities((4, 8), [a, b], wall=1)
 >>> p_wall[0].tolist()
 [1.0, 1.0, 1.0, 1.0, 0.5, 0.5, 0.0, 0.0]
@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.sampler.diagnostics import SpreadAccumulator
 
@@ -47,12 +47,12 @@ def _clip(rect, box):
     return max(r0, b0) - b0, max(c0, d0) - d0, min(r1, b1) - b0, min(c1, d1) - d0
 
 
-def rasterise(world: W.World, box, wall: int) -> tuple[np.ndarray, np.ndarray]:
+def rasterise(world: wm.World, box, wall: int) -> tuple[np.ndarray, np.ndarray]:
     """Wall mask and type index (-1 none) of ``world`` over the lattice ``box`` ``(r0, c0, r1, c1)``."""
     shape = (box[2] - box[0], box[3] - box[1])
     band = np.zeros(shape, np.int16)    # units with the cell in their wall band
     tidx = np.full(shape, -1, np.int8)
-    slots = W.active_slots(world)
+    slots = wm.active_slots(world)
     inner = {}
     for s in slots:  # whole rectangles first: every cell of a unit takes its type ...
         r0, c0, r1, c1 = (int(v) for v in world.rects[s])
@@ -118,7 +118,7 @@ def wall_disagreement_m2(p_wall: np.ndarray, resolution: float) -> float:
     return float(np.sum(2.0 * p * (1.0 - p)) * resolution * resolution)
 
 
-def typed_worlds(posterior, worlds) -> list[W.World]:
+def typed_worlds(posterior, worlds) -> list[wm.World]:
     """``worlds`` with types from ``posterior`` (the MAP types the sampler used); repeats typed once."""
     cache: dict[bytes, np.ndarray] = {}
     out = []
@@ -126,7 +126,7 @@ def typed_worlds(posterior, worlds) -> list[W.World]:
         key = w.rects.tobytes() + w.active.tobytes()
         if key not in cache:
             cache[key] = np.asarray(posterior.typing(w).world.types)
-        out.append(W.with_types(w, cache[key]))
+        out.append(wm.with_types(w, cache[key]))
     return out
 
 

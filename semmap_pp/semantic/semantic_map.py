@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL
 from semmap_pp.derive import derive_world
 from semmap_pp.derive.states import interior
@@ -47,7 +47,7 @@ class SemanticMap:
 
     grid: object
     frame: object
-    world: W.World
+    world: wm.World
     slot_ids: dict
     derived: object
     marginals: dict
@@ -105,10 +105,10 @@ class SemanticMap:
         return f"{len(types)} units" + (f" ({inner})" if inner else "")
 
 
-def number_units(frame, world: W.World, slots=None) -> dict[int, int]:
+def number_units(frame, world: wm.World, slots=None) -> dict[int, int]:
     """Unit ids 1..n for ``slots`` (default: the active slots), in reading order of their centres
     in the image."""
-    slots = [int(s) for s in (W.active_slots(world) if slots is None else slots)]
+    slots = [int(s) for s in (wm.active_slots(world) if slots is None else slots)]
     keys = []
     for s in slots:
         v = frame.rect_vertices_px(world.rects[s])
@@ -117,7 +117,7 @@ def number_units(frame, world: W.World, slots=None) -> dict[int, int]:
     return {s: i + 1 for i, (_, _, s) in enumerate(sorted(keys))}
 
 
-def label_lattice(shape, world: W.World, slot_ids: dict, wall: int) -> np.ndarray:
+def label_lattice(shape, world: wm.World, slot_ids: dict, wall: int) -> np.ndarray:
     """Unit id of every lattice cell, walls included.
 
     Where units overlap, a unit's interior wins over another's wall band (the cell is *in* that
@@ -138,7 +138,7 @@ def label_lattice(shape, world: W.World, slot_ids: dict, wall: int) -> np.ndarra
     return labels
 
 
-def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | None = None,
+def semantic_map(grid, frame, posterior, world: wm.World, *, roi: np.ndarray | None = None,
                  terms=None, previous=None) -> SemanticMap:
     """Derive the semantic map of ``world`` (types re-assigned by ``posterior``); ``terms``:
     ``posterior.evaluate(world)`` when the caller has it already; ``previous``: the units of an
@@ -154,7 +154,7 @@ def semantic_map(grid, frame, posterior, world: W.World, *, roi: np.ndarray | No
         corners = {s: rect_corners_m(frame, world.rects[s]) for s in order}   # world.json's vertices_m
         slot_ids, id_record = carry_ids(corners, order, previous)
     exterior_ids = number_units(frame, world, [e.slot for e in derived.exterior])
-    result = posterior.knowledge_result(world) if W.n_units(world) else None
+    result = posterior.knowledge_result(world) if wm.n_units(world) else None
     marginals = {}
     for s, uid in slot_ids.items():
         m = np.asarray(result.types[s], dtype=float) if result is not None else np.zeros(len(UNIT_TYPES))

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.plans.diff import diff_worlds
 from semmap_pp.plans.places import places_from_doc
 from semmap_pp.run.pipeline import figure_source, posterior_worlds, run_target, spread_first_draw
@@ -104,7 +104,7 @@ def conditional_wall_sd(post, world, max_offset: int) -> np.ndarray:
     tr = post.start(world)
     offsets = np.arange(-max_offset, max_offset + 1)
     out = []
-    for s in W.active_slots(world).tolist():
+    for s in wm.active_slots(world).tolist():
         rect = [int(v) for v in world.rects[s]]
         for side in range(4):
             lp = np.full(len(offsets), -np.inf)
@@ -113,7 +113,7 @@ def conditional_wall_sd(post, world, max_offset: int) -> np.ndarray:
                 r[side] += o
                 if r[2] - r[0] < 1 or r[3] - r[1] < 1:
                     continue
-                lp[k] = tr.logp if o == 0 else tr.propose(W.replace(world, s, tuple(r)), (s,)).logp
+                lp[k] = tr.logp if o == 0 else tr.propose(wm.replace(world, s, tuple(r)), (s,)).logp
             p = np.exp(lp - lp.max())
             p /= p.sum()
             mean = float((p * offsets).sum())
@@ -285,7 +285,7 @@ class AcrossSeeds:
 
     @classmethod
     def of(cls, seeds, rows, plans) -> "AcrossSeeds":
-        """From one rule set's summaries and :class:`~semmap_pp.studies.stability.Plan` s (W*s), both
+        """From one rule set's summaries and :class:`~semmap_pp.studies.stability.SeedPlan` s (W*s), both
         in the order of ``seeds`` (at least two)."""
 
         if len(seeds) < 2 or not len(seeds) == len(rows) == len(plans):

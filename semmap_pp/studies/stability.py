@@ -85,7 +85,7 @@ def unit_f1(a, b, min_iou: float = MATCH_IOU) -> float:
 
 
 @dataclass(frozen=True)
-class Plan:
+class SeedPlan:
     """The building units of one W*: ids (as world.json numbers them), lattice rectangles and
     types, with the run's seed, log posterior and CPR."""
 
@@ -99,7 +99,7 @@ class Plan:
     vertices_m: tuple = ()   # per unit, its four corners in the map frame (metres), as world.json
 
     @classmethod
-    def from_semantic(cls, seed: int, sm, seconds: float = float("nan")) -> "Plan":
+    def from_semantic(cls, seed: int, sm, seconds: float = float("nan")) -> "SeedPlan":
         """The plan of a :class:`~semmap_pp.semantic.semantic_map.SemanticMap` (exterior units left out)."""
         ids = sm.unit_ids
         rects = tuple(tuple(int(v) for v in sm.world.rects[sm.slot_of(u)]) for u in ids)
@@ -127,7 +127,7 @@ class UnitAgreement:
         return self.found == self.others and self.same_type == self.others
 
 
-def unit_agreement(ref: Plan, others: list[Plan]) -> list[UnitAgreement]:
+def unit_agreement(ref: SeedPlan, others: list[SeedPlan]) -> list[UnitAgreement]:
     """:class:`UnitAgreement` of every unit of ``ref`` against the plans ``others``."""
     hits = [[] for _ in ref.ids]
     for other in others:
@@ -138,7 +138,7 @@ def unit_agreement(ref: Plan, others: list[Plan]) -> list[UnitAgreement]:
             for u, t, h in zip(ref.ids, ref.types, hits)]
 
 
-def pairwise_f1(plans: list[Plan]) -> np.ndarray:
+def pairwise_f1(plans: list[SeedPlan]) -> np.ndarray:
     """Unit F1 (n, n) between every two plans (symmetric, 1 on the diagonal)."""
     n = len(plans)
     f = np.ones((n, n))
@@ -159,7 +159,7 @@ class Stability:
     f1: np.ndarray
 
     @classmethod
-    def of(cls, plans: list[Plan]) -> "Stability":
+    def of(cls, plans: list[SeedPlan]) -> "Stability":
         if len(plans) < 2:
             raise ValueError("stability needs the W*s of at least two seeds")
         ref = int(np.argmax([p.log_posterior for p in plans]))
@@ -167,7 +167,7 @@ class Stability:
         return cls(tuple(plans), ref, tuple(unit_agreement(plans[ref], others)), pairwise_f1(plans))
 
     @property
-    def reference(self) -> Plan:
+    def reference(self) -> SeedPlan:
         return self.plans[self.ref]
 
     @property
@@ -231,5 +231,5 @@ class Stability:
         }
 
 
-__all__ = ["MATCH_IOU", "iou_matrix", "match_units", "unit_f1", "Plan", "UnitAgreement",
+__all__ = ["MATCH_IOU", "iou_matrix", "match_units", "unit_f1", "SeedPlan", "UnitAgreement",
            "unit_agreement", "pairwise_f1", "Stability"]

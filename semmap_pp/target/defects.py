@@ -13,8 +13,8 @@ Two rooms side by side (columns), 1 cell = 0.1 m, walls 1 cell thick, adjacency 
 the left one is 20 cells high, the right one 12, so their connecting walls differ by 0.8 m.
 
 >>> import numpy as np
->>> from semmap_pp import world as W
->>> w = W.add(W.add(W.empty(3), 0, (0, 0, 20, 10), 0), 1, (0, 9, 12, 20), 0)
+>>> from semmap_pp import world as wm
+>>> w = wm.add(wm.add(wm.empty(3), 0, (0, 0, 20, 10), 0), 1, (0, 9, 12, 20), 0)
 >>> [(d.p, d.q, round(d.difference_m, 3)) for d in topological_defects(w, 0.1, 1, 1, 0.5)]
 [(0, 1, 0.8)]
 >>> topological_defects(w, 0.1, 1, 1, 1.0)     # within a 1 m tolerance
@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_matrix
 from semmap_pp.target.prior import connecting_length_difference
@@ -45,7 +45,7 @@ class Defect(NamedTuple):
     difference_m: float
 
 
-def topological_defects(world: W.World, resolution: float, wall: int, dilation: int,
+def topological_defects(world: wm.World, resolution: float, wall: int, dilation: int,
                         tolerance_m: float) -> list[Defect]:
     """Adjacent room pairs of ``world`` whose connecting walls differ by more than ``tolerance_m``.
 
@@ -64,7 +64,7 @@ def topological_defects(world: W.World, resolution: float, wall: int, dilation: 
     list of Defect
         Ordered by slot pair, ``p < q``.
     """
-    slots = W.active_slots(world)
+    slots = wm.active_slots(world)
     rooms = slots[np.asarray(world.types)[slots] == ROOM]
     if len(rooms) < 2:
         return []

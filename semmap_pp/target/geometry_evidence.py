@@ -10,7 +10,7 @@ is uncertain, so each unit also gets probabilities
 ``P(HaLi) = P(big size)``, ``P(CoLi) = (1 - P(big size)) P(big ratio)``, ``P(RoLi)`` the rest;
 
 a unit whose thresholded class has probability below ``hard_above`` is passed as soft evidence
-(:attr:`Evidence.soft`) instead of a hard fact. ``MulDoor(u)`` holds when ``u`` has at least
+(:attr:`GeometryEvidence.soft`) instead of a hard fact. ``MulDoor(u)`` holds when ``u`` has at least
 ``multiple_doors`` doors; with ``muldoor_scope = "space"`` a corridor-like unit counts the doors
 of every unit joined to it by open passages (:func:`muldoor_counts`: a corridor cut into
 rectangles, an L or a loop, has its doors spread over the pieces). ``Adj`` is the adjacency of
@@ -304,7 +304,7 @@ def soft_probabilities(rects: np.ndarray, resolution: float, params) -> np.ndarr
 
 
 @dataclass(frozen=True)
-class Evidence:
+class GeometryEvidence:
     """The evidence of one world: hashable, so results can be cached by it.
 
     Attributes
@@ -369,7 +369,7 @@ class Evidence:
 
 
 def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float, params,
-                   door_counts: np.ndarray | None = None, pieces: np.ndarray | None = None) -> Evidence:
+                   door_counts: np.ndarray | None = None, pieces: np.ndarray | None = None) -> GeometryEvidence:
     """Evidence of the units ``units`` with rectangles ``rects`` (n, 4) and adjacency (n, n).
 
     Parameters
@@ -400,7 +400,7 @@ def build_evidence(units, rects: np.ndarray, adj: np.ndarray, resolution: float,
     iu, ju = np.nonzero(np.triu(np.asarray(adj, dtype=bool), 1))
     pairs = frozenset((min(units[i], units[j]), max(units[i], units[j])) for i, j in zip(iu, ju))
     order = np.argsort(units)
-    return Evidence(units=tuple(sorted(units)), geometry=tuple(geometry[i] for i in order),
+    return GeometryEvidence(units=tuple(sorted(units)), geometry=tuple(geometry[i] for i in order),
                     soft=tuple(sorted(soft)), muldoor=muldoor, adj=pairs,
                     with_doors=door_counts is not None)
 
@@ -575,10 +575,10 @@ class Provider(Protocol):
     """Anything that turns evidence into type and SaLe marginals: ``infer(evidence) -> Result``.
 
     The knowledge engine (:class:`semmap_pp.knowledge.KnowledgeEngine`) takes its own evidence
-    value, :meth:`Evidence.to_knowledge`; :class:`FixedProvider` takes :class:`Evidence`.
+    value, :meth:`GeometryEvidence.to_knowledge`; :class:`FixedProvider` takes :class:`GeometryEvidence`.
     """
 
-    def infer(self, evidence: Evidence) -> Result: ...
+    def infer(self, evidence: GeometryEvidence) -> Result: ...
 
 
 @dataclass(frozen=True)
@@ -604,7 +604,7 @@ class FixedProvider:
         """Type indices of units with geometry classes ``geometry`` (vectorised fast path)."""
         return GEOMETRY_TYPE[np.asarray(geometry, dtype=np.intp)]
 
-    def infer(self, evidence: Evidence) -> FixedResult:
+    def infer(self, evidence: GeometryEvidence) -> FixedResult:
         eye = np.eye(len(UNIT_TYPES))
         t = {u: int(GEOMETRY_TYPE[GEOMETRY_CLASSES.index(g)]) for u, g in evidence.geometry}
         return FixedResult(

@@ -10,14 +10,14 @@ to the engine between sampling phases, once :meth:`Tracker.coverage` reaches the
 Examples
 --------
 >>> import numpy as np
->>> from semmap_pp import world as W
+>>> from semmap_pp import world as wm
 >>> from semmap_pp.model import load_model
 >>> from semmap_pp.lattice.frame import build_frame_from_classes
 >>> classes = np.full((40, 60), 1, np.uint8); classes[5:35, 5:55] = 0
 >>> post = Posterior(build_frame_from_classes(classes, 0.05, load_model()), load_model())
->>> w = W.add(W.empty(8), 0, (5, 5, 35, 30))
+>>> w = wm.add(wm.empty(8), 0, (5, 5, 35, 30))
 >>> tr = post.start(w)
->>> prop = tr.propose(W.replace(tr.world, 0, (5, 5, 35, 55)), [0])
+>>> prop = tr.propose(wm.replace(tr.world, 0, (5, 5, 35, 55)), [0])
 >>> abs(prop.logp - post.evaluate(prop.world).total) < 1e-9
 True
 """
@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
 from semmap_pp.derive.doors import opening_counts
@@ -54,7 +54,7 @@ class Terms(NamedTuple):
     loglik: float
     logprior: float
     total: float
-    world: W.World
+    world: wm.World
 
 
 class _Typing:
@@ -65,7 +65,7 @@ class _Typing:
 
     __slots__ = ("world", "geometry", "adj", "sale")
 
-    def __init__(self, world: W.World, geometry: np.ndarray, adj: np.ndarray, sale):
+    def __init__(self, world: wm.World, geometry: np.ndarray, adj: np.ndarray, sale):
         self.world, self.geometry, self.adj, self.sale = world, geometry, adj, sale
 
 
@@ -176,10 +176,10 @@ class Posterior:
             self._door_cache[key] = k
         return k
 
-    def _evidence(self, world: W.World, adj: np.ndarray, provider):
+    def _evidence(self, world: wm.World, adj: np.ndarray, provider):
         """The evidence of the active units of ``world`` (adjacency ``adj``), their doors and
         corridor pieces counted when ``provider`` needs them."""
-        slots = W.active_slots(world)
+        slots = wm.active_slots(world)
         rects = world.rects[slots]
         sub = adj[np.ix_(slots, slots)]
         doors, pieces = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True)
@@ -187,7 +187,7 @@ class Posterior:
         return build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
                               pieces)
 
-    def _infer(self, world: W.World, adj: np.ndarray, provider):
+    def _infer(self, world: wm.World, adj: np.ndarray, provider):
         """The provider's result (types, SaLe, MAP types) for the active units of ``world``."""
         ev = self._evidence(world, adj, provider)
         return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
@@ -212,7 +212,7 @@ class Posterior:
         map_types = (provider.map_types(evidence, base=base)
                      if base is not None and getattr(provider, "updates_map", False)
                      else provider.map_types(evidence))
-        types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
+        types = np.full(capacity, wm.NO_TYPE, dtype=np.int8)
         for s in evidence.units:
             types[s] = UNIT_TYPES.index(map_types[int(s)])
         types.setflags(write=False)
@@ -231,7 +231,7 @@ class Posterior:
             _, types, pairs, values = hit
         else:
             result = provider.infer(evidence)
-            types = np.full(capacity, W.NO_TYPE, dtype=np.int8)
+            types = np.full(capacity, wm.NO_TYPE, dtype=np.int8)
             for s in evidence.units:
                 types[s] = UNIT_TYPES.index(result.map_types[int(s)])
             types.setflags(write=False)
@@ -253,27 +253,27 @@ class Posterior:
         state["_geometry"] = GeometryTable(self.cells.resolution, self.model.evidence)
         return state
 
-    def _types(self, world: W.World, geometry: np.ndarray, adj: np.ndarray):
+    def _types(self, world: wm.World, geometry: np.ndarray, adj: np.ndarray):
         """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider.
 
         With the fixed provider the SaLe matrix is ``None`` (read from the fixed table by type).
         """
         provider = self.provider
         if isinstance(provider, FixedProvider):
-            types = np.where(world.active, GEOMETRY_TYPE[geometry], W.NO_TYPE).astype(np.int8)
+            types = np.where(world.active, GEOMETRY_TYPE[geometry], wm.NO_TYPE).astype(np.int8)
             return types, None
         ev = self._evidence(world, adj, provider)
         types, sale = self._result_arrays(provider, ev.to_knowledge(), world.capacity)
         return types.copy(), sale
 
-    def knowledge_evidence(self, world: W.World):
+    def knowledge_evidence(self, world: wm.World):
         """The evidence the knowledge engine gets for ``world``'s active units (keys: slots), as
         a :class:`semmap_pp.knowledge.Evidence` (``semmap rules evidence`` writes it as facts);
         the same with knowledge on or off: geometry classes, MulDoor and corridor pieces from the
         doors (counted whatever the provider), adjacency."""
         return self._evidence(world, self.adjacency(world), None).to_knowledge()
 
-    def knowledge_result(self, world: W.World):
+    def knowledge_result(self, world: wm.World):
         """Type marginals, SaLe marginals and MAP types of ``world`` from the provider in use.
 
         Keys are slots. With knowledge off the marginals are those of the fixed provider (one-hot
@@ -282,31 +282,31 @@ class Posterior:
         typ = self.typing(world)
         return self._infer(typ.world, typ.adj, self.provider)
 
-    def _typed(self, world: W.World, types: np.ndarray) -> W.World:
+    def _typed(self, world: wm.World, types: np.ndarray) -> wm.World:
         types.setflags(write=False)
-        return W.World(world.rects, world.active, types)
+        return wm.World(world.rects, world.active, types)
 
-    def adjacency(self, world: W.World) -> np.ndarray:
+    def adjacency(self, world: wm.World) -> np.ndarray:
         """(K, K) bool: which active slots of ``world`` are adjacent (walls dilated, paper Fig. 4)."""
         K = world.capacity
         adj = np.zeros((K, K), dtype=bool)
-        slots = W.active_slots(world)
+        slots = wm.active_slots(world)
         if len(slots):
             adj[np.ix_(slots, slots)] = adjacency_rows(
                 world.rects[slots], np.arange(len(slots)), self.cells.wall, self.cells.adjacency_dilation)
         return adj
 
-    def typing(self, world: W.World) -> _Typing:
+    def typing(self, world: wm.World) -> _Typing:
         """Geometry classes, adjacency, types and SaLe marginals of a world, from scratch."""
         geometry = np.zeros(world.capacity, dtype=np.int8)
         adj = self.adjacency(world)
-        slots = W.active_slots(world)
+        slots = wm.active_slots(world)
         if len(slots):
             geometry[slots] = geometry_class(world.rects[slots], self.cells.resolution, self.model.evidence)
         types, sale = self._types(world, geometry, adj)
         return _Typing(self._typed(world, types), geometry, adj, sale)
 
-    def enclosure(self, world: W.World) -> float:
+    def enclosure(self, world: wm.World) -> float:
         """The enclosure term of the likelihood (:func:`~semmap_pp.target.likelihood.enclosure_loglik`)."""
         sensor = self.model.sensor
         return float(enclosure_loglik(self.data.xsum, _ro(world.rects), _ro(world.active),
@@ -328,17 +328,17 @@ class Posterior:
         return float(self.prior_n(K)[n] + sale)
 
     # ------------------------------------------------------------------ full
-    def evaluate(self, world: W.World) -> Terms:
+    def evaluate(self, world: wm.World) -> Terms:
         """Full, stateless evaluation (types assigned from the geometry)."""
         typ = self.typing(world)
         w = typ.world
-        slots = W.active_slots(w)
+        slots = wm.active_slots(w)
         hist, g = full_tallies(self.data, w.rects[slots], w.types[slots] == CORRIDOR)
         loglik = loglik_from_tallies(self.data, hist, g) + self.enclosure(w)
         logprior = self._logprior(typ)
         return Terms(loglik, logprior, loglik + logprior, w)
 
-    def start(self, world: W.World) -> "Tracker":
+    def start(self, world: wm.World) -> "Tracker":
         """The incremental tracker of one chain, starting at ``world``."""
         return Tracker(self, world)
 
@@ -448,8 +448,9 @@ def _score_ro(xsum, gain, old_rects, old_active, old_types, new_rects, new_activ
                   _ro(sale), _ro(table), use_table, _ro(prior_n), ip, fp)
 
 
-class Proposal:
-    """A proposed world with its log posterior; pass it to :meth:`Tracker.accept` to commit.
+class ScoredProposal:
+    """A proposed world with its log posterior (the tracker's, not a kernel's
+    :class:`semmap_pp.sampler.kernels.Proposal`); pass it to :meth:`Tracker.accept` to commit.
 
     Attributes: ``world`` (types assigned), ``logp``, ``loglik``, ``logprior``, ``typing``
     (its :class:`_Typing`) and ``patch`` (the likelihood tallies).
@@ -483,12 +484,12 @@ class Tracker:
     #: ``propose`` takes ``floor`` (see :func:`semmap_pp.sampler.mcmc.mh_green`).
     supports_floor = True
 
-    def __init__(self, post: Posterior, world: W.World):
+    def __init__(self, post: Posterior, world: wm.World):
         self.post = post
         self._provider = post.provider
         self._typ = post.typing(world)
         w = self._typ.world
-        slots = W.active_slots(w)
+        slots = wm.active_slots(w)
         self.hist, self.gamma_total = full_tallies(post.data, w.rects[slots],
                                                    w.types[slots] == CORRIDOR)
         self.loglik = loglik_from_tallies(post.data, self.hist, self.gamma_total) + \
@@ -513,7 +514,7 @@ class Tracker:
             self._evidence = self._knowledge_evidence(w, self._typ.adj, self._many, self._pieces)
 
     @property
-    def world(self) -> W.World:
+    def world(self) -> wm.World:
         return self._typ.world
 
     def coverage(self, hist=None) -> float:
@@ -663,7 +664,7 @@ class Tracker:
         types, sale = post._result_arrays(self._provider, ev, world.capacity)
         return types, sale, patch
 
-    def propose(self, new_world: W.World, changed_slots, floor: float | None = None) -> Proposal:
+    def propose(self, new_world: wm.World, changed_slots, floor: float | None = None) -> ScoredProposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
 
         Types of *every* unit are re-derived (evidence of a neighbour may change with the edit);
@@ -725,20 +726,20 @@ class Tracker:
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
                 post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp)
-        new = W.World(new_world.rects, new_world.active, types)
-        return Proposal(new, loglik + logprior, loglik, logprior,
+        new = wm.World(new_world.rects, new_world.active, types)
+        return ScoredProposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale), (hist, gamma_total, knowledge))
 
     @staticmethod
-    def _bounded(world) -> Proposal:
-        return Proposal(world, -math.inf, -math.inf, -math.inf, None, None, bounded=True)
+    def _bounded(world) -> ScoredProposal:
+        return ScoredProposal(world, -math.inf, -math.inf, -math.inf, None, None, bounded=True)
 
     def resync(self) -> None:
         """Rebuild every cache from the current geometry (call after switching
         :attr:`Posterior.knowledge_on`: the provider, hence the types, changed)."""
         self.__init__(self.post, self.world)
 
-    def accept(self, prop: Proposal) -> None:
+    def accept(self, prop: ScoredProposal) -> None:
         """Commit a proposal (a rejected one is simply dropped)."""
         if prop.bounded:
             raise ValueError("a proposal bounded below its floor cannot be accepted")

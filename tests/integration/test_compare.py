@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN
 from semmap_pp.studies.compare import (ACROSS_QUANTITIES, AcrossSeeds, RuleSetSummary, across_dict, across_table,
                                compare_dict, compare_table, spread_of, summarise, wall_disagreement,
@@ -22,13 +22,13 @@ MODEL = load_model()
 
 
 def test_identical_worlds_have_no_spread():
-    w = W.add(W.empty(2), 0, (0, 0, 6, 6), ROOM)
+    w = wm.add(wm.empty(2), 0, (0, 0, 6, 6), ROOM)
     assert wall_spread([w, w, w], (10, 10), wall=1) == 0.0
 
 
 def test_spread_of_two_worlds_differing_in_one_wall():
-    a = W.add(W.empty(2), 0, (0, 0, 4, 4), ROOM)
-    b = W.add(W.empty(2), 0, (0, 0, 4, 6), ROOM)
+    a = wm.add(wm.empty(2), 0, (0, 0, 4, 4), ROOM)
+    b = wm.add(wm.empty(2), 0, (0, 0, 4, 6), ROOM)
     # a's wall cells: 12 of the 4x4 box; b's: 16 of the 4x6 box. Cells wall in both (p=1): rows 0 and
     # 3 of columns 0..3 and column 0 (10 cells); wall in one only (p=1/2): column 3 rows 1-2 (a), columns
     # 4, 5 of rows 0 and 3 and column 5 rows 1-2 (b) -> 8 cells. Mean p(1-p) = 8 * 0.25 / 18.
@@ -36,8 +36,8 @@ def test_spread_of_two_worlds_differing_in_one_wall():
 
 
 def test_wall_disagreement_is_the_area_two_worlds_disagree_on():
-    a = W.add(W.empty(2), 0, (0, 0, 4, 4), ROOM)
-    b = W.add(W.empty(2), 0, (0, 0, 4, 6), ROOM)
+    a = wm.add(wm.empty(2), 0, (0, 0, 4, 4), ROOM)
+    b = wm.add(wm.empty(2), 0, (0, 0, 4, 6), ROOM)
     assert wall_disagreement([a, a], (10, 10), wall=1, resolution=0.1) == 0.0
     # the 8 cells walled in one world of two (see above): p = 1/2, 2p(1-p) = 1/2, 0.01 m² each
     assert wall_disagreement([a, b], (10, 10), wall=1, resolution=0.1) == pytest.approx(8 * 0.5 * 0.01)
@@ -46,9 +46,9 @@ def test_wall_disagreement_is_the_area_two_worlds_disagree_on():
 def test_a_rare_excursion_lowers_the_mean_spread_but_raises_the_disagreement():
     # 19 identical worlds and one with a far-away extra room: the excursion adds 12 cells at
     # p = 1/20 to the "ever wall" cells, so the mean over them falls although the worlds agree less.
-    a = W.add(W.empty(2), 0, (0, 0, 4, 4), ROOM)
-    b = W.add(W.empty(2), 0, (0, 0, 4, 6), ROOM)
-    far = W.add(a, 1, (20, 20, 24, 24), ROOM)
+    a = wm.add(wm.empty(2), 0, (0, 0, 4, 4), ROOM)
+    b = wm.add(wm.empty(2), 0, (0, 0, 4, 6), ROOM)
+    far = wm.add(a, 1, (20, 20, 24, 24), ROOM)
     base = [a, b] * 10
     shape = (30, 30)
     excursion = base[:-1] + [far]
@@ -94,8 +94,8 @@ def test_spread_of_is_mean_sample_sd_and_range_of_the_finite_values():
 
 
 def _plan(seed, logp, rects):
-    from semmap_pp.studies.stability import Plan
-    return Plan(seed, tuple(range(1, len(rects) + 1)), tuple(rects), ("room",) * len(rects), logp, 0.9, 1.0)
+    from semmap_pp.studies.stability import SeedPlan
+    return SeedPlan(seed, tuple(range(1, len(rects) + 1)), tuple(rects), ("room",) * len(rects), logp, 0.9, 1.0)
 
 
 def test_across_seeds_sums_up_each_quantity_and_the_agreement_of_the_wstars():
@@ -166,7 +166,7 @@ def test_conditional_wall_sd_is_the_exact_gibbs_conditional_of_each_wall():
     # a map this clear pins every wall to one position (sd 0); with the evidence per cell scaled
     # down the conditionals spread over several offsets, so that the comparison has content
     post.data = dataclasses.replace(post.data, gain=post.data.gain * 1e-3)
-    world = W.add(W.add(W.empty(4), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    world = wm.add(wm.add(wm.empty(4), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
     k = 3
     got = conditional_wall_sd(post, world, k)
     offsets = np.arange(-k, k + 1)
@@ -177,7 +177,7 @@ def test_conditional_wall_sd_is_the_exact_gibbs_conditional_of_each_wall():
             for o in offsets:
                 r = [int(v) for v in world.rects[s]]
                 r[side] += int(o)
-                lp.append(post.evaluate(W.replace(world, s, tuple(r))).total)
+                lp.append(post.evaluate(wm.replace(world, s, tuple(r))).total)
             p = np.exp(np.array(lp) - max(lp))
             p /= p.sum()
             mean = (p * offsets).sum()

@@ -103,7 +103,7 @@ def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     """End to end: the map file as a renderer that marks every crossed cell free writes it; the
     run reads the sea as unknown, says so, and W* holds the two rooms, not one unit over all."""
     from semmap_pp.run.pipeline import RunSettings, load_inputs, run_map
-    from semmap_pp import world as W
+    from semmap_pp import world as wm
 
     path = save_grid(grid_of(building()), tmp_path / "sea.yaml")
     inputs = load_inputs(path)
@@ -116,7 +116,7 @@ def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     doc = world_dict(run.semantic)
     assert doc["map"]["notes"] == [inputs.notes[0]]        # programs reading world.json see it too
     _validate(doc)
-    rects = sorted(tuple(int(v) for v in run.world.rects[s]) for s in W.active_slots(run.world))
+    rects = sorted(tuple(int(v) for v in run.world.rects[s]) for s in wm.active_slots(run.world))
     assert len(rects) == 2 and run.semantic.cpr > 0.9
     assert load_map(path).classes[0, 0] == FREE     # the file itself is untouched
     # the same map with the sea kept: units over the sea besides the rooms (exterior strips)
@@ -126,7 +126,7 @@ def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     assert kept.notes == () and kept.grid.classes[0, 0] == FREE
     run = run_map(kept, RunSettings.from_model(kept.model, seed=1, chains=1, cores=1, tune=5,
                                                draws=5), log=lambda m: None)
-    assert W.n_units(run.world) > 2
+    assert wm.n_units(run.world) > 2
 
 
 @pytest.mark.parametrize("seal_gap_m", [1e-9, 1e308])

@@ -3,7 +3,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.evaluate import closing_radius_cells, default_roi
 from semmap_pp.lattice.frame import build_frame
@@ -38,9 +38,9 @@ def test_tally_cpr_equals_image_cpr_without_doors(rects):
     g = rooms_grid()
     f = build_frame(g, MODEL)
     post = Posterior(f, MODEL)
-    world = W.empty(4)
+    world = wm.empty(4)
     for i, r in enumerate(rects):
-        world = W.add(world, i, r)
+        world = wm.add(world, i, r)
     roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
     exact = semantic_map(g, f, post, world, roi=roi).cpr
     proxy = LatticeCPR.from_roi(f, roi)(post.start(world))
@@ -54,7 +54,7 @@ def test_knowledge_switches_on_in_burn_in_and_stays_on_for_recorded_draws():
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
     factory = TargetFactory(f, MODEL, load_rules(DEFAULT_RULES))
-    start = W.add(W.empty(4), 0, (6, 6, 54, 60))    # covers about half of the free cells
+    start = wm.add(wm.empty(4), 0, (6, 6, 54, 60))    # covers about half of the free cells
     data = data_from_frame(f)
 
     def knowledge_flags(threshold):
@@ -82,7 +82,7 @@ def test_run_map_keeps_recorded_worlds():
     # the recorded unit counts are those of the recorded worlds
     assert (run.samples["active"].sum(axis=2) == run.summaries["n_units"]).all()
     worlds = sampled_worlds(run, 4)
-    assert len(worlds) == 4 and all(W.is_valid(w, f.shape, f.cells.min_side) for w in worlds)
+    assert len(worlds) == 4 and all(wm.is_valid(w, f.shape, f.cells.min_side) for w in worlds)
     # time inside each draw's kernels: one entry per draw (burn-in too), within the wall time
     assert [len(t) for t in run.draw_seconds] == [8, 8]
     inside = np.concatenate(run.draw_seconds)
@@ -115,7 +115,7 @@ def test_run_map_starts_every_chain_from_the_given_world():
     f = build_frame(g, MODEL)
     roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
     inputs = Inputs(g, MODEL, None, f, roi, "default")
-    start = W.add(W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    start = wm.add(wm.add(wm.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
     run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=0, draws=4,
                                                  n_inner=1), log=lambda m: None, starts=[start])
     assert len(run.starts) == 2
@@ -137,7 +137,7 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
 
     g = rooms_grid(door=True)
     rules = load_rules(DEFAULT_RULES)
-    start = W.add(W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 46, 60)), 1, (6, 58, 54, 114))
+    start = wm.add(wm.add(wm.empty(MODEL.prior.k_max), 0, (6, 6, 46, 60)), 1, (6, 58, 54, 114))
     out = {}
     for rounds in (0, 3):
         model = dataclasses.replace(MODEL, kernels={**MODEL.kernels, "polish_rounds": rounds})
@@ -151,7 +151,7 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
     (lp0, _, logs0), (lp3, w3, logs3) = out[0], out[3]
     assert lp3 > lp0 + 10
     assert any("W* polished" in m for m in logs3) and not any("W* polished" in m for m in logs0)
-    rects = sorted(tuple(int(v) for v in w3.rects[s]) for s in W.active_slots(w3))
+    rects = sorted(tuple(int(v) for v in w3.rects[s]) for s in wm.active_slots(w3))
     assert rects == [(6, 6, 54, 60), (6, 58, 54, 114)]
 
 
@@ -168,10 +168,10 @@ def test_a_unit_over_the_building_and_its_free_surroundings_gets_a_note():
     f = build_frame(g, MODEL)
     post = Posterior(f, MODEL)
     roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
-    everything = W.add(W.empty(8), 0, (0, 0, 60, 120))
+    everything = wm.add(wm.empty(8), 0, (0, 0, 60, 120))
     note = _walls_inside_note(semantic_map(g, f, post, everything, roi=roi), post, MODEL)
     assert note is not None and note.startswith("unit 1 holds ") and "outside of the building as free" in note
-    rooms = W.add(W.add(W.empty(8), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    rooms = wm.add(wm.add(wm.empty(8), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
     assert _walls_inside_note(semantic_map(g, f, post, rooms, roi=roi), post, MODEL) is None
     import dataclasses
     off = dataclasses.replace(MODEL, diagnostics=dataclasses.replace(MODEL.diagnostics, walls_inside_max=1.0))
@@ -190,8 +190,8 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
     f = build_frame(g, MODEL)
     roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
     inputs = Inputs(g, MODEL, None, f, roi, "default")
-    good = W.add(W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
-    bad = W.add(W.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60))
+    good = wm.add(wm.add(wm.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60)), 1, (6, 58, 54, 114))
+    bad = wm.add(wm.empty(MODEL.prior.k_max), 0, (6, 6, 54, 60))
     run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=0, draws=6,
                                                  n_inner=1, spread_draws=0), log=lambda m: None,
                   starts=[good, bad])
@@ -268,7 +268,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     sp = run.spread
     assert figure_source(run) is sp
     # W* and the search are untouched by the sample that follows them
-    assert W.canonical_key(run.world) == W.canonical_key(plain.world)
+    assert wm.canonical_key(run.world) == wm.canonical_key(plain.world)
     assert run.semantic.log_posterior == plain.semantic.log_posterior
     np.testing.assert_array_equal(run.summaries["log_posterior"], plain.summaries["log_posterior"])
     # every chain of the sample started at W*: its first draw, 5 kernels on, differs from W* in
@@ -289,7 +289,7 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     # a run whose W* lies below a world its sample visited (here: W* with a unit taken out, and
     # the real W* as the sample's best) gets that world, polished: at least as high
     post = run_target(inputs)
-    worse = W.remove(run.world, int(np.flatnonzero(run.world.active)[0]))
+    worse = wm.remove(run.world, int(np.flatnonzero(run.world.active)[0]))
     low = post.evaluate(worse).total
     assert low < run.semantic.log_posterior
     climbed = dataclasses.replace(run, world=worse, semantic=semantic_map(g, f, post, worse, roi=roi),
@@ -328,6 +328,6 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
         assert cut.spread is None and cut.stopped == "interrupted" and figure_source(cut) is cut
         assert cut.search_complete and not early.search_complete and run.search_complete
         assert cut.report.within_mode.figures and not run.report.within_mode.figures
-        assert W.canonical_key(cut.world) == W.canonical_key(plain.world)
+        assert wm.canonical_key(cut.world) == wm.canonical_key(plain.world)
         assert any(n.startswith("no sample around W*: ") for n in cut.notes)
     assert any(n.startswith("no sample around W*: sampling stopped early") for n in early.notes)

@@ -296,7 +296,7 @@ def test_units_facing_across_free_floor_are_joined_by_a_passage(tmp_path):
     passage joins them (``[world] passage_gap_m``) in world.json, graph.graphml and routes; the
     strip itself stays outside both units (the same CPR), and regions.png keeps them apart (rooms
     as a person draws them); a model file without the key lists none."""
-    from semmap_pp import world as W
+    from semmap_pp import world as wm
     from semmap_pp.cells import FREE, OCCUPIED
     from semmap_pp.lattice.frame import build_frame
     from semmap_pp.grid import OccupancyGrid
@@ -308,7 +308,7 @@ def test_units_facing_across_free_floor_are_joined_by_a_passage(tmp_path):
     c = np.full((60, 100), OCCUPIED, np.uint8)
     c[4:56, 4:96] = FREE
     g = OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05)
-    world = W.add(W.add(W.empty(4), 0, (4, 4, 56, 44)), 1, (4, 56, 56, 96))
+    world = wm.add(wm.add(wm.empty(4), 0, (4, 4, 56, 44)), 1, (4, 56, 56, 96))
     old = model_without(tmp_path, "passage_gap_m")
     got = {}
     for name, model in (("default", load_model()), ("without", old)):

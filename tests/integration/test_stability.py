@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from semmap_pp.cli import main
-from semmap_pp.studies.stability import (Plan, Stability, iou_matrix, match_units, pairwise_f1, unit_agreement,
+from semmap_pp.studies.stability import (SeedPlan, Stability, iou_matrix, match_units, pairwise_f1, unit_agreement,
                                  unit_f1)
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,7 +58,7 @@ def test_matches_are_one_to_one_greedy_by_iou_and_at_least_a_half():
 
 
 def _plan(seed, logp, units):
-    return Plan(seed, tuple(range(1, len(units) + 1)), tuple(r for r, _ in units),
+    return SeedPlan(seed, tuple(range(1, len(units) + 1)), tuple(r for r, _ in units),
                 tuple(t for _, t in units), logp, 0.9, 1.0)
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.target.defects import count_defects, topological_defects
 from semmap_pp.model import load_model
@@ -13,7 +13,7 @@ RES, WALL, DIL = 0.1, 1, 1      # 10 cm cells, walls 1 cell thick, adjacency dil
 
 
 def pair(left, right, t_left=ROOM, t_right=ROOM):
-    return W.add(W.add(W.empty(4), 0, left, t_left), 2, right, t_right)
+    return wm.add(wm.add(wm.empty(4), 0, left, t_left), 2, right, t_right)
 
 
 def test_side_by_side_rooms_with_equal_walls_are_no_defect():
@@ -37,7 +37,7 @@ def test_stacked_rooms_compare_widths():
 def test_only_room_pairs_count():
     w = pair((0, 0, 20, 10), (0, 9, 14, 30), t_right=CORRIDOR)
     assert topological_defects(w, RES, WALL, DIL, 0.1) == []
-    untyped = pair((0, 0, 20, 10), (0, 9, 14, 30), t_left=W.NO_TYPE)
+    untyped = pair((0, 0, 20, 10), (0, 9, 14, 30), t_left=wm.NO_TYPE)
     assert topological_defects(untyped, RES, WALL, DIL, 0.1) == []
 
 
@@ -49,7 +49,7 @@ def test_rooms_that_do_not_touch_are_no_defect():
 def test_count_over_worlds():
     good = pair((0, 0, 20, 10), (0, 9, 20, 30))
     bad = pair((0, 0, 20, 10), (0, 9, 14, 30))
-    three = W.add(bad, 3, (19, 0, 40, 10), ROOM)      # below the left room, same width: no new defect
+    three = wm.add(bad, 3, (19, 0, 40, 10), ROOM)      # below the left room, same width: no new defect
     assert count_defects([good, bad, three], RES, WALL, DIL, 0.5).tolist() == [0, 1, 1]
 
 

@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL
 from semmap_pp.derive import derive_world
 from semmap_pp.derive.adjacency import adjacency_matrix, adjacency_raster
@@ -193,7 +193,7 @@ def test_derive_world_puts_doors_into_the_states():
     frame = build_frame_from_classes(DOORS, 0.05, load_model(), theta=0.0)
     frame = frame.__class__(frame.theta, frame.classes, frame.outside, frame.image_shape,
                             frame.resolution, CELLS, frame.origin)
-    w = W.add(W.add(W.empty(3), 0, (0, 0, 12, 8)), 2, (0, 7, 12, 15))
+    w = wm.add(wm.add(wm.empty(3), 0, (0, 0, 12, 8)), 2, (0, 7, 12, 15))
     d = derive_world(frame, w)
     assert d.slots.tolist() == [0, 2]
     assert [(x.p, x.q) for x in d.doors] == [(0, 2)]
@@ -249,7 +249,7 @@ def test_an_opening_without_a_jamb_is_a_passage_and_its_cells_are_free():
     cells = dataclasses.replace(load_model().cells(0.05), wall=1, door_min=2, door_max=4)
     frame = build_frame_from_classes(m, 0.05, load_model(), theta=0.0)
     frame = dataclasses.replace(frame, cells=cells)
-    d = derive_world(frame, W.add(W.add(W.empty(3), 0, hall), 1, corridor))
+    d = derive_world(frame, wm.add(wm.add(wm.empty(3), 0, hall), 1, corridor))
     assert d.doors == [] and len(d.passages) == 1
     assert (d.states[3, 3:7] == W_FREE).all() and d.states[3, 2] == W_WALL
 

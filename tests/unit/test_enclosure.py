@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.lattice.frame import build_frame_from_classes
 from semmap_pp.target.likelihood import (SEEN_MIN, X_FREE, X_OBJECTLIKE, X_WALLLIKE, enclosure_loglik,
@@ -105,9 +105,9 @@ def test_tracker_equals_full_evaluation_with_the_term_on(seed):
     cls = rng.choice(3, size=(90, 120), p=[0.6, 0.25, 0.15]).astype(np.uint8)
     post = Posterior(build_frame_from_classes(cls, 0.05, ON, theta=0.0), ON)
     shape = post.frame.shape
-    w = W.empty(8)
+    w = wm.empty(8)
     for s in range(5):
-        w = W.add(w, s, (10 * s, 5 * s, 10 * s + 30, 5 * s + 40))
+        w = wm.add(w, s, (10 * s, 5 * s, 10 * s + 30, 5 * s + 40))
     tr = post.start(w)
     assert post.enclosure(w) < 0.0        # the term is active on this world
     assert tr.logp == pytest.approx(post.evaluate(w).total, rel=1e-12)
@@ -115,15 +115,15 @@ def test_tracker_equals_full_evaluation_with_the_term_on(seed):
         s = int(rng.integers(w.capacity))
         cur = tr.world
         if cur.active[s] and rng.random() < 0.15:
-            nw = W.remove(cur, s)
+            nw = wm.remove(cur, s)
         elif not cur.active[s]:
             h, wd = int(rng.integers(21, 60)), int(rng.integers(21, 60))
             r0, c0 = int(rng.integers(0, shape[0] - h)), int(rng.integers(0, shape[1] - wd))
-            nw = W.add(cur, s, (r0, c0, r0 + h, c0 + wd))
+            nw = wm.add(cur, s, (r0, c0, r0 + h, c0 + wd))
         else:
             r = [int(v) for v in cur.rects[s]]
             r[int(rng.integers(4))] += int(rng.integers(-8, 9))
-            nw = W.replace(cur, s, r)
+            nw = wm.replace(cur, s, r)
         prop = tr.propose(nw, [s])
         full = post.evaluate(nw)
         if math.isinf(full.total):
@@ -159,10 +159,10 @@ def test_the_ascent_keeps_a_unit_over_a_ray_fan_only_with_the_term_off(model, ke
 
     frame = build_frame_from_classes(room_with_window_fan(), 0.05, model, theta=0.0)
     post = Posterior(frame, model)
-    room = W.add(W.empty(4), 0, (35, 5, 95, 65))
-    both = W.add(room, 1, (20, 65, 110, 160))
+    room = wm.add(wm.empty(4), 0, (35, 5, 95, 65))
+    both = wm.add(room, 1, (20, 65, 110, 160))
     gain = post.evaluate(both).total - post.evaluate(room).total
     assert (gain > 500) if kept else (gain < -1000)
     asc = _Ascent(post, both, data_from_frame(post.frame))
     asc.removals()
-    assert W.active_slots(asc.world).tolist() == ([0, 1] if kept else [0])
+    assert wm.active_slots(asc.world).tolist() == ([0, 1] if kept else [0])

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 import numpy as np
 from PIL import Image
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.derive.exterior import find_exterior, side_shares
 from semmap_pp.lattice.frame import build_frame
@@ -106,7 +106,7 @@ def fan_map():
     g = grid_of(room_with_window())
     f = build_frame(g, MODEL)
     assert f.theta == 0.0
-    w = W.add(W.add(W.add(W.empty(4), 0, ROOM), 1, FAN), 2, ROOM2)
+    w = wm.add(wm.add(wm.add(wm.empty(4), 0, ROOM), 1, FAN), 2, ROOM2)
     return g, f, w
 
 

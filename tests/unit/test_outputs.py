@@ -5,7 +5,7 @@ import jsonschema
 import numpy as np
 from PIL import Image
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
@@ -33,9 +33,9 @@ def two_rooms_grid(unseen_from=None):
 
 
 def two_rooms_world(slots=(0, 1)):
-    w = W.empty(4)
-    w = W.add(w, slots[0], (4, 4, 46, 56))
-    return W.add(w, slots[1], (4, 54, 46, 106))
+    w = wm.empty(4)
+    w = wm.add(w, slots[0], (4, 4, 46, 56))
+    return wm.add(w, slots[1], (4, 54, 46, 106))
 
 
 def build(world):
@@ -77,8 +77,8 @@ def test_labels_interior_beats_a_neighbours_wall(tmp_path):
     assert lab[20, 54] == 1 and lab[20, 55] == 1
     assert lab[20, 57] == 2 and lab[0, 0] == 0
     # an interior overlapping another unit's wall band takes the interior's id
-    w2 = W.add(W.add(W.empty(2), 0, (0, 0, 20, 20)), 1, (0, 18, 20, 40))
-    lab2 = label_lattice((20, 40), W.replace(w2, 1, (0, 10, 20, 40)), {0: 1, 1: 2}, wall=2)
+    w2 = wm.add(wm.add(wm.empty(2), 0, (0, 0, 20, 20)), 1, (0, 18, 20, 40))
+    lab2 = label_lattice((20, 40), wm.replace(w2, 1, (0, 10, 20, 40)), {0: 1, 1: 2}, wall=2)
     assert lab2[10, 12] == 1 and lab2[10, 19] == 2   # 12: inside 1, wall of 2; 19: wall of 1, inside 2
     p = write_labels_png(tmp_path / "labels.png", lab)
     back = np.asarray(Image.open(p))
@@ -87,7 +87,7 @@ def test_labels_interior_beats_a_neighbours_wall(tmp_path):
 
 
 def test_empty_world_is_a_valid_document():
-    g, f, sm = build(W.empty(4))
+    g, f, sm = build(wm.empty(4))
     doc = world_dict(sm)
     jsonschema.validate(doc, SCHEMA)
     assert doc["units"] == [] and doc["adjacency"] == [] and doc["cpr"] < 0.5

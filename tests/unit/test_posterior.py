@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.target.geometry_evidence import FixedResult, build_evidence
 from semmap_pp.lattice.frame import build_frame_from_classes
@@ -57,12 +57,12 @@ def random_rect(rng, shape, lo=21):
 def random_proposal(rng, world, shape):
     s = int(rng.integers(world.capacity))
     if world.active[s] and rng.random() < 0.15:
-        return W.remove(world, s), [s]
+        return wm.remove(world, s), [s]
     if not world.active[s]:
-        return W.add(world, s, random_rect(rng, shape)), [s]
+        return wm.add(world, s, random_rect(rng, shape)), [s]
     r = list(world.rects[s])
     r[rng.integers(4)] += int(rng.integers(-8, 9))
-    return W.replace(world, s, r), [s]
+    return wm.replace(world, s, r), [s]
 
 
 @pytest.mark.slow
@@ -72,9 +72,9 @@ def test_tracker_equals_full_evaluation(with_engine):
     provider = NeighbourProvider() if with_engine else None
     post = posterior(rng, provider)
     shape = post.frame.shape
-    w = W.empty(8)
+    w = wm.empty(8)
     for s in range(5):
-        w = W.add(w, s, random_rect(rng, shape))
+        w = wm.add(w, s, random_rect(rng, shape))
     tr = post.start(w)
     assert tr.logp == pytest.approx(post.evaluate(w).total, rel=1e-12)
     other_type_changes = 0
@@ -99,29 +99,29 @@ def test_tracker_equals_full_evaluation(with_engine):
 def test_fixed_types_follow_the_geometry_class():
     rng = np.random.default_rng(2)
     post = posterior(rng, shape=(200, 400))
-    w = W.add(W.add(W.empty(4), 0, (0, 0, 80, 100)), 1, (100, 0, 140, 400))
+    w = wm.add(wm.add(wm.empty(4), 0, (0, 0, 80, 100)), 1, (100, 0, 140, 400))
     terms = post.evaluate(w)
     assert [UNIT_TYPES[t] for t in terms.world.types[:2]] == ["room", "corridor"]
-    assert terms.world.types[2] == W.NO_TYPE
+    assert terms.world.types[2] == wm.NO_TYPE
 
 
 def test_prior_of_a_world_without_adjacent_pairs():
     rng = np.random.default_rng(3)
     post = posterior(rng)
-    w = W.add(W.add(W.empty(6), 0, (0, 0, 30, 30)), 3, (50, 60, 90, 120))
+    w = wm.add(wm.add(wm.empty(6), 0, (0, 0, 30, 30)), 3, (50, 60, 90, 120))
     c = post.cells
     expected = (log_p_n(2, 6, MODEL.prior) - log_slots(2, 6)
                 + 2 * log_p_rect_const(post.frame.shape, c.min_side, c.max_side))
     assert post.evaluate(w).logprior == pytest.approx(expected)
     # a unit narrower than the minimum side has prior probability 0
-    assert post.evaluate(W.replace(w, 0, (0, 0, 30, 5))).logprior == -math.inf
+    assert post.evaluate(wm.replace(w, 0, (0, 0, 30, 5))).logprior == -math.inf
 
 
 def test_coverage_counts_free_cells_under_units():
     cls = np.ones((40, 40), np.uint8)
     cls[0:20, :] = 0
     post = Posterior(build_frame_from_classes(cls, 0.05, MODEL, theta=0.0), MODEL)
-    tr = post.start(W.add(W.empty(2), 0, (0, 0, 20, 20)))
+    tr = post.start(wm.add(wm.empty(2), 0, (0, 0, 20, 20)))
     assert tr.coverage() == pytest.approx(0.5)
 
 
@@ -130,9 +130,9 @@ def test_resync_after_switching_knowledge_on():
     provider = NeighbourProvider()
     post = posterior(rng, provider)
     post.knowledge_on = False
-    w = W.empty(6)
+    w = wm.empty(6)
     for s, rect in enumerate([(0, 0, 40, 30), (0, 29, 40, 60), (0, 59, 40, 90)]):
-        w = W.add(w, s, rect)
+        w = wm.add(w, s, rect)
     tr = post.start(w)
     assert [UNIT_TYPES[t] for t in tr.world.types[:3]] == ["room"] * 3
     post.knowledge_on = True
@@ -178,7 +178,7 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels(monkey
                      engine)
     post.knowledge_on = True
     data = data_from_frame(post.frame)
-    tr = post.start(W.empty(6))
+    tr = post.start(wm.empty(6))
     checked = {"proposals": 0, "soft": 0, "other_type_changes": 0}
 
     class Checked:
@@ -212,7 +212,7 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels(monkey
         assert np.array_equal(tr.world.types, full.world.types)
         assert tr.logp == pytest.approx(full.total, rel=1e-9, abs=0)
         typ = post.typing(tr.world)
-        slots = W.active_slots(tr.world)
+        slots = wm.active_slots(tr.world)
         rects = tr.world.rects[slots]
         sub = typ.adj[np.ix_(slots, slots)]
         ev = build_evidence(slots, rects, sub, post.cells.resolution, model.evidence,
@@ -232,7 +232,7 @@ def test_tracker_equals_full_evaluation_with_knowledge_over_20000_kernels(monkey
     assert stats.attempted.sum() == 20_000 and stats.accepted.sum() > 100
     assert checked["proposals"] >= 250 and checked["soft"] > 0      # 294 with this seed
     assert checked["other_type_changes"] > 0     # knowledge retyped a unit the kernel left alone
-    assert W.n_units(tr.world) >= 2
+    assert wm.n_units(tr.world) >= 2
 
 
 def test_pair_openings_equal_the_door_detector():
@@ -305,7 +305,7 @@ def test_floor_skips_the_provider_only_below_the_bound(rule_file, monkeypatch):
     post.knowledge_on = True
     data = data_from_frame(post.frame)
     mix = default_mix(data.settings)
-    tr = post.start(W.empty(6))
+    tr = post.start(wm.empty(6))
     rng = np.random.default_rng(5)
     bounds = recorded_bounds(monkeypatch)
     n_bounded = n_full = 0
@@ -364,9 +364,9 @@ def test_map_types_bound_skips_only_proposals_below_the_floor(monkeypatch):
         rng = np.random.default_rng(21)
         provider = MapNeighbourProvider()
         post = posterior(rng, provider)
-        world = W.empty(6)
+        world = wm.empty(6)
         for s in range(4):
-            world = W.add(world, s, random_rect(rng, post.frame.shape))
+            world = wm.add(world, s, random_rect(rng, post.frame.shape))
         tr = post.start(world)
         ref = Posterior(post.frame, MODEL, NeighbourProvider())   # full evaluations, apart
         ref.knowledge_on = True                                   # from the provider's count
@@ -428,7 +428,7 @@ def test_same_evidence_shortcut_is_exact_and_makes_the_same_moves(monkeypatch):
         post = Posterior(frame, MODEL, KnowledgeEngine.from_file(rules))
         post.knowledge_on = True
         data = data_from_frame(post.frame)
-        tr = post.start(W.empty(6))
+        tr = post.start(wm.empty(6))
         trace = []
         run_chain(np.random.default_rng(11), tr, default_mix(data.settings), 1500, data, 20.0,
                   callback=lambda i, t, ok: trace.append((ok, t.logp)))
@@ -477,7 +477,7 @@ def test_patched_evidence_equals_the_evidence_built_in_full(monkeypatch):
     post = Posterior(frame, model, KnowledgeEngine.from_file(rules))
     post.knowledge_on = True
     data = data_from_frame(post.frame)
-    tr = post.start(W.empty(6))
+    tr = post.start(wm.empty(6))
     run_chain(np.random.default_rng(3), tr, default_mix(data.settings), 8000, data, 100.0)
     # this seed: 1086 calls; units added or removed 6 times (births and deaths are mostly
     # bounded below their floor first; tests/unit/test_evidence.py patches those at random)
@@ -501,9 +501,9 @@ def corridor_in_pieces(pieces, **evidence):
     post.knowledge_on = True
     rooms = [(1, 1, 19, 27), (1, 25, 19, 51), (1, 49, 19, 75), (1, 73, 19, 99)]
     rects = rooms + [(26, 1, 67, 99)] + list(pieces)
-    world = W.empty(10)
+    world = wm.empty(10)
     for s, r in enumerate(rects):
-        world = W.add(world, s, r)
+        world = wm.add(world, s, r)
     return post, rects, world
 
 
@@ -522,7 +522,7 @@ def test_a_corridor_in_two_pieces_counts_its_doors_as_one_space(scope):
     assert types[:4] == ["room"] * 4 and types[5] == "corridor"
     assert types[6] == ("other" if scope == "unit" else "corridor")
     tr = post.start(world)
-    moved = W.replace(W.replace(world, 5, (18, 1, 28, 41)), 6, (18, 39, 28, 99))
+    moved = wm.replace(wm.replace(world, 5, (18, 1, 28, 41)), 6, (18, 39, 28, 99))
     tr.accept(tr.propose(moved, (5, 6)))
     assert tr.logp == pytest.approx(post.evaluate(moved).total, rel=1e-12)
     assert np.array_equal(tr.world.types, post.typing(moved).world.types)
@@ -547,7 +547,7 @@ def test_a_short_piece_of_a_corridor_is_corridor_like_as_part_of_its_space(scope
     tr = post.start(world)
     assert tr._pieces[:7].tolist() == pieces.tolist()
     # the square grows to 23 x 24 cells: wider than twice the corridor (10): not a piece
-    wide = W.replace(world, 6, (14, 75, 37, 99))
+    wide = wm.replace(world, 6, (14, 75, 37, 99))
     prop = tr.propose(wide, (6,))
     tr.accept(prop)
     assert tr.logp == pytest.approx(post.evaluate(wide).total, rel=1e-12)
@@ -617,7 +617,7 @@ def _reference_log_prior(post, world, typ):
     P(SaLe) of the typing ``typ`` (the fixed table by type when its ``sale`` is None)."""
     from semmap_pp.target.prior import log_prior
 
-    slots = W.active_slots(world)
+    slots = wm.active_slots(world)
     adj = typ.adj[np.ix_(slots, slots)]
     types = typ.world.types[slots]
     sale = (post.fixed.fixed_sale[np.ix_(types, types)] if typ.sale is None
@@ -658,12 +658,12 @@ def test_the_log_prior_of_every_number_of_units_is_prior_log_prior(rules):
     rng = np.random.default_rng(55)
     K = post.model.prior.k_max
     n_max = K if rules is None else 6      # the engine on 64 overlapping units: too slow for a test
-    world = W.empty(K)
+    world = wm.empty(K)
     tr = post.start(world)
     assert tr.logprior == pytest.approx(_reference_log_prior(post, world, post.typing(world)))
     sale_terms = 0
     for n in range(1, n_max + 1):
-        new = W.add(tr.world, n - 1, random_rect(rng, shape, lo=c.min_side))
+        new = wm.add(tr.world, n - 1, random_rect(rng, shape, lo=c.min_side))
         prop = tr.propose(new, [n - 1])
         typ = post.typing(new)
         expected = _reference_log_prior(post, new, typ)
