@@ -38,7 +38,6 @@ from semmap_pp.evaluate import closing_radius_cells, default_roi
 from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import load_map
 from semmap_pp.sampler.kernels import data_from_frame
-from semmap_pp.sampler.kernels.data import model_settings
 from semmap_pp.target.likelihood import prepare
 from semmap_pp.model import load_model
 
@@ -65,7 +64,7 @@ frame = phase("build_frame", lambda: build_frame(grid, model))
 phase("default_roi", lambda: default_roi(grid.classes, closing_radius_cells(
     model.evaluate.roi_closing_m, grid.resolution)))
 phase("likelihood", lambda: prepare(frame, model))
-phase("kernel_data", lambda: data_from_frame(frame, model_settings(model)))
+phase("kernel_data", lambda: data_from_frame(frame, model.kernels))
 out["lattice"] = list(frame.shape)
 out["theta_deg"] = round(math.degrees(frame.theta), 2)
 out["total_s"] = round(sum(p["s"] for p in out["phases"].values()), 3)

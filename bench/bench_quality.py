@@ -273,14 +273,13 @@ def spread_best(run):
     the benchmark measures what taking it would give (``--spread-best``)."""
     from semmap_pp.sampler.ascent import polish
     from semmap_pp.sampler.kernels import data_from_frame
-    from semmap_pp.sampler.kernels.data import model_settings
     from semmap_pp.semantic.semantic_map import semantic_map
     from semmap_pp.run.pipeline import run_target
     sp = run.spread
     if sp is None or sp.best_world is None or not sp.best_logp > sp.start_logp:
         return run
     inputs = run.inputs
-    ks = model_settings(inputs.model)
+    ks = inputs.model.kernels
     post = run_target(inputs)
     world = polish(post, sp.best_world, data_from_frame(inputs.frame, ks), ks.polish_rounds)
     sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi)
@@ -732,8 +731,7 @@ def kernel_data(inputs, model):
     """The kernels' data of ``inputs``' lattice with the model's ``[kernels]`` settings (what
     :func:`semmap_pp.sampler.ascent.align_walls` needs)."""
     from semmap_pp.sampler.kernels import data_from_frame
-    from semmap_pp.sampler.kernels.data import model_settings
-    return data_from_frame(inputs.frame, model_settings(model))
+    return data_from_frame(inputs.frame, model.kernels)
 
 
 def outside_units(pred: dict, truth: dict, shape) -> list:

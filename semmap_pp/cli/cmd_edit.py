@@ -93,7 +93,6 @@ def run(args) -> int:
 def _run(args) -> int:
     from semmap_pp.sampler.ascent import snap_walls
     from semmap_pp.sampler.kernels import data_from_frame
-    from semmap_pp.sampler.kernels.data import model_settings
     from semmap_pp.cells import TYPE_LETTER
     from semmap_pp.semantic.semantic_map import semantic_map
     from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
@@ -116,7 +115,7 @@ def _run(args) -> int:
     post = run_target(inputs)
     reach = int(round(args.snap / inputs.frame.resolution))
     if reach > 0:
-        settings = model_settings(inputs.model)
+        settings = inputs.model.kernels
         world = snap_walls(post, world, data_from_frame(inputs.frame, settings),
                            [i for i, (_, _, changed) in enumerate(edited) if changed], reach=reach)
     terms = post.evaluate(world)

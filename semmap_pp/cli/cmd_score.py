@@ -75,7 +75,6 @@ def _line(name: str, s: dict, ref: float | None) -> str:
 def run(args) -> int:
     from semmap_pp.sampler.ascent import polish
     from semmap_pp.sampler.kernels import data_from_frame
-    from semmap_pp.sampler.kernels.data import model_settings
     from semmap_pp.run.pipeline import run_target
     from semmap_pp.plans.world_file import read_start_world
 
@@ -83,7 +82,7 @@ def run(args) -> int:
     worlds = [(p, read_start_world(p, inputs.frame, inputs.grid, inputs.model.prior.k_max))
               for p in args.worlds]          # every file checked before any scoring
     post = run_target(inputs)
-    settings = model_settings(inputs.model)
+    settings = inputs.model.kernels
     data = data_from_frame(inputs.frame, settings) if args.polish else None
     rounds = max(settings.polish_rounds, 1)     # the model's rounds; 0 (polish off) still polishes
     rows = []

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 import os
 import time
-from math import isfinite
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -37,7 +36,6 @@ from semmap_pp.resources import DEFAULT_RULES
 from semmap_pp.sampler.ascent import polish, refine_world
 from semmap_pp.sampler.diagnostics import SUMMARIES, ConvergenceReport, convergence
 from semmap_pp.sampler.kernels import data_from_frame, default_mix
-from semmap_pp.sampler.kernels.data import model_settings
 from semmap_pp.sampler.resume import keep_common_draws, merge_records
 from semmap_pp.sampler.sampling import sample_worlds
 from semmap_pp.sampler.spread import typed_worlds
@@ -90,10 +88,7 @@ def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> No
     The model's lengths at the map's resolution must fit in cells (:meth:`Model.cells`), and the
     map padded by the longest of them (ROI closing, wall, door, object extent) must stay within
     the cell limit: a mistaken resolution of nanometres per cell would otherwise ask for exabytes.
-    The ``[kernels]`` table is read here too, so that a bad value is reported before sampling.
     """
-
-
     try:
         c = model.cells(grid.resolution)
     except ModelError as exc:  # the map's resolution is the likelier culprit: name the map
@@ -105,12 +100,6 @@ def check_model_for_map(grid: OccupancyGrid, model: Model, max_cells: int) -> No
         raise MapError(grid.source, f"at {grid.resolution:g} m/cell the model's lengths reach {pad} "
                                     f"cells: the {w}x{h} map padded by them exceeds the limit of "
                                     f"{max_cells} cells (is the resolution right?)")
-    try:
-        ks = model_settings(model)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(model.path, f"[kernels]: {exc}") from None
-    if not all(isfinite(v) for _, v in ks.weights):
-        raise ModelError(model.path, "[kernels] weights must be finite numbers")
 
 
 @dataclass(frozen=True)
@@ -342,7 +331,7 @@ def data_start_world(inputs: Inputs) -> wm.World:
     clean = wm.empty(base.capacity)
     for i, s in enumerate(ok):
         clean = wm.add(clean, i, base.rects[s])
-    ks = model_settings(model)
+    ks = model.kernels
     if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/sampler/ascent.py)
         clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
                              rounds=ks.start_rounds)
@@ -377,7 +366,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     """
 
     model, frame = inputs.model, inputs.frame
-    kernel_settings = model_settings(model)
+    kernel_settings = model.kernels
     data = data_from_frame(frame, kernel_settings)
     factory = TargetFactory(frame, model, inputs.rules)
     head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "

@@ -140,7 +140,7 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
     start = wm.add(wm.add(wm.empty(MODEL.prior.k_max), 0, (6, 6, 46, 60)), 1, (6, 58, 54, 114))
     out = {}
     for rounds in (0, 3):
-        model = dataclasses.replace(MODEL, kernels={**MODEL.kernels, "polish_rounds": rounds})
+        model = dataclasses.replace(MODEL, kernels=MODEL.kernels._replace(polish_rounds=rounds))
         f = build_frame(g, model)
         roi = default_roi(g.classes, closing_radius_cells(model.evaluate.roi_closing_m, g.resolution))
         logs = []

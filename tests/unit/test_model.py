@@ -43,6 +43,11 @@ def edited(tmp_path, old, new):
     ("wall_line_gap_m = 0.05", "wall_line_gap_m = -0.05", "world.wall_line_gap_m: must be > 0"),
     ("door_max_m = 2.5", "door_max_m = 0.1", "world.door_max_m"),
     ("unknown = [0.30, 0.60, 0.10]", "unknown = [0.40, 0.50, 0.10]", "must equal sensor.other.unknown"),
+    # [kernels] is validated when the model is loaded, with the rest of the file
+    ("local_radius = 3", "local_radius = 0", "[kernels]: local_radius must be >= 1"),
+    ("box_prob = 0.5", "box_prob = 0.9", "[kernels]: box_prob + box_jitter_prob must be <= 1"),
+    ("max_candidates = 2000", "max_candidates = 2000\nmystery = 1", "[kernels]: unknown key 'mystery'"),
+    ("add_remove = 1.0", "add_remove = nan", "[kernels] weights must be finite numbers"),
 ])
 def test_bad_values_name_file_and_key(tmp_path, old, new, key):
     p = edited(tmp_path, old, new)

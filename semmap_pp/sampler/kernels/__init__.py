@@ -4,10 +4,10 @@ Each kernel returns a :class:`Proposal` (new world, log proposal ratio, changed 
 (no valid move: the chain stays). See docs/sampler.md for every forward and reverse density.
 """
 
+from semmap_pp.model import KIND_NAMES, KernelSettings, settings_from_mapping
 from semmap_pp.sampler.kernels.add_remove import add_remove
 from semmap_pp.sampler.kernels.allocate_delete import allocate_delete
-from semmap_pp.sampler.kernels.data import (KIND_NAMES, KernelData, KernelSettings, build_data, data_from_frame,
-                                    settings_from_mapping)
+from semmap_pp.sampler.kernels.data import KernelData, build_data, data_from_frame
 from semmap_pp.sampler.kernels.interchange import interchange
 from semmap_pp.sampler.kernels.proposal import Kernel, Mix, Proposal
 from semmap_pp.sampler.kernels.shrink_dilate import shrink_dilate
