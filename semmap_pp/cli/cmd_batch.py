@@ -18,8 +18,7 @@ from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int, positive_int, seconds
 from semmap_pp.cli.argtypes import seed as seed_type
-from semmap_pp.cli.cmd_info import add_map_options, map_options
-from semmap_pp.cli.cmd_map import add_run_length_options
+from semmap_pp.cli.options import add_map_options, add_run_length_options, map_options
 from semmap_pp.errors import MapError, SemmapError
 
 #: the options of ``semmap map`` a batch hands to every task: (dest, flag)

@@ -19,8 +19,7 @@ from pathlib import Path
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.argtypes import seed as seed_type
-from semmap_pp.cli.cmd_info import add_map_options, map_options
-from semmap_pp.cli.cmd_map import add_run_length_options
+from semmap_pp.cli.options import add_map_options, add_run_length_options, map_options
 from semmap_pp.cli.runs import add_jobs_option
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
 

@@ -18,8 +18,7 @@ import argparse
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_float
-from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_target_options, target_inputs
+from semmap_pp.cli.options import add_map_options, add_target_options, target_inputs
 from semmap_pp.cli.cmd_score import print_scores, score_world, scores_of
 from semmap_pp.errors import OutputError
 from semmap_pp.plans.edit import Edit

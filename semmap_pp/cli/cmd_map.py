@@ -19,47 +19,16 @@ import signal
 import sys
 from pathlib import Path
 
-from semmap_pp.cli.argtypes import n_inner as n_inner_type, seed as seed_type
+from semmap_pp.cli.argtypes import seed as seed_type
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
-from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.argtypes import seconds as _seconds
-from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.options import (add_map_options, add_run_length_options, add_target_options, map_options,
+                                   target_inputs)
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
 
 
 #: Options a resumed run takes from the resume file (giving them with --resume is an error).
 FIXED_WHEN_RESUMING = ("chains", "tune", "n_inner", "seed", "rules", "model", "roi")
-
-
-def add_target_options(p: argparse.ArgumentParser) -> None:
-    """``--rules``, ``--model``, ``--roi``: what the target of a run on a map is made of (``map``,
-    ``score``, ``edit``, ``stability``; read by :func:`target_inputs`)."""
-    p.add_argument("--rules", metavar="FILE", default=None,
-                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge; "
-                        "`semmap rules list` shows where the shipped ones are)")
-    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
-    p.add_argument("--roi", metavar="MASK", default=None,
-                   help="region-of-interest mask image for the CPR (default: the known part, closed)")
-
-
-def add_run_length_options(p: argparse.ArgumentParser, draws_help: str = "recorded draws per chain") -> None:
-    """``--chains``, ``--cores``, ``--tune``, ``--draws``, ``--n-inner`` (None: the model file's
-    ``[sampler]`` values), as ``semmap map``, ``compare`` and ``stability`` take them."""
-    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
-    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
-    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
-    p.add_argument("--draws", type=_positive_int, default=None, help=draws_help)
-    p.add_argument("--n-inner", type=n_inner_type, default=None, help="kernels per draw")
-
-
-def target_inputs(args: argparse.Namespace):
-    """The rule file and the loaded inputs (map, model, rules, ROI) that ``args`` name: MAP, the
-    options of :func:`add_target_options` and the map options."""
-    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
-
-    rules = Path(args.rules) if args.rules else DEFAULT_RULES
-    return rules, load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                              map_options=map_options(args))
 
 
 def register(subparsers) -> None:

@@ -12,7 +12,7 @@ import textwrap
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.options import add_map_options, map_options
 from semmap_pp.errors import EvidenceError, OutputError, SemmapError
 
 

@@ -22,8 +22,7 @@ import math
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_target_options, target_inputs
+from semmap_pp.cli.options import add_map_options, add_target_options, target_inputs
 
 
 def register(subparsers) -> None:

@@ -17,8 +17,7 @@ import sys
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import seed as seed_type
-from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_run_length_options, add_target_options, target_inputs
+from semmap_pp.cli.options import add_map_options, add_run_length_options, add_target_options, target_inputs
 from semmap_pp.cli.runs import add_jobs_option
 
 

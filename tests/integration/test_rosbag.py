@@ -572,7 +572,7 @@ def test_batch_hands_topic_and_at_to_every_task():
 @pytest.mark.parametrize("command", [["compare", "--rules", "a.lp", "--rules", "b.lp"], ["info"], ["map", "--out", "o"]])
 def test_every_map_command_takes_topic_and_at(command):
     from semmap_pp.cli import build_parser
-    from semmap_pp.cli.cmd_info import map_options
+    from semmap_pp.cli.options import map_options
 
     name, *rest = command
     args = build_parser().parse_args([name, "rec.mcap", *rest, "--topic", "/slam/map", "--at", "last"])
