@@ -11,7 +11,7 @@ STAMP   := $(VENV)/.installed
 DEMO_MAP ?= data/maps/ubremen-cartesium.yaml
 DEMO_OUT ?= out/demo
 
-.PHONY: install test demo bench clean
+.PHONY: install test test-fast demo bench clean
 
 $(STAMP): pyproject.toml
 	@test -n "$(PYTHON)" || { echo "make: no Python >= 3.12 found (set PYTHON=...)"; exit 1; }
@@ -22,8 +22,13 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# everything (CI: .ci/run): the unit tests, the doctests and the CLI / whole-run tests
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
+
+# the unit tests and the doctests, without the whole-map runs and the slow statistical tests
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2 -m "not slow" tests/unit semmap_pp
 
 demo: $(STAMP)
 	$(BIN)/semmap info $(DEMO_MAP)

@@ -10,7 +10,7 @@
 
 ``--maps`` and ``--tasks`` replace the eight maps (the last one also warms the compiled code) and
 the 200 tasks; ``--tiny`` (:data:`TINY`: the 5 x 4 cell test map alone, one chain of 2 + 4 draws,
-20 tasks) is the check of tests/test_bench_smoke.py that the benchmark runs, not a measurement.
+20 tasks) is the check of tests/integration/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def _batch(maps, out: Path, workers: int, extra: list[str]) -> float:
 def run(args) -> dict:
     from distributed import Client, LocalCluster
 
-    from semmap_pp import batch as B
+    from semmap_pp.run import batch as B
 
     if args.tiny:
         for key, value in TINY.items():

@@ -9,7 +9,7 @@ time ``method="auto"`` (which picks loopy BP there) and its error against exact 
 "rc2_hard" times the MAP of a captured intel evidence under ``rules/halls_to_corridors.lp``
 (``bench/data/intel_halls_rc2_hard.lp``; RC2 on the summed-out tables, whatever ``--rules``).
 ``--tiny`` runs every row once on small floors (8 units, dense 12 units, one MC-SAT seed, few
-cache hits): the check of tests/test_bench_smoke.py that the benchmark runs, not a measurement.
+cache hits): the check of tests/integration/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations

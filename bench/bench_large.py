@@ -13,7 +13,7 @@ smallest size: 1.0 means linear). With ``--canvas N`` (default 4000; 0 skips it)
 ``--canvas-floor`` floor pasted into an N x N canvas of unknown cells, as gmapping writes maps, is
 measured with the model's lattice crop and without (``crop_margin_m = 0``): the ratios of the two.
 ``--tiny`` (:data:`TINY`: sizes 200 and 300, a 600-cell canvas) is the check of
-tests/test_bench_smoke.py that the benchmark runs, not a measurement.
+tests/integration/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations
@@ -35,11 +35,10 @@ CHILD = r"""
 import json, math, resource, sys, time
 t0 = time.perf_counter()
 from semmap_pp.evaluate import closing_radius_cells, default_roi
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import load_map
-from semmap_pp.kernels import data_from_frame
-from semmap_pp.kernels.data import model_settings
-from semmap_pp.likelihood import prepare
+from semmap_pp.sampler.kernels import data_from_frame
+from semmap_pp.target.likelihood import prepare
 from semmap_pp.model import load_model
 
 def rss_kib():
@@ -65,7 +64,7 @@ frame = phase("build_frame", lambda: build_frame(grid, model))
 phase("default_roi", lambda: default_roi(grid.classes, closing_radius_cells(
     model.evaluate.roi_closing_m, grid.resolution)))
 phase("likelihood", lambda: prepare(frame, model))
-phase("kernel_data", lambda: data_from_frame(frame, model_settings(model)))
+phase("kernel_data", lambda: data_from_frame(frame, model.kernels))
 out["lattice"] = list(frame.shape)
 out["theta_deg"] = round(math.degrees(frame.theta), 2)
 out["total_s"] = round(sum(p["s"] for p in out["phases"].values()), 3)

@@ -1,14 +1,14 @@
 """Likelihood/posterior speed on a real map: incremental single-unit edits and full evaluations.
 
 ``python bench/run.py likelihood --json``. On the cartesium lattice (as the sampler sees it: the
-known cells and a margin, :func:`semmap_pp.frame.build_frame_from_classes`) a seeded 20-unit
+known cells and a margin, :func:`semmap_pp.lattice.frame.build_frame_from_classes`) a seeded 20-unit
 world of room-sized rectangles is placed over the known part of the map; a *typical single-unit
 edit* moves one wall of one unit by 1..5 cells (the SHRINK/DILATE kernel), half of the proposals
 are accepted. The same world and the same edits run on a map of four times the area (that lattice
 tiled 2x2), interleaved edit by edit with the 1x map, to show that the cost follows the edit, not
 the map. The world must lie in the prior's support and edits must be evaluated, or the run stops
 with a message (it would time nothing real). ``--tiny`` (:data:`TINY`: 3 units, 50 edits on
-tests/data/maps/intel_corner.yaml) is the check of tests/test_bench_smoke.py that it runs.
+tests/data/maps/intel_corner.yaml) is the check of tests/integration/test_bench_smoke.py that it runs.
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from semmap_pp import world as W
-from semmap_pp.frame import build_frame, build_frame_from_classes
+from semmap_pp import world as wm
+from semmap_pp.lattice.frame import build_frame, build_frame_from_classes
 from semmap_pp.grid import load_map
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
+from semmap_pp.target.posterior import Posterior
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ``--tiny``: the arguments it sets
@@ -46,20 +46,20 @@ def random_world(rng, classes, n, capacity, min_side, max_side=200):
     r_lo, r_hi, c_lo, c_hi = rows.min(), rows.max(), cols.min(), cols.max()
     lo = max(min_side, 40)
     h_max, w_max = min(max_side, max(int(r_hi - r_lo), lo + 1)), min(max_side, max(int(c_hi - c_lo), lo + 1))
-    w = W.empty(capacity)
+    w = wm.empty(capacity)
     for s in range(n):
         h = int(rng.integers(lo, h_max))
         wd = int(rng.integers(lo, w_max))
         r0 = int(rng.integers(r_lo, max(r_lo + 1, r_hi - h)))
         c0 = int(rng.integers(c_lo, max(c_lo + 1, c_hi - wd)))
-        w = W.add(w, s, (r0, c0, r0 + h, c0 + wd))
+        w = wm.add(w, s, (r0, c0, r0 + h, c0 + wd))
     return w
 
 
 def edit_sequence(rng, world, n_edits, min_side):
     """Pre-drawn (slot, side, step, accept) one-wall moves that keep every side >= min_side."""
     out = []
-    slots = W.active_slots(world)
+    slots = wm.active_slots(world)
     for _ in range(n_edits):
         out.append((int(rng.choice(slots)), int(rng.integers(4)),
                     int(rng.choice([-5, -4, -3, -2, -1, 1, 2, 3, 4, 5])), bool(rng.random() < 0.5)))
@@ -80,7 +80,7 @@ def time_edits(posts, world, edits, min_side):
                 or r[2] > h or r[3] > w):
             continue
         for k, tr in enumerate(trackers):
-            nw = W.replace(tr.world, slot, r)
+            nw = wm.replace(tr.world, slot, r)
             t0 = time.perf_counter()
             prop = tr.propose(nw, [slot])
             times[k].append(time.perf_counter() - t0)

@@ -2,7 +2,7 @@
 
 ``python bench/run.py quality --json [--subset synthetic|truth|surgery|real|ipa|types|stability|targets|all] [--floors N] [--budget B]``
 
-Every map goes through :func:`semmap_pp.pipeline.run_map` with the model file's defaults (``--budget
+Every map goes through :func:`semmap_pp.run.pipeline.run_map` with the model file's defaults (``--budget
 model``), a shorter run (``--budget quick``) or the model's run capped at a number of seconds of
 sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the means and the published figures
 (/work/shared/data/README.md) are printed, the JSON summary on the last line.
@@ -23,7 +23,7 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   ``--resolution R`` has the generator render them at R metres per cell (the same seeds and
   buildings, scanned onto coarser or finer cells).
 * **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
-  world (:func:`truth_world`, walls aligned by :func:`semmap_pp.ascent.align_walls`), derived and
+  world (:func:`truth_world`, walls aligned by :func:`semmap_pp.sampler.ascent.align_walls`), derived and
   scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
   of the W*s a synthetic run saved in DIR, to compare log posteriors inside the building.
 * **surgery**: which of W*'s errors the target prefers (:func:`bench_surgery`; ``--wstars DIR``, the
@@ -64,7 +64,7 @@ sampling until the best chain's ``best_logp`` first reached its final value, clo
 ``run_map``'s ``callback`` (start worlds and the final semantic map are not included).
 
 ``--tiny`` (:data:`TINY`: one synthetic floor, one chain of 2 + 4 draws of 10 kernels; the
-synthetic subset unless ``--subset`` names another) is the check of tests/test_bench_smoke.py
+synthetic subset unless ``--subset`` names another) is the check of tests/integration/test_bench_smoke.py
 that the benchmark runs, not a measurement.
 """
 
@@ -174,7 +174,7 @@ def add_arguments(parser) -> None:
 # ------------------------------------------------------------------ helpers
 
 def _settings(model, args):
-    from semmap_pp.pipeline import RunSettings
+    from semmap_pp.run.pipeline import RunSettings
     over = dict(BUDGETS[args.budget]) if isinstance(args.budget, str) else {}
     for key in ("chains", "cores", "tune", "draws", "n_inner", "anneal"):
         v = getattr(args, key)
@@ -187,8 +187,8 @@ def _settings(model, args):
 
 def _inputs_from_grid(grid, model, rules):
     from semmap_pp.evaluate import closing_radius_cells, default_roi
-    from semmap_pp.frame import build_frame
-    from semmap_pp.pipeline import Inputs
+    from semmap_pp.lattice.frame import build_frame
+    from semmap_pp.run.pipeline import Inputs
     frame = build_frame(grid, model)
     roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
     return Inputs(grid, model, rules, frame, roi, "default")
@@ -239,7 +239,7 @@ def _run(inputs, settings, quiet):
     The clock starts before ``run_map`` (start worlds included). A sampling failure is re-raised as
     :class:`MapFailed` so one map does not end the benchmark.
     """
-    from semmap_pp import pipeline
+    from semmap_pp.run import pipeline
     clock = []
     t0 = time.perf_counter()
 
@@ -275,16 +275,15 @@ def spread_best(run):
     W* is (``[kernels] polish_rounds`` of the ascent), in place of W* when that world is higher;
     otherwise ``run`` itself. ``semmap map`` never does this (W* is the search's, docs/sampler.md):
     the benchmark measures what taking it would give (``--spread-best``)."""
-    from semmap_pp.ascent import polish
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import model_settings
-    from semmap_pp.outputs.semantic import semantic_map
-    from semmap_pp.pipeline import run_target
+    from semmap_pp.sampler.ascent import polish
+    from semmap_pp.sampler.kernels import data_from_frame
+    from semmap_pp.semantic.semantic_map import semantic_map
+    from semmap_pp.run.pipeline import run_target
     sp = run.spread
     if sp is None or sp.best_world is None or not sp.best_logp > sp.start_logp:
         return run
     inputs = run.inputs
-    ks = model_settings(inputs.model)
+    ks = inputs.model.kernels
     post = run_target(inputs)
     world = polish(post, sp.best_world, data_from_frame(inputs.frame, ks), ks.polish_rounds)
     sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi)
@@ -297,9 +296,9 @@ class MapFailed(RuntimeError):
 
 def regions_of(sm) -> tuple[np.ndarray, dict]:
     """Image-frame region labels and ``unit id -> region id``: regions.png's regions
-    (:mod:`semmap_pp.outputs.regions`: units joined where their connecting wall holds an open
+    (:mod:`semmap_pp.semantic.regions`: units joined where their connecting wall holds an open
     passage, one space cut into two rectangles)."""
-    from semmap_pp.outputs.regions import regions_image, unit_regions
+    from semmap_pp.semantic.regions import regions_image, unit_regions
     unit_region = unit_regions(sm)
     return regions_image(sm, unit_region).astype(np.int32), unit_region
 
@@ -321,7 +320,7 @@ def _log(args, msg):
 def _save(args, name, sm, extra=None):
     if args.save is None:
         return
-    from semmap_pp.outputs import world_dict, write_labels_png, write_world_json
+    from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
     out = args.save / name
     out.mkdir(parents=True, exist_ok=True)
     write_world_json(out / "world.json", world_dict(sm))
@@ -483,11 +482,11 @@ def route_agreement(pred: dict, truth: dict, matches: dict, resolution: float) -
     map): for every two true units that both match a unit of W* (``matches``: W* id -> true id),
     the shortest route between the two true units' centres through the truth's open doors and open
     walls (``open_boundaries``), and the shortest between the matched units' centres through W*'s
-    doors and passages (:meth:`semmap_pp.places.Places.route`; both in the image's pixel frame,
+    doors and passages (:meth:`semmap_pp.plans.places.Places.route`; both in the image's pixel frame,
     scaled to metres). ``route_pairs`` counts the pairs the truth joins, ``route_found`` those W*
     joins too (their ratio is ``route_recall``), ``route_extra`` the pairs W* joins and the truth
     does not, and ``route_ratios`` W*'s length over the truth's, per pair both join."""
-    from semmap_pp.places import places_from_doc
+    from semmap_pp.plans.places import places_from_doc
 
     def doc(units, doors, passages):
         return {"units": units, "doors": doors, "passages": passages}
@@ -646,7 +645,7 @@ def _rooms_vs_truth(sm, truth_labels) -> dict:
 
 def bench_synthetic(args, model, rules) -> dict:
     from semmap_pp.evaluate import score_world
-    from semmap_pp.outputs import world_dict
+    from semmap_pp.semantic.world_json import world_dict
     rows = []
     seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     for seed in range(args.first_floor, args.first_floor + args.floors):
@@ -728,7 +727,7 @@ def bench_synthetic(args, model, rules) -> dict:
 
 def lattice_rect(frame, corners_px) -> tuple:
     """The lattice cell box enclosing a polygon given in the pixel frame (the inverse of
-    :meth:`semmap_pp.frame.Frame.rect_vertices_px`, rounded: :meth:`~semmap_pp.frame.Frame.rect_from_vertices_px`)."""
+    :meth:`semmap_pp.lattice.frame.Frame.rect_vertices_px`, rounded: :meth:`~semmap_pp.lattice.frame.Frame.rect_from_vertices_px`)."""
     return frame.rect_from_vertices_px(corners_px)[0]
 
 
@@ -753,10 +752,9 @@ def truth_world(frame, truth: dict, capacity: int, extra=()):
 
 def kernel_data(inputs, model):
     """The kernels' data of ``inputs``' lattice with the model's ``[kernels]`` settings (what
-    :func:`semmap_pp.ascent.align_walls` needs)."""
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import model_settings
-    return data_from_frame(inputs.frame, model_settings(model))
+    :func:`semmap_pp.sampler.ascent.align_walls` needs)."""
+    from semmap_pp.sampler.kernels import data_from_frame
+    return data_from_frame(inputs.frame, model.kernels)
 
 
 def outside_units(pred: dict, truth: dict, shape) -> list:
@@ -781,7 +779,7 @@ def _mostly_outside(mask: np.ndarray, inside: np.ndarray) -> bool:
 
 def bench_truth(args, model, rules) -> dict:
     """The ceiling of the synthetic targets: each floor's seen true units as the world, their walls
-    set on the lattice's best positions by the ascent's wall moves (:func:`semmap_pp.ascent.align_walls`,
+    set on the lattice's best positions by the ascent's wall moves (:func:`semmap_pp.sampler.ascent.align_walls`,
     no unit added, removed, merged or cut), types assigned by the full target, and everything
     derived and scored exactly as W* is in :func:`bench_synthetic`. What a mapper that found every
     seen unit would score: unit recall is capped by the units never seen, and CPR by what the
@@ -791,10 +789,10 @@ def bench_truth(args, model, rules) -> dict:
     saved W*s of ``--subset synthetic --save DIR``) W*'s units over the space outside the building
     (:func:`outside_units`) join the seen truth before the walls are aligned, so that the two log
     posteriors differ only inside the building; rows then carry W*'s log posterior too."""
-    from semmap_pp.ascent import align_walls
-    from semmap_pp.outputs import world_dict
-    from semmap_pp.outputs.semantic import semantic_map
-    from semmap_pp.pipeline import run_target
+    from semmap_pp.sampler.ascent import align_walls
+    from semmap_pp.semantic.world_json import world_dict
+    from semmap_pp.semantic.semantic_map import semantic_map
+    from semmap_pp.run.pipeline import run_target
     rows = []
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
@@ -859,11 +857,11 @@ def bench_surgery(args, model, rules) -> dict:
     """Which of W*'s errors the target prefers (``--wstars DIR``: the W*s of ``--subset synthetic
     --save DIR``). For each repair of :func:`surgery_clusters`, W* with its units over a missed or
     pieced true unit replaced by the true units there, every wall then moved to its best position
-    (:func:`semmap_pp.ascent.align_walls`, the full target), against W* aligned the same way:
+    (:func:`semmap_pp.sampler.ascent.align_walls`, the full target), against W* aligned the same way:
     ``delta`` > 0 (the truth scores higher: a search miss), < 0 (the target's own choice) or 0
     (the walls moved back to W*'s: a room seen in part shrinks to its seen part again)."""
-    from semmap_pp.ascent import align_walls
-    from semmap_pp.pipeline import run_target
+    from semmap_pp.sampler.ascent import align_walls
+    from semmap_pp.run.pipeline import run_target
     if args.wstars is None:
         raise SystemExit("--subset surgery needs --wstars DIR (the W*s of --subset synthetic --save DIR)")
     rows = []
@@ -905,11 +903,11 @@ def bench_surgery(args, model, rules) -> dict:
 
 def bench_stability(args, model, rules) -> dict:
     """The synthetic floors searched with each of ``--seeds`` (``semmap stability``'s comparison,
-    :mod:`semmap_pp.stability`), and whether seed agreement tells right from wrong: the best W*'s
+    :mod:`semmap_pp.studies.stability`), and whether seed agreement tells right from wrong: the best W*'s
     units found with their type under every seed, and the others, each counted with how many of
     them match a true unit (IoU >= 0.5, as the synthetic subset scores them)."""
-    from semmap_pp.outputs import world_dict
-    from semmap_pp.stability import Plan, Stability
+    from semmap_pp.semantic.world_json import world_dict
+    from semmap_pp.studies.stability import SeedPlan, Stability
     seeds = [int(v) for v in str(args.seeds).split(",") if v.strip()]
     if len(set(seeds)) < 2:
         raise SystemExit("--seeds needs at least two different seeds")
@@ -925,7 +923,7 @@ def bench_stability(args, model, rules) -> dict:
             except MapFailed as exc:
                 _log(args, f"synth {f:3d} seed {seed}: FAILED {exc}")
                 break
-            plans.append(Plan.from_semantic(seed, run.semantic, clock[-1][0]))
+            plans.append(SeedPlan.from_semantic(seed, run.semantic, clock[-1][0]))
             sms.append(run.semantic)
         if len(plans) < len(set(seeds)):
             rows.append({"floor": f, "error": "a seed failed"})
@@ -963,7 +961,7 @@ def real_maps(bundled: Path, shared: Path) -> list[tuple[Path, bool]]:
 
 
 def bench_real(args, model, rules) -> dict:
-    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
     rows = []
     for path, bundled in real_maps(ROOT / "data" / "maps", SHARED / "real"):
         if not _keep(path.stem, args):
@@ -1051,7 +1049,7 @@ REAL_GT = ROOT / "bench" / "data" / "real-gt"
 def bench_real_gt(args, model, rules) -> dict:
     from semmap_pp.cells import FREE
     from semmap_pp.evaluate import protocol_scores, read_segmentation, read_segmentation_truth
-    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
     rows = []
     for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
         name = folder.name
@@ -1169,7 +1167,7 @@ def bench_types(args, model, rules) -> dict:
 def run(args) -> dict:
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
-    from semmap_pp.pipeline import DEFAULT_RULES
+    from semmap_pp.run.pipeline import DEFAULT_RULES
     if args.tiny:
         for key, value in TINY.items():
             setattr(args, key, value)

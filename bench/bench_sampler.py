@@ -4,8 +4,8 @@
 empty world with the plain loop (``--burn`` kernels) so that it holds units; then it measures
 
 * ``kernels_alone_us``: each kernel pair's CPU cost without the target (proposal and exact ratio);
-* ``loop_kernels_per_s``: :func:`semmap_pp.mcmc.run_chain` with the project's Posterior;
-* ``pymc_kernels_per_s``: one chain through ``pm.sample`` with :class:`semmap_pp.step.WorldStep`
+* ``loop_kernels_per_s``: :func:`semmap_pp.sampler.mcmc.run_chain` with the project's Posterior;
+* ``pymc_kernels_per_s``: one chain through ``pm.sample`` with :class:`semmap_pp.sampler.step.WorldStep`
   (``--draws`` draws of ``--n-inner`` kernels, timed around ``pm.sample``, set-up included);
 * ``pymc_overhead_us_per_draw``: ``pm.sample`` with a constant target and one kernel per draw, minus
   the same kernels in the plain loop: what PyMC adds per draw;
@@ -25,7 +25,7 @@ empty world with the plain loop (``--burn`` kernels) so that it holds units; the
 
 ``--only knowledge`` runs the burn-in and the knowledge measurement alone. ``--tiny`` runs every
 part once at a few kernels on tests/data/maps/intel_corner.yaml (:data:`TINY`): the check of
-tests/test_bench_smoke.py that the benchmark runs, not a measurement.
+tests/integration/test_bench_smoke.py that the benchmark runs, not a measurement.
 """
 
 from __future__ import annotations
@@ -36,13 +36,13 @@ from pathlib import Path
 import numpy as np
 
 from semmap_pp import world as wm
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import load_map
-from semmap_pp.kernels import data_from_frame, default_mix
-from semmap_pp.mcmc import run_chain
+from semmap_pp.sampler.kernels import data_from_frame, default_mix
+from semmap_pp.sampler.mcmc import run_chain
 from semmap_pp.model import load_model
-from semmap_pp.posterior import Posterior
-from semmap_pp.sampling import _FlatTracker, sample_worlds
+from semmap_pp.target.posterior import Posterior
+from semmap_pp.sampler.sampling import _FlatTracker, sample_worlds
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ``--tiny``: the arguments it sets
@@ -153,7 +153,7 @@ def run(args) -> dict:
     start = tracker.world
     kstart = start
     if args.knowledge_start == "refined":   # the start world of semmap map's first chain
-        from semmap_pp.pipeline import load_inputs, start_worlds
+        from semmap_pp.run.pipeline import load_inputs, start_worlds
         kstart = start_worlds(load_inputs(args.map, rules_path=args.rules), 1,
                               np.random.default_rng(args.seed))[0]
     knowledge = knowledge_rate(args, frame, model, data, kstart)

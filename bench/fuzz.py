@@ -1,6 +1,6 @@
 """Longer fuzzing of the map, rule and model loaders: ``python bench/fuzz.py --seconds 600``.
 
-Runs the fuzz targets of tests/test_fuzz.py (random bytes and mutations of valid PNG, PGM, .npy,
+Runs the fuzz targets of tests/unit/test_fuzz.py (random bytes and mutations of valid PNG, PGM, .npy,
 YAML, rules/*.lp and models/default.toml) with hypothesis, round after round with fresh random
 seeds, until the time is up. A case may only end normally or with the project's own SemmapError; a
 case that runs longer than ``--case-timeout`` seconds counts as a hang. Every failure is printed with

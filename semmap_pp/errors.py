@@ -87,7 +87,7 @@ class WriteError(OutputError):
 
 
 class BusyError(OutputError):
-    """An output folder another run holds (:mod:`semmap_pp.outdir`): shown as ``PATH message``."""
+    """An output folder another run holds (:mod:`semmap_pp.run.outdir`): shown as ``PATH message``."""
 
     def __str__(self) -> str:
         return f"{self.path} {self.message}"

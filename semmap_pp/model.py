@@ -21,6 +21,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping, NamedTuple
 
 import numpy as np
 
@@ -30,10 +31,10 @@ from semmap_pp.resources import DEFAULT_MODEL
 
 SIZE_MEASURES = ("short_side", "long_side", "area")
 # Whose doors count towards MulDoor: the unit's own, or for a corridor-like unit those of the
-# space it forms with the units joined to it by open passages (semmap_pp.evidence.muldoor_counts).
+# space it forms with the units joined to it by open passages (semmap_pp.target.geometry_evidence.muldoor_counts).
 MULDOOR_SCOPES = ("unit", "space")
 #: [evidence] colike_scope: each unit's own Table 4 class, or room-like pieces of a corridor space
-#: corridor-like (semmap_pp.evidence.space_colike)
+#: corridor-like (semmap_pp.target.geometry_evidence.space_colike)
 COLIKE_SCOPES = ("unit", "space")
 N_PRIORS = ("poisson", "geometric")
 #: [outside] mode: read the free space outside the building as unknown when enough of the map's
@@ -122,7 +123,7 @@ class EvidenceParams:
     multiple_doors: int
     muldoor_scope: str = "unit"
     #: "space": room-like units joined by open passages to a corridor-like unit at most
-    #: space_width_ratio times as wide are corridor-like (semmap_pp.evidence.space_colike)
+    #: space_width_ratio times as wide are corridor-like (semmap_pp.target.geometry_evidence.space_colike)
     colike_scope: str = "unit"
     space_width_ratio: float = 2.0
 
@@ -194,10 +195,10 @@ class DiagnosticsParams:
     rhat_max: float
     ess_min: float
     #: Adjacent rooms whose connecting walls differ by more than this (metres) are a topological
-    #: defect (semmap_pp.derive.defects); a missing key means 2 * prior.sale_sigma_m.
+    #: defect (semmap_pp.target.defects); a missing key means 2 * prior.sale_sigma_m.
     defect_tolerance_m: float
     #: A W* unit whose interior holds at least this share of the map's wall-like cells gets a note
-    #: (semmap_pp.derive.walls_inside: the map probably shows the outside as free); a missing key
+    #: (semmap_pp.target.walls_inside: the map probably shows the outside as free); a missing key
     #: means 0.5, 1.0 switches the note off.
     walls_inside_max: float = 0.5
 
@@ -215,7 +216,7 @@ class OutsideParams:
 
 @dataclass(frozen=True)
 class RoomParams:
-    """``[rooms]``: how rooms.png gives every free cell a room (semmap_pp.outputs.rooms).
+    """``[rooms]``: how rooms.png gives every free cell a room (semmap_pp.semantic.rooms).
 
     A model file without the table gets these values."""
 
@@ -225,6 +226,103 @@ class RoomParams:
     band_m: float = 0.3
     walled_min: float = 0.2
     wall_blur_m: float = 0.05
+
+
+#: The five kernel pairs of the sampler, by kind (:mod:`semmap_pp.sampler.kernels`).
+KIND_NAMES = ("add_remove", "split_merge", "shrink_dilate", "allocate_delete", "interchange")
+
+
+class KernelSettings(NamedTuple):
+    """Tuning of the proposal distributions (defaults here; a model file's ``[kernels]`` table overrides).
+
+    None of these changes the target distribution; they change how fast the chain mixes.
+
+    Attributes
+    ----------
+    line_floor : float
+        Weight added to every lattice position before line evidence (in [0, 1]) is added; keeps
+        every position proposable (irreducibility).
+    local_prob : float
+        Probability that a wall move is a local step of 1..``local_radius`` cells instead of a jump
+        drawn from the line evidence.
+    local_radius : int
+    birth_uniform : float
+        Probability that a birth draws its rectangle uniformly over all valid rectangles instead of
+        from the data-driven candidate table.
+    birth_jitter : int
+        Each coordinate of a candidate birth is moved by a uniform offset in ``[-j, j]``.
+    box_prob, box_jitter_prob : float
+        ALLOCATE draws each coordinate of the new unit exactly from the free-space box behind the
+        wall (``box_prob``), near it (``box_jitter_prob``, offset within ``box_jitter``) or uniformly
+        over its range (the rest).
+    box_jitter : int
+    wall_line_min : int
+        Shortest run of occupied cells reported as a wall line.
+    max_candidates : int
+        Most birth candidates kept (largest distance-transform values first).
+    weights : tuple of (kind, weight)
+        Mixing weights of the five kernel pairs.
+    start_rounds : int
+        Rounds of the greedy ascent that refines the data-driven start world
+        (:func:`semmap_pp.sampler.ascent.refine_world`; 0 = the greedy cover as it is).
+    polish_rounds : int
+        Rounds of the greedy ascent of the full target that polishes W* after sampling (0 = W* as
+        sampled).
+    ascent_peaks : int
+        The ascent's wall moves try a few local steps and the strongest peaks of the wall-line
+        evidence along the wall's range: this many at 0.05 m cells and coarser, more on finer maps
+        (:func:`semmap_pp.sampler.ascent.ascent_peaks`).
+    """
+
+    line_floor: float = 0.05
+    local_prob: float = 0.5
+    local_radius: int = 3
+    birth_uniform: float = 0.2
+    birth_jitter: int = 2
+    box_prob: float = 0.5
+    box_jitter_prob: float = 0.3
+    box_jitter: int = 2
+    wall_line_min: int = 5
+    max_candidates: int = 2000
+    weights: tuple = (("add_remove", 1.0), ("split_merge", 1.0), ("shrink_dilate", 4.0),
+                      ("allocate_delete", 1.0), ("interchange", 2.0))
+    start_rounds: int = 6
+    polish_rounds: int = 3
+    ascent_peaks: int = 8
+
+
+def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelSettings:
+    """Read a ``[kernels]`` table (e.g. from a model file) into :class:`KernelSettings`.
+
+    Unknown keys and values of the wrong kind raise :class:`~semmap_pp.errors.ModelError`.
+    ``weights`` is a table ``{kind = weight}``.
+    """
+    base = KernelSettings()._asdict()
+    out = {}
+    for key, value in dict(table).items():
+        if key not in base:
+            raise ModelError(source, f"unknown key {key!r}")
+        if key == "weights":
+            if not isinstance(value, Mapping) or any(k not in KIND_NAMES for k in value):
+                raise ModelError(source, f"weights must be a table over {KIND_NAMES}")
+            w = dict(base["weights"]) | {k: float(v) for k, v in value.items()}
+            if any(v < 0 for v in w.values()) or sum(w.values()) <= 0:
+                raise ModelError(source, "weights must be >= 0 with a positive sum")
+            out[key] = tuple(w.items())
+        elif isinstance(base[key], int):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ModelError(source, f"{key} must be a non-negative integer")
+            out[key] = int(value)
+        else:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1:
+                raise ModelError(source, f"{key} must be a number in [0, 1]")
+            out[key] = float(value)
+    s = KernelSettings(**(base | out))
+    if s.box_prob + s.box_jitter_prob > 1:
+        raise ModelError(source, "box_prob + box_jitter_prob must be <= 1")
+    if s.local_radius < 1:
+        raise ModelError(source, "local_radius must be >= 1")
+    return s
 
 
 @dataclass(frozen=True)
@@ -239,7 +337,7 @@ class Model:
     evaluate: EvaluateParams
     sampler: SamplerParams
     diagnostics: DiagnosticsParams
-    kernels: dict  # the [kernels] table: proposal tuning, read by kernels.settings_from_mapping
+    kernels: KernelSettings  # the [kernels] table: proposal tuning, validated (settings_from_mapping)
     outside: OutsideParams = OutsideParams()
     rooms: RoomParams = RoomParams()
 
@@ -480,6 +578,12 @@ def load_model(path: str | Path | None = None) -> Model:
     kernels = r.raw("kernels")
     if not isinstance(kernels, dict):
         raise r.error("kernels", "must be a table")
+    try:
+        kernels = settings_from_mapping(kernels, source=f"{path} [kernels]")
+    except (TypeError, ValueError) as exc:
+        raise ModelError(path, f"[kernels]: {exc}") from None
+    if not all(math.isfinite(v) for _, v in kernels.weights):
+        raise ModelError(path, "[kernels] weights must be finite numbers")
     outside = OutsideParams()   # optional table (model files written before it: the map as it is)
     if r.has("outside"):
         if not isinstance(r.raw("outside"), dict):
@@ -502,7 +606,7 @@ def load_model(path: str | Path | None = None) -> Model:
             wall_blur_m=r.optional("rooms.wall_blur_m", rooms.wall_blur_m, r.number, lo=0.0, hi=10.0))
     return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
                  prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
-                 diagnostics=diagnostics, kernels=dict(kernels), outside=outside, rooms=rooms)
+                 diagnostics=diagnostics, kernels=kernels, outside=outside, rooms=rooms)
 
 
 def _row(r: _Reader, key: str, raw: list, i: int, n: int) -> np.ndarray:

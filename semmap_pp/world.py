@@ -1,6 +1,6 @@
 """The semantic world state W = {U, T, R} as an immutable value.
 
-A world lives on the *building lattice* of a map (see :mod:`semmap_pp.frame`): the classified input
+A world lives on the *building lattice* of a map (see :mod:`semmap_pp.lattice.frame`): the classified input
 map resampled once onto a grid aligned with the building's dominant orientation θ0. On that lattice a
 space unit is an axis-aligned rectangle of whole cells, so the paper's oriented rectangle
 (centre, size, orientation) is ``(r0, c0, r1, c1)`` in lattice cells (half-open: rows r0..r1-1,

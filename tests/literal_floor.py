@@ -1,4 +1,4 @@
-"""The literal floor of tests/test_outputs_files.py and tests/test_places.py (0.05 m cells, walls 2
+"""The literal floor of tests/unit/test_outputs_files.py and tests/integration/test_places.py (0.05 m cells, walls 2
 cells, doors 10..50 cells)::
 
     +------+------+------+      A | B : a 1 m door          -> separate regions, edge "door"
@@ -13,12 +13,12 @@ Ids follow reading order of the unit centres: A = 1, B = 2, C = 3, D = 4.
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-from semmap_pp.frame import build_frame
+from semmap_pp.lattice.frame import build_frame
 from semmap_pp.grid import OccupancyGrid
-from semmap_pp.outputs import semantic_map
-from semmap_pp.posterior import Posterior
+from semmap_pp.semantic.semantic_map import semantic_map
+from semmap_pp.target.posterior import Posterior
 
 RECTS = {"A": (4, 4, 70, 56), "B": (4, 54, 70, 106), "C": (4, 104, 70, 156), "D": (68, 4, 110, 56)}
 
@@ -40,14 +40,14 @@ def floor_grid(source=None):
 
 
 def floor_world():
-    w = W.empty(6)
+    w = wm.empty(6)
     for slot, key in zip((0, 2, 3, 5), "ABCD"):  # slots scattered: ids must not depend on them
-        w = W.add(w, slot, RECTS[key])
+        w = wm.add(w, slot, RECTS[key])
     return w
 
 
 def literal_floor(model, source=None):
-    """The floor's semantic map (:class:`semmap_pp.outputs.SemanticMap`) under ``model``."""
+    """The floor's semantic map (:class:`semmap_pp.semantic.semantic_map.SemanticMap`) under ``model``."""
     g = floor_grid(source)
     f = build_frame(g, model)
     return semantic_map(g, f, Posterior(f, model), floor_world())

@@ -20,7 +20,7 @@ It writes, into ``--out`` (default ``docs/figures``):
   whose connecting walls differ by more than ``[diagnostics] defect_tolerance_m``) has its two
   connecting walls drawn in orange and a magenta dashed circle (the paper's Fig. 6);
 * ``knowledge_fig7.png`` — up to ``--worlds`` sampled worlds (default 1000, evenly thinned over chains
-  and draws) drawn with thin lines over the map, one panel per rule set (``compare.compare_png``);
+  and draws) drawn with thin lines over the map, one panel per rule set (``outputs.figures.compare_png``);
 * ``knowledge_table.md`` / ``knowledge_table.json`` — per rule set: W* (units, CPR, log posterior,
   defects) and the sampled worlds (defects, spread measures, R-hat, ESS), see docs/knowledge_comparison.md.
 
@@ -45,12 +45,13 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from semmap_pp import atomic  # noqa: E402
-from semmap_pp import world as W  # noqa: E402
-from semmap_pp.compare import (compare_dict, compare_png, mean_wall_sd_m, summarise,  # noqa: E402
-                               typed_sampled_worlds)
-from semmap_pp.derive.defects import ROOM, count_defects, topological_defects  # noqa: E402
+from semmap_pp import world as wm  # noqa: E402
+from semmap_pp.outputs.figures import compare_png  # noqa: E402
+from semmap_pp.studies.compare import (compare_dict, mean_wall_sd_m, summarise,  # noqa: E402
+                                       typed_sampled_worlds)
+from semmap_pp.target.defects import ROOM, count_defects, topological_defects  # noqa: E402
 from semmap_pp.knowledge import load_rules  # noqa: E402
-from semmap_pp.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402
+from semmap_pp.run.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402
 
 RULES = {"table3": ROOT / "rules" / "table3.lp", "none": ROOT / "rules" / "none.lp"}
 ORANGE = "#ff8c00"
@@ -75,7 +76,7 @@ def sample_from(inputs, model, seed: int, start, draws: int, n_inner: int, chain
 
 def all_rooms(world):
     """``world`` with every active unit typed room: defects of the geometry alone, whatever the typing."""
-    return W.with_types(world, np.full(world.capacity, ROOM))
+    return wm.with_types(world, np.full(world.capacity, ROOM))
 
 
 def reference_target(inputs):
@@ -91,14 +92,14 @@ def spread_numbers(run, worlds, reference) -> dict:
     ``reference`` is :func:`reference_target`: defects are also counted with table3's typing for both
     rule sets (none.lp types every unit room, so its own typing counts every adjacent pair).
     """
-    from semmap_pp.compare import wall_spread
-    from semmap_pp.outputs.spread import cell_probabilities, typed_worlds, wall_disagreement_m2
+    from semmap_pp.studies.compare import wall_spread
+    from semmap_pp.sampler.spread import cell_probabilities, typed_worlds, wall_disagreement_m2
 
     frame, model = run.inputs.frame, run.inputs.model
     c = frame.cells
     tol = model.diagnostics.defect_tolerance_m
     p_wall, _ = cell_probabilities(frame.shape, worlds, c.wall)
-    units = np.array([W.n_units(w) for w in worlds])
+    units = np.array([wm.n_units(w) for w in worlds])
     geo = count_defects([all_rooms(w) for w in worlds], c.resolution, c.wall, c.adjacency_dilation, tol)
     typed = count_defects(worlds, c.resolution, c.wall, c.adjacency_dilation, tol)
     ref = count_defects(typed_worlds(reference, worlds), c.resolution, c.wall, c.adjacency_dilation, tol)
@@ -147,7 +148,7 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
         ax.imshow(classified_rgb(sm.grid.classes, light=True)[y0:y1, x0:x1], extent=(x0, x1, y1, y0),
                   interpolation="nearest")
         ax.add_collection(LineCollection(world_outlines(frame, [world]), colors="tab:blue", linewidths=1.2))
-        for s in W.active_slots(world):
+        for s in wm.active_slots(world):
             x, y = frame.rect_vertices_px(world.rects[s]).mean(axis=0)
             t = int(world.types[s])
             letter = TYPE_LETTER[("room", "corridor", "hall", "other")[t]] if t >= 0 else "?"
@@ -170,7 +171,7 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-        ax.set_title(f"{name}: W* with {W.n_units(world)} units, CPR {sm.cpr:.3f}, "
+        ax.set_title(f"{name}: W* with {wm.n_units(world)} units, CPR {sm.cpr:.3f}, "
                      f"{len(defects)} topological defect(s)", fontsize=9)
     handles = [Line2D([], [], color="tab:blue", label="unit of W*"),
                Line2D([], [], color=ORANGE, lw=3, label="connecting walls of a defect (adjacent rooms, "
@@ -182,7 +183,7 @@ def fig6_png(runs: list, names: list[str]) -> bytes:
 
 
 def run_rule_sets(map_path, model_path, seed, draws, n_inner, chains, n_worlds, start_mode):
-    from semmap_pp.outputs.spread import typed_worlds
+    from semmap_pp.sampler.spread import typed_worlds
 
     base = load_inputs(map_path, model_path=model_path, rules_path=RULES["table3"])
     model = base.model
@@ -233,7 +234,7 @@ def main(argv=None) -> int:
                 s = summarise(o["sample"], name, RULES[name].name, o["worlds"])
                 print(json.dumps({"seed": seed, "rules": name, "draws": args.draws, "n_inner": args.n_inner,
                                   "start": args.start, "wstar_cpr": round(float(o["find"].semantic.cpr), 4),
-                                  "wstar_units": W.n_units(o["find"].world),
+                                  "wstar_units": wm.n_units(o["find"].world),
                                   "wstar_defects": len(topological_defects(
                                       o["find"].world, *_defect_args(o["find"]))),
                                   "wstar_defects_table3_typing": len(topological_defects(
@@ -255,7 +256,7 @@ def main(argv=None) -> int:
     atomic.write_bytes(args.out / "knowledge_fig6.png", fig6_png(finds, names))
     atomic.write_bytes(args.out / "knowledge_fig7.png", compare_png(samples, worlds, rows))
 
-    wstar = {n: {"units": W.n_units(out[n]["find"].world), "cpr": round(float(out[n]["find"].semantic.cpr), 4),
+    wstar = {n: {"units": wm.n_units(out[n]["find"].world), "cpr": round(float(out[n]["find"].semantic.cpr), 4),
                  "log_posterior": round(float(out[n]["find"].semantic.log_posterior), 1),
                  "defects": len(topological_defects(out[n]["find"].world, *_defect_args(out[n]["find"]))),
                  "defects_all_adjacent": len(topological_defects(all_rooms(out[n]["find"].world),

@@ -24,14 +24,14 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from semmap_pp import world as W  # noqa: E402
+from semmap_pp import world as wm  # noqa: E402
 from semmap_pp.atomic import atomic_path, write_text  # noqa: E402
 from semmap_pp.cells import OCCUPIED, UNIT_TYPES, UNKNOWN, W_FREE, W_OBJECT, W_WALL  # noqa: E402
 from semmap_pp.derive import derive_world  # noqa: E402
-from semmap_pp.frame import build_frame  # noqa: E402
+from semmap_pp.lattice.frame import build_frame  # noqa: E402
 from semmap_pp.grid import load_map  # noqa: E402
 from semmap_pp.model import load_model  # noqa: E402
-from semmap_pp.posterior import Posterior  # noqa: E402
+from semmap_pp.target.posterior import Posterior  # noqa: E402
 
 # (r0, c0, r1, c1) on the lattice, read off a gridded picture of the lattice map.
 HAND_WORLD = [
@@ -53,7 +53,7 @@ def snap(post, world):
     """Coordinate ascent on each side of each unit within ±SNAP cells."""
     tr = post.start(world)
     for _ in range(ROUNDS):
-        for s in W.active_slots(tr.world):
+        for s in wm.active_slots(tr.world):
             for side in range(4):
                 best, best_w = tr.logp, None
                 for step in range(-SNAP, SNAP + 1):
@@ -61,7 +61,7 @@ def snap(post, world):
                         continue
                     r = tr.world.rects[s].copy()
                     r[side] += step
-                    prop = tr.propose(W.replace(tr.world, s, r), [s])
+                    prop = tr.propose(wm.replace(tr.world, s, r), [s])
                     if prop.logp > best:
                         best, best_w = prop.logp, prop
                 if best_w is not None:
@@ -74,9 +74,9 @@ def main() -> int:
     grid = load_map(ROOT / "data/maps/ubremen-cartesium.yaml")
     frame = build_frame(grid, model)
     post = Posterior(frame, model)
-    world = W.empty(model.prior.k_max)
+    world = wm.empty(model.prior.k_max)
     for s, rect in enumerate(HAND_WORLD):
-        world = W.add(world, s, rect)
+        world = wm.add(world, s, rect)
     start = post.evaluate(world).total
     tr = snap(post, world)
     world = tr.world

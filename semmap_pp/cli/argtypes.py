@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from semmap_pp.sampler.sampling import MAX_N_INNER, MAX_SEED
+
 
 def integer(text: str) -> int:
     """Any integer."""
@@ -34,10 +36,6 @@ def non_negative_int(text: str) -> int:
     return value
 
 
-#: the largest seed: numpy's generators take any, but trace.nc stores it as a 64-bit HDF5 integer
-MAX_SEED = 2 ** 32 - 1
-#: the most kernels per draw: the model's 50 runs in milliseconds; 10^6 in about a minute a draw
-MAX_N_INNER = 1_000_000
 
 
 def seed(text: str) -> int:

@@ -1,7 +1,7 @@
 """``semmap batch MAP... --out DIR``: many maps, seeds and rule sets as tasks of a Dask cluster.
 
 One task per map, rule file and seed, each a ``semmap map`` run writing
-``DIR/<map>[/<rules>][/seed-<s>]/`` exactly as ``semmap map`` does (:mod:`semmap_pp.batch`). MAP is
+``DIR/<map>[/<rules>][/seed-<s>]/`` exactly as ``semmap map`` does (:mod:`semmap_pp.run.batch`). MAP is
 a map file, a folder of them or a glob pattern. Without ``--scheduler`` a local cluster of
 ``--workers`` worker processes (default: one per core) runs them; ``--scheduler ADDRESS`` sends them
 to a running Dask scheduler (docs/cli.md). A task that fails (a bad map, ``--timeout``, a worker that
@@ -17,10 +17,9 @@ import sys
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int, positive_int, seconds
-from semmap_pp.cli.cmd_info import add_map_options, map_options
-from semmap_pp.cli.cmd_map import add_run_length_options
-from semmap_pp.errors import MapError, SemmapError
 from semmap_pp.cli.argtypes import seed as seed_type
+from semmap_pp.cli.options import add_map_options, add_run_length_options, map_options
+from semmap_pp.errors import MapError, SemmapError
 
 #: the options of ``semmap map`` a batch hands to every task: (dest, flag)
 PASSED = (("model", "--model"), ("roi", "--roi"), ("chains", "--chains"), ("cores", "--cores"),
@@ -134,7 +133,7 @@ class _Progress:
 
 
 def run(args) -> int:
-    from semmap_pp import batch as B
+    from semmap_pp.run import batch as B
 
     maps = B.expand_maps(args.maps)
     _check_inputs(args)
@@ -148,7 +147,7 @@ def run(args) -> int:
         probe.unlink()
     except OSError as exc:
         raise MapError(out, f"cannot write there: {exc.strerror or exc}") from None
-    from semmap_pp.outdir import check_free_space, lock_out_dir, needed_bytes
+    from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     check_free_space(out, needed_bytes())
     with lock_out_dir(out):      # one batch at a time in DIR (each task's run locks its own folder)
         return _run_tasks(args, B, maps, out)

@@ -2,9 +2,9 @@
 
 Runs ``semmap map``'s sampling once per rule file with the same map, model, seed and run lengths,
 then prints a Markdown table (CPR, log posterior, R-hat and ESS of the summaries, posterior wall
-spread, topological defects; see :mod:`semmap_pp.compare`). With ``--seeds`` it does so for each
+spread, topological defects; see :mod:`semmap_pp.studies.compare`). With ``--seeds`` it does so for each
 seed and first prints every quantity's mean, sd and range over the seeds, with how far each rule
-set's W*s agree between seeds (:class:`semmap_pp.compare.AcrossSeeds`). With ``--out DIR`` it also
+set's W*s agree between seeds (:class:`semmap_pp.studies.compare.AcrossSeeds`). With ``--out DIR`` it also
 writes ``compare.md``, ``compare.json`` and ``compare.png`` (the sampled worlds of each run drawn
 thin, side by side; of the first seed), each atomically. Ctrl-C stops and writes nothing (exit 130).
 """
@@ -16,13 +16,12 @@ import json
 import sys
 from pathlib import Path
 
-from semmap_pp.cli.cmd_info import add_map_options, map_options
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
-from semmap_pp.cli.cmd_map import add_run_length_options
+from semmap_pp.cli.argtypes import seed as seed_type
+from semmap_pp.cli.options import add_map_options, add_run_length_options, map_options
 from semmap_pp.cli.runs import add_jobs_option
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
-from semmap_pp.cli.argtypes import seed as seed_type
 
 
 def register(subparsers) -> None:
@@ -60,7 +59,7 @@ def _names(paths: list[Path]) -> list[str]:
 
 
 def run(args) -> int:
-    from semmap_pp.outdir import claimed
+    from semmap_pp.run.outdir import claimed
 
     with claimed(args.out, args.force):    # checked and held before any sampling
         return _run(args)
@@ -68,13 +67,14 @@ def run(args) -> int:
 
 def _run(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.compare import (AcrossSeeds, across_dict, across_table, compare_dict, compare_png,
-                                   compare_table, diffs_section, summarise, typed_sampled_worlds,
-                                   wstar_diffs)
+    from semmap_pp.outputs.figures import compare_png
+    from semmap_pp.studies.compare import (AcrossSeeds, across_dict, across_table, compare_dict,
+                                           compare_table, diffs_section, summarise, typed_sampled_worlds,
+                                           wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.pipeline import RunSettings, load_inputs
-    from semmap_pp.stability import Plan
+    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.studies.stability import SeedPlan
 
     if len(args.rules) < 2:
         print("semmap compare: error: give --rules at least twice (the knowledge sets to compare)",
@@ -117,7 +117,7 @@ def _run(args) -> int:
     cols = []
     if several:
         cols = [AcrossSeeds.of(seeds, [rows[j] for _r, _w, rows in per_seed],
-                               [Plan.from_semantic(seed, runs[j].semantic, runs[j].seconds)
+                               [SeedPlan.from_semantic(seed, runs[j].semantic, runs[j].seconds)
                                 for seed, (runs, _w, _rows) in zip(seeds, per_seed)])
                 for j in range(n)]
         text = "\n\n".join([f"## Across seeds\n\n{across_table(cols)}"]

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_int
-from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.options import add_map_options, map_options
 from semmap_pp.errors import MapError, OutputError
 from semmap_pp.grid import load_map
 from semmap_pp.grid.write import classes_to_image, write_map

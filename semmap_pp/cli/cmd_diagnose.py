@@ -1,10 +1,10 @@
 """``semmap diagnose DIR [--model FILE] [--json]``: re-read a run's trace.nc and judge convergence.
 
 Reads ``DIR/trace.nc`` (or a trace file given directly) with
-:func:`semmap_pp.diagnostics.read_trace` and prints the run's provenance (its attributes), R-hat
+:func:`semmap_pp.sampler.diagnostics.read_trace` and prints the run's provenance (its attributes), R-hat
 and bulk / tail ESS of every label-invariant summary with the verdict, the posterior spread of
 each summary (mean, sd, 5 % / 50 % / 95 % quantiles over the draws of the chains in the best
-chain's mode, :meth:`~semmap_pp.diagnostics.ConvergenceReport.mode_chains`, as the run's figures
+chain's mode, :meth:`~semmap_pp.sampler.diagnostics.ConvergenceReport.mode_chains`, as the run's figures
 use them), the acceptance rates, and any spread numbers stored as trace attributes. The thresholds are the model file's
 ``[diagnostics]`` (``rhat_max``, ``ess_min``), as ``semmap map`` uses them. When DIR also holds
 ``spread.nc`` (the sample around W* that the spread figures are drawn from), the same report of it
@@ -51,7 +51,7 @@ def _clean(v):
 def diagnose(tree, rhat_max: float, ess_min: float, *, figures: bool = True) -> dict:
     """Everything ``semmap diagnose`` reports, from a trace DataTree (``figures``: whether the
     run's spread figures were drawn from this trace's draws)."""
-    from semmap_pp.diagnostics import convergence
+    from semmap_pp.sampler.diagnostics import convergence
 
     around = tree.attrs.get("start") == "W*"      # spread.nc: the sample around W*
     report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min,
@@ -90,7 +90,7 @@ def _chains_text(chains: list[int], n_chains: int, first: int = 1) -> str:
     >>> _chains_text([1, 2], 2), _chains_text([1], 2), _chains_text([1, 3], 3, 5)
     ('all chains and draws', "chain 1's draws: the best chain's mode", "chains 1, 3's draws from draw 5: the best chain's mode")
     """
-    from semmap_pp.diagnostics import chains_phrase
+    from semmap_pp.sampler.diagnostics import chains_phrase
 
     since = f" from draw {first}" if first > 1 else ""
     if len(chains) == n_chains:
@@ -117,7 +117,7 @@ def format_text(d: dict) -> str:
 
 
 def run(args) -> int:
-    from semmap_pp.diagnostics import read_trace
+    from semmap_pp.sampler.diagnostics import read_trace
     from semmap_pp.model import load_model
 
     path = args.dir / "trace.nc" if args.dir.is_dir() else args.dir

@@ -1,4 +1,4 @@
-"""``semmap diff OLD NEW``: what changed between two world.json files (:mod:`semmap_pp.world_diff`).
+"""``semmap diff OLD NEW``: what changed between two world.json files (:mod:`semmap_pp.plans.diff`).
 
 OLD and NEW are each a world.json or a run's folder. Units are paired by where they are, not by id;
 the command lists the units retyped, moved, removed and added, and the doors and passages removed
@@ -34,8 +34,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from semmap_pp.places import read_places
-    from semmap_pp.world_diff import TOLERANCE_M, diff_worlds
+    from semmap_pp.plans.places import read_places
+    from semmap_pp.plans.diff import TOLERANCE_M, diff_worlds
 
     tolerance = TOLERANCE_M if args.tolerance is None else args.tolerance
     diff = diff_worlds(read_places(args.old), read_places(args.new), tolerance_m=tolerance)

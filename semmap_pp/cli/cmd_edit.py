@@ -3,7 +3,7 @@
 The plan a person knows better than the search, said in the outputs' own terms: units by the id
 world.json and overlay.png give them, places by points read off the map (map-frame metres, or
 image pixels with ``--pixels``). The edits (``--drop``, ``--merge``, ``--cut``, ``--wall``,
-``--add``; :mod:`semmap_pp.world_edit`) apply in the order given; then every wall is set on the
+``--add``; :mod:`semmap_pp.plans.edit`) apply in the order given; then every wall is set on the
 lattice's best position within ``--snap`` metres (``ascent.snap_walls``; 0 keeps them as given),
 the types are decided again under ``--rules``, and the result is written into DIR as ``semmap map``
 writes a W*'s plan: world.json (for ``semmap map MAP --start``, ``semmap score`` and the next
@@ -18,12 +18,11 @@ import argparse
 from pathlib import Path
 
 from semmap_pp.cli.argtypes import non_negative_float
-from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_target_options, target_inputs
+from semmap_pp.cli.options import add_map_options, add_target_options, target_inputs
 from semmap_pp.cli.cmd_score import print_scores, score_world, scores_of
 from semmap_pp.errors import OutputError
-from semmap_pp.places import unit_key
-from semmap_pp.world_edit import Edit
+from semmap_pp.plans.edit import Edit
+from semmap_pp.plans.places import unit_key
 
 
 #: How far (metres) the edited units' walls may move to the map's best position: a point read off
@@ -82,7 +81,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from semmap_pp.outdir import claimed
+    from semmap_pp.run.outdir import claimed
 
     if not args.edits:
         raise OutputError(args.out, "no edit given (--drop, --merge, --cut, --wall, --add); nothing written")
@@ -91,16 +90,15 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
-    from semmap_pp.ascent import snap_walls
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import model_settings
+    from semmap_pp.sampler.ascent import snap_walls
+    from semmap_pp.sampler.kernels import data_from_frame
     from semmap_pp.cells import TYPE_LETTER
-    from semmap_pp.outputs.semantic import semantic_map
-    from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
+    from semmap_pp.semantic.semantic_map import semantic_map
+    from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
     from semmap_pp.outputs.write import write_plan
-    from semmap_pp.pipeline import run_target
-    from semmap_pp.world_edit import apply_edits, edit_origins, id_changes
-    from semmap_pp.world_file import pack_world, read_previous_ids, read_world_units
+    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.plans.edit import apply_edits, edit_origins, id_changes
+    from semmap_pp.plans.world_file import pack_world, read_previous_ids, read_world_units
 
     if args.out.is_dir() and args.world.parent.resolve() == args.out.resolve():
         raise OutputError(args.out, "is the directory of WORLD_JSON: its run's other files (trace.nc, "
@@ -116,7 +114,7 @@ def _run(args) -> int:
     post = run_target(inputs)
     reach = int(round(args.snap / inputs.frame.resolution))
     if reach > 0:
-        settings = model_settings(inputs.model)
+        settings = inputs.model.kernels
         world = snap_walls(post, world, data_from_frame(inputs.frame, settings),
                            [i for i, (_, _, changed) in enumerate(edited) if changed], reach=reach)
     terms = post.evaluate(world)
@@ -143,7 +141,7 @@ def _run(args) -> int:
 
 
 def carried_rows(ids: list[dict], record: dict) -> list[dict]:
-    """:func:`~semmap_pp.world_edit.id_changes` rows after ``--ids-from``: a unit an edit made
+    """:func:`~semmap_pp.plans.edit.id_changes` rows after ``--ids-from``: a unit an edit made
     that carried an id (the piece of a cut that is most of the unit it came from) continues that
     unit, so its ``was`` is the id (its ``by`` still names the edit).
 

@@ -96,7 +96,7 @@ def detect_kind(truth: Path) -> str:
 
 def _read_run(run_dir: Path) -> tuple[dict, np.ndarray]:
     from semmap_pp.evaluate import read_label_image
-    from semmap_pp.world_file import read_world_doc
+    from semmap_pp.plans.world_file import read_world_doc
 
     if not run_dir.is_dir():
         raise MapError(run_dir, "not a run folder (expected the --out folder of `semmap map`)")

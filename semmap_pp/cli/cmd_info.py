@@ -1,10 +1,8 @@
 """``semmap info MAP [--json]``: what a map file holds and how its cells classify.
 
 The map options (``--occupied-thresh``, ``--free-thresh``, ``--negate``, ``--resolution``,
-``--mode``, ``--max-cells``, and a bag's ``--topic`` and ``--at``) are added by
-:func:`add_map_options` and turned into
-:func:`~semmap_pp.grid.load_map` keywords by :func:`map_options`, so other subcommands can offer the
-same ones.
+``--mode``, ``--max-cells``, and a bag's ``--topic`` and ``--at``) are the shared ones of
+:mod:`semmap_pp.cli.options`.
 """
 
 from __future__ import annotations
@@ -14,44 +12,10 @@ import json
 import math
 
 from semmap_pp.cells import INPUT_CLASSES, known_box
-from semmap_pp.cli.argtypes import bag_time as _bag_time
-from semmap_pp.cli.argtypes import positive_int as _positive_int
-from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
+from semmap_pp.cli.options import add_map_options, map_options
+from semmap_pp.grid import OccupancyGrid, load_map
 from semmap_pp.grid.outside import border_open_share, seal_radius
-from semmap_pp.grid.pixels import MODES
 from semmap_pp.model import OutsideParams
-
-
-def add_map_options(parser: argparse.ArgumentParser) -> None:
-    """Add the options that override or complete a map's map_server parameters."""
-    group = parser.add_argument_group("map parameters (override the YAML, complete a bare image)")
-    group.add_argument("--occupied-thresh", type=float, metavar="P",
-                       help="occupancy above P is occupied (map_server default 0.65)")
-    group.add_argument("--free-thresh", type=float, metavar="P",
-                       help="occupancy below P is free (map_server default 0.196)")
-    group.add_argument("--negate", type=int, choices=(0, 1),
-                       help="1: dark pixels are free, light ones occupied")
-    group.add_argument("--resolution", type=float, metavar="M",
-                       help="metres per cell (bare images default to 0.05, with a note)")
-    group.add_argument("--mode", choices=MODES, help="map_server mode (default trinary)")
-    group.add_argument("--max-cells", type=_positive_int, default=MAX_CELLS, metavar="N",
-                       help=f"refuse larger images (default {MAX_CELLS})")
-    group.add_argument("--allow-outside", action="store_true",
-                       help="let the YAML's image: be outside the YAML's folder (absolute or ../ path)")
-    bag = parser.add_argument_group("a bag's map (ROS 1 .bag, ROS 2 bag folder, .mcap; other maps ignore these)")
-    bag.add_argument("--topic", metavar="TOPIC", default=None,
-                     help="the nav_msgs/OccupancyGrid topic (default: the bag's one such topic)")
-    bag.add_argument("--at", type=_bag_time, metavar="TIME|last", default=None,
-                     help="the last map message at or before TIME seconds after the bag's start "
-                          "(default: last, the bag's last map message)")
-
-
-def map_options(args: argparse.Namespace) -> dict:
-    """:func:`load_map` keyword arguments from the options of :func:`add_map_options`."""
-    return {"occupied_thresh": args.occupied_thresh, "free_thresh": args.free_thresh,
-            "negate": args.negate, "resolution": args.resolution, "mode": args.mode,
-            "max_cells": args.max_cells, "allow_outside": args.allow_outside,
-            "topic": getattr(args, "topic", None), "at": getattr(args, "at", None)}
 
 
 def register(subparsers) -> None:
@@ -152,8 +116,8 @@ def format_text(facts: dict) -> str:
 
 def orientation(grid: OccupancyGrid, model) -> dict:
     """θ0 of the lattice ``semmap map`` would build (degrees) and the walls at another angle
-    (:func:`semmap_pp.frame.off_axis_walls`; ``note``: whether the run would say so)."""
-    from semmap_pp.frame import lattice_orientation, off_axis_noted, off_axis_walls
+    (:func:`semmap_pp.lattice.frame.off_axis_walls`; ``note``: whether the run would say so)."""
+    from semmap_pp.lattice.frame import lattice_orientation, off_axis_noted, off_axis_walls
 
     params = model.lattice
     theta = lattice_orientation(grid.classes, params)

@@ -5,7 +5,7 @@ image's frame), ``trace.nc`` (ArviZ: label-invariant summaries and sampler stati
 draw), ``diagnostics.txt`` (R-hat, ESS and the verdict) and the other outputs of
 :func:`semmap_pp.outputs.write.write_all`, after ``resume.npz`` (what ``--resume`` needs), which
 comes first. Every file is written atomically; a non-empty DIR is refused without ``--force``, and
-a DIR another run is writing into is refused (:mod:`semmap_pp.outdir`). The same inputs and seed
+a DIR another run is writing into is refused (:mod:`semmap_pp.run.outdir`). The same inputs and seed
 give the same world.json, unless ``--budget`` (or Ctrl-C) ends sampling early: then the run's
 length depends on the machine. Ctrl-C stops sampling cleanly, writes what was done and exits 130;
 a Ctrl-C while the files are written stops the writing once resume.npz is complete (exit 130).
@@ -19,47 +19,16 @@ import signal
 import sys
 from pathlib import Path
 
+from semmap_pp.cli.argtypes import seed as seed_type
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
-from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.argtypes import seconds as _seconds
-from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.options import (add_map_options, add_run_length_options, add_target_options, map_options,
+                                   target_inputs)
 from semmap_pp.model import SPREAD_DRAWS_RULE, spread_draws_ok
-from semmap_pp.cli.argtypes import n_inner as n_inner_type, seed as seed_type
 
 
 #: Options a resumed run takes from the resume file (giving them with --resume is an error).
 FIXED_WHEN_RESUMING = ("chains", "tune", "n_inner", "seed", "rules", "model", "roi")
-
-
-def add_target_options(p: argparse.ArgumentParser) -> None:
-    """``--rules``, ``--model``, ``--roi``: what the target of a run on a map is made of (``map``,
-    ``score``, ``edit``, ``stability``; read by :func:`target_inputs`)."""
-    p.add_argument("--rules", metavar="FILE", default=None,
-                   help="rule file (default rules/table3.lp; rules/none.lp = no knowledge; "
-                        "`semmap rules list` shows where the shipped ones are)")
-    p.add_argument("--model", metavar="FILE", default=None, help="model file (default models/default.toml)")
-    p.add_argument("--roi", metavar="MASK", default=None,
-                   help="region-of-interest mask image for the CPR (default: the known part, closed)")
-
-
-def add_run_length_options(p: argparse.ArgumentParser, draws_help: str = "recorded draws per chain") -> None:
-    """``--chains``, ``--cores``, ``--tune``, ``--draws``, ``--n-inner`` (None: the model file's
-    ``[sampler]`` values), as ``semmap map``, ``compare`` and ``stability`` take them."""
-    p.add_argument("--chains", type=_positive_int, default=None, help="chains (model file default)")
-    p.add_argument("--cores", type=_positive_int, default=None, help="processes (model file default)")
-    p.add_argument("--tune", type=_non_negative_int, default=None, help="burn-in draws per chain")
-    p.add_argument("--draws", type=_positive_int, default=None, help=draws_help)
-    p.add_argument("--n-inner", type=n_inner_type, default=None, help="kernels per draw")
-
-
-def target_inputs(args: argparse.Namespace):
-    """The rule file and the loaded inputs (map, model, rules, ROI) that ``args`` name: MAP, the
-    options of :func:`add_target_options` and the map options."""
-    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
-
-    rules = Path(args.rules) if args.rules else DEFAULT_RULES
-    return rules, load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,
-                              map_options=map_options(args))
 
 
 def register(subparsers) -> None:
@@ -103,15 +72,15 @@ def _usage(message: str) -> int:
 def _resume_inputs(args):
     """Inputs, settings and resume state of ``--resume DIR``."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.pipeline import RunSettings, load_inputs
-    from semmap_pp.resume import read_resume
+    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.sampler.resume import read_resume
 
     state = read_resume(args.resume, extra_draws=args.draws)
     m = state.meta["inputs"]
     inputs = load_inputs(m["map"], model_path=m["model"],
                          rules_path=Path(m["rules"]) if m["rules"] else None, roi_path=m["roi"],
                          map_options=m["map_options"])
-    lattice = m.get("lattice")   # written since session 17; the worlds are in its cells
+    lattice = m.get("lattice")   # absent from older files; the worlds are in its cells
     if lattice is not None and tuple(lattice) != tuple(inputs.frame.shape):
         raise SemmapError(Path(args.resume) / "resume.npz",
                           f"written for a lattice of {lattice[0]} x {lattice[1]} cells, but the map and "
@@ -127,10 +96,10 @@ def _resume_inputs(args):
 
 
 def _places_or_none(doc: dict, path):
-    """A world.json's content (read from ``path``) as :func:`semmap_pp.places.places_from_doc`
+    """A world.json's content (read from ``path``) as :func:`semmap_pp.plans.places.places_from_doc`
     reads it, or None: a file too old or odd for ``semmap diff`` still gives its ids."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.places import places_from_doc
+    from semmap_pp.plans.places import places_from_doc
 
     try:
         return places_from_doc(doc, Path(path))
@@ -142,8 +111,8 @@ def _changes_since(previous, path: Path, name: str | None = None) -> str | None:
     """One line on how the world.json just written to ``path`` differs from ``previous`` (called
     ``name`` in it, else by its path)."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.places import read_places
-    from semmap_pp.world_diff import diff_worlds
+    from semmap_pp.plans.places import read_places
+    from semmap_pp.plans.diff import diff_worlds
 
     try:
         now = read_places(path)
@@ -157,7 +126,7 @@ def carried_ids_source(run_dir: Path) -> Path | None:
     ``ids`` object): what ``--resume run_dir`` carries them from, so that the resumed run keeps
     them; None otherwise (a file that cannot be read is left to the resume's own checks)."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.world_file import read_world_doc
+    from semmap_pp.plans.world_file import read_world_doc
 
     path = Path(run_dir) / "world.json"
     try:
@@ -183,11 +152,12 @@ def _install_sigint(stop):
 
 
 def run(args) -> int:
-    from semmap_pp.outdir import check_free_space, lock_out_dir, needed_bytes
+    from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
-    from semmap_pp.pipeline import RunSettings, check_inputs_not_outputs, check_out_dir
-    from semmap_pp.resume import FILE_NAME as RESUME_FILE
-    from semmap_pp.world_file import previous_ids_from_doc, read_run_world
+    from semmap_pp.run.outdir import check_out_dir
+    from semmap_pp.run.pipeline import RunSettings, check_inputs_not_outputs
+    from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
+    from semmap_pp.plans.world_file import previous_ids_from_doc, read_run_world
 
     state, starts = None, None
     if not spread_draws_ok(args.spread_draws or 0):
@@ -217,7 +187,7 @@ def run(args) -> int:
         if settings.draws < 4:
             return _usage("--draws must be at least 4 (R-hat and ESS need them)")
         if args.start is not None:
-            from semmap_pp.world_file import read_start_world
+            from semmap_pp.plans.world_file import read_start_world
             starts = [read_start_world(args.start, inputs.frame, inputs.grid, inputs.model.prior.k_max)]
 
     ids_from = args.ids_from
@@ -241,14 +211,14 @@ def run(args) -> int:
 
 def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, previous_ids,
                       previous_places, ids_from) -> int:
-    """Sample (:func:`semmap_pp.pipeline.run_map`) and write every output into ``out``, which
+    """Sample (:func:`semmap_pp.run.pipeline.run_map`) and write every output into ``out``, which
     the caller holds the lock of; the exit status."""
     from semmap_pp.cli.progress import Progress
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
-    from semmap_pp.pipeline import run_map
-    from semmap_pp.resume import FILE_NAME as RESUME_FILE
-    from semmap_pp.step import StopFlag
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
+    from semmap_pp.sampler.step import StopFlag
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
@@ -341,9 +311,10 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     once. Either way the search is saved, and every file written is complete (each is renamed
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
-    from semmap_pp.outputs.write import write_all
-    from semmap_pp.resume import FILE_NAME as RESUME_FILE
-    from semmap_pp.resume import write_resume
+    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_posterior, write_wstar
+    from semmap_pp.run.pipeline import posterior_worlds
+    from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
+    from semmap_pp.sampler.resume import write_resume
 
     pressed, saving = [], [True]
 
@@ -360,7 +331,9 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         saving[0] = False
         if pressed:
             raise KeyboardInterrupt
-        written += write_all(out, run, rules_name=rules.name, rules_path=rules, other_files=(RESUME_FILE,))
+        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules)
+        written += write_posterior(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), wstar,
+                                   rules_name=rules.name, other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
         return written, True
     return written, False

@@ -1,5 +1,5 @@
 """``semmap where WORLD X Y`` and ``semmap route WORLD FROM TO``: the unit at a map point, and the
-doors and passages from one place to another (:mod:`semmap_pp.places`).
+doors and passages from one place to another (:mod:`semmap_pp.plans.places`).
 
 WORLD is a world.json or a run's folder. Points are map-frame metres (as tf gives a robot's pose
 in ``map``). FROM and TO are each a unit id as overlay.png shows it (``7``, ``R7``) or a point
@@ -86,7 +86,7 @@ def _passages_note(places) -> str | None:
 
 
 def run_where(args) -> int:
-    from semmap_pp.places import read_places
+    from semmap_pp.plans.places import read_places
 
     places = read_places(args.world)
     found = places.units_at(args.x, args.y)
@@ -105,7 +105,7 @@ def run_where(args) -> int:
 
 
 def run_route(args) -> int:
-    from semmap_pp.places import read_places
+    from semmap_pp.plans.places import read_places
 
     places = read_places(args.world)
     start, goal = _place(places, args.start), _place(places, args.goal)

@@ -12,7 +12,7 @@ import textwrap
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.cli.cmd_info import add_map_options, map_options
+from semmap_pp.cli.options import add_map_options, map_options
 from semmap_pp.errors import EvidenceError, OutputError, SemmapError
 
 
@@ -249,8 +249,8 @@ def world_evidence_facts(inputs, world_path) -> str:
     from semmap_pp.knowledge import Evidence
     from semmap_pp.knowledge.dialect import SOFT_PREDICATES
     from semmap_pp.knowledge.evidence import evidence_to_facts
-    from semmap_pp.posterior import Posterior
-    from semmap_pp.world_file import pack_world, read_world_units
+    from semmap_pp.target.posterior import Posterior
+    from semmap_pp.plans.world_file import pack_world, read_world_units
 
     units = read_world_units(world_path, inputs.frame, inputs.grid)
     world = pack_world([r for _, r in units], inputs.model.prior.k_max, world_path)
@@ -274,7 +274,7 @@ def world_evidence_facts(inputs, world_path) -> str:
 
 def _evidence(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.pipeline import load_inputs
+    from semmap_pp.run.pipeline import load_inputs
 
     if args.out is not None and (args.out.is_dir() or str(args.out).endswith(("/", "\\"))):
         raise OutputError(args.out, "is a directory; --out names the facts file to write")

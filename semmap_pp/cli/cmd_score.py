@@ -22,8 +22,7 @@ import math
 from pathlib import Path
 
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_target_options, target_inputs
+from semmap_pp.cli.options import add_map_options, add_target_options, target_inputs
 
 
 def register(subparsers) -> None:
@@ -45,7 +44,7 @@ def register(subparsers) -> None:
 
 def score_world(inputs, post, world) -> dict:
     """The scores of one world (types decided by ``post``) as a JSON-ready dict."""
-    from semmap_pp.outputs.semantic import semantic_map
+    from semmap_pp.semantic.semantic_map import semantic_map
 
     terms = post.evaluate(world)
     return scores_of(semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms), terms)
@@ -73,17 +72,16 @@ def _line(name: str, s: dict, ref: float | None) -> str:
 
 
 def run(args) -> int:
-    from semmap_pp.ascent import polish
-    from semmap_pp.kernels import data_from_frame
-    from semmap_pp.kernels.data import model_settings
-    from semmap_pp.pipeline import run_target
-    from semmap_pp.world_file import read_start_world
+    from semmap_pp.sampler.ascent import polish
+    from semmap_pp.sampler.kernels import data_from_frame
+    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.plans.world_file import read_start_world
 
     rules, inputs = target_inputs(args)
     worlds = [(p, read_start_world(p, inputs.frame, inputs.grid, inputs.model.prior.k_max))
               for p in args.worlds]          # every file checked before any scoring
     post = run_target(inputs)
-    settings = model_settings(inputs.model)
+    settings = inputs.model.kernels
     data = data_from_frame(inputs.frame, settings) if args.polish else None
     rounds = max(settings.polish_rounds, 1)     # the model's rounds; 0 (polish off) still polishes
     rows = []

@@ -2,7 +2,7 @@
 
 Runs ``semmap map``'s search once per seed (default 0 1 2) with the same map, model, rules and run
 lengths, without the sample around W* (it never changes W*), and compares the W*s
-(:mod:`semmap_pp.stability`): the unit F1 between every two of them, and for each unit of the
+(:mod:`semmap_pp.studies.stability`): the unit F1 between every two of them, and for each unit of the
 best one (highest log posterior) in how many of the others it is found (IoU >= 0.5) and with which
 type. Prints a Markdown table; with ``--out DIR`` also writes ``stability.md``, ``stability.json``
 and ``stability.png`` (the best W*'s units coloured by agreement), each atomically. Ctrl-C stops
@@ -16,10 +16,9 @@ import json
 import sys
 from pathlib import Path
 
-from semmap_pp.cli.cmd_info import add_map_options
-from semmap_pp.cli.cmd_map import add_run_length_options, add_target_options, target_inputs
-from semmap_pp.cli.runs import add_jobs_option
 from semmap_pp.cli.argtypes import seed as seed_type
+from semmap_pp.cli.options import add_map_options, add_run_length_options, add_target_options, target_inputs
+from semmap_pp.cli.runs import add_jobs_option
 
 
 def register(subparsers) -> None:
@@ -41,7 +40,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from semmap_pp.outdir import claimed
+    from semmap_pp.run.outdir import claimed
 
     with claimed(args.out, args.force):    # checked and held before any sampling
         return _run(args)
@@ -51,8 +50,8 @@ def _run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.cli.runs import run_each
     from semmap_pp.outputs.figures import stability_png
-    from semmap_pp.pipeline import RunSettings
-    from semmap_pp.stability import Plan, Stability
+    from semmap_pp.run.pipeline import RunSettings
+    from semmap_pp.studies.stability import SeedPlan, Stability
 
     seeds = list(dict.fromkeys(args.seeds))
     if len(seeds) < 2:
@@ -71,7 +70,7 @@ def _run(args) -> int:
                                           for seed in seeds], workers=args.jobs)
     if done is None:
         return 130
-    plans = [Plan.from_semantic(seed, r.semantic, seconds) for seed, (r, seconds) in zip(seeds, done)]
+    plans = [SeedPlan.from_semantic(seed, r.semantic, seconds) for seed, (r, seconds) in zip(seeds, done)]
     semantic = [r.semantic for r, _ in done]
     result = Stability.of(plans)
     table = result.table()

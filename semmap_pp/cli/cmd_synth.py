@@ -15,8 +15,8 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
-from semmap_pp.errors import OutputError
 from semmap_pp.cli.argtypes import finite, integer, non_negative_int
+from semmap_pp.errors import OutputError
 from semmap_pp.synth import generate_floor, write_floor
 from semmap_pp.synth.floor import MAX_UNITS
 

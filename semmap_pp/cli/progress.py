@@ -1,7 +1,7 @@
 """Live progress of ``semmap map`` on stderr: a ``rich`` table on a terminal, plain lines otherwise.
 
-Both read the per-draw records of :func:`semmap_pp.step.draw_info` (phase, chain, draw, log
-posterior, units, CPR, temperature) that :func:`semmap_pp.sampling.sample_worlds` delivers in the
+Both read the per-draw records of :func:`semmap_pp.sampler.step.draw_info` (phase, chain, draw, log
+posterior, units, CPR, temperature) that :func:`semmap_pp.sampler.sampling.sample_worlds` delivers in the
 main process. PyMC's own progress bar stays off.
 
 Plain mode (stderr is not a terminal, e.g. a log file or the tests) prints one line at the first

@@ -40,13 +40,13 @@ def run_each(command: str, inputs, jobs, workers: int = 1) -> list | None:
     None when Ctrl-C stopped them (the caller then writes nothing and exits 130).
 
     The jobs share one map and model, so chain 1's data-driven start world, which depends on
-    neither the seed nor the rules (:func:`semmap_pp.pipeline.data_start_world`), is built once
+    neither the seed nor the rules (:func:`semmap_pp.run.pipeline.data_start_world`), is built once
     and handed to every run (``base_start``): the same runs, built once. With ``workers`` > 1
     the runs go ``workers`` at a time, each in a process of its own (:func:`_run_parallel`);
     the results are the same as in a row."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.pipeline import run_map
-    from semmap_pp.step import StopFlag
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.sampler.step import StopFlag
 
     for note in inputs.notes:
         log(f"note: {note}")
@@ -94,7 +94,7 @@ def _ignore_sigint() -> None:
 
 def _run_one(title: str, inputs, settings, base):
     """One run of :func:`_run_parallel`, in a worker process; its log lines carry ``title``."""
-    from semmap_pp.pipeline import run_map
+    from semmap_pp.run.pipeline import run_map
 
     t0 = time.perf_counter()
     run = run_map(inputs, settings, log=lambda msg: log(f"[{title}] {msg}"), base_start=base)
@@ -117,7 +117,7 @@ def _run_parallel(command: str, inputs, jobs, workers: int) -> list | None:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from semmap_pp.pipeline import data_start_world
+    from semmap_pp.run.pipeline import data_start_world
 
     log(f"--- {len(jobs)} runs, {workers} at a time (--jobs), each in a process of its own ---")
     pool = None

@@ -5,13 +5,13 @@ for the outputs.
 Examples
 --------
 >>> import numpy as np
->>> from semmap_pp import world as W
+>>> from semmap_pp import world as wm
 >>> from semmap_pp.model import load_model
->>> from semmap_pp.frame import build_frame_from_classes
+>>> from semmap_pp.lattice.frame import build_frame_from_classes
 >>> cls = np.full((40, 80), 2, np.uint8); cls[2:38, 2:78] = 0   # free inside outer walls
 >>> cls[:, 38:42] = 2; cls[10:26, 38:42] = 0                    # a wall with a door
 >>> frame = build_frame_from_classes(cls, 0.05, load_model(), theta=0.0)
->>> w = W.add(W.add(W.empty(4), 0, (0, 0, 40, 40)), 1, (0, 40, 40, 80))
+>>> w = wm.add(wm.add(wm.empty(4), 0, (0, 0, 40, 40)), 1, (0, 40, 40, 80))
 >>> d = derive_world(frame, w)
 >>> d.adjacency.tolist(), [(x.p, x.q, x.box) for x in d.doors], d.exterior
 ([[False, True], [True, False]], [(0, 1, (10, 38, 26, 42))], [])
@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from semmap_pp import world as W
+from semmap_pp import world as wm
 from semmap_pp.derive.adjacency import adjacency_matrix
 from semmap_pp.derive.doors import Door, find_gap_passages, find_openings
 from semmap_pp.derive.exterior import find_exterior
@@ -64,11 +64,11 @@ class Derived(NamedTuple):
     gap_passages: list = []
 
 
-def derive_world(frame, world: W.World) -> Derived:
+def derive_world(frame, world: wm.World) -> Derived:
     """Cell states, doors, objects, adjacency, unexplored areas and exterior units of ``world`` on
     ``frame``."""
     c = frame.cells
-    slots = W.active_slots(world)
+    slots = wm.active_slots(world)
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
     doors, passages = find_openings(frame.door_classes, rects, adj, c, slots)

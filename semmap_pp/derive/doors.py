@@ -1,10 +1,10 @@
-"""Doors: runs of free cells on the wall two adjacent units share (paper Sec. III-B, DESIGN.md).
+"""Doors: runs of free cells on the wall two adjacent units share (paper Sec. III-B, docs/model.md).
 
 For two units ``p`` and ``q`` the *connecting wall* is the strip between their facing wall bands:
 when they sit side by side along the columns (their column gap exceeds their row gap) it is the
 columns from the inner edge of the left unit's right band to the inner edge of the right unit's
 left band, over the rows both interiors share; likewise with rows and columns swapped. Doors are
-looked for on the map with its *specks* made free (:func:`doorway_classes`, kept by the frame as
+looked for on the map with its *specks* made free (:func:`semmap_pp.lattice.frame.doorway_classes`, kept by the frame as
 ``Frame.door_classes``): clusters of a few non-free cells, such as SLAM noise or a chair leg with
 the unseen cell behind it, which would otherwise cut a door into two gaps too narrow to count (a
 wall, a door jamb or a closed leaf is a long line of cells). A line of the strip across the wall
@@ -13,10 +13,10 @@ lines whose width lies in ``[door_min, door_max]`` cells: a longer run is an ope
 two units are one space), a shorter one a gap in a noisy wall. A run that reaches within ``wall``
 cells of both ends of the strip has no jamb on the shared wall — the whole boundary the two units
 share is open, as where a corridor ends in a hall — and is an open passage too, whatever its width
-(docs/quality.md, session 6). A jamb is a wall the map shows: lines closed by unknown cells alone
+(docs/model.md). A jamb is a wall the map shows: lines closed by unknown cells alone
 (no occupied cell: the unseen margin along a wall, where a corridor narrows) count as reached, so
 a corridor piece meeting the next through its whole seen width is joined by a passage
-(docs/quality.md, What changed 40). Passages are not doors, but their cells are open: the
+(CHANGELOG.md, quality change 40). Passages are not doors, but their cells are open: the
 world's cell states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
 
 Examples
@@ -79,31 +79,6 @@ def connecting_wall(rp, rq, wall: int):
     return box, vertical
 
 
-def doorway_classes(classes: np.ndarray, speck_cells: int) -> np.ndarray:
-    """``classes`` with every *speck* made FREE: a non-free cell whose 8-connected component of
-    non-free cells has at most ``speck_cells`` cells (a chair leg and the unseen cell behind it;
-    a wall, a jamb or a closed leaf is a longer line of cells). Doors are looked for on these.
-
-    >>> m = np.array([[0, 0, 0, 0, 0], [0, 2, 0, 0, 2], [0, 1, 0, 0, 2], [0, 0, 0, 0, 2]], np.uint8)
-    >>> doorway_classes(m, 2).tolist()
-    [[0, 0, 0, 0, 0], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2]]
-    >>> doorway_classes(m, 1).tolist() == m.tolist()
-    True
-    """
-    from scipy import ndimage
-
-    blocked = classes != FREE
-    labels, n = ndimage.label(blocked, structure=np.ones((3, 3), bool))
-    if n == 0:
-        return classes
-    size = np.bincount(labels.ravel(), minlength=n + 1)
-    small = size <= speck_cells
-    small[0] = False
-    out = classes.copy()
-    out[small[labels]] = FREE
-    return out
-
-
 def open_runs(line_open: np.ndarray) -> list[tuple[int, int]]:
     """Maximal runs ``[start, stop)`` of True in a 1-D boolean array.
 
@@ -143,7 +118,7 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
     ----------
     classes : (H', W') uint8
         Lattice input classes with their specks made free (``Frame.door_classes``,
-        :func:`doorway_classes`).
+        :func:`semmap_pp.lattice.frame.doorway_classes`).
     rp, rq : (r0, c0, r1, c1)
     cells : CellParams
         Wall thickness and door width limits in cells.

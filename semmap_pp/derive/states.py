@@ -1,6 +1,6 @@
 """World cell states WALL / FREE / OBJECT / UNKNOWN on the lattice, and the objects of each unit.
 
-Output definition (DESIGN.md, the paper): a cell outside every unit is UNKNOWN; a cell in some
+Output definition (the paper; docs/outputs.md): a cell outside every unit is UNKNOWN; a cell in some
 unit's wall band is WALL, unless it is a door or passage cell (FREE: where the wall two units
 share is open); an interior cell is OBJECT when the
 input is unknown (the paper: "unknown cells of the input map that are located within a unit are
@@ -8,7 +8,7 @@ considered as object cells") or when it is occupied and its 8-connected componen
 cells *within that unit's interior* spans at most ``object_max_extent`` cells along both axes;
 otherwise FREE. A cell inside several interiors is OBJECT if any of them makes it one.
 
-The likelihood (:mod:`semmap_pp.likelihood`) uses a per-map approximation of the occupied-cell
+The likelihood (:mod:`semmap_pp.target.likelihood`) uses a per-map approximation of the occupied-cell
 rule (wall-like = on a straight run longer than ``object_max_extent``); :func:`cell_states` with
 ``objects="lines"`` reproduces it, and docs/model.md compares the two.
 
@@ -142,7 +142,7 @@ def cell_states(classes: np.ndarray, rects: np.ndarray, wall: int, object_max_ex
         "components": the per-unit connected-component rule (the output definition);
         "lines": the likelihood's rule, occupied cells are objects unless ``wall_like``.
     wall_like : (H', W') bool
-        Required for ``objects="lines"`` (:func:`semmap_pp.likelihood.wall_like`).
+        Required for ``objects="lines"`` (:func:`semmap_pp.target.likelihood.wall_like`).
     """
     shape = classes.shape
     band = np.zeros(shape, np.int32)     # number of units with the cell in their wall band

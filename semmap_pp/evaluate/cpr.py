@@ -2,7 +2,7 @@
 
 A cell of the ROI is *correctly explained* when the pair (input class, world state) is one of
 (FREE, FREE), (OCCUPIED, WALL), (OCCUPIED, OBJECT), (UNKNOWN, OBJECT), (UNKNOWN, UNKNOWN)
-(docs/DESIGN.md). CPR = correctly explained ROI cells / ROI cells.
+(docs/evaluation.md, "Cell prediction rate"). CPR = correctly explained ROI cells / ROI cells.
 
 The paper's ROI was drawn by hand. Ours is a mask file (:func:`load_roi`) or, by default, the
 known part of the map closed morphologically and with its holes filled (:func:`default_roi`).
@@ -22,7 +22,7 @@ from semmap_pp.cells import (FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOW
 from semmap_pp.errors import MapError
 from semmap_pp.evaluate.io import read_image
 
-# The (input class, world state) pairs that count as correctly explained (docs/DESIGN.md).
+# The (input class, world state) pairs that count as correctly explained (docs/evaluation.md).
 CORRECT_PAIRS = ((FREE, W_FREE), (OCCUPIED, W_WALL), (OCCUPIED, W_OBJECT),
                  (UNKNOWN, W_OBJECT), (UNKNOWN, W_UNKNOWN))
 

@@ -8,7 +8,7 @@ from semmap_pp.grid.images import MAX_CELLS
 from semmap_pp.grid.load import load_map
 from semmap_pp.grid.meta import (DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH,
                                  DEFAULT_RESOLUTION)
-from semmap_pp.grid.model import OccupancyGrid
+from semmap_pp.grid.occupancy import OccupancyGrid
 from semmap_pp.grid.pixels import classify, occupancy_from_grey, ros_values
 from semmap_pp.grid.write import classes_to_image, save_grid, write_map
 

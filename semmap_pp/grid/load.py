@@ -7,7 +7,7 @@ from pathlib import Path
 
 from semmap_pp.errors import MapError
 from semmap_pp.grid import images, meta, rosbag
-from semmap_pp.grid.model import OccupancyGrid
+from semmap_pp.grid.occupancy import OccupancyGrid
 from semmap_pp.grid.pixels import classify_grey
 
 YAML_SUFFIXES = (".yaml", ".yml")

@@ -21,10 +21,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rosbags.rosbag1 import Reader as Reader1
+from rosbags.rosbag2 import Reader as Reader2
+from rosbags.typesys import Stores, get_typestore
 
 from semmap_pp.errors import MapError
 from semmap_pp.grid import meta
-from semmap_pp.grid.model import OccupancyGrid
+from semmap_pp.grid.occupancy import OccupancyGrid
 from semmap_pp.grid.pixels import classify
 
 #: The message type of a map (rosbags' name for ROS 1's ``nav_msgs/OccupancyGrid`` too).
@@ -108,8 +111,6 @@ class GridMessage:
 
 def _open(path: Path):
     """An unopened rosbags reader of ``path`` and whether it is ROS 1."""
-    from rosbags.rosbag1 import Reader as Reader1
-    from rosbags.rosbag2 import Reader as Reader2
 
     if path.is_dir():
         metadata = path / METADATA
@@ -201,7 +202,6 @@ def read_grid_message(path: str | Path, *, topic: str | None = None, at: float |
                 raise MapError(path, f"topic {name} has no message at or before --at {at} s (its first "
                                      f"is logged {(first - start) / 1e9:.3f} s after the bag's start)")
             log_ns, raw = best
-            from rosbags.typesys import Stores, get_typestore
             if ros1:
                 msg = get_typestore(Stores.ROS1_NOETIC).deserialize_ros1(raw, GRID_TYPE)
             else:

@@ -30,6 +30,7 @@ variables; :mod:`semmap_pp.knowledge.size`). Every problem is a :class:`~semmap_
 from __future__ import annotations
 
 import hashlib
+import itertools
 import math
 import os
 import re
@@ -244,7 +245,6 @@ def expand_facts(statements: list, path: str, budget: list[int] | None = None,
     >>> [str(st) for st in sts[1:]]
     ['unit(1).', 'unit(2).', 'unit(3).', 'adj(1,2).', 'adj(1,3).', 'p(X) :- unit(X).']
     """
-    import itertools
 
     budget = [MAX_INTERVAL_FACTS] if budget is None else budget
     plans = []                  # per statement: None (kept as it is) or its intervals' ranges
@@ -367,7 +367,7 @@ def check_head_terms(symbol, body, path) -> None:
     grounding endless (e.g. ``chain(X+1) :- chain(X).``), and no head variable that clingo
     solves from an arithmetic body term, which computes new values just the same
     (``adj(Q,P) :- adj(P,Q-5).`` derives ``adj(7,1)`` from ``adj(1,2)``, then ``adj(6,7)``,
-    without end; found by ``bench/fuzz.py`` in session 30).
+    without end; found by ``bench/fuzz.py``).
     """
     bound = set()
     for lit in body:

@@ -10,7 +10,7 @@ the network (the MCMC target built on them stays a fixed function of the world).
 
 On a tree the fixed point is exact; on loopy graphs it is the Bethe approximation. For the
 weak, symmetric couplings of ``rules/table3.lp`` the error against enumeration is measured in
-``tests/test_knowledge_lbp.py`` and docs/rules.md.
+``tests/unit/test_knowledge_lbp.py`` and docs/rules.md.
 """
 
 from __future__ import annotations
@@ -207,7 +207,7 @@ def cluster(card, potentials, max_states):
     Deterministic: passes over the factors in a fixed order until one merges nothing; each
     factor tries its partners of the pass's start in index order. A factor is skipped in a pass
     when neither its scope nor the scope of any factor sharing a variable with it changed since
-    it was last tried: its pairs would be refused again (``tests/test_knowledge_lbp.py`` checks
+    it was last tried: its pairs would be refused again (``tests/unit/test_knowledge_lbp.py`` checks
     the result against the plain passes)."""
     facs = {k: (tuple(s), np.asarray(t, dtype=np.float64)) for k, (s, t) in
             enumerate(potentials) if len(s) >= 2}

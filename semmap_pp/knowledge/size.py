@@ -49,7 +49,7 @@ MAX_GROUND_STATEMENTS = 2_000_000
 
 #: clingo's ground statements per body instance or aggregate element, at most: a weak
 #: constraint's body becomes an auxiliary rule and a cost entry, an aggregate a weight rule and
-#: a rule per element (tests/test_knowledge_size.py compares the bound with clingo's output).
+#: a rule per element (tests/integration/test_knowledge_size.py compares the bound with clingo's output).
 STATEMENTS_PER_INSTANCE = 2
 
 #: The floor every rule file must be able to ground within the limit (checked when it is

@@ -16,6 +16,7 @@ import matplotlib
 
 matplotlib.use("Agg")  # headless; also set before any pyplot import elsewhere in the process
 
+import networkx as nx  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
@@ -161,7 +162,6 @@ def graph_png(sm, graph, *, max_object_nodes: int = 40) -> bytes:
     Objects are drawn one node each when there are at most ``max_object_nodes`` of them; otherwise
     one node per unit holding its object count (a map with hundreds of objects would bury the graph).
     """
-    import networkx as nx
 
     box = crop_box(sm)
     fig, (ax,) = _axes(box, extra_h=0.4)
@@ -229,9 +229,9 @@ def outline_counts(worlds) -> tuple[np.ndarray, np.ndarray]:
     """The distinct unit rectangles of ``worlds`` (n, 4), in order of first appearance, and in how
     many of the worlds each appears (n,).
 
-    >>> from semmap_pp import world as W
-    >>> a = W.add(W.add(W.empty(3), 0, (0, 0, 9, 9)), 1, (0, 8, 9, 20))
-    >>> b = W.replace(a, 1, (0, 8, 9, 22))
+    >>> from semmap_pp import world as wm
+    >>> a = wm.add(wm.add(wm.empty(3), 0, (0, 0, 9, 9)), 1, (0, 8, 9, 20))
+    >>> b = wm.replace(a, 1, (0, 8, 9, 22))
     >>> rects, n = outline_counts([a, a, b])
     >>> rects.tolist(), n.tolist()
     ([[0, 0, 9, 9], [0, 8, 9, 20], [0, 8, 9, 22]], [3, 2, 1])
@@ -358,11 +358,35 @@ def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
 
 #: stability.png: a unit found with its type in every other seed's W*, in some or with another
 #: type, in none
+def _number(v, spec: str) -> str:
+    return "nan" if isinstance(v, float) and not math.isfinite(v) else format(v, spec)
+
+
+def compare_png(runs: list, worlds: list, rows: list) -> bytes:
+    """compare.png: the sampled worlds of each run drawn thin on the map, side by side (paper Fig. 7);
+    ``rows`` are the runs' :class:`~semmap_pp.studies.compare.RuleSetSummary`."""
+    fig, axes, (y0, y1, x0, x1) = side_by_side([r.semantic for r in runs], extra_h=0.6)
+    for ax, run, ws, row in zip(axes, runs, worlds, rows):
+        ax.imshow(classified_rgb(run.semantic.grid.classes, light=True)[y0:y1, x0:x1],
+                  extent=(x0, x1, y1, y0), interpolation="nearest")
+        ax.add_collection(world_lines(run.semantic.frame, ws))
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y1, y0)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"{row.name}: {row.n_worlds} worlds, walls disagree on "
+                     f"{_number(row.wall_disagreement_m2, '.2f')} m², defects {_number(row.defects_mean, '.2f')}",
+                     fontsize=9)
+    fig.subplots_adjust(0.01, 0.01, 0.99, 1 - 0.5 / fig.get_figheight(), wspace=0.03)
+    return png(fig)
+
+
 AGREEMENT_COLOURS = {"every seed": "#1a9850", "some seeds": "#f39c12", "no other seed": "#d73027"}
 
 
 def agreement_class(u) -> str:
-    """The :data:`AGREEMENT_COLOURS` key of a :class:`~semmap_pp.stability.UnitAgreement`."""
+    """The :data:`AGREEMENT_COLOURS` key of a :class:`~semmap_pp.studies.stability.UnitAgreement`."""
     if u.agreed:
         return "every seed"
     return "some seeds" if u.found else "no other seed"
@@ -371,7 +395,7 @@ def agreement_class(u) -> str:
 def stability_png(sm, agreement, seeds) -> bytes:
     """stability.png: the reference W* (``sm``) on the light classified map, each unit filled in
     the colour of how many other seeds' W*s hold it (:func:`agreement_class`), with its id and
-    ``found/others``; ``agreement`` are :class:`~semmap_pp.stability.UnitAgreement` rows."""
+    ``found/others``; ``agreement`` are :class:`~semmap_pp.studies.stability.UnitAgreement` rows."""
     box = crop_box(sm)
     fig, (ax,) = _axes(box, extra_h=0.7)
     _show(ax, classified_rgb(sm.grid.classes, light=True), box)
@@ -393,7 +417,7 @@ def stability_png(sm, agreement, seeds) -> bytes:
 
 __all__ = ["png", "classified_rgb", "overlay_rgb", "crop_box", "overlay_png",
            "graph_png", "world_outlines", "outline_counts", "world_alpha", "world_lines", "independent_text", "posterior_png", "posterior_cells_png", "roi_png",
-           "regions_preview_png", "AGREEMENT_COLOURS", "agreement_class", "stability_png"]
+           "regions_preview_png", "compare_png", "AGREEMENT_COLOURS", "agreement_class", "stability_png"]
 
 
 #: ``semmap diff --png``: the colour of each kind of change.
@@ -406,7 +430,7 @@ def diff_png(diff) -> bytes:
     units are drawn solid, coloured by what happened to them (unchanged grey, moved orange, retyped
     blue, added green), OLD's moved and removed units dashed (removed in red), and the doors and
     passages that went (red x) or came (green +); labels are NEW's, OLD's for a removed unit
-    (:class:`semmap_pp.world_diff.WorldDiff`)."""
+    (:class:`semmap_pp.plans.diff.WorldDiff`)."""
     def ring(u):
         v = np.asarray(u.corners, float)
         return np.vstack([v, v[:1]])

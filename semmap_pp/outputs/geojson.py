@@ -31,7 +31,8 @@ import numpy as np
 
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
-from semmap_pp.outputs.world_json import world_dict
+from semmap_pp.semantic.regions import unit_regions
+from semmap_pp.semantic.world_json import world_dict
 
 FORMAT = "semmap_pp.geojson/1"
 
@@ -71,13 +72,12 @@ def geojson_dict(sm, doc: dict | None = None, regions: dict[int, int] | None = N
     ----------
     sm : SemanticMap
     doc : dict, optional
-        Its world.json content (:func:`~semmap_pp.outputs.world_json.world_dict`), so ids agree.
+        Its world.json content (:func:`~semmap_pp.semantic.world_json.world_dict`), so ids agree.
     regions : dict, optional
-        Unit id -> region id (:func:`~semmap_pp.outputs.regions.unit_regions`).
+        Unit id -> region id (:func:`~semmap_pp.semantic.regions.unit_regions`).
     """
     doc = world_dict(sm) if doc is None else doc
     if regions is None:
-        from semmap_pp.outputs.regions import unit_regions
         regions = unit_regions(sm)
     features = []
     for u in doc["units"]:

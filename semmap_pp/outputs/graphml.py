@@ -13,7 +13,7 @@ Nodes (``kind`` says which; ``id`` is the id of world.json):
 Edges (``relation``): ``door`` between units connected by one or more doors (``doors``: their ids,
 comma-separated; ``n_doors``; ``width_m`` of the widest), ``adjacent`` between units adjacent
 without a door (on both, ``passage``: True when the wall between them is open, see
-:mod:`semmap_pp.outputs.regions`), ``passage`` between units that do not touch but face each other
+:mod:`semmap_pp.semantic.regions`), ``passage`` between units that do not touch but face each other
 across a strip of free floor (world.json's passages; ``passage`` True), ``contains`` from a unit to each of its objects, and ``next_to``
 from an unexplored area to every unit whose rectangle its bounding box touches (grown by the
 adjacency dilation) and from an exterior unit to every unit it is adjacent to. GraphML holds scalars only, so id lists are comma-separated strings.
@@ -30,7 +30,8 @@ import numpy as np
 
 from semmap_pp import atomic
 from semmap_pp.cells import TYPE_LETTER, UNIT_TYPES
-from semmap_pp.outputs.world_json import world_dict
+from semmap_pp.semantic.regions import join_regions, passage_pairs, unit_pairs
+from semmap_pp.semantic.world_json import world_dict
 
 
 def _ids(values) -> str:
@@ -73,9 +74,8 @@ def world_graph(sm, doc: dict | None = None, regions: dict[int, int] | None = No
         Its world.json content, so ids agree (computed when omitted).
     regions : dict, optional
         Unit id -> region id; ``passages`` the unit-id pairs with an open wall
-        (:mod:`semmap_pp.outputs.regions`; computed when omitted).
+        (:mod:`semmap_pp.semantic.regions`; computed when omitted).
     """
-    from semmap_pp.outputs.regions import join_regions, passage_pairs, unit_pairs
 
     doc = world_dict(sm) if doc is None else doc
     passages = set(map(tuple, passage_pairs(sm) if passages is None else passages))

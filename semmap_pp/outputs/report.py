@@ -16,6 +16,7 @@ from pathlib import Path
 
 from semmap_pp import __version__, atomic
 from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.sampler.diagnostics import chains_phrase, format_rhat
 
 #: What each output file holds (name -> one line), in the order the report lists them.
 FILES = {
@@ -128,7 +129,6 @@ def units_table(doc: dict, regions: dict[int, int]) -> str:
 
 
 def convergence_table(report) -> str:
-    from semmap_pp.diagnostics import format_rhat
 
     rows, classes = [], []
     for q in report.quantities:
@@ -143,7 +143,7 @@ def convergence_table(report) -> str:
 
 
 def mode_section(rep) -> str:
-    """The diagnostics within the best chain's mode (:class:`semmap_pp.diagnostics.ModeReport`), when
+    """The diagnostics within the best chain's mode (:class:`semmap_pp.sampler.diagnostics.ModeReport`), when
     they say more than the main table; "" otherwise."""
     if not rep.shows_mode():
         return ""
@@ -154,15 +154,14 @@ def mode_section(rep) -> str:
 
 
 def spread_text(rep) -> str:
-    """Which chains' draws the spread figures hold (:func:`semmap_pp.pipeline.spread_chains`).
+    """Which chains' draws the spread figures hold (:func:`semmap_pp.run.pipeline.spread_chains`).
 
     >>> import numpy as np
-    >>> from semmap_pp.diagnostics import convergence
+    >>> from semmap_pp.sampler.diagnostics import convergence
     >>> lp = np.tile(np.arange(50.0) % 5, (3, 1)); lp[1] -= 100.0
     >>> spread_text(convergence({"log_posterior": lp}, rhat_max=1.01, ess_min=10))
     "Drawn from chains 1, 3, the best chain's mode; chain 2 left out: its mean log posterior lies far below (Convergence)."
     """
-    from semmap_pp.diagnostics import chains_phrase
 
     mode = rep.mode_chains()
     left = [c for c in range(1, rep.n_chains + 1) if c not in mode]
@@ -178,7 +177,7 @@ def spread_text(rep) -> str:
 
 def spread_section(run) -> str:
     """Where the spread figures come from: the sample around W* with its own R-hat and ESS
-    (:class:`semmap_pp.pipeline.SpreadSample`), or the search's draws."""
+    (:class:`semmap_pp.run.pipeline.SpreadSample`), or the search's draws."""
     sp = getattr(run, "spread", None)
     if sp is None:
         return f"<p>{e(spread_text(run.report))}</p>"

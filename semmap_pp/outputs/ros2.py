@@ -34,9 +34,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
 
+from semmap_pp import atomic
 from semmap_pp.cells import TYPE_LETTER, UNIT_TYPES
+from semmap_pp.errors import MapError
 from semmap_pp.errors import OutputError, SemmapError
+from semmap_pp.grid.images import decode_image
+from semmap_pp.outputs.types_layer import types_image
+from semmap_pp.plans.places import places_from_doc
+from semmap_pp.plans.world_file import finite, read_world_doc
 
 #: The folder in a run's output.
 BAG_NAME = "rosbag2"
@@ -71,7 +80,7 @@ class BagPlan:
 
 
 def _pixel_to_metres(doc_map: dict, px: np.ndarray) -> np.ndarray:
-    """Map-frame metres of continuous pixel coordinates ``[x, y]`` (as :mod:`semmap_pp.frame`)."""
+    """Map-frame metres of continuous pixel coordinates ``[x, y]`` (as :mod:`semmap_pp.lattice.frame`)."""
     res, (ox, oy, yaw), h = doc_map["resolution"], doc_map["origin"], doc_map["height"]
     u, v = px[:, 0] * res, (h - px[:, 1]) * res
     c, s = math.cos(yaw), math.sin(yaw)
@@ -79,7 +88,6 @@ def _pixel_to_metres(doc_map: dict, px: np.ndarray) -> np.ndarray:
 
 
 def _finite_list(value, n: int) -> list[float] | None:
-    from semmap_pp.world_file import finite
 
     vals = [finite(v) for v in value] if isinstance(value, list) and len(value) == n else None
     return None if vals is None or None in vals else vals
@@ -93,7 +101,6 @@ def plan_from_doc(doc: dict, codes: np.ndarray, *, path=None, frame_id: str | No
     ``"map"`` and 0 when it has none). A unit, door, adjacent pair or map field that is not as
     semmap map writes it is one :class:`~semmap_pp.errors.SemmapError` naming ``path``.
     """
-    from semmap_pp.places import places_from_doc
 
     m = doc.get("map")
     if not isinstance(m, dict):
@@ -152,7 +159,6 @@ class _Messages:
     """rosbags message builders of one typestore (every field given: rosbags has no defaults)."""
 
     def __init__(self, plan: BagPlan):
-        from rosbags.typesys import Stores, get_typestore
 
         self.store = get_typestore(Stores.ROS2_JAZZY)
         self.t = self.store.types
@@ -236,7 +242,6 @@ class _Messages:
 
 
 def _qos():
-    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
     zero = QosTime(0, 0)
     return [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, zero,
@@ -245,9 +250,7 @@ def _qos():
 
 def write_bag(path: str | os.PathLike, plan: BagPlan) -> Path:
     """Write the bag of ``plan`` as the folder ``path`` (replacing one there, whole); return it."""
-    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
-    from semmap_pp import atomic
 
     path = Path(path)
     msgs = _Messages(plan)
@@ -270,7 +273,6 @@ def write_bag(path: str | os.PathLike, plan: BagPlan) -> Path:
 def write_run_bag(out: str | os.PathLike, sm, doc: dict) -> Path:
     """``out/rosbag2`` of a semantic map ``sm`` and its world.json content ``doc`` (frame id and
     stamp: the input map's)."""
-    from semmap_pp.outputs.types_layer import types_image
 
     plan = plan_from_doc(doc, types_image(sm, doc), frame_id=sm.grid.frame_id, stamp_ns=sm.grid.stamp_ns)
     return write_bag(Path(out) / BAG_NAME, plan)
@@ -278,8 +280,6 @@ def write_run_bag(out: str | os.PathLike, sm, doc: dict) -> Path:
 
 def read_types_layer(run_dir: Path) -> np.ndarray:
     """types.pgm of a run's folder (its codes, image rows), or one error naming the file."""
-    from semmap_pp.errors import MapError
-    from semmap_pp.grid.images import decode_image
 
     path = run_dir / "types.pgm"
     if not path.exists():
@@ -296,7 +296,6 @@ def read_types_layer(run_dir: Path) -> np.ndarray:
 def export_run(run_dir: str | os.PathLike) -> Path:
     """Write ``run_dir/rosbag2`` again from the run's world.json and types.pgm (``semmap export
     ros2``); return the folder."""
-    from semmap_pp.world_file import read_world_doc
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():

@@ -37,7 +37,7 @@ DOOR_CODE = 5
 def types_image(sm, doc: dict) -> np.ndarray:
     """The layer's codes (uint8, the input image's shape) from the semantic map ``sm`` and its
     world.json content ``doc``: each unit's pixels of labels.png get its type's code, then the
-    door cells (:meth:`~semmap_pp.outputs.semantic.SemanticMap.door_image`, the doors
+    door cells (:meth:`~semmap_pp.semantic.semantic_map.SemanticMap.door_image`, the doors
     overlay.png draws) get :data:`DOOR_CODE`.
 
     Examples

@@ -1,4 +1,4 @@
-"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.pipeline.MapRun`.
+"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.run.pipeline.MapRun`.
 
 Each file is written atomically (:mod:`semmap_pp.atomic`): a reader, or a crash, sees the previous
 complete file or the new one. world.json, labels.png, trace.nc and diagnostics.txt come first, so
@@ -12,6 +12,7 @@ import glob
 import os
 import shutil
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,12 +21,13 @@ from semmap_pp.errors import printable
 from semmap_pp.outputs import figures as fig
 from semmap_pp.outputs.geojson import geojson_dict, write_geojson
 from semmap_pp.outputs.graphml import world_graph, write_graphml
-from semmap_pp.outputs.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
-from semmap_pp.outputs.spread import cell_probabilities, typed_worlds
 from semmap_pp.outputs.types_layer import write_types_layer
-from semmap_pp.outputs.world_json import world_dict, write_labels_png, write_world_json
+from semmap_pp.sampler.diagnostics import to_datatree, write_trace
+from semmap_pp.sampler.spread import cell_probabilities
+from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
+from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
 
 #: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
 N_SAMPLED_WORLDS = 1000
@@ -45,7 +47,6 @@ def diagnostics_text(run, rules_path) -> str:
 
 def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
     """world.json, labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
-    from semmap_pp.diagnostics import to_datatree, write_trace
 
     inputs, settings, sm = run.inputs, run.settings, run.semantic
     doc = world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
@@ -70,25 +71,13 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
     return written, doc
 
 
-def posterior_worlds(run, n: int) -> list:
-    """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
-    draws: :func:`semmap_pp.pipeline.figure_source`), from its chains in the best chain's mode
-    (:func:`semmap_pp.pipeline.spread_chains`) after the draws in which they were still settling
-    (:func:`semmap_pp.pipeline.spread_first_draw`), typed as the sampler typed them."""
-    from semmap_pp.pipeline import figure_source, run_target, sampled_worlds, spread_chains, spread_first_draw
-
-    src = figure_source(run)
-    return typed_worlds(run_target(run.inputs),
-                        sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))
-
-
 def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     """Delete the temporary files an earlier, killed run left in ``out_dir``; return them.
 
     :mod:`semmap_pp.atomic` writes ``NAME`` through ``.NAME.XXXXXXXX.tmp`` and renames it; a run
     killed (SIGKILL) while writing leaves that file behind. Only temporaries of the output files
     (:data:`semmap_pp.outputs.report.FILES`) are removed; any other file is left alone. Call it
-    only while holding ``out_dir``'s lock (:func:`semmap_pp.outdir.lock_out_dir`): a run that
+    only while holding ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`): a run that
     writes into the folder holds it, so no temporary removed here is a live run's.
 
     >>> import tempfile
@@ -134,29 +123,22 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
     return written, pngs, regions, region_img
 
 
-def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
-              n_worlds: int = N_SAMPLED_WORLDS, other_files: tuple[str, ...] = ()) -> list[Path]:
-    """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written.
+class WstarFiles(NamedTuple):
+    """What :func:`write_wstar` wrote and :func:`write_posterior` needs: the paths, the world.json
+    document, the figures' PNG bytes so far, the regions and their image."""
 
-    Parameters
-    ----------
-    out_dir : path
-    run : MapRun
-    rules_name : str
-        The rule file's name (world.json, trace.nc, report).
-    rules_path : path, optional
-        Its path as given (diagnostics.txt); ``rules_name`` when omitted.
-    n_worlds : int
-        Sampled worlds in posterior.png and posterior_cells.png.
-    other_files : tuple of str
-        Names of files the caller writes into ``out_dir`` itself (``semmap map``: ``resume.npz``,
-        before this call); the report lists them with the others.
+    written: list
+    doc: dict
+    pngs: dict
+    regions: dict
+    region_img: np.ndarray
 
-    Every file goes through :func:`semmap_pp.atomic.write_bytes`: a full disk stops the writing
-    with a :class:`~semmap_pp.errors.WriteError` naming the file, and each file written before it
-    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.outdir.lock_out_dir`):
-    the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
-    """
+
+def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None) -> WstarFiles:
+    """The files of W* (world.json, labels.png, trace.nc, spread.nc, diagnostics.txt and the plan
+    files of :func:`write_plan`) into ``out_dir``, created if missing. The first half of
+    :func:`write_all`: a caller that makes the sampled worlds only now (``semmap map``) has these
+    complete before it rebuilds the run's target for them."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
@@ -166,12 +148,20 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
 
     plan, pngs, regions, region_img = write_plan(out, sm, doc)
     written += plan
+    return WstarFiles(written, doc, pngs, regions, region_img)
 
-    from semmap_pp.pipeline import figure_source
 
-    worlds = posterior_worlds(run, n_worlds)
+def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
+                    other_files: tuple[str, ...] = ()) -> list[Path]:
+    """posterior.png, posterior_cells.png and report.html, after :func:`write_wstar`; the paths
+    written, those of ``wstar`` first. The second half of :func:`write_all`."""
+    out = Path(out_dir)
+    sm = run.semantic
+    written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
+        wstar.regions, wstar.region_img
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
-    mode = figure_source(run).report.within_mode      # the draws the worlds come from
+    source = run.spread if run.spread is not None else run   # the draws the worlds come from
+    mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
     pngs |= {
         "posterior": fig.posterior_png(sm, worlds, ess),
@@ -192,4 +182,35 @@ def write_all(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=No
     return written
 
 
-__all__ = ["N_SAMPLED_WORLDS", "write_all", "write_core", "write_plan", "diagnostics_text", "posterior_worlds"]
+def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str, rules_path=None,
+              other_files: tuple[str, ...] = ()) -> list[Path]:
+    """Write every output of ``run`` into ``out_dir`` (created if missing); return the paths written:
+    :func:`write_wstar`, then :func:`write_posterior`.
+
+    Parameters
+    ----------
+    out_dir : path
+    run : MapRun
+    worlds : list of World
+        The typed sampled worlds of posterior.png and posterior_cells.png, from the run's sample
+        around W* when it has one (:func:`semmap_pp.run.pipeline.posterior_worlds`, usually
+        :data:`N_SAMPLED_WORLDS` of them): the run hands them over typed, outputs only draw them.
+    rules_name : str
+        The rule file's name (world.json, trace.nc, report).
+    rules_path : path, optional
+        Its path as given (diagnostics.txt); ``rules_name`` when omitted.
+    other_files : tuple of str
+        Names of files the caller writes into ``out_dir`` itself (``semmap map``: ``resume.npz``,
+        before this call); the report lists them with the others.
+
+    Every file goes through :func:`semmap_pp.atomic.write_bytes`: a full disk stops the writing
+    with a :class:`~semmap_pp.errors.WriteError` naming the file, and each file written before it
+    stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`):
+    the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
+    """
+    wstar = write_wstar(out_dir, run, rules_name=rules_name, rules_path=rules_path)
+    return write_posterior(out_dir, run, worlds, wstar, rules_name=rules_name, other_files=other_files)
+
+
+__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core",
+           "write_plan", "diagnostics_text"]

@@ -63,7 +63,7 @@ def _rotation(rng: np.random.Generator, p: SynthParams) -> float:
     return round(float(rng.uniform(0.0, 360.0)), 1)
 
 
-def _plan(rng: np.random.Generator, n_units: int, p: SynthParams, res: float) -> topology.Plan:
+def _plan(rng: np.random.Generator, n_units: int, p: SynthParams, res: float) -> topology.FloorPlan:
     best = None
     for attempt in range(ATTEMPTS):
         kind = layout.choose_layout(rng, p, n_units)

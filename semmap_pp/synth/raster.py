@@ -14,7 +14,7 @@ from scipy import ndimage
 
 from semmap_pp.synth.layout import cells
 from semmap_pp.synth.params import SynthParams
-from semmap_pp.synth.topology import Plan
+from semmap_pp.synth.topology import FloorPlan
 
 
 @dataclass
@@ -46,7 +46,7 @@ def _fill(a: np.ndarray, box, offset, value) -> None:
     a[max(0, y0 - oy):max(0, y1 - oy), max(0, x0 - ox):max(0, x1 - ox)] = value
 
 
-def draw_plan(plan: Plan, p: SynthParams, res: float) -> BuildingRasters:
+def draw_plan(plan: FloorPlan, p: SynthParams, res: float) -> BuildingRasters:
     """Rasterise walls, doors, windows, exits and unit labels of ``plan``."""
     pad = cells(p.wall_outer_max, res) + 4
     x_min, y_min = int(plan.rects[:, 0].min()) - pad, int(plan.rects[:, 1].min()) - pad
@@ -97,13 +97,13 @@ def draw_plan(plan: Plan, p: SynthParams, res: float) -> BuildingRasters:
     return BuildingRasters(solid, glass, labels, inside, offset, keep_out)
 
 
-def _interior(plan: Plan, i: int, offset, inset: int):
+def _interior(plan: FloorPlan, i: int, offset, inset: int):
     x0, y0, x1, y1 = plan.rects[i].tolist()
     ox, oy = offset
     return x0 - ox + inset, y0 - oy + inset, x1 - ox - inset, y1 - oy - inset
 
 
-def furnish(rng: np.random.Generator, plan: Plan, br: BuildingRasters, p: SynthParams,
+def furnish(rng: np.random.Generator, plan: FloorPlan, br: BuildingRasters, p: SynthParams,
             res: float) -> np.ndarray:
     """Furniture blobs, table and chair legs, hall pillars and corridor objects added to ``solid``.
 

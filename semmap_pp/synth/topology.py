@@ -34,7 +34,7 @@ class Door:
 
 
 @dataclass
-class Plan:
+class FloorPlan:
     """A complete floor plan in the building frame (see the module docstring for boundaries)."""
 
     rects: np.ndarray                 # (n, 4) int: x0, y0, x1, y1
@@ -291,7 +291,7 @@ def _explore(rng, n: int, types, doors: list, open_pairs: list, root: int, p: Sy
 
 
 def build_plan(rng: np.random.Generator, draft: Draft, keep: np.ndarray, p: SynthParams,
-               res: float) -> Plan:
+               res: float) -> FloorPlan:
     """Walls, doors, windows, exits and exploration of the kept rectangles of ``draft``."""
     old = [i for i in range(len(draft.rects)) if keep[i]]
     new_of = {o: k for k, o in enumerate(old)}
@@ -327,11 +327,11 @@ def build_plan(rng: np.random.Generator, draft: Draft, keep: np.ndarray, p: Synt
                 exits.append((i, o, c, lo, lo + d.width))
     root = _root(rects.tolist(), types, np.ones(len(rects), dtype=bool))
     explored, entered = _explore(rng, len(rects), types, doors, open_pairs, root, p)
-    return Plan(rects, types, draft.layout, open_pairs, l_pairs, shared, doors, walls, windows,
+    return FloorPlan(rects, types, draft.layout, open_pairs, l_pairs, shared, doors, walls, windows,
                 exits, explored, entered)
 
 
-def rescale_plan(plan: Plan, factor: float) -> Plan:
+def rescale_plan(plan: FloorPlan, factor: float) -> FloorPlan:
     """``plan`` with every length multiplied by ``factor`` and rounded to whole cells.
 
     The generator draws every plan in cells of :data:`semmap_pp.synth.floor.PLAN_RESOLUTION` and
@@ -343,7 +343,7 @@ def rescale_plan(plan: Plan, factor: float) -> Plan:
     Examples
     --------
     >>> d = Door(0, 1, "v", 10, 5.0, 3, False)
-    >>> p = Plan(np.array([[0, 0, 10, 8], [10, 0, 21, 8]]), ["room", "room"], "row", [], [],
+    >>> p = FloorPlan(np.array([[0, 0, 10, 8], [10, 0, 21, 8]]), ["room", "room"], "row", [], [],
     ...          {(0, 1): ("v", 10, 0, 8)}, [d], [("v", 10, 0, 8, 1)], [], [],
     ...          np.ones(2, bool), np.ones(2, bool))
     >>> q = rescale_plan(p, 2.0)

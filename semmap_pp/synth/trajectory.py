@@ -12,7 +12,7 @@ from scipy import ndimage
 
 from semmap_pp.synth.params import SynthParams
 from semmap_pp.synth.raster import BuildingRasters
-from semmap_pp.synth.topology import Plan
+from semmap_pp.synth.topology import FloorPlan
 
 
 def _polyline(points, step: float) -> list:
@@ -26,7 +26,7 @@ def _polyline(points, step: float) -> list:
     return out
 
 
-def _door_point(plan: Plan, d, unit: int, depth: float):
+def _door_point(plan: FloorPlan, d, unit: int, depth: float):
     """A point ``depth`` cells from door ``d``'s centre, on the side of ``unit``."""
     x0, y0, x1, y1 = plan.rects[unit].tolist()
     if d.orient == "v":
@@ -36,7 +36,7 @@ def _door_point(plan: Plan, d, unit: int, depth: float):
     return (d.centre, d.coord + side * depth)
 
 
-def scan_poses(rng: np.random.Generator, plan: Plan, br: BuildingRasters, solid: np.ndarray,
+def scan_poses(rng: np.random.Generator, plan: FloorPlan, br: BuildingRasters, solid: np.ndarray,
                p: SynthParams, res: float) -> np.ndarray:
     """Scan positions ``(N, 2)`` as building-frame ``(x, y)`` in cells (continuous)."""
     step = p.pose_spacing / res

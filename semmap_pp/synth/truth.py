@@ -20,7 +20,7 @@ from PIL import Image
 from semmap_pp import atomic
 from semmap_pp.errors import OutputError
 from semmap_pp.synth.render import Placement
-from semmap_pp.synth.topology import Plan
+from semmap_pp.synth.topology import FloorPlan
 
 DIGITS = 3
 _NUMBER_LIST = re.compile(r"\[\s*(-?[\d.]+(?:,\s*-?[\d.]+)*)\s*\]")  # rounding of every float in truth.json, so the file's bytes are stable
@@ -34,7 +34,7 @@ def _pt(xy) -> list:
     return [_r(xy[0]), _r(xy[1])]
 
 
-def build_truth(plan: Plan, pl: Placement, *, seed: int, resolution: float, width: int, height: int,
+def build_truth(plan: FloorPlan, pl: Placement, *, seed: int, resolution: float, width: int, height: int,
                 laser_range_m: float) -> dict:
     """The ``truth.json`` document of a plan placed into the image by ``pl``."""
     units = []

@@ -1,0 +1,1 @@
+"""The building lattice: the dominant orientation θ0 and the map resampled onto lattice cells (:mod:`.frame`)."""

@@ -1,0 +1,489 @@
+"""The building lattice: the map's dominant orientation θ0 and the map resampled onto a grid rotated
+by θ0 (see docs/architecture.md, "The building lattice").
+
+Two coordinate frames, kept apart on purpose. Inside this module (``lattice_to_image``,
+``image_to_lattice``) fractional cell *indices* are used: index ``(col, row)`` is the centre of that
+cell, and a lattice rectangle ``(r0, c0, r1, c1)`` spans ``[r0 - 0.5, r1 - 0.5] x [c0 - 0.5, c1 - 0.5]``.
+Everything this module hands to the outside world in pixels (``rect_vertices_px``, and the input of
+``image_to_metres``) is in the project's continuous pixel frame of :mod:`semmap_pp.cells`: pixel
+``(row r, col c)`` spans ``x in [c, c+1)``, ``y in [r, r+1)``, so its centre is ``(c + 0.5, r + 0.5)``.
+A lattice point maps to the image by ``p_img = R(θ0) (p_lat - o_lat) + o_img`` on ``[x, y]``
+pairs, with ``o_lat`` and ``o_img`` the centres of the two grids; the lattice's column axis runs
+along the image direction ``(cos θ0, sin θ0)`` (y pointing down the image). The lattice kept may be
+a part of the whole image's lattice (``Frame.crop``: the known cells and ``[lattice]
+crop_margin_m`` around them, when that leaves out at least half the cells); ``o_lat`` is then the
+whole lattice's centre in the part's indices, so every cell keeps its place.
+
+Examples
+--------
+>>> import numpy as np
+>>> from semmap_pp.model import load_model
+>>> classes = np.zeros((5, 8), np.uint8)
+>>> f = build_frame_from_classes(classes, 0.05, load_model())
+>>> f.theta, f.classes.shape, bool(f.outside.any())
+(0.0, (5, 8), False)
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, known_box
+from semmap_pp.model import CellParams, LatticeParams, Model
+
+
+def _soft_hist(u: np.ndarray) -> np.ndarray:
+    """Histogram of fractional positions with linear interpolation between the two nearest bins."""
+    f = np.floor(u)
+    i = (f - f.min()).astype(np.intp)
+    t = u - f
+    return np.bincount(i, weights=1.0 - t, minlength=i.max() + 2) + np.bincount(
+        i + 1, weights=t, minlength=i.max() + 2)
+
+
+def projection_sharpness(x: np.ndarray, y: np.ndarray, theta: float, bin_cells: float = 1.0) -> float:
+    """Sum of squared row and column profiles of points ``(x, y)`` on a lattice rotated by ``theta``.
+
+    Walls are long straight runs, so the angle that stacks the occupied cells into the fewest
+    lattice rows and columns is the wall direction. Linear-interpolated binning (bins of
+    ``bin_cells``) makes the score smooth in ``theta``.
+    """
+    c, s = math.cos(theta), math.sin(theta)
+    hu = _soft_hist((c * x + s * y) / bin_cells)
+    hv = _soft_hist((-s * x + c * y) / bin_cells)
+    return float(np.dot(hu, hu) + np.dot(hv, hv))
+
+
+def _best(x, y, angles, bin_cells):
+    scores = np.array([projection_sharpness(x, y, a, bin_cells) for a in angles])
+    i = int(np.argmax(scores))
+    return i, scores
+
+
+def estimate_orientation(classes: np.ndarray, params: LatticeParams) -> float:
+    """Dominant wall orientation θ0 in radians, in (-π/4, π/4].
+
+    Maximises :func:`projection_sharpness` of the occupied cells: a coarse scan over 90° in steps
+    of ``angle_bin_deg`` (bins of 2 cells, so a peak between two steps is not missed), a fine scan
+    of ±``refine_window_deg`` around the best coarse angle in tenth steps (1-cell bins), then a
+    parabola through the best three fine angles. (A histogram of gradient orientations, tried
+    first, is biased towards the axes on aliased walls: see docs/model.md.)
+
+    Parameters
+    ----------
+    classes : (H, W) uint8
+        Input classes (:mod:`semmap_pp.cells` codes).
+    params : LatticeParams
+        Step and refinement window from the model file.
+
+    Returns
+    -------
+    float
+        θ0; 0.0 when the map holds fewer than two occupied cells.
+    """
+    x, y = _occupied_points(classes)
+    return _orientation_of_points(x, y, params) if x.size >= 2 else 0.0
+
+
+def _occupied_points(classes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` of the occupied cells, centred on their integer mean: at theta = 0 every cell sits
+    on a bin centre (no interpolation spread)."""
+    y, x = np.nonzero(np.asarray(classes) == OCCUPIED)
+    if x.size == 0:
+        return x.astype(np.float64), y.astype(np.float64)
+    return ((x - round(float(x.mean()))).astype(np.float64),
+            (y - round(float(y.mean()))).astype(np.float64))
+
+
+def _orientation_of_points(x: np.ndarray, y: np.ndarray, params: LatticeParams) -> float:
+    """:func:`estimate_orientation` of the centred points ``(x, y)`` (at least two)."""
+    period = math.pi / 2
+    step = math.radians(params.angle_bin_deg)
+    coarse = -period / 2 + step * np.arange(int(math.ceil(period / step)))
+    i, _ = _best(x, y, coarse, 2.0)
+    fine_step = step / 10.0
+    half = int(math.ceil(math.radians(params.refine_window_deg) / fine_step))
+    fine = coarse[i] + fine_step * np.arange(-half, half + 1)
+    j, scores = _best(x, y, fine, 1.0)
+    theta = float(fine[j])
+    if 0 < j < len(fine) - 1:
+        a, b, c = scores[j - 1], scores[j], scores[j + 1]
+        den = a - 2 * b + c
+        if den < 0:
+            theta += 0.5 * fine_step * (a - c) / den
+    theta = math.remainder(theta, period)  # into [-45°, 45°]
+    if theta <= -period / 2:
+        theta += period
+    return float(theta)
+
+
+def doorway_classes(classes: np.ndarray, speck_cells: int) -> np.ndarray:
+    """``classes`` with every *speck* made FREE: a non-free cell whose 8-connected component of
+    non-free cells has at most ``speck_cells`` cells (a chair leg and the unseen cell behind it;
+    a wall, a jamb or a closed leaf is a longer line of cells). Doors are looked for on these.
+
+    >>> m = np.array([[0, 0, 0, 0, 0], [0, 2, 0, 0, 2], [0, 1, 0, 0, 2], [0, 0, 0, 0, 2]], np.uint8)
+    >>> doorway_classes(m, 2).tolist()
+    [[0, 0, 0, 0, 0], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2], [0, 0, 0, 0, 2]]
+    >>> doorway_classes(m, 1).tolist() == m.tolist()
+    True
+    """
+    blocked = classes != FREE
+    labels, n = ndimage.label(blocked, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return classes
+    size = np.bincount(labels.ravel(), minlength=n + 1)
+    small = size <= speck_cells
+    small[0] = False
+    out = classes.copy()
+    out[small[labels]] = FREE
+    return out
+
+
+
+@dataclass(frozen=True)
+class OffAxis:
+    """Walls at another angle than θ0 (:func:`off_axis_walls`)."""
+
+    share: float        # of the occupied cells in blocks with enough of them to have an orientation
+    angle_deg: float    # orientation of those blocks (the median, weighted by their cells), degrees
+    blocks: int         # how many blocks
+    box_px: tuple | None = None   # (x0, y0, x1, y1): the pixels those blocks span (x1, y1 exclusive)
+
+
+def off_axis_walls(classes: np.ndarray, theta: float, resolution: float, params: LatticeParams) -> OffAxis:
+    """The part of the map whose walls run at another angle than θ0: a wing of the building built
+    at an angle, which the lattice's axis-aligned rectangles cannot follow (the model's known limit,
+    docs/robustness.md).
+
+    The map is cut into square blocks of ``off_axis_block_m``; a block with at least two block
+    sides' worth of occupied cells has its own orientation (:func:`estimate_orientation`). A block
+    is off axis when that orientation differs from ``theta`` by more than ``off_axis_min_deg``
+    (modulo 90°) and stacks its occupied cells at least ``off_axis_min_gain`` times sharper than
+    ``theta`` does (:func:`projection_sharpness`): clutter has no orientation to speak of, and a
+    block of walls at θ0 scores the same at both angles. Cartesium, intel, aces, freiburg-079, the
+    ipa plans and the 30 synthetic floors have at most 3 % of their cells off axis (intel's one
+    diagonal wall); two floors side by side at 10°, 30° or 45° from each other have 37–42 %.
+
+    >>> import numpy as np
+    >>> from semmap_pp.model import load_model
+    >>> c = np.ones((200, 200), np.uint8); c[20:180:40, 10:190] = 2; c[10:190, 20:180:40] = 2
+    >>> off_axis_walls(c, 0.0, 0.05, load_model().lattice).share
+    0.0
+    """
+    classes = np.asarray(classes)
+    b = max(16, int(round(params.off_axis_block_m / resolution)))
+    need = 2 * b
+    seen = off = 0
+    angles, weights, corners = [], [], []
+    h, w = classes.shape
+    for r0 in range(0, h, b):
+        for c0 in range(0, w, b):
+            x, y = _occupied_points(classes[r0:r0 + b, c0:c0 + b])
+            if x.size < need:
+                continue
+            seen += x.size
+            own = _orientation_of_points(x, y, params)
+            if abs(math.degrees(math.remainder(own - theta, math.pi / 2))) <= params.off_axis_min_deg:
+                continue
+            if projection_sharpness(x, y, own) < params.off_axis_min_gain * projection_sharpness(x, y, theta):
+                continue
+            off += x.size
+            angles.append(math.degrees(own))
+            weights.append(x.size)
+            corners.append((c0, r0, min(c0 + b, w), min(r0 + b, h)))
+    if not off:
+        return OffAxis(0.0, math.nan, 0)
+    order = np.argsort(angles)
+    cum = np.cumsum(np.asarray(weights)[order])
+    median = float(np.asarray(angles)[order][np.searchsorted(cum, cum[-1] / 2)])
+    c = np.asarray(corners)
+    box = (int(c[:, 0].min()), int(c[:, 1].min()), int(c[:, 2].max()), int(c[:, 3].max()))
+    return OffAxis(off / seen, median, len(angles), box)
+
+
+def off_axis_noted(share: float, params: LatticeParams) -> bool:
+    """Whether walls at another angle holding ``share`` of the occupied cells get a note: from
+    ``off_axis_note_share`` on, never when that is 0."""
+    return 0 < params.off_axis_note_share <= share
+
+
+def off_axis_note(classes: np.ndarray, frame: Frame, params: LatticeParams) -> str | None:
+    """A note for the run when walls at another angle hold ``off_axis_note_share`` or more of the
+    occupied cells (:func:`off_axis_walls`, :func:`off_axis_noted`), else None."""
+    if params.off_axis_note_share <= 0:     # no note whatever the share: skip the blocks
+        return None
+    found = off_axis_walls(classes, frame.theta, frame.resolution, params)
+    if not off_axis_noted(found.share, params):
+        return None
+    x0, y0, x1, y1 = found.box_px
+    return (f"{100 * found.share:.0f} % of the occupied cells lie where the walls run at about "
+            f"{found.angle_deg:.0f} deg, not along the lattice's {math.degrees(frame.theta):.1f} deg (a wing "
+            f"built at another angle?), within pixels x {x0}-{x1}, y {y0}-{y1} of the image: the units "
+            f"there are the lattice's rectangles and fit those walls poorly; a crop of the map to each "
+            f"wing, mapped on its own, gets its own lattice (docs/robustness.md)")
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """The map resampled onto the building lattice.
+
+    Attributes
+    ----------
+    theta : float
+        θ0 in radians (0.0 for the identity frame).
+    classes : (H', W') uint8
+        Lattice classes; cells outside the input image are UNKNOWN.
+    outside : (H', W') bool
+        Lattice cells whose centre falls outside the input image.
+    image_shape : (H, W)
+        Shape of the input image.
+    crop : (i0, j0, H_all, W_all) or None
+        The lattice is the part of the whole image's lattice (shape ``(H_all, W_all)``) from row
+        ``i0`` and column ``j0`` on that covers the known cells and a margin (:func:`known_window`);
+        None: the whole image's lattice. Its cells are exactly those of the whole lattice.
+    resolution : float
+        Metres per cell (the same on the lattice).
+    cells : CellParams
+        The model's lengths in cells at this resolution.
+    origin : (x, y, yaw)
+        The input map's origin (ROS map_server), for metres.
+    """
+
+    theta: float
+    classes: np.ndarray
+    outside: np.ndarray
+    image_shape: tuple[int, int]
+    resolution: float
+    cells: CellParams
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    crop: tuple[int, int, int, int] | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.classes.shape
+
+    @functools.cached_property
+    def door_classes(self) -> np.ndarray:
+        """``classes`` with specks made free (:func:`doorway_classes`): the cells doors and passages
+        are looked for on."""
+        return doorway_classes(self.classes, self.cells.door_speck)
+
+    def _centres(self):
+        h, w = self.image_shape
+        i0, j0, hl, wl = self.crop if self.crop is not None else (0, 0) + tuple(self.classes.shape)
+        return (w - 1) / 2.0, (h - 1) / 2.0, (wl - 1) / 2.0 - j0, (hl - 1) / 2.0 - i0
+
+    def lattice_to_image(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous image coordinates ``(x_px, y_px)`` of (fractional) lattice ``(rows, cols)``."""
+        oxi, oyi, oxl, oyl = self._centres()
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        u = np.asarray(cols, dtype=np.float64) - oxl
+        v = np.asarray(rows, dtype=np.float64) - oyl
+        return c * u - s * v + oxi, s * u + c * v + oyi
+
+    def image_to_lattice(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional lattice ``(rows, cols)`` of image coordinates; inverse of lattice_to_image."""
+        oxi, oyi, oxl, oyl = self._centres()
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        u = np.asarray(x_px, dtype=np.float64) - oxi
+        v = np.asarray(y_px, dtype=np.float64) - oyi
+        return -s * u + c * v + oyl, c * u + s * v + oxl
+
+    def rect_vertices_px(self, rect) -> np.ndarray:
+        """The four ``[x, y]`` corners of a lattice rectangle in the continuous pixel frame.
+
+        Order: (r0, c0), (r0, c1), (r1, c1), (r1, c0) corners of the half-open cell box. The frame is
+        that of :mod:`semmap_pp.cells` (pixel ``(r, c)`` spans ``[c, c+1) x [r, r+1)``), as written to
+        world.json.
+        """
+        r0, c0, r1, c1 = (float(v) for v in rect)
+        rows = np.array([r0, r0, r1, r1]) - 0.5
+        cols = np.array([c0, c1, c1, c0]) - 0.5
+        x, y = self.lattice_to_image(rows, cols)
+        return np.stack([x + 0.5, y + 0.5], axis=1)
+
+    def rect_from_vertices_px(self, vertices_px) -> tuple[tuple[int, int, int, int], float]:
+        """The lattice rectangle nearest to four ``[x, y]`` corners in the continuous pixel frame,
+        and how far (pixels) the corners lie from its own: the inverse of :meth:`rect_vertices_px`
+        (0 up to the rounding of world.json's coordinates for a unit of this lattice).
+
+        >>> from semmap_pp.model import load_model
+        >>> f = build_frame_from_classes(np.zeros((50, 60), np.uint8), 0.05, load_model(), theta=0.3)
+        >>> rect, off = f.rect_from_vertices_px(f.rect_vertices_px((3, 4, 20, 31)).round(3))
+        >>> rect, off < 0.001
+        ((3, 4, 20, 31), True)
+        >>> f.rect_from_vertices_px([[0, 0], [10, 0], [10, 10], [0, 10]])[1] > 1   # not of this lattice
+        True
+        """
+        p = np.asarray(vertices_px, dtype=np.float64).reshape(-1, 2)
+        r, c = self.image_to_lattice(p[:, 0] - 0.5, p[:, 1] - 0.5)
+        rect = tuple(int(round(v)) for v in (r.min() + 0.5, c.min() + 0.5, r.max() + 0.5, c.max() + 0.5))
+        own = self.rect_vertices_px(rect)
+        off = max(float(np.min(np.hypot(*(own - q).T))) for q in p)
+        return rect, off
+
+    def image_to_metres(self, x_px, y_px) -> tuple[np.ndarray, np.ndarray]:
+        """Map-frame metres of continuous pixel-frame coordinates (ROS map_server, as :mod:`semmap_pp.grid`).
+
+        ``(x_px, y_px) = (c + 0.5, r + 0.5)`` is the centre of pixel ``(r, c)``; ``(0, height)`` is the
+        bottom-left image corner, which map_server places at the origin.
+        """
+        h = self.image_shape[0]
+        u = np.asarray(x_px, dtype=np.float64) * self.resolution
+        v = (h - np.asarray(y_px, dtype=np.float64)) * self.resolution
+        ox, oy, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        return ox + c * u - s * v, oy + s * u + c * v
+
+    def metres_to_image(self, x_m, y_m) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous pixel-frame coordinates of map-frame metres; inverse of :meth:`image_to_metres`."""
+        ox, oy, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        dx, dy = np.asarray(x_m, dtype=np.float64) - ox, np.asarray(y_m, dtype=np.float64) - oy
+        u, v = c * dx + s * dy, -s * dx + c * dy
+        return u / self.resolution, self.image_shape[0] - v / self.resolution
+
+    def rect_vertices_m(self, rect) -> np.ndarray:
+        """The four corners of :meth:`rect_vertices_px` in map-frame metres."""
+        v = self.rect_vertices_px(rect)
+        x, y = self.image_to_metres(v[:, 0], v[:, 1])
+        return np.stack([x, y], axis=1)
+
+    def to_image(self, lattice_array: np.ndarray, fill=0) -> np.ndarray:
+        """Resample a lattice array into the input image frame (nearest neighbour).
+
+        Image pixels whose centre falls outside the lattice take ``fill``.
+        """
+        a = np.asarray(lattice_array)
+        if a.shape[:2] != self.classes.shape:
+            raise ValueError(f"expected a lattice array of shape {self.classes.shape}, got {a.shape}")
+        if self.theta == 0.0:
+            if self.crop is None:
+                return a.copy()
+            i0, j0 = self.crop[:2]
+            out = np.full(tuple(self.image_shape) + a.shape[2:], fill, dtype=a.dtype)
+            out[i0:i0 + a.shape[0], j0:j0 + a.shape[1]] = a
+            return out
+        h, w = self.image_shape
+        hl, wl = a.shape[:2]
+        out = np.full((h, w) + a.shape[2:], fill, dtype=a.dtype)
+        # only the pixels of the lattice's footprint (its corners' bounding box, a cell wider)
+        x, y = self.lattice_to_image(np.array([-0.5, -0.5, hl - 0.5, hl - 0.5]),
+                                     np.array([-0.5, wl - 0.5, -0.5, wl - 0.5]))
+        x0, x1 = max(int(math.floor(x.min())) - 1, 0), min(int(math.ceil(x.max())) + 2, w)
+        y0, y1 = max(int(math.floor(y.min())) - 1, 0), min(int(math.ceil(y.max())) + 2, h)
+        if x0 >= x1 or y0 >= y1:
+            return out
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        rows, cols = self.image_to_lattice(xx, yy)
+        ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
+        ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
+        part = out[y0:y1, x0:x1]
+        part[ok] = a[ri[ok], ci[ok]]
+        return out
+
+
+#: The lattice is cropped only when the part kept holds at most this share of the whole lattice's
+#: cells: a crop saves time and memory in proportion to what it leaves out, and a few per cent are
+#: not worth a lattice of another extent (the search's random draws depend on it: on three of the
+#: 30 synthetic floors, whose crops kept 94-99 % of the cells, W* changed both ways).
+CROP_MAX_SHARE = 0.5
+
+
+def known_window(classes: np.ndarray, margin: int) -> tuple[int, int, int, int] | None:
+    """``(r0, c0, r1, c1)``: the bounding box of the known (not unknown) cells grown by ``margin``
+    cells and clipped to the image; None when that is the whole image, when ``margin`` is 0 (no
+    crop) or when no cell is known.
+
+    >>> c = np.full((100, 200), UNKNOWN, np.uint8); c[40:50, 90:120] = 0
+    >>> known_window(c, 10), known_window(c, 0), known_window(c, 100)
+    ((30, 80, 60, 130), None, None)
+    """
+    box = known_box(classes) if margin > 0 else None
+    if box is None:
+        return None
+    h, w = np.shape(classes)
+    r0, c0, r1, c1 = box
+    win = (max(r0 - margin, 0), max(c0 - margin, 0), min(r1 + margin, h), min(c1 + margin, w))
+    return None if win == (0, 0, h, w) else win
+
+
+def lattice_orientation(classes: np.ndarray, params: LatticeParams, theta: float | None = None) -> float:
+    """The lattice's θ0 in radians: ``theta`` (estimated by :func:`estimate_orientation` when
+    None), 0.0 when it is below ``identity_below_deg`` (the image itself is the lattice)."""
+    if theta is None:
+        theta = estimate_orientation(classes, params)
+    return 0.0 if abs(math.degrees(theta)) < params.identity_below_deg else float(theta)
+
+
+def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Model,
+                             origin=(0.0, 0.0, 0.0), theta: float | None = None) -> Frame:
+    """Estimate θ0 (unless given) and resample ``classes`` onto the lattice.
+
+    Parameters
+    ----------
+    classes : (H, W) uint8
+        Input classes.
+    resolution : float
+        Metres per cell.
+    model : Model
+        The model (lattice parameters, lengths).
+    origin : (x, y, yaw)
+        Map origin, for metres.
+    theta : float, optional
+        Use this orientation instead of estimating one (radians).
+    """
+    classes = np.asarray(classes, dtype=np.uint8)
+    theta = lattice_orientation(classes, model.lattice, theta)
+    h, w = classes.shape
+    cells = model.cells(resolution)
+    origin = tuple(float(v) for v in origin)
+    window = known_window(classes, int(math.ceil(model.lattice.crop_margin_m / resolution - 1e-9)))
+    crop = None
+    if window is not None and (window[2] - window[0]) * (window[3] - window[1]) > CROP_MAX_SHARE * h * w:
+        window = None   # too little to leave out (CROP_MAX_SHARE)
+    if theta == 0.0:
+        r0, c0, r1, c1 = window if window is not None else (0, 0, h, w)
+        lat = classes[r0:r1, c0:c1].copy()
+        outside = np.zeros(lat.shape, dtype=bool)
+        if window is not None:
+            crop = (r0, c0, h, w)
+    else:
+        c, s = abs(math.cos(theta)), abs(math.sin(theta))
+        wl = int(math.ceil(w * c + h * s - 1e-9))
+        hl = int(math.ceil(w * s + h * c - 1e-9))
+        probe = Frame(theta, np.zeros((1, 1), np.uint8), np.zeros((1, 1), bool), (h, w),
+                      float(resolution), cells, origin, (0, 0, hl, wl))
+        i0, j0, i1, j1 = 0, 0, hl, wl
+        if window is not None:   # the whole lattice's cells over the window's corners
+            r0, c0, r1, c1 = window
+            rr, cc = probe.image_to_lattice(np.array([c0 - 0.5, c1 - 0.5, c0 - 0.5, c1 - 0.5]),
+                                            np.array([r0 - 0.5, r0 - 0.5, r1 - 0.5, r1 - 0.5]))
+            i0, i1 = max(int(math.floor(rr.min())), 0), min(int(math.ceil(rr.max())) + 1, hl)
+            j0, j1 = max(int(math.floor(cc.min())), 0), min(int(math.ceil(cc.max())) + 1, wl)
+            if (i1 - i0) * (j1 - j0) <= CROP_MAX_SHARE * hl * wl:
+                crop = (i0, j0, hl, wl)
+            else:
+                i0, j0, i1, j1 = 0, 0, hl, wl
+        rows, cols = np.mgrid[i0:i1, j0:j1]
+        x, y = probe.lattice_to_image(rows, cols)
+        xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
+        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+        lat = np.full(rows.shape, UNKNOWN, dtype=np.uint8)
+        lat[inside] = classes[yi[inside], xi[inside]]
+        outside = ~inside
+    lat.setflags(write=False)
+    outside.setflags(write=False)
+    return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin, crop)
+
+
+def build_frame(grid, model: Model, theta: float | None = None) -> Frame:
+    """The building lattice of an :class:`~semmap_pp.grid.OccupancyGrid` (the module contract)."""
+    return build_frame_from_classes(grid.classes, grid.resolution, model, origin=grid.origin,
+                                    theta=theta)

@@ -1,0 +1,1 @@
+"""A world.json read back and used: onto the lattice again, places and routes, diffs and hand edits."""

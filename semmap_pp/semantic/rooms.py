@@ -1,0 +1,391 @@
+"""rooms.png: every free cell of the building given the room it belongs to.
+
+The units of W* are the abstract model (the paper's rectangles); a *room* is what a person, or a
+room segmenter such as ipa_room_segmentation or ROSE2, draws on the map's free cells. Rooms are
+made from W* in three steps, all on the input image's cells:
+
+1. **Seeds.** Every free cell inside a unit's interior (its rectangle less the wall band) takes
+   the unit's region (:mod:`semmap_pp.semantic.regions`: units joined by an open wall are one
+   region). W*'s door cells are never part of a room: a door separates the rooms it joins.
+2. **Rooms seen through their door.** The strips along each interior (up to ``band_m`` along the
+   floor) go to it; the free cells left fall into connected pieces. A piece of at least
+   ``min_room_m2`` that meets the rooms only through openings no wider than a door (``door_max_m``
+   of ``[rooms]``, in the model file) is a room of its own when walls enclose it: at least
+   ``walled_min`` of the non-free cells around it (not the specks inside it) lie within
+   ``wall_blur_m`` of an occupied cell
+   (a SLAM map blurs its walls into a margin of cells neither free nor occupied). That is a room
+   the robot saw through its door, or entered without W* giving it a unit, flagged
+   ``seen_through_door`` in world.json's ``rooms``. Without such walls it is rays into the open
+   through a window or an exit: no room.
+3. **Every other free cell** (rays through a door, an alcove, a strip along a ragged wall) joins
+   the room it is nearest to along the free floor, never across a door (a breadth-first
+   geodesic flood, 4-connected).
+
+Free cells that no room reaches (specks beyond a wall, free space seen outside through a window
+with no room behind it) are 0. ``docs/outputs.md`` compares the convention with ipa's and ROSE2's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy import ndimage as ndi
+from scipy.spatial import ConvexHull, QhullError
+
+from semmap_pp.cells import FREE, OCCUPIED
+from semmap_pp.derive.doors import connecting_wall, wall_strip
+from semmap_pp.derive.states import interior
+from semmap_pp.model import RoomParams
+from semmap_pp.semantic.regions import join_regions, passage_pairs
+
+_FOUR = ndi.generate_binary_structure(2, 1)
+_EIGHT = np.ones((3, 3), bool)
+
+
+@dataclass(frozen=True)
+class Room:
+    """One room of rooms.png.
+
+    Attributes
+    ----------
+    id : int
+        Its value in rooms.png (1..k).
+    units : tuple of int
+        The unit ids it grew from, in order; empty for a room seen through its door that no unit
+        covers.
+    cells : int
+        Its free cells.
+    seen_share : float
+        ``cells`` over the area of the convex hull of its cells: 1 for a room seen whole and
+        empty, less for one seen in part (a fan of rays through its door) or cluttered.
+    """
+
+    id: int
+    units: tuple
+    cells: int
+    seen_share: float
+
+    @property
+    def seen_through_door(self) -> bool:
+        return not self.units
+
+
+@dataclass(frozen=True)
+class Rooms:
+    """rooms.png's labels (``(H, W)`` int32, 0 none) and its rooms, by id."""
+
+    labels: np.ndarray
+    rooms: tuple
+
+
+@numba.njit(cache=True, nogil=True)
+def _flood(labels, passable, max_steps):  # pragma: no cover - compiled
+    """Breadth-first geodesic flood: every passable 0-cell reachable from a labelled cell in at most
+    ``max_steps`` steps (any number when negative) takes the label of the nearest one
+    (4-connected; ties to the label that reached it first, i.e. in row-major order of the seeds)."""
+    h, w = labels.shape
+    out = labels.copy()
+    n = h * w
+    steps = np.zeros(n, np.int64)
+    queue = np.empty(n, np.int64)     # cell index; int64: a canvas may exceed 2**31 cells
+    head = 0
+    tail = 0
+    for i in range(h):
+        for j in range(w):
+            if out[i, j] > 0:
+                queue[tail] = i * w + j
+                tail += 1
+    while head < tail:
+        k = queue[head]
+        head += 1
+        i = k // w
+        j = k - i * w
+        lab = out[i, j]
+        if max_steps >= 0 and steps[k] >= max_steps:
+            continue
+        for d in range(4):
+            ii = i + (1 if d == 0 else -1 if d == 1 else 0)
+            jj = j + (1 if d == 2 else -1 if d == 3 else 0)
+            if 0 <= ii < h and 0 <= jj < w and out[ii, jj] == 0 and passable[ii, jj]:
+                out[ii, jj] = lab
+                steps[ii * w + jj] = steps[k] + 1
+                queue[tail] = ii * w + jj
+                tail += 1
+    return out
+
+
+def geodesic_flood(labels: np.ndarray, passable: np.ndarray, max_steps: int = -1) -> np.ndarray:
+    """Each 0-cell of ``passable`` reachable from a labelled cell (in at most ``max_steps`` steps
+    when it is not negative) takes the nearest cell's label.
+
+    >>> lab = np.array([[1, 0, 0, 0, 2]], np.int32)
+    >>> geodesic_flood(lab, np.array([[1, 1, 0, 1, 1]], bool)).tolist()
+    [[1, 1, 0, 2, 2]]
+    >>> geodesic_flood(np.array([[1, 0, 0, 0]]), np.ones((1, 4), bool), max_steps=2).tolist()
+    [[1, 1, 1, 0]]
+    """
+    return _flood(np.ascontiguousarray(labels, np.int32), np.ascontiguousarray(passable, np.bool_),
+                  int(max_steps))
+
+
+def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """Per seed label, how many of its cells touch ``piece`` (4-connected)."""
+    ring = ndi.binary_dilation(piece, _FOUR) & ~piece
+    return np.bincount(seeds[ring], minlength=int(seeds.max(initial=0)) + 1)
+
+
+def _walled_share(piece: np.ndarray, free: np.ndarray, occupied: np.ndarray | None, reach: int) -> float:
+    """Share of the non-free cells around ``piece`` (8-connected, its holes filled: specks and
+    furniture inside it are no walls around it) that lie within ``reach`` cells of an occupied cell
+    (a SLAM map blurs its walls into a margin of cells neither free nor occupied)."""
+    if occupied is None:
+        return 1.0
+    piece = ndi.binary_fill_holes(piece)
+    ring = ndi.binary_dilation(piece, _EIGHT) & ~piece & ~free
+    n = int(ring.sum())
+    if not n:
+        return 1.0
+    near = ndi.binary_dilation(occupied, _EIGHT, iterations=reach) if reach > 0 else occupied
+    return float((ring & near).sum()) / n
+
+
+def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
+                params: RoomParams = RoomParams(), occupied: np.ndarray | None = None
+                ) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """Rooms of the free cells (see the module docstring).
+
+    Parameters
+    ----------
+    free : (H, W) bool
+        The map's free cells.
+    seeds : (H, W) int
+        Region id (1..m) of every cell inside a unit's interior, 0 elsewhere.
+    doors : (H, W) bool
+        W*'s door cells.
+    resolution : float
+        Metres per cell.
+    occupied : (H, W) bool, optional
+        The map's occupied cells (the other non-free cells are unknown); None: every non-free
+        cell counts as occupied.
+
+    Returns
+    -------
+    labels : (H, W) int32, room 1..k per cell, 0 none
+    rooms : list of (room id, region it grew from or 0 for a room seen through its door, cells)
+
+    Examples
+    --------
+    A corridor unit (region 1) with a room behind a one-cell door that no unit covers:
+
+    >>> free = np.zeros((6, 9), bool); free[0:2, :] = True; free[3:6, 2:7] = True
+    >>> free[2, 4] = True                        # the doorway through the wall row 2
+    >>> seeds = np.zeros((6, 9), int); seeds[0:2, :] = 1
+    >>> lab, rooms = room_labels(free, seeds, np.zeros_like(free), 1.0,
+    ...                          RoomParams(min_room_m2=10.0, door_max_m=2.0))
+    >>> rooms                  # the doorway cell, one band_m step from the corridor, went to it
+    [(1, 1, 19), (2, 0, 15)]
+    """
+    free = np.asarray(free, bool)
+    full = np.zeros(free.shape, np.int32)
+    if not free.any():
+        return full, []
+    # work on the free cells' bounding box (a SLAM map's canvas is mostly unknown)
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    # (with the walls just beyond them: the blur's margin and one cell)
+    pad = 2 + int(round(params.wall_blur_m / resolution))
+    box = (slice(max(rows[0] - pad, 0), rows[-1] + 1 + pad), slice(max(cols[0] - pad, 0), cols[-1] + 1 + pad))
+    free = free[box]
+    doors = np.asarray(doors, bool)[box]
+    seeds = np.asarray(seeds)[box]
+    occupied = None if occupied is None else np.asarray(occupied, bool)[box]
+    passable = free & ~doors
+    seeds = np.where(passable, seeds, 0).astype(np.int32)
+    n_regions = int(seeds.max(initial=0))
+    min_cells = params.min_room_m2 / resolution ** 2
+    door_cells = params.door_max_m / resolution
+    blur = int(round(params.wall_blur_m / resolution))
+
+    # the strips along each interior (its wall band, a ragged wall's margin) go to it first, so that
+    # what is left falls apart into the pieces beyond the walls
+    near = geodesic_flood(seeds, passable, max(1, int(round(params.band_m / resolution))))
+    rest = passable & (near == 0)
+    pieces, n = ndi.label(rest, _EIGHT)
+    seeded = near.copy()
+    extra = []
+    if n:
+        sizes = np.bincount(pieces.ravel(), minlength=n + 1)
+        objs = ndi.find_objects(pieces)
+        for k in range(1, n + 1):
+            if sizes[k] < min_cells or objs[k - 1] is None:
+                continue
+            sl = tuple(slice(max(s.start - 1 - blur, 0), s.stop + 1 + blur) for s in objs[k - 1])
+            piece = pieces[sl] == k
+            contact = _contact_widths(piece, near[sl])
+            contact[0] = 0
+            if contact.max(initial=0) > door_cells:
+                continue
+            occ_sl = None if occupied is None else occupied[sl]
+            if _walled_share(piece, free[sl], occ_sl, blur) >= params.walled_min:
+                extra.append(k)
+                seeded[pieces == k] = n_regions + len(extra)
+            else:                  # rays into the open (a window's fan): no room, not flooded either
+                passable = passable & (pieces != k)
+    flooded = geodesic_flood(seeded, passable)
+    # number the rooms 1..k: the regions first (in order), then the rooms seen through their door
+    present = np.bincount(flooded.ravel(), minlength=n_regions + len(extra) + 1)
+    lut = np.zeros(present.size, np.int32)
+    kept = [old for old in range(1, present.size) if present[old]]
+    lut[kept] = np.arange(1, len(kept) + 1, dtype=np.int32)
+    full[box] = lut[flooded]
+    return full, [(int(lut[old]), old if old <= n_regions else 0, int(present[old])) for old in kept]
+
+
+def seen_share(mask: np.ndarray) -> float:
+    """Cells of ``mask`` over the area (in cells) of the convex hull of their squares.
+
+    >>> m = np.zeros((4, 4), bool); m[:, :2] = True
+    >>> seen_share(m)
+    1.0
+    >>> m[1:, 1] = False; round(seen_share(m), 3)      # an L of 5 cells; its hull holds 6.5
+    0.769
+    """
+    mask = np.asarray(mask, bool)
+    n = int(mask.sum())
+    if n == 0:
+        return 0.0
+    # the hull of the cells' squares is the hull of each row's outermost squares' corners
+    rows = np.flatnonzero(mask.any(axis=1))
+    first = mask[rows].argmax(axis=1)
+    last = mask.shape[1] - 1 - mask[rows, ::-1].argmax(axis=1)
+    corners = np.concatenate([np.stack([rows + dr, cols], 1)
+                              for dr in (0, 1) for cols in (first, last + 1)])
+    try:
+        area = ConvexHull(corners).volume
+    except QhullError:            # all corners on a line: a hull of no area
+        return 1.0
+    return float(min(1.0, n / area)) if area > 0 else 1.0
+
+
+def opening_share(classes: np.ndarray, rp, rq, wall: int) -> float:
+    """Share of the lines across the connecting wall of rectangles ``rp`` and ``rq`` that are
+    open (free all the way across, ``classes`` the lattice's door classes), on the strip
+    :func:`~semmap_pp.derive.doors.wall_strip` finds doors on; 0 without one."""
+    found = wall_strip(classes, rp, rq, wall)
+    if found is None:
+        return 0.0
+    strip, _, vertical = found
+    lines = (strip == FREE).all(axis=1 if vertical else 0)
+    return float(lines.mean()) if lines.size else 0.0
+
+
+def wide_opening(free: np.ndarray, rp, rq, wall: int, width: float) -> bool:
+    """Whether the free floor joins rectangles ``rp`` and ``rq`` across their connecting wall
+    through a gap at least ``width`` cells wide: a path from one side of the wall to the other,
+    within ``width`` of it, whose cells all lie at least ``width / 2`` from every non-free cell
+    (``free`` the lattice's free cells, its specks made free). A door, or a gap that clutter
+    narrows to a door's width, is no such gap.
+
+    >>> free = np.ones((40, 60), bool); free[:, 29:31] = False       # a wall down column 29-30
+    >>> rp, rq = (0, 0, 40, 31), (0, 29, 40, 60)                       # two units, walls 2 cells
+    >>> free[5:25, 29:31] = True; wide_opening(free, rp, rq, 2, 16.0)  # a 20-cell gap
+    True
+    >>> free[13:25, 29:31] = False; wide_opening(free, rp, rq, 2, 16.0)  # an 8-cell door
+    False
+    """
+    cw = connecting_wall(rp, rq, wall)
+    if cw is None or width <= 0:
+        return False
+    (r0, c0, r1, c1), vertical = cw
+    reach = int(np.ceil(width))
+    # the wall strip and ``width`` of floor on each side of it
+    b0, b1 = (r0, r1) if vertical else (r0 - reach, r1 + reach)
+    d0, d1 = (c0 - reach, c1 + reach) if vertical else (c0, c1)
+    pad = int(np.ceil(width / 2)) + 1
+    H, W = free.shape
+    y0, y1, x0, x1 = max(b0 - pad, 0), min(b1 + pad, H), max(d0 - pad, 0), min(d1 + pad, W)
+    if y0 >= y1 or x0 >= x1:
+        return False
+    clear = ndi.distance_transform_edt(np.pad(free[y0:y1, x0:x1], 1))[1:-1, 1:-1]
+    wide = clear >= width / 2
+    band = np.zeros(wide.shape, bool)
+    band[max(b0, 0) - y0:min(b1, H) - y0, max(d0, 0) - x0:min(d1, W) - x0] = True
+    wide &= band
+    side_a, side_b = np.zeros_like(band), np.zeros_like(band)
+    if vertical:
+        side_a[:, :max(c0 - x0, 0)] = True
+        side_b[:, max(c1 - x0, 0):] = True
+    else:
+        side_a[:max(r0 - y0, 0), :] = True
+        side_b[max(r1 - y0, 0):, :] = True
+    lab, n = ndi.label(wide, _EIGHT)
+    if not n:
+        return False
+    return bool(np.intersect1d(lab[wide & side_a], lab[wide & side_b]).size)
+
+
+#: unit types whose side openings lead into other rooms, however wide (a corridor's, a hall's)
+_THROUGH_TYPES = frozenset({"corridor", "hall"})
+
+
+def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
+    """Unit-id pairs one room joins, and the doors that stay doors between rooms.
+
+    Units joined by a passage (:func:`~semmap_pp.semantic.regions.passage_pairs`) are one room; so
+    are two units whose door takes at least ``open_share_min`` of the wall they share: an opening
+    that wide is the open side of one room that W* cut in two, not a door in a wall. So are two
+    units, neither a corridor nor a hall, whose floor meets through a gap wider than a double door
+    (``door_max_m``, :func:`wide_opening`): the open side of a room that a partition, a stub of
+    wall or a row of cupboards half divides. A corridor's or a hall's openings, however wide, lead
+    into the rooms along it."""
+    ids, rects, classes = sm.slot_ids, sm.world.rects, sm.frame.door_classes
+    wall = sm.frame.cells.wall
+    width = params.door_max_m / sm.frame.resolution
+    free = None
+    pairs, doors, decided = list(passage_pairs(sm)), [], {}
+    for d in sm.derived.doors:
+        pair = tuple(sorted((ids[d.p], ids[d.q])))
+        if pair not in decided:
+            joined = opening_share(classes, rects[d.p], rects[d.q], wall) >= params.open_share_min
+            if not joined and not _THROUGH_TYPES & {sm.type_of(pair[0]), sm.type_of(pair[1])}:
+                free = classes == FREE if free is None else free
+                joined = wide_opening(free, rects[d.p], rects[d.q], wall, width)
+            decided[pair] = joined
+        if decided[pair]:
+            pairs.append(pair)
+        else:
+            doors.append(d)
+    return sorted(set(pairs)), doors
+
+
+def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
+    """rooms.png's rooms of a :class:`~semmap_pp.semantic.semantic_map.SemanticMap` (module docstring)."""
+    pairs, doors = room_joins(sm, params)
+    region = join_regions(sm.unit_ids, pairs)
+    wall = sm.frame.cells.wall
+    seeds_lat = np.zeros(sm.frame.shape, np.int32)
+    door_lat = np.zeros(sm.frame.shape, bool)
+    for s, uid in sorted(sm.slot_ids.items(), key=lambda kv: kv[1]):
+        r0, c0, r1, c1 = (max(int(v), 0) for v in interior(sm.world.rects[s], wall))
+        box = seeds_lat[r0:r1, c0:c1]
+        box[box == 0] = region[uid]
+    for d in doors:
+        r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
+        door_lat[r0:r1, c0:c1] = True
+    seeds = sm.frame.to_image(seeds_lat, fill=0)
+    door_img = sm.frame.to_image(door_lat, fill=False)
+    classes = sm.grid.classes
+    labels, found = room_labels(classes == FREE, seeds, door_img, sm.grid.resolution, params,
+                                occupied=classes == OCCUPIED)
+    units_of: dict[int, list[int]] = {}
+    for uid, rid in region.items():
+        units_of.setdefault(rid, []).append(uid)
+    objs = ndi.find_objects(labels)
+    rooms = tuple(Room(k, tuple(units_of.get(rid, ())) if rid else (), n,
+                       seen_share(labels[objs[k - 1]] == k)) for k, rid, n in found)
+    return Rooms(labels, rooms)
+
+
+__all__ = ["Room", "Rooms", "room_labels", "room_joins", "rooms_of", "opening_share", "seen_share", "wide_opening",
+           "geodesic_flood"]

@@ -1,0 +1,1 @@
+"""The target the sampler sees: likelihood, prior, the geometry evidence for the knowledge engine, and the posterior with its incremental tracker; checks of a world under them (defects, walls inside a unit)."""

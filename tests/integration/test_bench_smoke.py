@@ -1,0 +1,115 @@
+"""Every benchmark runs: ``bench/run.py NAME --tiny --json`` for each ``bench/bench_*.py``, in this
+process (imports and compiled code shared with the other tests), gives one JSON result.
+
+``--tiny`` (each module's ``TINY`` or ``SIZES``) runs every part of a benchmark at a few kernels,
+edits or cells: it measures nothing, it only keeps the benchmarks from rotting between the runs
+that docs/benchmarks.md reports (``make bench``). A new benchmark without ``--tiny`` fails here.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+NAMES = sorted(p.stem[len("bench_"):] for p in BENCH.glob("bench_*.py"))
+
+
+def bench(capsys, monkeypatch, *argv) -> dict:
+    """The JSON result of ``bench/run.py *argv --json`` (the last line it prints)."""
+    monkeypatch.setattr(sys, "path", list(sys.path))      # run.py puts bench/ first: undone after
+    spec = importlib.util.spec_from_file_location("bench_runner", BENCH / "run.py")
+    runner = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(runner)
+    capsys.readouterr()
+    assert runner.main([*argv, "--json"]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    result = json.loads(out[-1])
+    assert isinstance(result, dict) and result["benchmark"] == argv[0]
+    assert math.isfinite(result["wall_s"]) and result["machine"]["cpus"] >= 1
+    return result
+
+
+def test_every_benchmark_is_tested():
+    assert NAMES == ["batch", "knowledge", "large", "learn", "likelihood", "quality", "sampler"]
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
+    result = bench(capsys, monkeypatch, name, "--tiny")
+    assert result["command"] == f"python bench/run.py {name} --tiny --json"
+    if name == "batch":
+        assert result["one_worker_s"] > 0 and result["two_workers_s"] > 0
+        assert set(result["task_wall_s_one_worker"]) == {"tiny"}
+    elif name == "knowledge":
+        assert result["auto_map_equals_exact_dense_12"] is True
+        assert result["mcsat_max_abs_err_corridor_8"] < 0.05 and result["rc2_hard_units"] == 40
+    elif name == "large":
+        assert [m["cells"] for m in result["sizes"]] == [200 ** 2, 300 ** 2]
+        assert result["canvas"]["crop"]["lattice"] != result["canvas"]["whole"]["lattice"]
+    elif name == "learn":
+        assert [r["map"] for r in result["rows"]] == ["synth-0", "synth-1", "synth-2"]
+        assert all(0 <= r["accuracy_learned"] <= 1 for r in result["rows"])
+        assert len(result["weights_all"]) == 19
+    elif name == "likelihood":
+        for k in ("1x", "4x"):
+            assert result[k]["edits_timed"] >= 40 and result[k]["incremental_vs_full_rel_err"] < 1e-9
+    elif name == "quality":
+        (row,) = result["synthetic"]["rows"]
+        assert row["seed"] == 1 and 0 < row["cpr"] <= 1
+        assert 0 < row["rooms_precision"] <= 1 and 0 < row["rooms_recall"] <= 1 and row["rooms_outside"] >= 0
+    elif name == "sampler":
+        assert result["knowledge_pymc_kernels"] == 10 and result["knowledge_tracker_error"] < 1e-9
+
+
+@pytest.mark.parametrize("seed,units", [(0, 20), (3, 30)])
+def test_bench_likelihood_times_edits_on_the_cartesium_lattice(seed, units, capsys, monkeypatch):
+    """``bench/run.py likelihood`` on its default map (cartesium, whose lattice the frame crops to
+    the known cells): the world is placed on the cropped lattice, so the edits are evaluated (all
+    of them were skipped, and the run ended in ``statistics.StatisticsError``), and the 4x map is
+    that lattice tiled 2 x 2."""
+    result = bench(capsys, monkeypatch, "likelihood", "--seed", str(seed), "--units", str(units),
+                   "--edits", "40", "--full", "1")
+    one, four = result["1x"], result["4x"]
+    assert four["lattice"] == [2 * one["lattice"][0], 2 * one["lattice"][1]]
+    assert one["lattice"] != result["lattice"]          # cropped: the case that failed
+    assert one["edits_timed"] >= 35 and four["edits_timed"] == one["edits_timed"]
+    assert one["edit_us_median"] > 0 and one["incremental_vs_full_rel_err"] < 1e-9
+
+
+def test_the_partial_subset_runs_on_one_exploration(capsys, monkeypatch):
+    result = bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "partial",
+                   "--maps", "freiburg_building52@0.3")
+    (row,) = result["partial"]["rows"]
+    assert row["map"] == "freiburg_building52@0.3" and 0 < row["precision"] <= 1 and 0 < row["recall"] <= 1
+
+
+def test_partial_explorations_see_part_of_the_floor_and_are_reproducible(monkeypatch):
+    """bench/partial_maps.py: the partial map keeps the full map's grey values on the cells its
+    rays reached and is unknown (205) elsewhere; its truth is the floor's on the free cells it
+    holds; rooms the robot did not enter are seen in part (through their doors); the same
+    arguments give the same map, and entering more rooms sees more."""
+    monkeypatch.setattr(sys, "path", [str(BENCH), *sys.path])
+    import partial_maps
+    from semmap_pp.evaluate import read_segmentation_truth
+    folder = BENCH / "data" / "real-gt" / "freiburg_building52"
+    truth = read_segmentation_truth(folder / "gt.png", "rose2")
+    part, meta, gt = partial_maps.explore(folder, 0.3, 1, truth)
+    again, _, gt2 = partial_maps.explore(folder, 0.3, 1, truth)
+    assert (part == again).all() and (gt == gt2).all()
+    from PIL import Image
+    full = np.asarray(Image.open(folder / "map.png").convert("L"))
+    seen = part != 205
+    assert (part[seen] == full[seen]).all() and 0.2 < seen.mean() / (full != 205).mean() < 1.0
+    free = (255.0 - part) / 255.0 < float(meta["free_thresh"])
+    assert (gt[~free] == 0).all() and set(np.unique(gt)) <= set(np.unique(truth))
+    shares = [(gt == t).sum() / (truth == t).sum() for t in np.unique(truth) if t and (truth == t).sum() > 200]
+    assert min(shares) < 0.8 and max(shares) > 0.95           # some rooms seen in part, some whole
+    more, _, _ = partial_maps.explore(folder, 0.6, 1, truth)
+    assert (more != 205).sum() > seen.sum()

@@ -1,0 +1,130 @@
+"""`semmap eval DIR --truth T`: synthetic truth, ipa segmentation and ipa place types, detected."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from semmap_pp.cli import main
+from semmap_pp.cli.cmd_eval import detect_kind
+from semmap_pp.evaluate import read_ipa_gt, read_ipa_types, read_label_image
+from semmap_pp.evaluate.types import TRUTH_CORRIDOR, TRUTH_ROOM
+from semmap_pp.semantic.world_json import write_labels_png
+
+ROOT = Path(__file__).resolve().parents[2]
+IPA = ROOT / "tests" / "data" / "ipa"
+TINY = ["--chains", "2", "--cores", "1", "--tune", "2", "--draws", "4", "--n-inner", "5", "--progress", "none"]
+
+
+@pytest.fixture(scope="module")
+def floor(tmp_path_factory):
+    out = tmp_path_factory.mktemp("floor") / "f"
+    assert main(["synth", "--seed", "3", "--units", "4", "--out", str(out)]) == 0
+    return out
+
+
+def fake_run(path, units, labels, cpr=0.5, **extra):
+    """A run folder holding only what `semmap eval` reads: world.json and labels.png."""
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "world.json").write_text(json.dumps(dict({"format": "semmap_pp.world/1", "units": units, "cpr": cpr},
+                                                     **extra)))
+    write_labels_png(path / "labels.png", np.asarray(labels))
+    return path
+
+
+def scores(capsys, *args):
+    assert main(["eval", *map(str, args), "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_sampled_run_against_its_synthetic_floor(floor, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(["map", str(floor / "map.yaml"), "--out", str(run), *TINY]) == 0
+    capsys.readouterr()
+    doc = scores(capsys, run, "--truth", floor)
+    s = doc["scores"]
+    assert doc["kind"] == "synthetic" and s["units_true"] == 4
+    assert s["units_predicted"] == len(json.loads((run / "world.json").read_text())["units"])
+    assert s["units_exterior"] == len(json.loads((run / "world.json").read_text())["exterior"])
+    for k in ("unit_f1", "unit_precision", "unit_recall", "segmentation_precision", "segmentation_iou", "cpr"):
+        assert 0.0 <= s[k] <= 1.0, k
+    assert main(["eval", str(run), "--truth", str(floor / "truth.json")]) == 0
+    table = capsys.readouterr().out
+    assert "unit_f1" in table and "door_recall" in table and "segmentation_recall" in table
+
+
+def test_the_truth_itself_scores_perfectly(floor, tmp_path, capsys):
+    t = json.loads((floor / "truth.json").read_text())
+    units = [{"id": u["id"], "type": u["type"], "vertices_px": u["corners_px"]} for u in t["units"]]
+    doors = [{"units": d["units"], "center_px": d["center_px"], "width_m": d["width_m"]} for d in t["doors"]]
+    run = fake_run(tmp_path / "perfect", units, read_label_image(floor / "truth_labels.png"),
+                   adjacency=t["adjacency"], doors=doors)
+    s = scores(capsys, run, "--truth", floor)["scores"]
+    assert s["unit_f1"] == 1.0 and s["type_accuracy"] == 1.0
+    assert s["adjacency_recall"] == 1.0 and s["door_recall"] == 1.0
+    assert s["segmentation_precision"] == 1.0 and s["segmentation_recall"] == 1.0
+
+
+def test_ipa_segmentation_of_labels_and_regions(tmp_path, capsys):
+    gt = read_ipa_gt(IPA / "office_a_gt_segmentation.png")
+    merged = np.where(gt > 0, 1, 0)                 # one segment for every room
+    run = fake_run(tmp_path / "seg", [{"id": 1, "type": "room"}], gt)
+    write_labels_png(run / "regions.png", merged)
+    doc = scores(capsys, run, "--truth", IPA / "office_a_gt_segmentation.png")
+    s = doc["scores"]
+    assert doc["kind"] == "ipa-segmentation"
+    assert s["precision"] == 1.0 and s["recall"] == 1.0 and s["rooms"] == 27
+    assert s["regions_segments"] == 1 and s["regions_precision"] < 0.5 and s["regions_recall"] == 1.0
+
+
+def test_ipa_place_types(tmp_path, capsys):
+    truth = read_ipa_types(IPA / "training_Fr52.png")
+    labels = np.where(truth == TRUTH_ROOM, 1, np.where(truth == TRUTH_CORRIDOR, 2, 0))
+    right = fake_run(tmp_path / "right", [{"id": 1, "type": "room"}, {"id": 2, "type": "corridor"}], labels)
+    wrong = fake_run(tmp_path / "wrong", [{"id": 1, "type": "corridor"}, {"id": 2, "type": "room"}], labels)
+    s = scores(capsys, right, "--truth", IPA / "training_Fr52.png")["scores"]
+    assert s["type_accuracy"] == 1.0 and s["coverage"] == 1.0
+    assert scores(capsys, wrong, "--truth", IPA / "training_Fr52.png")["scores"]["type_accuracy"] == 0.0
+
+
+def test_kind_by_content_when_the_name_says_nothing(tmp_path):
+    shutil.copy(IPA / "office_a_gt_segmentation.png", tmp_path / "a.png")
+    shutil.copy(IPA / "training_Fr52.png", tmp_path / "b.png")
+    assert detect_kind(tmp_path / "a.png") == "ipa-segmentation"
+    assert detect_kind(tmp_path / "b.png") == "ipa-types"
+
+
+@pytest.mark.parametrize("world", [
+    '{"format": "semmap_pp.world/1", "units": [' + ",".join(['{"id": 1}'] * 20_001) + "]}",
+    '{"format": "semmap_pp.world/1", "objects": [' + ",".join(["[]"] * 2_000_001) + "]}",
+])
+def test_a_runs_world_json_is_bounded_as_every_world_json_is(tmp_path, capsys, world):
+    # issue 55 F3: a world.json is bounded before anything is built from it, here too
+    run = fake_run(tmp_path / "big", [], np.ones((5, 5)))
+    (run / "world.json").write_text(world)
+    assert main(["eval", str(run), "--truth", str(IPA / "training_Fr52.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"semmap: error: {run / 'world.json'}: ")
+    assert "a world.json holds at most 20000" in err or "too many for a world.json" in err
+
+
+def test_truth_of_another_map_is_a_user_error(floor, tmp_path, capsys):
+    run = fake_run(tmp_path / "small", [{"id": 1, "type": "room"}], np.ones((5, 5)))
+    assert main(["eval", str(run), "--truth", str(IPA / "training_Fr52.png")]) == 2
+    err = capsys.readouterr().err
+    assert "not the same map" in err and err.count("\n") == 1
+
+
+def test_an_l_cut_the_other_way_is_scored_both_ways(tmp_path, capsys):
+    from test_evaluate_lshape import A2, B2, prediction, truth
+    t = dict(truth(), height=75, width=75, resolution=0.05)
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "truth.json").write_text(json.dumps(t))
+    pred = prediction(A2, B2)
+    run = fake_run(tmp_path / "run", pred["units"], np.zeros((75, 75)), doors=pred["doors"])
+    s = scores(capsys, run, "--truth", tmp_path / "t")["scores"]
+    assert s["l_shapes"] == 1 and s["l_shapes_recut"] == 1
+    assert s["unit_f1"] == pytest.approx(0.8) and s["unit_f1_either_l"] == 1.0
+    assert s["door_recall"] == pytest.approx(1 / 3) and s["door_recall_either_l"] == 1.0

@@ -1,0 +1,404 @@
+"""rooms.png and world.json's rooms (semmap_pp.semantic.rooms), the ROSE2 / ipa segmentation
+protocol (semmap_pp.evaluate.protocol_scores) and `semmap eval DIR --segmentation GT`."""
+
+import json
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from PIL import Image
+from scipy import ndimage as ndi
+
+from semmap_pp.cli import main
+from semmap_pp.errors import ModelError
+from semmap_pp.evaluate import (colour_room_labels, colour_segment_labels, protocol_scores,
+                                read_segmentation, read_segmentation_truth)
+from semmap_pp.model import RoomParams, load_model
+from semmap_pp.semantic.rooms import geodesic_flood, room_labels, seen_share
+
+ROOT = Path(__file__).resolve().parents[2]
+REAL_GT = ROOT / "bench" / "data" / "real-gt"
+INTEL = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"
+TINY = ["--chains", "2", "--cores", "1", "--tune", "2", "--draws", "4", "--n-inner", "5",
+        "--spread-draws", "0", "--progress", "none"]
+#: ROSE2's published recall on its five maps (Luperto et al. 2022; bench/data/real-gt/README.md)
+PUBLISHED_RECALL = {"freiburg_building52": 0.967, "freiburg_building101": 0.908, "g4s_y2": 0.943,
+                    "map17": 0.913, "map23": 0.977}
+
+
+# --- the flood ---------------------------------------------------------------------------------
+
+def bfs_distance(passable: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """4-connected path length from ``sources`` through passable cells (inf where unreachable)."""
+    h, w = passable.shape
+    dist = np.full((h, w), np.inf)
+    q = deque()
+    for i, j in zip(*np.nonzero(sources)):
+        dist[i, j] = 0
+        q.append((i, j))
+    while q:
+        i, j = q.popleft()
+        for ii, jj in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
+            if 0 <= ii < h and 0 <= jj < w and passable[ii, jj] and dist[ii, jj] == np.inf:
+                dist[ii, jj] = dist[i, j] + 1
+                q.append((ii, jj))
+    return dist
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1))
+def test_the_flood_gives_each_cell_a_nearest_seed_along_the_floor(seed):
+    rng = np.random.default_rng(seed)
+    passable = rng.random((12, 15)) < 0.75
+    seeds = np.zeros((12, 15), np.int32)
+    for label in (1, 2, 3):
+        i, j = rng.integers(0, 12), rng.integers(0, 15)
+        seeds[i, j] = label
+        passable[i, j] = True
+    out = geodesic_flood(seeds, passable)
+    dists = {k: bfs_distance(passable, seeds == k) for k in (1, 2, 3)}
+    nearest = np.min(np.stack(list(dists.values())), axis=0)
+    for i, j in np.ndindex(out.shape):
+        if seeds[i, j]:
+            assert out[i, j] == seeds[i, j]
+        elif not passable[i, j] or nearest[i, j] == np.inf:
+            assert out[i, j] == 0
+        else:
+            assert dists[int(out[i, j])][i, j] == nearest[i, j]
+
+
+# --- room_labels on drawn floors --------------------------------------------------------------
+
+def corridor_and_room(door_width: int):
+    """A corridor (rows 0..9, a unit's interior) and, behind a wall (rows 10..11) with a doorway of
+    ``door_width`` cells, a 20 x 20 room that no unit covers; 0.1 m cells."""
+    free = np.zeros((32, 40), bool)
+    free[0:10, :] = True
+    free[12:32, 10:30] = True
+    free[10:12, 20 - door_width // 2:20 + (door_width + 1) // 2] = True
+    seeds = np.zeros(free.shape, np.int32)
+    seeds[1:9, 1:39] = 1
+    return free, seeds
+
+
+def test_a_room_seen_through_its_door_is_a_room_of_its_own():
+    free, seeds = corridor_and_room(door_width=8)          # 0.8 m
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
+    assert (labels[12:32, 10:30] == 2).all()
+    assert (labels[0:10] == 1).all()                        # the corridor's own strips joined it
+
+
+def test_rays_into_the_open_through_a_window_are_no_room():
+    """The same piece beyond a door-wide opening, once with walls around it (a room seen through its
+    door) and once ending in unknown cells (rays through a window into the open)."""
+    free, seeds = corridor_and_room(door_width=8)
+    walls = ~free
+    walls[12:32, 10:30] = False
+    walls[10:12, :] = True
+    walls[10:12, 16:24] = False
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=walls)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
+    free, seeds = (np.pad(a, ((0, 6), (0, 0))) for a in (free, seeds))   # unknown beyond the fan
+    open_air = np.zeros_like(free)
+    open_air[10:12, 14:26] = True                           # a window's frame, nothing beyond
+    open_air[10:12, 16:24] = False
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=open_air)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[13:32, 10:30] == 0).all()                # not flooded into the corridor either
+
+
+def fan_beyond_a_door(far_wall: bool):
+    """A corridor (rows 0..9) with a wall (rows 10..11) and a 0.8 m door, and beyond the door a fan
+    of rays widening into a room the robot never entered: its sides unseen (unknown cells), and,
+    with ``far_wall``, the room's far wall (row 34) behind a one-cell margin of blur (row 33, neither
+    free nor occupied); without it the rays end in unknown cells. 0.1 m cells."""
+    free = np.zeros((40, 60), bool)
+    occupied = np.zeros_like(free)
+    free[0:10, :] = True
+    occupied[10:12, :] = True
+    occupied[10:12, 26:34] = False
+    free[10:12, 26:34] = True
+    for r in range(12, 33):
+        half = 4 + (r - 12) // 2
+        free[r, 30 - half:30 + half] = True
+    if far_wall:
+        occupied[34, 10:50] = True
+    seeds = np.zeros(free.shape, np.int32)
+    seeds[1:9, 1:59] = 1
+    return free, seeds, occupied
+
+
+def test_a_fan_into_a_room_seen_through_its_door_is_a_room_and_one_into_the_open_is_not():
+    """The fan's sides are unseen, so most non-free cells around it are unknown whatever lies
+    beyond; what tells a room from the open is its far wall, read through the map's blur
+    (``wall_blur_m``): without the wall, or without the blur, too few cells around it are walls."""
+    free, seeds, occupied = fan_beyond_a_door(far_wall=True)
+    ring = ndi.binary_dilation(free[12:], np.ones((3, 3), bool)) & ~free[12:]
+    assert (ring & occupied[12:]).sum() < 0.2 * ring.sum()          # occupied cells alone: too few
+    blur = RoomParams(wall_blur_m=0.1)                               # one 0.1 m cell
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
+    assert (labels[13:33][free[13:33]] == 2).all()
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1,
+                                RoomParams(wall_blur_m=0.0), occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]         # the blur hides the wall
+    free, seeds, occupied = fan_beyond_a_door(far_wall=False)
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[13:33] == 0).all()
+
+
+def test_an_opening_wider_than_a_door_joins_the_unit_in_front():
+    free, seeds = corridor_and_room(door_width=20)         # 2.0 m > door_max_m 1.6
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[free] == 1).all()
+
+
+def test_a_piece_smaller_than_a_room_joins_its_neighbour():
+    free, seeds = corridor_and_room(door_width=8)
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, RoomParams(min_room_m2=5.0))
+    assert len(rooms) == 1 and (labels[free] == 1).all()     # 4 m^2 behind the door
+
+
+def test_doors_separate_rooms_and_belong_to_none():
+    free, seeds = corridor_and_room(door_width=8)
+    seeds[13:31, 11:29] = 2                                 # the room is a unit too
+    doors = np.zeros_like(free)
+    doors[10:12, 16:24] = True
+    labels, rooms = room_labels(free, seeds, doors, 0.1)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 2)]
+    assert (labels[doors] == 0).all() and (labels[free & ~doors] > 0).all()
+    assert sum(n for *_, n in rooms) == int((free & ~doors).sum())
+
+
+def test_free_cells_no_room_reaches_are_none():
+    free, seeds = corridor_and_room(door_width=8)
+    free[30:32, 0:4] = True                                 # a speck beyond the wall
+    labels, _ = room_labels(free, seeds, np.zeros_like(free), 0.1)
+    assert (labels[30:32, 0:4] == 0).all()
+
+
+def test_seen_share_of_a_full_and_of_a_fan_shaped_room():
+    assert seen_share(np.ones((5, 7), bool)) == 1.0
+    fan = np.zeros((30, 30), bool)
+    for k in range(0, 30, 9):                               # four thin rays from one corner
+        rr = np.linspace(0, 29, 60).astype(int)
+        cc = np.clip((rr * k / 29).astype(int), 0, 29)
+        fan[rr, cc] = True
+    assert seen_share(fan) < 0.4
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1))
+def test_seen_share_equals_the_hull_of_every_cells_corners(seed):
+    from scipy.spatial import ConvexHull, QhullError
+    rng = np.random.default_rng(seed)
+    mask = rng.random((rng.integers(1, 10), rng.integers(1, 10))) < 0.4
+    if not mask.any():
+        assert seen_share(mask) == 0.0
+        return
+    r, c = np.nonzero(mask)
+    corners = np.unique(np.concatenate([np.stack([r + a, c + b], 1) for a in (0, 1) for b in (0, 1)]), axis=0)
+    try:
+        expected = min(1.0, mask.sum() / ConvexHull(corners).volume)
+    except QhullError:
+        expected = 1.0
+    assert seen_share(mask) == pytest.approx(expected, abs=1e-12)
+
+
+def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
+    text = (ROOT / "models" / "default.toml").read_text()
+    assert load_model().rooms == RoomParams(**{k: getattr(load_model().rooms, k)
+                                               for k in ("min_room_m2", "door_max_m", "open_share_min",
+                                                         "band_m", "walled_min", "wall_blur_m")})
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("open_share_min = 0.6", "open_share_min = 1.5"))
+    with pytest.raises(ModelError, match="rooms.open_share_min"):
+        load_model(bad)
+    without = tmp_path / "old.toml"
+    start = text.index("[rooms]")
+    end = text.index("\n[", start + 1)
+    without.write_text(text[:start] + text[end + 1:])
+    assert load_model(without).rooms == RoomParams()
+
+
+# --- the protocol ------------------------------------------------------------------------------
+
+def test_colour_truth_rooms_are_connected_regions_of_one_colour():
+    img = np.zeros((30, 50, 3), np.uint8)
+    img[:, :20] = (10, 200, 10)
+    img[:, 25:] = (10, 200, 10)                             # the same colour again: another room
+    img[0:2, 22:24] = (90, 90, 90)                          # 4 cells: too small to be a room
+    labels = colour_room_labels(img)
+    assert sorted(np.unique(labels).tolist()) == [0, 1, 2]
+    assert colour_segment_labels(img).max() == 2            # one segment per colour
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISHED_RECALL))
+def test_rose2s_own_output_scores_its_published_recall(name):
+    """The scoring code reproduces ROSE2's published recall on each of its five maps (its
+    precision figures depend on how their code treats small regions: README of real-gt)."""
+    gt = read_segmentation_truth(REAL_GT / name / "gt.png", "rose2")
+    s = protocol_scores(gt, read_segmentation(REAL_GT / name / "rose2.png"))
+    assert s.recall == pytest.approx(PUBLISHED_RECALL[name], abs=0.0015)
+    assert 0.8 < s.precision <= 1.0
+
+
+def test_a_merged_segment_lowers_precision_and_a_split_room_recall():
+    gt = np.zeros((20, 40), int)
+    gt[:, :20], gt[:, 20:] = 1, 2
+    perfect = protocol_scores(gt, gt)
+    assert (perfect.precision, perfect.recall) == (1.0, 1.0)
+    merged = protocol_scores(gt, np.ones_like(gt))
+    assert merged.precision == 0.5 and merged.recall == 1.0
+    split = gt.copy()
+    split[:, 30:] = 3
+    s = protocol_scores(gt, split)
+    assert s.precision == 1.0 and s.recall == 0.75
+
+
+# --- a run -------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rooms") / "run"
+    assert main(["map", str(INTEL), "--out", str(out), *TINY]) == 0
+    return out
+
+
+def test_a_run_writes_rooms_png_and_world_json_rooms_that_agree(run_dir):
+    rooms = np.asarray(Image.open(run_dir / "rooms.png"))
+    doc = json.loads((run_dir / "world.json").read_text())
+    assert rooms.dtype == np.uint16
+    assert rooms.shape == np.asarray(Image.open(run_dir / "labels.png")).shape
+    ids, counts = np.unique(rooms[rooms > 0], return_counts=True)
+    assert [r["id"] for r in doc["rooms"]] == ids.tolist()
+    assert [r["cells"] for r in doc["rooms"]] == counts.tolist()
+    units = {u["id"] for u in doc["units"]}
+    for r in doc["rooms"]:
+        assert set(r["units"]) <= units and r["seen_through_door"] == (not r["units"])
+        assert 0 < r["seen_share"] <= 1
+    owned = [u for r in doc["rooms"] for u in r["units"]]
+    assert len(owned) == len(set(owned))                    # a unit grows one room at most
+
+
+def test_rooms_cover_only_free_cells(run_dir):
+    from semmap_pp.cells import FREE
+    from semmap_pp.grid import load_map
+    rooms = np.asarray(Image.open(run_dir / "rooms.png"))
+    classes = load_map(INTEL).classes
+    assert (classes[rooms > 0] == FREE).all()
+    assert (rooms > 0).sum() > 0.8 * (classes == FREE).sum()
+
+
+def test_eval_segmentation_scores_rooms_png(run_dir, tmp_path, capsys):
+    rooms = np.asarray(Image.open(run_dir / "rooms.png"))
+    rng = np.random.default_rng(0)
+    palette = rng.integers(30, 255, (int(rooms.max()) + 1, 3)).astype(np.uint8)
+    palette[0] = 0
+    gt = tmp_path / "gt.png"
+    Image.fromarray(palette[rooms]).save(gt)                # the run's own rooms as the truth
+    assert main(["eval", str(run_dir), "--segmentation", str(gt), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["scores"]
+    # every true room (a one-colour region) lies in one room of rooms.png; a room whose cells
+    # fall apart is two true rooms, so precision may stay below 1
+    assert s["recall"] == 1.0 and s["precision"] > 0.9
+    assert main(["eval", str(run_dir), "--segmentation", str(gt), "--of", "labels.png", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["scores"]["precision"] < s["precision"]
+
+
+def test_eval_segmentation_errors_are_one_line(run_dir, tmp_path, capsys):
+    wrong = tmp_path / "wrong.png"
+    Image.fromarray(np.zeros((10, 10, 3), np.uint8)).save(wrong)
+    assert main(["eval", str(run_dir), "--segmentation", str(wrong)]) != 0
+    err = capsys.readouterr().err.strip()
+    assert "wrong.png" in err and "no region of one colour" in err and "\n" not in err
+    gt = tmp_path / "gt.png"
+    Image.fromarray(np.full((20, 30, 3), 200, np.uint8)).save(gt)
+    assert main(["eval", str(run_dir), "--segmentation", str(gt)]) != 0
+    err = capsys.readouterr().err.strip()
+    assert "not the same map" in err and "\n" not in err
+    assert main(["eval", str(tmp_path), "--segmentation", str(gt)]) != 0
+    assert "rooms.png" in capsys.readouterr().err
+
+
+def test_eval_segmentation_refuses_a_fifo_without_reading_it(run_dir, tmp_path):
+    import os
+    import subprocess
+    import sys
+    fifo = tmp_path / "gt.png"
+    os.mkfifo(fifo)
+    for args in (["--segmentation", str(fifo)], ["--segmentation", str(REAL_GT / "map17" / "gt.png"),
+                                                 "--of", str(fifo)]):
+        p = subprocess.run([sys.executable, "-m", "semmap_pp", "eval", str(run_dir), *args],
+                           capture_output=True, text=True, timeout=120)
+        assert p.returncode == 2
+        assert "gt.png" in p.stderr and "not a regular file" in p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1
+
+
+# --- units one room across a wide gap ------------------------------------------------------------
+
+def two_units_with_a_partition(gap_cells: int, clutter: bool = False):
+    """Two 40 x 40-cell units side by side (0.05 m cells, 2-cell wall bands) sharing a wall down
+    columns 38-41 that stops ``gap_cells`` short of the bottom wall; ``clutter`` puts a cupboard
+    row across the floor in front of the gap."""
+    from semmap_pp.cells import FREE, OCCUPIED
+    classes = np.full((44, 84), OCCUPIED, np.uint8)
+    classes[2:42, 2:82] = FREE
+    classes[2:42 - gap_cells, 38:42] = OCCUPIED
+    if clutter:
+        classes[42 - gap_cells - 2:42, 30:36] = OCCUPIED
+    return classes, (0, 0, 44, 42), (0, 38, 44, 84)
+
+
+@pytest.mark.parametrize("gap_cells, joined", [(40, True), (36, True), (30, False), (16, False)])
+def test_a_gap_wider_than_a_double_door_is_one_floor(gap_cells, joined):
+    from semmap_pp.cells import FREE
+    from semmap_pp.semantic.rooms import wide_opening
+    classes, rp, rq = two_units_with_a_partition(gap_cells)
+    width = RoomParams().door_max_m / 0.05                       # 32 cells
+    assert wide_opening(classes == FREE, rp, rq, 2, width) is joined
+    assert wide_opening(classes == FREE, rq, rp, 2, width) is joined     # symmetric
+
+
+def test_clutter_in_front_of_a_wide_gap_narrows_it_to_a_door():
+    from semmap_pp.cells import FREE
+    from semmap_pp.semantic.rooms import wide_opening
+    classes, rp, rq = two_units_with_a_partition(36)
+    assert wide_opening(classes == FREE, rp, rq, 2, 32.0)
+    classes, rp, rq = two_units_with_a_partition(36, clutter=True)
+    assert not wide_opening(classes == FREE, rp, rq, 2, 32.0)
+
+
+class _FakeMap:
+    """The parts of a SemanticMap that room_joins reads: two units with one door between them."""
+
+    def __init__(self, classes, rp, rq, types):
+        from types import SimpleNamespace
+        from semmap_pp.derive.doors import Door
+        self.slot_ids = {0: 1, 1: 2}
+        self.world = SimpleNamespace(rects=[rp, rq])
+        self.frame = SimpleNamespace(door_classes=classes, cells=SimpleNamespace(wall=2),
+                                     resolution=0.05)
+        self.derived = SimpleNamespace(doors=[Door(0, 1, (30, 38, 42, 42), True, 12)], passages=[])
+        self._types = dict(zip((1, 2), types))
+
+    def type_of(self, uid):
+        return self._types[uid]
+
+
+@pytest.mark.parametrize("types, gap_cells, one_room", [
+    (("room", "room"), 36, True), (("room", "other"), 36, True),
+    (("room", "room"), 16, False),                    # a door
+    (("corridor", "room"), 36, False), (("room", "hall"), 36, False)])   # a corridor's side
+def test_room_joins_takes_a_wide_gap_between_rooms_but_not_a_corridors(types, gap_cells, one_room):
+    from semmap_pp.semantic.rooms import room_joins
+    classes, rp, rq = two_units_with_a_partition(gap_cells)
+    pairs, doors = room_joins(_FakeMap(classes, rp, rq, types), RoomParams(open_share_min=1.0))
+    assert (pairs == [(1, 2)]) is one_room
+    assert len(doors) == (0 if one_room else 1)

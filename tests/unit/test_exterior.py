@@ -1,0 +1,368 @@
+"""Exterior units (semmap_pp.derive.exterior): free space seen outside the building through its
+windows is flagged, rooms and pieces of a corridor are not, and the outputs list the flagged units
+apart without changing the world's cell states or CPR."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import jsonschema
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import numpy as np
+from PIL import Image
+
+from semmap_pp import world as wm
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.derive.exterior import find_exterior, side_shares
+from semmap_pp.lattice.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.model import load_model
+from semmap_pp.semantic.semantic_map import semantic_map
+from semmap_pp.semantic.world_json import world_dict, write_labels_png
+from semmap_pp.outputs.geojson import geojson_dict
+from semmap_pp.outputs.graphml import world_graph
+from semmap_pp.target.posterior import Posterior
+
+SCHEMA = json.loads((Path(__file__).parents[2] / "docs" / "world.schema.json").read_text())
+MODEL = load_model()
+
+
+def room_with_window():
+    """A 3 x 2.6 m room (walls 2 cells) with a 1 m window in its right wall, and the rays that
+    left through the window: a fan of free lines, unknown between them, nothing hit."""
+    c = np.full((80, 160), UNKNOWN, np.uint8)
+    c[10:62, 10:72] = OCCUPIED
+    c[12:60, 12:70] = FREE
+    c[60:80, 10:72] = OCCUPIED                            # a second room below it
+    c[62:78, 12:70] = FREE
+    c[26:46, 70:72] = FREE                                # the window
+    for row in range(-40, 120, 3):                        # rays beyond it, spreading out
+        r = np.linspace(36, row, 80).round().astype(int)
+        ok = (r >= 0) & (r < 79)
+        c[r[ok], np.arange(72, 152)[ok]] = FREE
+        c[r[ok] + 1, np.arange(72, 152)[ok]] = FREE
+    return c
+
+
+def grid_of(c):
+    return OccupancyGrid(classes=c, occupancy=np.zeros(c.shape, np.float32), resolution=0.05,
+                         origin=(0.0, 0.0, 0.0), source=None, image_path=None)
+
+
+ROOM, FAN, ROOM2 = (10, 10, 62, 72), (20, 70, 54, 150), (60, 10, 80, 72)
+
+
+def test_a_fan_beyond_a_window_is_exterior_and_the_room_is_not():
+    c = room_with_window()
+    flags = find_exterior(c, np.array([ROOM, FAN, ROOM2]), wall=2, max_share=0.3, seen_min=0.1)
+    assert flags.tolist() == [False, True, False]
+    # the fan's shares: its left side is the wall with the window (enclosed), rays leave the others
+    count = np.zeros(c.shape, np.int32)
+    for r0, c0, r1, c1 in (ROOM, FAN, ROOM2):
+        count[r0:r1, c0:c1] += 1
+    shares = np.sort(side_shares(c, FAN, count, 2, 0.1))
+    assert shares[3] > 0.9 and shares[2] < 0.3
+
+
+def test_the_test_is_off_at_zero_and_order_does_not_matter():
+    c = room_with_window()
+    assert not find_exterior(c, np.array([ROOM, FAN, ROOM2]), 2, 0.0, 0.1).any()
+    assert find_exterior(c, np.array([ROOM2, FAN, ROOM]), 2, 0.3, 0.1).tolist() == [False, True, False]
+
+
+def test_pieces_of_a_corridor_are_not_exterior():
+    """A corridor junction: walls above, free space continuing left, right and down into
+    neighbouring units. Its open sides lead into units, not out of the building."""
+    c = np.full((60, 120), UNKNOWN, np.uint8)
+    c[12:14, 0:120] = OCCUPIED                            # the wall above the corridor
+    c[14:30, 0:120] = FREE                                # the corridor
+    c[30:32, 0:50] = OCCUPIED                             # the wall below, broken by a branch
+    c[30:32, 70:120] = OCCUPIED
+    c[30:60, 50:70] = FREE                                # the branch going down
+    c[30:60, 48:50] = OCCUPIED
+    c[30:60, 70:72] = OCCUPIED
+    rects = np.array([(12, 0, 32, 50), (12, 48, 32, 72), (12, 70, 32, 120), (30, 48, 60, 72)])
+    assert not find_exterior(c, rects, 2, 0.3, 0.1).any()
+    # without its neighbours' cover the junction's shares would flag it
+    alone = np.zeros(c.shape, np.int32)
+    alone[12:32, 48:72] = 1
+    assert np.sort(side_shares(c, rects[1], alone, 2, 0.1))[2] < 0.3
+
+
+def test_a_side_seen_too_little_counts_as_enclosed():
+    """A room seen only through its door: the far half unknown. Its far side has almost no seen
+    cells, so it counts as enclosed; the room is not exterior."""
+    c = np.full((60, 60), UNKNOWN, np.uint8)
+    c[10:50, 10:12] = OCCUPIED                            # left wall, seen
+    c[10:12, 10:30] = OCCUPIED; c[48:50, 10:30] = OCCUPIED  # top and bottom walls, half seen
+    c[12:48, 12:30] = FREE                                 # half of the inside seen
+    c[20:40, 48:50] = FREE                                 # a sliver of the far side
+    flags = find_exterior(c, np.array([(10, 10, 50, 50)]), 2, 0.3, 0.1)
+    assert flags.tolist() == [False]
+
+
+def fan_map():
+    g = grid_of(room_with_window())
+    f = build_frame(g, MODEL)
+    assert f.theta == 0.0
+    w = wm.add(wm.add(wm.add(wm.empty(4), 0, ROOM), 1, FAN), 2, ROOM2)
+    return g, f, w
+
+
+def test_outputs_list_exterior_units_apart_and_keep_the_cpr(tmp_path):
+    g, f, w = fan_map()
+    sm = semantic_map(g, f, Posterior(f, MODEL), w)
+    off = dataclasses.replace(MODEL, world=dataclasses.replace(MODEL.world, exterior_max_share=0.0))
+    f_off = build_frame(g, off)
+    sm_off = semantic_map(g, f_off, Posterior(f_off, off), w)
+    doc, doc_off = world_dict(sm), world_dict(sm_off)
+    jsonschema.validate(doc, SCHEMA)
+    assert [u["id"] for u in doc["units"]] == [1, 2] and len(doc_off["units"]) == 3
+    assert len(doc["exterior"]) == 1 and doc_off["exterior"] == []
+    x = doc["exterior"][0]
+    assert x["id"] == 1 and x["units"] == [1]
+    assert x["vertices_px"] == [[70.0, 20.0], [150.0, 20.0], [150.0, 54.0], [70.0, 54.0]]
+    assert doc["adjacency"] == [[1, 2]] and doc["doors"] == []    # the window joins no two units
+    assert doc["cpr"] == doc_off["cpr"] and doc["log_posterior"] == doc_off["log_posterior"]
+    assert np.array_equal(sm.states_image, sm_off.states_image)
+    # labels.png: the room only; the fan's cells are 0 where the room does not reach
+    write_labels_png(tmp_path / "labels.png", sm.labels_image)
+    lab = np.asarray(Image.open(tmp_path / "labels.png"))
+    assert set(np.unique(lab).tolist()) == {0, 1, 2}
+    assert (lab[20:54, 75:150] == 0).all() and (lab[12:60, 12:70] == 1).all()
+    kinds = [ft["properties"]["kind"] for ft in geojson_dict(sm, doc)["features"]]
+    assert kinds.count("exterior") == 1 and kinds.count("unit") == 2
+    g = world_graph(sm, doc)
+    assert [n for n, a in g.nodes(data=True) if a["kind"] == "exterior"] == ["x1"]
+    assert g.edges["x1", "u1"]["relation"] == "next_to" and g.degree("x1") == 1
+
+
+def test_a_unit_inside_the_building_footprint_is_not_exterior():
+    """A fan of rays through a door into a room the robot never entered looks like a window fan,
+    but it lies within the convex hull of the other units: the building's footprint."""
+    c = room_with_window()
+    far = (10, 150, 62, 160)           # another unit right of the fan: the fan is now between
+    c[10:62, 150:160] = OCCUPIED
+    c[12:60, 152:158] = FREE
+    flags = find_exterior(c, np.array([ROOM, FAN, ROOM2, far]), 2, 0.3, 0.1)
+    assert flags.tolist() == [False, False, False, False]
+    # a footprint needs two units besides the one tested: a world keeps at least two
+    assert find_exterior(c, np.array([ROOM, FAN]), 2, 0.3, 0.1).tolist() == [False, False]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 7))
+def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
+    """Random maps and rectangles (some reaching past the map): the flags follow the units when
+    their order is permuted, a world keeps at least two (or all, below three) of its units, and
+    the input arrays are not edited."""
+    rng = np.random.default_rng(seed)
+    c = rng.choice(np.array([FREE, UNKNOWN, OCCUPIED], np.uint8), size=(40, 50), p=[0.5, 0.3, 0.2])
+    r0, c0 = rng.integers(-5, 35, n), rng.integers(-5, 45, n)
+    rects = np.stack([r0, c0, r0 + rng.integers(4, 20, n), c0 + rng.integers(4, 20, n)], axis=1)
+    c_before, rects_before = c.copy(), rects.copy()
+    flags = find_exterior(c, rects, 1, 0.6, 0.1)
+    assert np.array_equal(c, c_before) and np.array_equal(rects, rects_before)
+    assert np.count_nonzero(~flags) >= min(n, 2)
+    perm = rng.permutation(n)
+    assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1), flags[perm])
+
+
+def test_two_fans_side_by_side_do_not_shield_each_other():
+    """A fan cut into two units: each covers the other's shared side, but neither is enclosed by
+    walls of its own, so neither gives cover: both are exterior."""
+    c = room_with_window()
+    fan_a, fan_b = (20, 70, 54, 112), (20, 110, 54, 150)
+    flags = find_exterior(c, np.array([ROOM, fan_a, fan_b, ROOM2]), 2, 0.3, 0.1)
+    assert flags.tolist() == [False, True, True, False]
+    # with the other fan's cover, fan_a's shares would keep it
+    count = np.zeros(c.shape, np.int32)
+    for r0, c0, r1, c1 in (ROOM, fan_a, fan_b, ROOM2):
+        count[r0:r1, c0:c1] += 1
+    assert np.sort(side_shares(c, fan_a, count, 2, 0.1))[2] >= 0.3
+
+
+def test_fans_do_not_widen_the_footprint():
+    """Two fans stacked along the open side of a hall (floor 6 of the synthetic benchmark): each
+    lies mostly inside the convex hull of the hall and the *other* fan, so a footprint of every
+    unit not flagged kept both. The footprint is the enclosed units' hull: both are exterior."""
+    c = np.full((120, 160), UNKNOWN, np.uint8)
+    c[10:110, 40:150] = OCCUPIED
+    c[12:108, 42:128] = FREE
+    c[12:108, 130:148] = FREE                             # a room beside the hall
+    c[20:100, 40:42] = FREE                               # the hall's glass side
+    c[15:105, 0:40] = FREE                                # rays beyond it
+    hall, fan_a, fan_b = (10, 40, 110, 130), (20, 2, 60, 42), (60, 2, 100, 42)
+    rects = np.array([hall, fan_a, fan_b, (10, 128, 110, 150)])
+    assert find_exterior(c, rects, 2, 0.3, 0.1).tolist() == [False, True, True, False]
+    # each fan is less than half outside the hull of the hall and the other fan
+    from semmap_pp.derive.exterior import _hull, _outside_share
+    assert _outside_share(np.array(fan_a), _hull(np.array([hall, fan_b]))) < 0.5
+    assert _outside_share(np.array(fan_b), _hull(np.array([hall, fan_a]))) < 0.5
+
+
+def test_a_corridor_stub_open_at_its_end_does_not_widen_the_footprint():
+    """A corridor along the top of a room reaches past the room's window wall, over the fan of
+    rays beyond the window (aces' north-west stub): its own walls enclose two of its sides (its
+    floor and its closed end), so it is enclosed, but it does not widen the footprint. With it
+    in the hull the fan would lie mostly inside; without it the fan is exterior."""
+    from semmap_pp.derive.exterior import _hull, _outside_share
+
+    c = np.full((110, 170), UNKNOWN, np.uint8)
+    c[30:82, 10:72] = OCCUPIED
+    c[32:80, 12:70] = FREE                                # a room ...
+    c[44:68, 70:72] = FREE                                # ... with a window on its right
+    c[80:100, 10:72] = OCCUPIED
+    c[82:98, 12:70] = FREE                                # a room below it
+    c[10:32, 10:150] = FREE                               # a corridor above, open above and right
+    c[30:32, 10:150] = OCCUPIED                           # its floor wall drawn
+    c[10:32, 10:12] = OCCUPIED                            # its closed left end
+    c[40:43, 72:150:2] = FREE                             # rays beyond the window
+    for row in range(34, 110, 3):
+        r = np.linspace(56, row, 78).round().astype(int)
+        ok = (r >= 34) & (r < 109)
+        c[r[ok], np.arange(72, 150)[ok]] = FREE
+    room, room2, stub, fan = (30, 10, 82, 72), (80, 10, 100, 72), (10, 10, 32, 150), (40, 70, 76, 150)
+    assert find_exterior(c, np.array([room, room2, stub, fan]), 2, 0.3, 0.1).tolist() == [
+        False, False, False, True]
+    assert _outside_share(np.array(fan), _hull(np.array([room, room2, stub]))) < 0.5
+    own = side_shares(c, stub, None, 2, 0.1, own=0)
+    assert np.sort(own)[1] < 0.3 <= np.sort(own)[2]       # two sides of its own: enclosed, not walled
+
+
+def test_without_an_enclosed_unit_nothing_is_exterior():
+    """Free space everywhere (a map that shows its outside as free): no unit is enclosed, there
+    is no footprint to be outside of, and no unit is flagged."""
+    c = np.full((60, 90), FREE, np.uint8)
+    rects = np.array([(0, 0, 30, 30), (0, 30, 30, 60), (0, 60, 30, 90), (30, 0, 60, 90)])
+    assert not find_exterior(c, rects, 2, 0.3, 0.1).any()
+
+
+def test_a_strip_closed_only_at_its_short_ends_does_not_shield_a_fan():
+    """A thin unit inside the fan beyond the window, closed by obstacles at its two short ends and
+    open along both long sides, passes the two-sides test on its own walls but encloses a fifth of
+    its perimeter: it gives no cover and does not widen the footprint, so the fan is still
+    flagged (it was not when such a strip counted as supported)."""
+    from semmap_pp.derive.exterior import perimeter_share
+
+    cls = np.ones((30, 30), np.uint8)
+    cls[2:28, 2:14] = OCCUPIED
+    cls[3:15, 3:13] = FREE
+    cls[16:27, 3:13] = FREE
+    cls[6:10, 13] = FREE
+    cls[1:20, 14:28] = FREE
+    cls[3, 20:22] = OCCUPIED
+    cls[18, 20:22] = OCCUPIED
+    strip = (3, 20, 19, 22)
+    own = side_shares(cls, strip, None, 1, 0.1, own=0)
+    assert np.sort(own)[2] >= 0.3 and perimeter_share(own, strip) < 0.3
+    rects = np.array([[2, 2, 16, 14], [2, 13, 18, 28], [15, 2, 28, 14], strip])
+    assert find_exterior(cls, rects, wall=1, max_share=0.3, seen_min=0.1).tolist() == \
+        [False, True, False, False]
+
+
+def l_building_with_corner_fan():
+    """An L-shaped building: room A (upper left) with a 1 m window in its right wall, and a long
+    room B below A reaching further right. The rays through the window fill the concave corner
+    beyond A's right wall and above B's top wall, and leave it upwards and to the right."""
+    c = np.full((100, 140), UNKNOWN, np.uint8)
+    c[20:62, 10:52] = OCCUPIED                            # A and its walls
+    c[22:60, 12:50] = FREE
+    c[60:92, 10:130] = OCCUPIED                           # B and its walls
+    c[62:90, 12:128] = FREE
+    c[34:54, 50:52] = FREE                                # the window in A's right wall
+    for row in range(-60, 60, 3):                         # rays beyond it, over B's roof line
+        r = np.linspace(44, row, 90).round().astype(int)
+        cols = np.arange(52, 142)
+        ok = (r >= 0) & (r < 60) & (cols < 140)
+        c[r[ok], cols[ok]] = FREE
+        c[r[ok] + 1, cols[ok]] = FREE
+    return c
+
+
+A, B, CORNER = (20, 10, 62, 52), (60, 10, 92, 130), (16, 50, 62, 130)
+
+
+def test_a_fan_in_the_concave_corner_of_the_building_is_exterior():
+    """The corner fan has two enclosed sides (A's right wall and B's top wall, both drawn, with A
+    and B across them) and lies inside the convex hull of A and B, so the three-open-sides test
+    misses it; it lies outside their orthogonal hull (the L itself) and is flagged."""
+    from semmap_pp.derive.exterior import ortho_hull
+
+    c = l_building_with_corner_fan()
+    shares = np.sort(side_shares(c, CORNER, None, 2, 0.1))
+    assert shares[2] >= 0.3 > shares[1]                  # two enclosed sides, two open ones
+    hull = ortho_hull(np.array([A, B]), c.shape)
+    assert not hull[30, 100] and hull[30, 30] and hull[80, 120]
+    flags = find_exterior(c, np.array([A, B, CORNER]), wall=2, max_share=0.3, seen_min=0.1)
+    assert flags.tolist() == [False, False, True]
+
+
+def test_a_room_glimpsed_through_its_door_with_one_wall_drawn_is_not_exterior():
+    """Beyond a corridor's door, a room whose back and right walls the laser never hit: rays leave
+    it through those two sides, but its drawn left wall has no building unit across it (the
+    space beyond is unknown), so it is not a fan between two building walls."""
+    c = np.full((100, 140), UNKNOWN, np.uint8)
+    c[60:80, 0:140] = OCCUPIED                            # a corridor and its walls
+    c[62:78, 0:140] = FREE
+    c[20:62, 40:42] = OCCUPIED                            # the room's drawn left wall
+    c[60:62, 60:80] = FREE                                # the door in the corridor's top wall
+    for col in range(20, 160, 3):                         # rays through the door, into the room
+        r = np.linspace(61, 10, 60).round().astype(int)
+        cc = np.linspace(70, col, 60).round().astype(int)
+        ok = (cc >= 42) & (cc < 140)
+        c[r[ok], cc[ok]] = FREE
+    corridor, room = (60, 0, 80, 140), (18, 40, 62, 110)
+    shares = np.sort(side_shares(c, room, None, 2, 0.1))
+    assert shares[2] >= 0.3 > shares[1]
+    corridor2 = (80, 0, 100, 140)                         # a room below, enclosed too
+    c[80:100, 0:140] = OCCUPIED
+    c[82:98, 2:138] = FREE
+    flags = find_exterior(c, np.array([corridor, room, corridor2]), wall=2, max_share=0.3,
+                          seen_min=0.1)
+    assert not flags[1]
+
+
+def u_building(notch: str):
+    """A U-shaped building: wings L and R (rooms enclosed by walls) and a base B below them. The
+    notch between the wings holds either a fan of rays through a window in L's right wall
+    (``"fan"``: rays stop at R's wall or leave the notch up and down, unknown between them) or a
+    corridor seen whole, open at both ends (``"corridor"``)."""
+    c = np.full((130, 120), UNKNOWN, np.uint8)
+    for r0, c0, r1, c1 in ((10, 10, 90, 40), (10, 80, 90, 110), (88, 10, 120, 110)):
+        c[r0:r1, c0:c1] = OCCUPIED
+        c[r0 + 2:r1 - 2, c0 + 2:c1 - 2] = FREE
+    if notch == "fan":
+        c[40:50, 38:40] = FREE                            # the window
+        for angle in np.linspace(-1.3, 1.3, 27):          # rays from it, stopped by R's wall
+            for t in np.arange(0.0, 120.0, 0.5):
+                r, col = int(round(45 + t * np.sin(angle))), int(round(40 + t * np.cos(angle)))
+                if not (0 <= r < 88 and 40 <= col < 120) or c[r, col] == OCCUPIED:
+                    break
+                c[r, col] = FREE
+    else:
+        c[0:88, 40:80] = FREE
+    return c
+
+
+UL, UR, UB, NOTCH = (10, 10, 90, 40), (10, 80, 90, 110), (88, 10, 120, 110), (20, 38, 70, 82)
+
+
+def test_a_fan_in_the_notch_of_a_u_is_exterior_but_a_corridor_there_is_not():
+    """Both units lie inside the orthogonal hull (it fills the notch), both have two open sides
+    and two drawn walls with a wing across each; the fan shows little of its interior, the
+    corridor all of it."""
+    from semmap_pp.derive.exterior import _seen_inside, ortho_hull
+
+    rects = np.array([UL, UR, UB, NOTCH])
+    assert ortho_hull(rects[:3], (130, 120))[30, 60]
+    for notch, flagged in (("fan", True), ("corridor", False)):
+        c = u_building(notch)
+        shares = np.sort(side_shares(c, NOTCH, None, 2, 0.1))
+        assert shares[2] >= 0.3 > shares[1], notch
+        assert (_seen_inside(c, NOTCH, 2) < 0.7) == flagged
+        flags = find_exterior(c, rects, wall=2, max_share=0.3, seen_min=0.1, fan_seen_max=0.7)
+        assert flags.tolist() == [False, False, False, flagged], notch
+        # without the seen-share rule neither is flagged: the orthogonal hull holds both
+        assert not find_exterior(c, rects, wall=2, max_share=0.3, seen_min=0.1).any()

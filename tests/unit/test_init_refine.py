@@ -1,0 +1,663 @@
+"""The greedy ascent (ascent.refine_world) and the door candidates it relies on."""
+
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.lattice.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.sampler.ascent import align_walls, refine_world
+from semmap_pp.sampler.kernels import build_data, data_from_frame
+from semmap_pp.model import load_model
+from semmap_pp.target.posterior import Posterior
+
+
+def two_rooms() -> np.ndarray:
+    """Two 3 m x 3 m rooms (0.05 m cells) side by side, 2-cell walls, a 0.8 m door between them."""
+    m = np.full((84, 144), UNKNOWN, np.uint8)
+    m[2:82, 2:142] = OCCUPIED
+    m[4:80, 4:70] = FREE
+    m[4:80, 72:140] = FREE
+    m[34:50, 70:72] = FREE          # the door in the shared wall
+    return m
+
+
+def knowledge_free(m: np.ndarray):
+    """The knowledge-free target and the kernels' data of lattice map ``m`` (0.05 m cells, no
+    rotation): ``(posterior, data)``."""
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), load_model())
+    assert frame.theta == 0.0
+    return Posterior(frame, load_model(), None), data_from_frame(frame)
+
+
+def test_refine_reaches_the_walls_and_swallows_the_fragment():
+    model = load_model()
+    grid = OccupancyGrid(two_rooms(), np.zeros((84, 144), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    assert frame.theta == 0.0                                # the lattice is the image
+    post = Posterior(frame, model, None)
+    start = wm.empty(8)
+    start = wm.add(start, 0, (2, 2, 82, 50))                # left room stops 20 cells short of its wall
+    start = wm.add(start, 1, (4, 50, 80, 70))               # a strip between it and the wall
+    start = wm.add(start, 2, (2, 70, 82, 142))              # the right room, right as it is
+    out = refine_world(post, start, data_from_frame(frame))
+    assert post.evaluate(out).total > post.evaluate(start).total
+    rects = sorted(tuple(int(v) for v in out.rects[s]) for s in wm.active_slots(out))
+    assert len(rects) == 2                                  # the strip was absorbed, nothing born
+    left, right = rects
+    assert abs(left[3] - 72) <= 2 and left[:3] == (2, 2, 82)  # its wall band now sits on the shared wall
+    assert right == (2, 70, 82, 142)
+
+
+def test_align_walls_moves_walls_only():
+    """Rectangles a few cells off their walls are set on them; no unit is added, removed, merged
+    or cut, even where refine_world would (a fragment-free world of two misplaced rooms)."""
+    post, data = knowledge_free(two_rooms())
+    start = wm.add(wm.add(wm.empty(8), 3, (4, 1, 79, 69)), 5, (1, 73, 84, 140))
+    out = align_walls(post, start, data)
+    assert wm.active_slots(out).tolist() == [3, 5]
+    assert post.evaluate(out).total > post.evaluate(start).total
+    assert tuple(int(v) for v in out.rects[3]) == (2, 2, 82, 72)
+    assert tuple(int(v) for v in out.rects[5]) == (2, 70, 82, 142)
+    assert np.array_equal(start.rects[3], (4, 1, 79, 69))      # the input is not edited
+
+
+def hall_with_window() -> np.ndarray:
+    """A 4.8 m x 4 m hall (2-cell walls) with a 0.45 m window in its top wall and free space seen
+    through it above (outside the building)."""
+    m = np.full((140, 120), UNKNOWN, np.uint8)
+    m[40:120, 2:102] = OCCUPIED
+    m[42:118, 4:100] = FREE
+    m[10:40, 60:95] = FREE
+    m[40:42, 74:83] = FREE
+    return m
+
+
+def test_a_merge_trims_the_unit_that_blocks_its_box(monkeypatch):
+    """The hall in two pieces (a strip along its right wall) and a third unit over the space seen
+    through the window and the hall's top right corner: merging the two pieces is only a gain
+    when the third unit is cut back to the hall's top wall (a wall line), which the merge does."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(hall_with_window())
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (60, 70, 120, 102)),
+                   2, (8, 70, 62, 102))
+    asc = ascent._Ascent(post, start, data)
+    assert asc.merges()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert (40, 2, 120, 102) in rects                        # the hall is one unit
+    (fan,) = [r for r in rects if r != (40, 2, 120, 102)]
+    assert fan[0] < 40 and fan[2] <= 42                       # the third one ends at the hall's top wall
+    assert asc.tr.logp > post.evaluate(start).total
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+
+    # without the trim the two pieces cannot be merged (the box would overlap the third unit)
+    monkeypatch.setattr(ascent._Ascent, "cut_back", lambda self, world, a, box: (world, []))
+    old = ascent._Ascent(post, start, data)
+    old.merges()
+    assert (40, 2, 120, 102) not in {tuple(int(v) for v in old.world.rects[s])
+                                     for s in wm.active_slots(old.world)}
+
+
+def test_a_merge_swallows_a_third_piece_that_lies_inside_its_box(monkeypatch):
+    """The hall in three pieces, a strip along its right wall cut in two: the box of the hall's
+    main piece and either strip piece holds the other strip piece whole, so the merge drops it
+    (before, a unit the box swallowed blocked the merge and the hall stayed in pieces: synthetic
+    floor 7, docs/quality.md)."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(hall_with_window())
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (40, 2, 120, 72)), 1, (40, 70, 100, 102)),
+                   2, (98, 70, 120, 102))
+    asc = ascent._Ascent(post, start, data)
+    assert asc.merges()
+    rects = [tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world)]
+    assert rects == [(40, 2, 120, 102)]
+    assert asc.tr.logp > post.evaluate(start).total
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+
+    # what the merge does with the third piece: no part of a unit side is left beside the box
+    box = (40, 2, 120, 102)
+    swallowed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
+    assert cut == [2] and not swallowed.active[2]
+
+
+def test_a_merge_trims_a_unit_only_along_a_wall_line():
+    """Two rooms; the left one in two pieces, the second reaching across the shared wall into the
+    right room. Their box would cut the right room back at a column of open floor (no wall line
+    there), so the merge is refused, although the target would take it (intel's rooms and
+    corridor ends were merged into one hall that way; docs/sampler.md)."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(two_rooms())
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 60)), 1, (2, 58, 82, 100)),
+                   2, (2, 70, 82, 142))
+    asc = ascent._Ascent(post, start, data)
+    box = (2, 2, 82, 100)
+    trimmed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
+    assert cut == [2] and tuple(int(v) for v in trimmed.rects[2]) == (2, 98, 82, 142)
+    assert asc.boundary_lines(box, trimmed.rects[2]) < asc.trim_line_min    # open floor at column 98
+    assert not asc.merges()
+    assert np.array_equal(asc.world.rects, start.rects)
+    # the other guard: a unit left with less than half its area is not trimmed but kept whole
+    keep = ascent._Ascent(post, start, data, merge_keep=0.7, trim_line_min=0.0)
+    assert not keep.merges()                                  # 44 of 72 columns kept: 0.61 < 0.7
+    loose = ascent._Ascent(post, start, data, merge_keep=0.5, trim_line_min=0.0)
+    assert loose.merges()                                     # without both guards the merge is taken
+
+
+def corridor_over_room() -> np.ndarray:
+    """A 0.9 m x 9.8 m corridor (2-cell walls) and a 3 m x 3 m room below its middle, joined by a
+    0.8 m door."""
+    m = np.full((126, 206), UNKNOWN, np.uint8)
+    m[38:122, 2:202] = OCCUPIED
+    m[40:58, 4:200] = FREE
+    m[60:120, 100:160] = FREE
+    m[58:60, 120:136] = FREE
+    return m
+
+
+def test_a_merge_trims_a_unit_by_a_wall_band_without_asking_for_a_wall_line():
+    """The corridor in two pieces, the right one a row lower, so the pair's box reaches a row
+    into the room's top band: trimming the room by that row only sets the two bands on one line,
+    and the merge needs no wall line there (synthetic floor 4's corridor stayed in two pieces,
+    its door into a room leaving less than half the wall a line; docs/quality.md). A box that
+    would trim the room deeper still needs the line."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(corridor_over_room())
+    room = (58, 98, 122, 162)
+    for lower, merged in ((1, True), (4, False)):
+        start = wm.add(wm.add(wm.add(wm.empty(8), 0, (38, 2, 60, 100)),
+                              1, (38 + lower, 98, 60 + lower, 202)), 2, room)
+        asc = ascent._Ascent(post, start, data, trim_line_min=1.01)   # no line is ever enough
+        box = (38, 2, 60 + lower, 202)
+        trimmed, cut = asc.cut_back(wm.replace(wm.remove(start, 1), 0, box), 0, box)
+        assert cut == [2] and asc.trimmed_by(trimmed, 2) == lower      # rows taken off its top
+        assert asc.merges() == merged
+        n = wm.n_units(asc.world)
+        assert n == (2 if merged else 3)
+        if merged:
+            assert asc.tr.logp > post.evaluate(start).total
+            assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+
+
+def room_and_alcove_room() -> np.ndarray:
+    """A tall room (rows 2..92, columns 62..122) and a shorter room beside its lower part (rows
+    22..92, columns 2..60), 2-cell walls, a 0.8 m door between them."""
+    m = np.full((96, 126), UNKNOWN, np.uint8)
+    m[0:94, 60:124] = OCCUPIED
+    m[20:94, 0:62] = OCCUPIED
+    m[2:92, 62:122] = FREE
+    m[22:92, 2:60] = FREE
+    m[60:76, 60:62] = FREE
+    return m
+
+
+def test_an_l_shaped_pair_is_cut_the_other_way_along_a_wall_when_that_raises_log_p(monkeypatch):
+    """The two rooms split the wrong way round (the tall room's top as one unit; the short room
+    and the tall room's bottom as the other, the wall between them inside it): the recut makes
+    the tall room one unit and the short room the other; from there no recut helps, and a recut
+    whose new cut crosses open floor is not tried."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(room_and_alcove_room())
+    wrong = wm.add(wm.add(wm.empty(8), 0, (0, 60, 22, 124)), 1, (20, 0, 94, 124))
+    asc = ascent._Ascent(post, wrong, data)
+    assert asc.recuts()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects == [(0, 60, 94, 124), (20, 0, 94, 62)]
+    assert asc.tr.logp > post.evaluate(wrong).total
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+    assert not ascent._Ascent(post, asc.world, data).recuts()           # the right cut is kept
+    polished = refine_world(post, wrong, data, rounds=1, recuts=True)   # W*'s polish takes it too
+    assert sorted(tuple(int(v) for v in polished.rects[s]) for s in wm.active_slots(polished)) == rects
+    # the same pair with no wall along the other cut (the wall between the rooms taken away: an
+    # opening of 3.5 m, wider than a door)
+    m = room_and_alcove_room()
+    m[22:92, 60:62] = FREE
+    open_post, open_data = knowledge_free(m)
+    tried = []
+    monkeypatch.setattr(ascent._Ascent, "tentative", lambda self, new, changed, polish: tried.append(1))
+    ascent._Ascent(open_post, wrong, open_data).recuts()
+    assert tried == []
+
+
+def test_door_candidates_are_gaps_in_wall_lines_not_corridor_rows():
+    m = np.full((30, 40), FREE, np.uint8)
+    m[:, 5] = m[:, 16] = OCCUPIED     # a corridor 10 cells wide between two walls (columns 6..15)
+    m[20, 16:] = OCCUPIED             # a wall along row 20 right of the corridor ...
+    m[20, 26:31] = FREE               # ... with a 5-cell gap in it
+    data = build_data(m, min_side=4, wall_cells=1, door_min=3, door_max=12)
+    doors = {tuple(int(v) for v in d) for d in data.door_candidates}
+    assert (0, 20, 26, 31) in doors                         # axis 0 = along a row: row 20, cols 26..30
+    assert not any(d[0] == 0 and d[2] == 6 and d[3] == 16 for d in doors)  # no corridor row is a door
+
+
+def corridor_and_room() -> np.ndarray:
+    """A 1 m x 14.8 m corridor (0.05 m cells) and a room below its middle; the wall between them
+    has three doors, so its pieces are shorter than ``object_max_extent`` (objects, not walls)."""
+    m = np.full((130, 300), UNKNOWN, np.uint8)
+    m[38:62, 0:300] = OCCUPIED
+    m[40:60, 2:298] = FREE
+    m[60:124, 98:202] = OCCUPIED
+    m[62:122, 100:200] = FREE
+    for c0 in (112, 150, 176):
+        m[60:62, c0:c0 + 14] = FREE
+    return m
+
+
+def test_bridges_join_a_corridor_across_the_unit_that_spans_it_and_a_room():
+    """Two corridor pieces and one unit over the rest of the corridor and the room: no removal,
+    wall move, merge or split raises log p, but joining the pieces across that unit (cut back to
+    the room) does."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    model = load_model()
+    grid = OccupancyGrid(corridor_and_room(), np.zeros((130, 300), np.float32), 0.05)
+    frame = build_frame(grid, model)
+    assert frame.theta == 0.0
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.add(wm.add(wm.empty(8), 0, (38, 0, 62, 100)), 1, (38, 200, 62, 300)),
+                   2, (38, 98, 124, 202))
+    asc = _Ascent(post, start, data_from_frame(frame))
+    before = asc.tr.logp
+    assert not asc.removals() and not asc.merges() and not asc.splits()
+    assert not any(asc.wall_moves(s) for s in wm.active_slots(asc.world).tolist())
+    assert asc.tr.logp == before
+    assert asc.bridges()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects == [(38, 0, 62, 300), (60, 98, 124, 202)]
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6      # the tracker agrees
+
+
+def corridor_and_two_rooms(crossing_wall: bool) -> np.ndarray:
+    """A 1 m x 30 m corridor (0.05 m cells) and two 5 m rooms below its middle, each with three
+    doors to it (wall pieces shorter than ``object_max_extent``); with ``crossing_wall`` the wall
+    between the rooms runs on across the corridor."""
+    m = np.full((130, 600), UNKNOWN, np.uint8)
+    m[38:62, 0:600] = OCCUPIED
+    m[40:60, 2:598] = FREE
+    m[60:124, 198:402] = OCCUPIED
+    m[62:122, 200:299] = FREE
+    m[62:122, 301:400] = FREE
+    for c0 in (212, 250, 276, 312, 350, 376):
+        m[60:62, c0:c0 + 14] = FREE
+    if crossing_wall:
+        m[40:60, 299:301] = OCCUPIED
+    return m
+
+
+def _two_rooms_ascent(crossing_wall: bool):
+    from semmap_pp.sampler.ascent import _Ascent
+
+    model = load_model()
+    m = corridor_and_two_rooms(crossing_wall)
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    assert frame.theta == 0.0
+    post = Posterior(frame, model, None)
+    start = wm.empty(8)
+    for s, r in enumerate([(38, 0, 62, 200), (38, 400, 62, 600), (38, 198, 124, 301),
+                           (38, 299, 124, 402)]):
+        start = wm.add(start, s, r)
+    return post, _Ascent(post, start, data_from_frame(frame))
+
+
+def test_bridges_span_two_rooms_wide_gaps_but_not_a_wall_across_the_corridor():
+    """The corridor's pieces are 10 m apart (two units over corridor + room between them): joined.
+    With a wall across the corridor in the gap, two corridors meet at a wall: not joined."""
+    post, asc = _two_rooms_ascent(crossing_wall=False)
+    before = asc.tr.logp
+    assert asc.bridges()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects[0] == (38, 0, 62, 600)
+    assert [r[0] for r in rects[1:]] == [60, 60] and len(rects) == 3   # rooms cut back below it
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6
+
+    post, asc = _two_rooms_ascent(crossing_wall=True)
+    a, b = [int(v) for v in asc.world.rects[0]], [int(v) for v in asc.world.rects[1]]
+    assert asc.crossing_line(1, a, b) >= asc.merge_line_max
+    before = asc.tr.logp
+    assert not asc.bridges()
+    assert asc.tr.logp == before
+
+
+def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
+    """With knowledge on, the ascent passes its acceptance threshold to the tracker as a floor, so
+    proposals whose type-free bound is below it skip the knowledge engine; the moves taken, the
+    world and its log p are those of the ascent without floors."""
+    from pathlib import Path
+
+    from semmap_pp.sampler.ascent import _Ascent
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.run.pipeline import TargetFactory
+    from semmap_pp.target.posterior import Tracker
+
+    model = load_model()
+    m = corridor_and_two_rooms(crossing_wall=False)
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    rules = load_rules(Path(__file__).resolve().parents[2] / "rules" / "table3.lp")
+    start = wm.empty(8)
+    for s, r in enumerate([(38, 0, 62, 210), (38, 390, 62, 600), (38, 198, 124, 301),
+                           (38, 299, 124, 402)]):
+        start = wm.add(start, s, r)
+
+    def ascend():
+        post = TargetFactory(frame, model, rules)()
+        post.knowledge_on = True
+        asc = _Ascent(post, start, data_from_frame(frame))
+        for s in wm.active_slots(asc.world).tolist():
+            asc.wall_moves(s)
+        asc.bridges()
+        return asc
+
+    with_floors = ascend()
+    assert sum(with_floors.tr.skipped) > 0
+    monkeypatch.setattr(Tracker, "supports_floor", False)
+    without = ascend()
+    assert sum(without.tr.skipped) == 0
+    assert np.array_equal(with_floors.world.active, without.world.active)
+    assert np.array_equal(with_floors.world.rects, without.world.rects)
+    assert with_floors.tr.logp == without.tr.logp
+
+
+def l_of_walls(T=50, V=80, H=40, O=45) -> np.ndarray:
+    """One space whose lower-left room is closed off by an L of walls (a horizontal wall ``H``
+    cells long under ``T`` rows of open floor, then a vertical one ``V`` cells long with a 0.8 m
+    door); right of the L an ``O``-cell strip stays open to the space above (floor 10's corner)."""
+    rows, cols = 4 + T + 2 + V + 2, 4 + H + 2 + O + 2
+    m = np.full((rows + 2, cols + 2), UNKNOWN, np.uint8)
+    m[2:rows, 2:cols] = OCCUPIED
+    m[4:rows - 2, 4:cols - 2] = FREE
+    hw, vw = 4 + T, 4 + H
+    m[hw:hw + 2, 4:vw + 2] = OCCUPIED
+    m[hw:rows - 2, vw:vw + 2] = OCCUPIED
+    door = hw + 2 + V // 2 - 8
+    m[door:door + 16, vw:vw + 2] = FREE
+    return m
+
+
+def test_a_room_in_an_l_of_walls_is_cut_out_by_two_cuts_when_no_single_cut_helps():
+    from semmap_pp.sampler.ascent import _Ascent
+
+    m = l_of_walls()
+    model = load_model()
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.empty(8), 0, (2, 2, m.shape[0] - 2, m.shape[1] - 2))
+    asc = _Ascent(post, start, data_from_frame(frame))
+    before = asc.tr.logp
+    singles = [wm.add(wm.replace(start, 0, a), 1, b) for a, b in asc.cuts(start.rects[0])]
+    assert singles and max(post.evaluate(w).total for w in singles) < before   # no cut alone helps
+    assert asc.splits()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert len(rects) == 3 and (54, 2, 138, 46) in rects      # the room inside the L, on its walls
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6
+
+
+def row_of_rooms(n: int) -> np.ndarray:
+    """``n`` 3 m x 2.5 m rooms in a row (0.05 m cells, 2-cell walls), a 0.8 m door near the top
+    of each shared wall."""
+    w = 52
+    m = np.full((66, 2 + n * w + 4), UNKNOWN, np.uint8)
+    m[2:64, 2:2 + n * w + 2] = OCCUPIED
+    for i in range(n):
+        c0 = 4 + i * w
+        m[4:62, c0:c0 + w - 2] = FREE
+        if i:
+            m[8:24, c0 - 2:c0] = FREE
+    return m
+
+
+def test_the_ascent_grows_a_full_world_to_split_every_room():
+    """A world of 2 slots over a row of 6 rooms: each split needs an empty slot, so the ascent
+    doubles the capacity (2 -> 4 -> 8) and cuts every room out, its log p tracked exactly."""
+    m = row_of_rooms(6)
+    post, data = knowledge_free(m)
+    start = wm.add(wm.empty(2), 0, (2, 2, 64, m.shape[1] - 2))
+    out = refine_world(post, start, data, rounds=6)
+    assert out.capacity == 8 and wm.n_units(out) == 6
+    widths = sorted(int(out.rects[s][3] - out.rects[s][1]) for s in wm.active_slots(out))
+    assert widths == [54] * 6                                  # each room on its own walls
+    assert post.evaluate(out).total > post.evaluate(wm.grow(start, 8)).total + 500
+
+
+def test_start_worlds_have_room_for_a_building_larger_than_k_max():
+    """k_max = 4 and 6 rooms: the greedy cover fills its 4 slots, the start ascent doubles the
+    capacity to add and cut what is left: the start world is the six rooms (with k_max = 64 the
+    capacity stays 64)."""
+    import dataclasses
+
+    from semmap_pp.evaluate import default_roi
+    from semmap_pp.run.pipeline import Inputs, start_worlds
+
+    m = row_of_rooms(6)
+    grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
+    found = {}
+    for k_max, capacity in ((4, 8), (64, 64)):
+        model = load_model()
+        model = dataclasses.replace(model, prior=dataclasses.replace(model.prior, k_max=k_max))
+        inputs = Inputs(grid, model, None, build_frame(grid, model), default_roi(m, 20), "default")
+        worlds = start_worlds(inputs, 2, np.random.default_rng(0))
+        assert [w.capacity for w in worlds] == [capacity, capacity]
+        found[k_max] = sorted(tuple(int(v) for v in worlds[0].rects[s]) for s in wm.active_slots(worlds[0]))
+    assert found[4] == [(2, 2 + 52 * i, 64, 56 + 52 * i) for i in range(6)]
+    assert len(found[64]) >= 6
+
+
+def test_the_ascents_validity_test_equals_its_definition():
+    """``_Ascent.valid``'s test (the prior's compiled ``all_valid``) against ``world.is_valid``
+    plus the longest side, on random worlds (rectangles past the lattice, inverted, too small,
+    too long, inactive)."""
+    from semmap_pp.target.prior import all_valid
+    rng = np.random.default_rng(0)
+    seen = set()
+    for _ in range(3000):
+        k = int(rng.integers(1, 8))
+        lo, hi = int(rng.integers(1, 6)), int(rng.integers(5, 40))
+        r0, c0 = rng.integers(-3, 50, k), rng.integers(-3, 60, k)
+        rects = np.stack([r0, c0, r0 + rng.integers(-2, 45, k), c0 + rng.integers(-2, 45, k)], 1)
+        world = wm.make(rects, rng.random(k) < 0.7, np.full(k, wm.NO_TYPE))
+        r = world.rects[world.active]
+        want = wm.is_valid(world, (50, 60), lo) and bool(np.all(r[:, 2:] - r[:, :2] <= hi))
+        assert all_valid(world.rects, world.active, (50, 60), lo, hi) == want
+        seen.add(want)
+    assert seen == {True, False}
+
+
+def test_the_fragments_a_grown_unit_swallows_equal_their_definition():
+    """``_Ascent.absorb``'s compiled selection against its definition (the thin units other than
+    the grown one with at least ``share`` of their area inside it) on random worlds."""
+    from semmap_pp.sampler.ascent import _swallowed
+    rng = np.random.default_rng(1)
+    found = 0
+    for _ in range(3000):
+        k = int(rng.integers(1, 10))
+        r0, c0 = rng.integers(0, 40, k), rng.integers(0, 40, k)
+        rects = np.stack([r0, c0, r0 + rng.integers(1, 30, k), c0 + rng.integers(1, 30, k)], 1)
+        world = wm.make(rects, rng.random(k) < 0.8, np.full(k, wm.NO_TYPE))
+        slot, min_side = int(rng.integers(0, k)), int(rng.integers(1, 8))
+        r, o = world.rects[slot], world.rects
+        inter = (np.clip(np.minimum(o[:, 2], r[2]) - np.maximum(o[:, 0], r[0]), 0, None)
+                 * np.clip(np.minimum(o[:, 3], r[3]) - np.maximum(o[:, 1], r[1]), 0, None))
+        area = (o[:, 2] - o[:, 0]) * (o[:, 3] - o[:, 1])
+        thin = np.minimum(o[:, 2] - o[:, 0], o[:, 3] - o[:, 1]) < 2 * min_side
+        want = world.active & (np.arange(k) != slot) & thin & (inter >= 0.8 * area)
+        got = _swallowed(world.rects, world.active, slot, 2 * min_side, 0.8)
+        assert np.array_equal(got, want)
+        found += int(want.any())
+    assert found > 100
+
+
+def test_a_wall_off_its_line_moves_with_both_its_edges():
+    """Both rooms' edges on the shared wall 8 cells right of it: each edge alone cannot move (it
+    opens a gap of free space or runs into the other room), the wall moved as a whole can, and
+    W*'s polish (``shared_walls=True``) takes it."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(two_rooms())
+    right = [(2, 2, 82, 72), (2, 70, 82, 142)]
+    wrong = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 80)), 1, (2, 78, 82, 142))
+    rects = lambda w: sorted(tuple(int(v) for v in w.rects[s]) for s in wm.active_slots(w))  # noqa: E731
+    stuck = ascent._Ascent(post, wrong, data)
+    assert not stuck.all_wall_moves()                        # one edge at a time: stuck
+    asc = ascent._Ascent(post, wrong, data)
+    assert sorted(asc.wall_group(0, 3)) == [(0, 3), (1, 1)]  # the two edges on the shared wall
+    assert sorted(asc.wall_group(0, 0)) == [(0, 0), (1, 0)]  # the two top edges, collinear
+    assert asc.shared_wall_moves()
+    assert rects(asc.world) == right
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(asc.tr.logp)
+    assert not ascent._Ascent(post, asc.world, data).shared_wall_moves()   # a local maximum
+    assert rects(refine_world(post, wrong, data, rounds=1, recuts=True, shared_walls=True)) == right
+
+
+def test_a_birth_that_does_not_pay_leaves_the_world_as_it_was(monkeypatch):
+    """A tentative birth is polished by wall moves, which may swallow units; when the whole does
+    not raise log p the world before the birth comes back, swallowed units included (the undo
+    used to remove the new unit only, so a failed birth could lower log p)."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(two_rooms())
+    start = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 72)), 1, (2, 70, 82, 142))
+    asc = ascent._Ascent(post, start, data)
+    asc.data = data._replace(birth_rects=np.array([[10, 20, 40, 50]]))   # a box inside room 0
+    before = asc.tr.logp
+    born = []
+
+    def swallow_right_room(self, slot):      # the polish of the new unit drops the right room
+        born.append(slot)
+        self.tr.accept(self.tr.propose(wm.remove(self.world, 1), (1,)))
+        return True
+
+    monkeypatch.setattr(ascent._Ascent, "wall_moves", swallow_right_room)
+    assert not asc.births(covered_frac=1.0)  # every box counts as uncovered
+    assert born == [2]                       # the box was born in the first free slot
+    assert asc.tr.logp == before
+    assert sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world)) \
+        == [(2, 2, 82, 72), (2, 70, 82, 142)]
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6 * abs(before)
+
+
+def test_a_focused_pass_visits_the_focus_only():
+    """Wall moves ``within`` a set of slots visit only those units; ``near`` adds the units
+    within two wall bands."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(two_rooms())
+    off = wm.add(wm.add(wm.empty(8), 0, (2, 5, 82, 72)), 1, (2, 70, 82, 139))   # outer walls 3 cells in
+    asc = ascent._Ascent(post, off, data)
+    assert asc.near({0}) == {0, 1} and asc.near({1}) == {0, 1}
+    apart = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 40)), 1, (2, 100, 82, 142))
+    far = ascent._Ascent(post, apart, data)
+    assert far.near({0}) == {0}
+    assert asc.units({1}) == [1]
+    assert asc.all_wall_moves({1})
+    assert tuple(int(v) for v in asc.world.rects[0]) == (2, 5, 82, 72)       # not visited
+    assert tuple(int(v) for v in asc.world.rects[1]) == (2, 70, 82, 142)     # onto its wall
+    assert asc.units() == [0, 1] and asc.all_wall_moves()
+    assert tuple(int(v) for v in asc.world.rects[0]) == (2, 2, 82, 72)
+
+
+def test_a_wall_move_reaches_as_many_walls_on_a_finer_map():
+    """At 0.025 m a thick wall is drawn as two lines of cells, each line a plateau of the line
+    evidence as wide as the wall band (4 cells), so a wall fills 8 of the peaks: the 8 peaks of
+    0.05 m reach 1 wall of the row, the 16 of ``ascent_peaks(8, 0.025)`` reach 2 (CHANGELOG.md, quality
+    change 30)."""
+    from semmap_pp.sampler.ascent import _Ascent, ascent_peaks
+    from semmap_pp.lattice.frame import build_frame_from_classes
+
+    model = load_model()
+    m = np.full((60, 760), FREE, np.uint8)
+    walls = [60 + 80 * k for k in range(8)]
+    for x in walls:
+        m[:, x] = m[:, x + 5] = OCCUPIED        # a 0.15 m wall: two lines, its core unknown
+        m[:, x + 1:x + 5] = UNKNOWN
+    frame = build_frame_from_classes(m, 0.025, model)
+    post, data = Posterior(frame, model, None), data_from_frame(frame)
+    world = wm.add(wm.empty(4), 0, (0, 0, 60, 50))
+
+    def walls_reached(asc) -> int:
+        cand = asc.positions([0, 0, 60, 50], 3)     # the unit's right wall
+        return sum(any(x + 1 <= c <= x + 9 for c in cand) for x in walls)
+
+    fine = _Ascent(post, world, data)
+    assert ascent_peaks(8, 0.025) == fine.peaks == 16 and ascent_peaks(8, 0.05) == 8
+    assert walls_reached(fine) == 2
+    assert walls_reached(_Ascent(post, world, data, peaks=8)) == 1
+
+
+def test_after_whole_walls_moved_the_joining_moves_run_again(monkeypatch):
+    """W*'s polish alternates its phases: once whole walls have moved, the moves that join units
+    (merges among them) run again, since a moved wall may open a merge, but no split; when no
+    whole wall moves, one pass is all. From a local maximum, with the whole-wall phase made to
+    report a move once: two passes of the merges instead of one, one of the splits."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(two_rooms())
+    wrong = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 80)), 1, (2, 78, 82, 142))
+    polished = refine_world(post, wrong, data, rounds=2, recuts=True, shared_walls=True)
+    calls, cuts = [], []
+    merges, splits = ascent._Ascent.merges, ascent._Ascent.splits
+    monkeypatch.setattr(ascent._Ascent, "merges", lambda self: calls.append(1) or merges(self))
+    monkeypatch.setattr(ascent._Ascent, "splits", lambda self, *a: cuts.append(1) or splits(self, *a))
+    refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
+    assert len(calls) == len(cuts) == 1          # a local maximum: nothing moves, one pass
+    reported = []
+    shared = ascent._Ascent.shared_wall_moves
+
+    def once(self):
+        moved = shared(self)
+        if not reported:
+            reported.append(1)
+            return moved | {0}
+        return moved
+    monkeypatch.setattr(ascent._Ascent, "shared_wall_moves", once)
+    calls.clear()
+    cuts.clear()
+    out = refine_world(post, polished, data, rounds=2, recuts=True, shared_walls=True)
+    assert len(calls) == 2          # the merges again after the (reported) wall move ...
+    assert len(cuts) == 1           # ... but not the splits
+    assert post.evaluate(out).total >= post.evaluate(polished).total - 1e-6
+
+
+def test_w_stars_polish_leaves_the_double_cuts_to_the_start_ascent():
+    """The room inside an L of walls needs two cuts at once: the start ascent (refine_world, as
+    the pipeline's knowledge-free start runs it) makes them, W*'s polish does not try them
+    (ascent.polish; CHANGELOG.md, quality change 35) and keeps what single moves give."""
+    from semmap_pp.sampler.ascent import polish
+
+    m = l_of_walls()
+    model = load_model()
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    post, data = Posterior(frame, model, None), data_from_frame(frame)
+    start = wm.add(wm.empty(8), 0, (2, 2, m.shape[0] - 2, m.shape[1] - 2))
+
+    def rects(w):
+        return sorted(tuple(int(v) for v in w.rects[s]) for s in wm.active_slots(w))
+
+    assert (54, 2, 138, 46) in rects(refine_world(post, start, data, rounds=1))
+    polished = polish(post, start, data, rounds=1)
+    assert (54, 2, 138, 46) not in rects(polished)
+    assert post.evaluate(polished).total >= post.evaluate(start).total
+
+
+def test_w_stars_polish_leaves_the_births_to_the_start_ascent(monkeypatch):
+    """The start ascent (refine_world) tries births, the boxes of the birth table over free space
+    no unit covers; W*'s polish does not (ascent.polish; CHANGELOG.md, quality change 36)."""
+    from semmap_pp.sampler import ascent
+
+    post, data = knowledge_free(two_rooms())
+    left_only = wm.add(wm.empty(8), 0, (2, 2, 82, 72))      # the left room on its walls
+    tried = []
+    births = ascent._Ascent.births
+    monkeypatch.setattr(ascent._Ascent, "births",
+                        lambda self, *a, **k: tried.append(1) or births(self, *a, **k))
+    refine_world(post, left_only, data, rounds=1)
+    assert tried
+    tried.clear()
+    polished = ascent.polish(post, left_only, data, rounds=1)
+    assert not tried
+    assert post.evaluate(polished).total >= post.evaluate(left_only).total
