@@ -1091,7 +1091,7 @@ def bench_partial(args, model, rules) -> dict:
     import tempfile
     import partial_maps
     from semmap_pp.evaluate import protocol_scores, read_segmentation_truth
-    from semmap_pp.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
     rows = []
     with tempfile.TemporaryDirectory(prefix="semmap-partial-") as tmp:
         for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):

@@ -293,8 +293,8 @@ def _evidence(args) -> int:
 
 def _label(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.knowledge.labelled import parse_values
-    from semmap_pp.pipeline import load_inputs
+    from semmap_pp.studies.labelled import parse_values
+    from semmap_pp.run.pipeline import load_inputs
 
     _check_out_file(args.out)
     inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))
@@ -309,7 +309,7 @@ def _label(args) -> int:
 
 
 def labelled_example_text(inputs, world_path, truth=None, values=None) -> str:
-    """A labelled example (:mod:`semmap_pp.knowledge.labelled`) of the world.json at
+    """A labelled example (:mod:`semmap_pp.studies.labelled`) of the world.json at
     ``world_path`` on ``inputs``' map: its evidence (:func:`world_evidence_facts`) and labels,
     from the per-cell type image ``truth`` (grey values ``values``, default the ipa ones; the
     units' cells from labels.png beside the world.json) or else from the world.json's types."""
@@ -317,7 +317,7 @@ def labelled_example_text(inputs, world_path, truth=None, values=None) -> str:
     from PIL import Image
 
     from semmap_pp.errors import MapError
-    from semmap_pp.knowledge.labelled import (IPA_VALUES, cell_counts, label_facts,
+    from semmap_pp.studies.labelled import (IPA_VALUES, cell_counts, label_facts,
                                               majority_labels, read_truth_image, world_labels)
 
     world_path = Path(world_path)
@@ -352,7 +352,7 @@ def _check_out_file(out) -> None:
 
 def _label_synth(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.knowledge.labelled import synthetic_example
+    from semmap_pp.studies.labelled import synthetic_example
     from semmap_pp.model import load_model
 
     if args.floors < 1 or args.first < 0:

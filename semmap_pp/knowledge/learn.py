@@ -38,12 +38,16 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
+import tempfile
+import textwrap
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import clingo
 import clingo.ast as cast
 import numpy as np
+from scipy.optimize import minimize
 
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import EvidenceError, RuleError
@@ -52,6 +56,7 @@ from semmap_pp.knowledge.dialect import (MAX_WEIGHT, WEIGHT_SCALE, RuleSet, _rea
 from semmap_pp.knowledge.evidence import Evidence, evidence_from_facts, ground_facts
 from semmap_pp.knowledge.exact import JunctionTree, TooDense, calibrate, scope_marginal
 from semmap_pp.knowledge.ground import _build, _check_size, _clingo_ground, _with_soft_weights
+from semmap_pp.knowledge.engine import KnowledgeEngine
 
 #: Default standard deviation of the Gaussian prior on each weight (MLN units: 1.0 = 1000
 #: thousandths). A weight of the file is believed to within about ±1 before any data.
@@ -638,7 +643,6 @@ def learn(path, examples, sigma: float = SIGMA, prior_mean: str = "file",
     EvidenceError
         An example's labels break the hard rules.
     """
-    from scipy.optimize import minimize
 
     sr = path if isinstance(path, SoftRules) else soft_rules(path)
     if not examples:
@@ -706,10 +710,7 @@ def _engine_with(sr: SoftRules, values):
     """A :class:`~semmap_pp.knowledge.engine.KnowledgeEngine` over the rule file with the
     parameter ``values``: the rewritten file read from a temporary folder, its includes copied
     beside it (they lie in the file's folder), so it is validated as any rule file is."""
-    import shutil
-    import tempfile
 
-    from semmap_pp.knowledge.engine import KnowledgeEngine
     text = rewritten_text(sr, values)
     key = (sr.rules.path, text)
     eng = _ENGINES.get(key)
@@ -817,7 +818,6 @@ def learned_text(result: Learned, data_desc: str) -> str:
               f"%% log likelihood {result.start_log_likelihood:.3f} with the input weights, "
               f"{result.log_likelihood:.3f} with the learned ones. Each learned weight's comment "
               "gives its standard error."]
-    import textwrap
     text = " ".join(h[3:] if h.startswith("%% ") else h for h in header)
     return rewritten_text(sr, result.values, notes,
                           ["%% " + w for w in textwrap.wrap(text, 94, break_on_hyphens=False)])

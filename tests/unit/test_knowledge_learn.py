@@ -1,5 +1,5 @@
 """Tests of weight learning (`semmap rules learn`, semmap_pp.knowledge.learn) and of labelled
-examples (semmap_pp.knowledge.labelled)."""
+examples (semmap_pp.studies.labelled)."""
 
 from __future__ import annotations
 
@@ -17,10 +17,10 @@ from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import EvidenceError, RuleError, SemmapError
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge import learn as lm
-from semmap_pp.knowledge import labelled
+from semmap_pp.studies import labelled
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(__file__).parent / "data" / "learn"
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data" / "learn"
 TABLE3 = ROOT / "rules" / "table3.lp"
 PLANTED = DATA / "planted.lp"
 

@@ -26,6 +26,16 @@ import numpy as np
 
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import MapError, SemmapError
+from semmap_pp.evaluate.io import grey, read_image
+from semmap_pp.lattice.frame import build_frame
+from semmap_pp.grid import OccupancyGrid
+from semmap_pp.knowledge.evidence import evidence_to_facts
+from semmap_pp.model import load_model
+from semmap_pp.target.posterior import Posterior
+from semmap_pp.synth import generate_floor
+from semmap_pp.plans.world_file import pack_world
+from semmap_pp.knowledge import Evidence
+from semmap_pp.knowledge.dialect import SOFT_PREDICATES
 
 #: The grey values of the ipa place-type images (``/work/shared/data/ipa-types/training_*.png``):
 #: 77 room, 115 corridor; every other value (doorway 179, obstacle 0) labels nothing. The ipa
@@ -67,7 +77,6 @@ def read_truth_image(path, values: dict, shape=None) -> np.ndarray:
     """A per-cell type image as type indices (``UNIT_TYPES``; a grey value's first type), -1
     where its grey value is not one of ``values``; its size must be ``shape`` (the map's) when
     given."""
-    from semmap_pp.evaluate.io import grey, read_image
     image = read_image(path)
     if image.ndim == 3:
         image = np.rint(grey(image)).astype(np.int64)
@@ -143,13 +152,6 @@ def synthetic_example(seed: int, model=None) -> str:
     world; the evidence is what the engine computes for that world on the floor's map (the same
     code as for any world); the labels are the truth's types, and the cells of each unit's
     rectangle are counted as its true type."""
-    from semmap_pp.frame import build_frame
-    from semmap_pp.grid import OccupancyGrid
-    from semmap_pp.knowledge.evidence import evidence_to_facts
-    from semmap_pp.model import load_model
-    from semmap_pp.posterior import Posterior
-    from semmap_pp.synth import generate_floor
-    from semmap_pp.world_file import pack_world
 
     model = model or load_model(None)
     floor = generate_floor(int(seed))
@@ -161,8 +163,6 @@ def synthetic_example(seed: int, model=None) -> str:
     world = pack_world(rects, model.prior.k_max)
     ev = Posterior(frame, model, None).knowledge_evidence(world)
     # the evidence numbers units by world slot: unit k + 1 is seen[k]
-    from semmap_pp.knowledge import Evidence
-    from semmap_pp.knowledge.dialect import SOFT_PREDICATES
     relabel = {name: {u + 1: p for u, p in ev.unary(name)} for name in SOFT_PREDICATES}
     ev = Evidence.build([u + 1 for u in ev.units], adj=[(p + 1, q + 1) for p, q in ev.adj],
                         **relabel)
