@@ -276,17 +276,14 @@ def _evidence(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.run.pipeline import load_inputs
 
-    if args.out is not None and (args.out.is_dir() or str(args.out).endswith(("/", "\\"))):
-        raise OutputError(args.out, "is a directory; --out names the facts file to write")
+    if args.out is not None:
+        _check_out_file(args.out, "facts file")
     inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))
     text = world_evidence_facts(inputs, args.world)
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    try:
-        atomic.write_text(args.out, text)
-    except OSError as exc:
-        raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
+    atomic.write_text(args.out, text)
     print(args.out)
     return 0
 
@@ -300,10 +297,7 @@ def _label(args) -> int:
     inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))
     values = parse_values(args.truth_values) if args.truth_values else None
     text = labelled_example_text(inputs, args.world, args.truth, values)
-    try:
-        atomic.write_text(args.out, text)
-    except OSError as exc:
-        raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
+    atomic.write_text(args.out, text)
     print(args.out)
     return 0
 
@@ -345,9 +339,9 @@ def _unit_ids(world_path) -> set:
     return {u["id"] for u in doc.get("units", []) if isinstance(u, dict) and isinstance(u.get("id"), int)}
 
 
-def _check_out_file(out) -> None:
+def _check_out_file(out, what: str = "file") -> None:
     if out.is_dir() or str(out).endswith(("/", "\\")):
-        raise OutputError(out, "is a directory; --out names the file to write")
+        raise OutputError(out, f"is a directory; --out names the {what} to write")
 
 
 def _label_synth(args) -> int:
@@ -362,10 +356,7 @@ def _label_synth(args) -> int:
     model = load_model(args.model)
     for seed in range(args.first, args.first + args.floors):
         path = args.out / f"synth-{seed}.lp"
-        try:
-            atomic.write_text(path, synthetic_example(seed, model))
-        except OSError as exc:
-            raise OutputError(path, f"cannot write: {exc.strerror or exc}") from None
+        atomic.write_text(path, synthetic_example(seed, model))
         print(path)
     return 0
 
@@ -389,10 +380,7 @@ def _learn(args) -> int:
     if args.out is not None:
         result = lm.learn(sr, examples, **settings)
         desc = ", ".join(str(d) for d in args.data)
-        try:
-            atomic.write_text(args.out, lm.learned_text(result, desc))
-        except OSError as exc:
-            raise OutputError(args.out, f"cannot write: {exc.strerror or exc}") from None
+        atomic.write_text(args.out, lm.learned_text(result, desc))
         out["weights"] = [
             {"name": p.name, "file": int(p.value), "learned": int(round(v * 1000)),
              "se": None if se != se else round(float(se), 4), "ground_tuples": int(g),
