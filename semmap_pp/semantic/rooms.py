@@ -136,19 +136,16 @@ def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     return np.bincount(seeds[ring], minlength=int(seeds.max(initial=0)) + 1)
 
 
-def _walled_share(piece: np.ndarray, free: np.ndarray, occupied: np.ndarray | None, reach: int) -> float:
+def _walled_share(piece: np.ndarray, free: np.ndarray, walls: np.ndarray | None) -> float:
     """Share of the non-free cells around ``piece`` (8-connected, its holes filled: specks and
-    furniture inside it are no walls around it) that lie within ``reach`` cells of an occupied cell
-    (a SLAM map blurs its walls into a margin of cells neither free nor occupied)."""
-    if occupied is None:
+    furniture inside it are no walls around it) that are ``walls`` (cells near an occupied one;
+    None: every non-free cell)."""
+    if walls is None:
         return 1.0
     piece = ndi.binary_fill_holes(piece)
     ring = ndi.binary_dilation(piece, _EIGHT) & ~piece & ~free
     n = int(ring.sum())
-    if not n:
-        return 1.0
-    near = ndi.binary_dilation(occupied, _EIGHT, iterations=reach) if reach > 0 else occupied
-    return float((ring & near).sum()) / n
+    return float((ring & walls).sum()) / n if n else 1.0
 
 
 def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
@@ -194,18 +191,21 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     # work on the free cells' bounding box (a SLAM map's canvas is mostly unknown)
     rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
     # (with the walls just beyond them: the blur's margin and one cell)
-    pad = 2 + int(round(params.wall_blur_m / resolution))
+    blur = int(round(params.wall_blur_m / resolution))
+    pad = 2 + blur
     box = (slice(max(rows[0] - pad, 0), rows[-1] + 1 + pad), slice(max(cols[0] - pad, 0), cols[-1] + 1 + pad))
     free = free[box]
     doors = np.asarray(doors, bool)[box]
     seeds = np.asarray(seeds)[box]
-    occupied = None if occupied is None else np.asarray(occupied, bool)[box]
+    # cells that count as walls: within the blur's margin of an occupied cell
+    walls = None if occupied is None else np.asarray(occupied, bool)[box]
+    if walls is not None and blur > 0:
+        walls = ndi.binary_dilation(walls, _EIGHT, iterations=blur)
     passable = free & ~doors
     seeds = np.where(passable, seeds, 0).astype(np.int32)
     n_regions = int(seeds.max(initial=0))
     min_cells = params.min_room_m2 / resolution ** 2
     door_cells = params.door_max_m / resolution
-    blur = int(round(params.wall_blur_m / resolution))
 
     # the strips along each interior (its wall band, a ragged wall's margin) go to it first, so that
     # what is left falls apart into the pieces beyond the walls
@@ -220,14 +220,13 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
         for k in range(1, n + 1):
             if sizes[k] < min_cells or objs[k - 1] is None:
                 continue
-            sl = tuple(slice(max(s.start - 1 - blur, 0), s.stop + 1 + blur) for s in objs[k - 1])
+            sl = tuple(slice(max(s.start - 1, 0), s.stop + 1) for s in objs[k - 1])
             piece = pieces[sl] == k
             contact = _contact_widths(piece, near[sl])
             contact[0] = 0
             if contact.max(initial=0) > door_cells:
                 continue
-            occ_sl = None if occupied is None else occupied[sl]
-            if _walled_share(piece, free[sl], occ_sl, blur) >= params.walled_min:
+            if _walled_share(piece, free[sl], None if walls is None else walls[sl]) >= params.walled_min:
                 extra.append(k)
                 seeded[pieces == k] = n_regions + len(extra)
             else:                  # rays into the open (a window's fan): no room, not flooded either
