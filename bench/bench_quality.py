@@ -151,6 +151,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--budget", default="model", type=_budget,
                         help="run lengths: 'model' ([sampler]), 'quick', or seconds of sampling per map")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed")
+    parser.add_argument("--over-seeds", default=None,
+                        help="run the subset once per sampler seed (comma-separated, e.g. 0,1,2): rows "
+                             "carry it as sampler_seed, 'means' is the mean over the seeds of each seed's means, "
+                             "'seed_sd' their standard deviation; one search's W* depends on its seed")
     for name in ("chains", "cores", "tune", "draws", "n-inner"):
         parser.add_argument(f"--{name}", type=int, default=None, help=f"override {name}")
     parser.add_argument("--anneal", type=float, default=None, help="override the burn-in temperature")
@@ -1191,7 +1195,7 @@ def run(args) -> dict:
            "real": bench_real, "real-gt": bench_real_gt, "partial": bench_partial, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
     for name in subsets:
         t0 = time.perf_counter()
-        out[name] = fns[name](args, model, rules)
+        out[name] = over_seeds(fns[name], args, model, rules)
         out[name]["wall_s"] = round(time.perf_counter() - t0, 1)
         off = knowledge_off(out[name])
         if off:    # said at the top of the subset: its rows measured the geometry's fixed types
@@ -1201,6 +1205,64 @@ def run(args) -> dict:
     for line in report_lines(out["target_report"]) if out["target_report"] else ():
         _log(args, line)
     return out
+
+
+def parse_seeds(text) -> list[int]:
+    """``--over-seeds`` as a list of seeds (empty for None).
+
+    >>> parse_seeds("0, 1,2"), parse_seeds(None)
+    ([0, 1, 2], [])
+    """
+    if text is None:
+        return []
+    try:
+        seeds = [int(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise SystemExit(f"--over-seeds: comma-separated integers expected, got {text!r}") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise SystemExit(f"--over-seeds: distinct seeds >= 0 expected, got {text!r}")
+    return seeds
+
+
+def combine_seeds(parts: dict) -> dict:
+    """One subset's results under several seeds (``{seed: result}``) as one result: every row
+    with its ``sampler_seed``, the means over the seeds of each seed's means, their standard deviation
+    (``seed_sd``, 0 for one seed) and each seed's means (``means_by_seed``).
+
+    >>> r = combine_seeds({0: {"rows": [{"map": "a", "p": 0.9}], "means": {"p": 0.9}},
+    ...                    1: {"rows": [{"map": "a", "p": 0.8}], "means": {"p": 0.8}}})
+    >>> r["means"], r["seed_sd"], [row["sampler_seed"] for row in r["rows"]]
+    ({'p': 0.85}, {'p': 0.05}, [0, 1])
+    """
+    rows, by_seed = [], {}
+    for seed, part in parts.items():
+        rows += [{**row, "sampler_seed": seed} for row in part.get("rows", [])]
+        by_seed[seed] = part.get("means", {})
+    keys = [k for k in next(iter(by_seed.values()), {}) if all(
+        isinstance(m.get(k), (int, float)) and m.get(k) is not None for m in by_seed.values())]
+    first = next(iter(parts.values()))
+    return {**{k: v for k, v in first.items() if k not in ("rows", "means")}, "rows": rows,
+            "means": {k: round(float(np.mean([m[k] for m in by_seed.values()])), 4) for k in keys},
+            "seed_sd": {k: round(float(np.std([m[k] for m in by_seed.values()])), 4) for k in keys},
+            "means_by_seed": {str(s): m for s, m in by_seed.items()}}
+
+
+def over_seeds(fn, args, model, rules) -> dict:
+    """``fn(args, model, rules)``, once per ``--over-seeds`` seed (:func:`combine_seeds`), or once."""
+    seeds = parse_seeds(getattr(args, "over_seeds", None))
+    if not seeds:
+        return fn(args, model, rules)
+    keep, parts = args.seed, {}
+    try:
+        for seed in seeds:
+            args.seed = seed
+            _log(args, f"-- seed {seed}")
+            parts[seed] = fn(args, model, rules)
+    finally:
+        args.seed = keep
+    if any("rows" not in p for p in parts.values()):     # a skipped subset: as it came
+        return next(iter(parts.values()))
+    return combine_seeds(parts)
 
 
 def _measured(result: dict, subset: str, key: str):

@@ -113,3 +113,26 @@ def test_partial_explorations_see_part_of_the_floor_and_are_reproducible(monkeyp
     assert min(shares) < 0.8 and max(shares) > 0.95           # some rooms seen in part, some whole
     more, _, _ = partial_maps.explore(folder, 0.6, 1, truth)
     assert (more != 205).sum() > seen.sum()
+
+
+def test_quality_over_seeds_gives_each_seed_its_rows_and_the_mean_of_their_means(capsys, monkeypatch):
+    result = bench(capsys, monkeypatch, "quality", "--tiny", "--over-seeds", "0,1")
+    part = result["synthetic"]
+    assert [r["sampler_seed"] for r in part["rows"]] == [0, 1]
+    assert all(r["seed"] == 1 for r in part["rows"])          # the floor's seed is kept
+    by_seed = part["means_by_seed"]
+    for key in ("cpr", "rooms_precision"):
+        values = [by_seed[s][key] for s in ("0", "1")]
+        assert part["means"][key] == pytest.approx(np.mean(values), abs=1e-4)
+        assert part["seed_sd"][key] == pytest.approx(np.std(values), abs=1e-4)
+
+
+@pytest.mark.parametrize("text", ["0,x", "1,1", "-1", ","])
+def test_quality_over_seeds_refuses_a_bad_list(text, capsys, monkeypatch):
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    spec = importlib.util.spec_from_file_location("bench_runner", BENCH / "run.py")
+    runner = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(runner)
+    with pytest.raises(SystemExit, match="--over-seeds"):
+        runner.main(["quality", "--tiny", "--over-seeds", text, "--json"])
+
