@@ -19,7 +19,8 @@ made from W* in three steps, all on the input image's cells:
    through a window or an exit: no room.
 3. **Every other free cell** (rays through a door, an alcove, a strip along a ragged wall) joins
    the room it is nearest to along the free floor, never across a door (a breadth-first
-   geodesic flood, 4-connected).
+   geodesic flood, 8-connected but never cutting the corner between two wall or door cells: a
+   ray's cells may touch only at their corners, a wall drawn as a staircase stays shut).
 
 Free cells that no room reaches (specks beyond a wall, free space seen outside through a window
 with no room behind it) are 0. ``docs/outputs.md`` compares the convention with ipa's and ROSE2's.
@@ -81,10 +82,12 @@ class Rooms:
 
 
 @numba.njit(cache=True, nogil=True)
-def _flood(labels, passable, max_steps):  # pragma: no cover - compiled
+def _flood(labels, passable, walls, max_steps):  # pragma: no cover - compiled
     """Breadth-first geodesic flood: every passable 0-cell reachable from a labelled cell in at most
-    ``max_steps`` steps (any number when negative) takes the label of the nearest one
-    (4-connected; ties to the label that reached it first, i.e. in row-major order of the seeds)."""
+    ``max_steps`` steps (any number when negative) takes the label of the nearest one. Steps go to
+    the 4 neighbours, and to the 4 diagonal ones unless both cells beside the diagonal are
+    ``walls`` (a ray's cells touch at their corners; a wall drawn as a staircase is not crossed);
+    ties go to the label that reached the cell first (row-major order of the seeds)."""
     h, w = labels.shape
     out = labels.copy()
     n = h * w
@@ -105,29 +108,49 @@ def _flood(labels, passable, max_steps):  # pragma: no cover - compiled
         lab = out[i, j]
         if max_steps >= 0 and steps[k] >= max_steps:
             continue
-        for d in range(4):
-            ii = i + (1 if d == 0 else -1 if d == 1 else 0)
-            jj = j + (1 if d == 2 else -1 if d == 3 else 0)
-            if 0 <= ii < h and 0 <= jj < w and out[ii, jj] == 0 and passable[ii, jj]:
-                out[ii, jj] = lab
-                steps[ii * w + jj] = steps[k] + 1
-                queue[tail] = ii * w + jj
-                tail += 1
+        for d in range(8):
+            di = _DI[d]
+            dj = _DJ[d]
+            ii = i + di
+            jj = j + dj
+            if not (0 <= ii < h and 0 <= jj < w) or out[ii, jj] != 0 or not passable[ii, jj]:
+                continue
+            if d >= 4 and walls[ii, j] and walls[i, jj]:
+                continue
+            out[ii, jj] = lab
+            steps[ii * w + jj] = steps[k] + 1
+            queue[tail] = ii * w + jj
+            tail += 1
     return out
 
 
-def geodesic_flood(labels: np.ndarray, passable: np.ndarray, max_steps: int = -1) -> np.ndarray:
+_DI = np.array([1, -1, 0, 0, 1, 1, -1, -1], np.int64)
+_DJ = np.array([0, 0, 1, -1, 1, -1, 1, -1], np.int64)
+
+
+def geodesic_flood(labels: np.ndarray, passable: np.ndarray, max_steps: int = -1,
+                   walls: np.ndarray | None = None) -> np.ndarray:
     """Each 0-cell of ``passable`` reachable from a labelled cell (in at most ``max_steps`` steps
-    when it is not negative) takes the nearest cell's label.
+    when it is not negative) takes the nearest cell's label: 8-connected, a diagonal step taken
+    unless both cells beside it are ``walls`` (None: every cell not ``passable``).
 
     >>> lab = np.array([[1, 0, 0, 0, 2]], np.int32)
     >>> geodesic_flood(lab, np.array([[1, 1, 0, 1, 1]], bool)).tolist()
     [[1, 1, 0, 2, 2]]
     >>> geodesic_flood(np.array([[1, 0, 0, 0]]), np.ones((1, 4), bool), max_steps=2).tolist()
     [[1, 1, 1, 0]]
+
+    A ray whose cells touch at their corners is followed, a staircase wall is not crossed:
+
+    >>> ray = np.eye(4, dtype=bool); lab = np.zeros((4, 4), np.int32); lab[0, 0] = 1
+    >>> geodesic_flood(lab, ray, walls=np.zeros((4, 4), bool)).diagonal().tolist()
+    [1, 1, 1, 1]
+    >>> geodesic_flood(lab, ray).diagonal().tolist()
+    [1, 0, 0, 0]
     """
-    return _flood(np.ascontiguousarray(labels, np.int32), np.ascontiguousarray(passable, np.bool_),
-                  int(max_steps))
+    passable = np.ascontiguousarray(passable, np.bool_)
+    walls = ~passable if walls is None else np.ascontiguousarray(walls, np.bool_)
+    return _flood(np.ascontiguousarray(labels, np.int32), passable, walls, int(max_steps))
 
 
 def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:
@@ -199,6 +222,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     seeds = np.asarray(seeds)[box]
     # cells that count as walls: within the blur's margin of an occupied cell
     walls = None if occupied is None else np.asarray(occupied, bool)[box]
+    # what a flood's diagonal step may not cut between: the map's walls (or every non-free cell)
+    # and W*'s doors; unknown cells between the cells of a ray are no walls
+    blocked = (~free if walls is None else walls) | doors
     if walls is not None and blur > 0:
         walls = ndi.binary_dilation(walls, _EIGHT, iterations=blur)
     passable = free & ~doors
@@ -209,7 +235,7 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
 
     # the strips along each interior (its wall band, a ragged wall's margin) go to it first, so that
     # what is left falls apart into the pieces beyond the walls
-    near = geodesic_flood(seeds, passable, max(1, int(round(params.band_m / resolution))))
+    near = geodesic_flood(seeds, passable, max(1, int(round(params.band_m / resolution))), blocked)
     rest = passable & (near == 0)
     pieces, n = ndi.label(rest, _EIGHT)
     seeded = near.copy()
@@ -231,7 +257,7 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
                 seeded[pieces == k] = n_regions + len(extra)
             else:                  # rays into the open (a window's fan): no room, not flooded either
                 passable = passable & (pieces != k)
-    flooded = geodesic_flood(seeded, passable)
+    flooded = geodesic_flood(seeded, passable, walls=blocked)
     # number the rooms 1..k: the regions first (in order), then the rooms seen through their door
     present = np.bincount(flooded.ravel(), minlength=n_regions + len(extra) + 1)
     lut = np.zeros(present.size, np.int32)

@@ -30,8 +30,9 @@ PUBLISHED_RECALL = {"freiburg_building52": 0.967, "freiburg_building101": 0.908,
 
 # --- the flood ---------------------------------------------------------------------------------
 
-def bfs_distance(passable: np.ndarray, sources: np.ndarray) -> np.ndarray:
-    """4-connected path length from ``sources`` through passable cells (inf where unreachable)."""
+def bfs_distance(passable: np.ndarray, sources: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Path length from ``sources`` through passable cells (inf where unreachable): steps to the 4
+    neighbours, and to the diagonal ones unless both cells beside the step are ``walls``."""
     h, w = passable.shape
     dist = np.full((h, w), np.inf)
     q = deque()
@@ -40,16 +41,20 @@ def bfs_distance(passable: np.ndarray, sources: np.ndarray) -> np.ndarray:
         q.append((i, j))
     while q:
         i, j = q.popleft()
-        for ii, jj in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
-            if 0 <= ii < h and 0 <= jj < w and passable[ii, jj] and dist[ii, jj] == np.inf:
-                dist[ii, jj] = dist[i, j] + 1
-                q.append((ii, jj))
+        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)):
+            ii, jj = i + di, j + dj
+            if not (0 <= ii < h and 0 <= jj < w) or not passable[ii, jj] or dist[ii, jj] < np.inf:
+                continue
+            if di and dj and walls[ii, j] and walls[i, jj]:
+                continue
+            dist[ii, jj] = dist[i, j] + 1
+            q.append((ii, jj))
     return dist
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2 ** 31 - 1))
-def test_the_flood_gives_each_cell_a_nearest_seed_along_the_floor(seed):
+@given(st.integers(0, 2 ** 31 - 1), st.booleans())
+def test_the_flood_gives_each_cell_a_nearest_seed_along_the_floor(seed, some_walls):
     rng = np.random.default_rng(seed)
     passable = rng.random((12, 15)) < 0.75
     seeds = np.zeros((12, 15), np.int32)
@@ -57,8 +62,10 @@ def test_the_flood_gives_each_cell_a_nearest_seed_along_the_floor(seed):
         i, j = rng.integers(0, 12), rng.integers(0, 15)
         seeds[i, j] = label
         passable[i, j] = True
-    out = geodesic_flood(seeds, passable)
-    dists = {k: bfs_distance(passable, seeds == k) for k in (1, 2, 3)}
+    # every non-passable cell a wall, or only some of them (the others unseen cells)
+    walls = ~passable & (rng.random(passable.shape) < 0.5) if some_walls else ~passable
+    out = geodesic_flood(seeds, passable, walls=walls)
+    dists = {k: bfs_distance(passable, seeds == k, walls) for k in (1, 2, 3)}
     nearest = np.min(np.stack(list(dists.values())), axis=0)
     for i, j in np.ndindex(out.shape):
         if seeds[i, j]:
@@ -81,6 +88,36 @@ def corridor_and_room(door_width: int):
     seeds = np.zeros(free.shape, np.int32)
     seeds[1:9, 1:39] = 1
     return free, seeds
+
+
+def test_the_cells_of_a_ray_that_touch_at_their_corners_join_its_room_but_a_staircase_wall_holds():
+    """A room (a unit's interior) with a ray leaving it across unseen cells, its cells touching
+    only at their corners: the ray is the room's. Below the room's floor, a second room behind a
+    wall drawn as a staircase of occupied cells (rows 18 and 19 in turn): the flood does not cut
+    through the staircase's corners."""
+    free = np.zeros((30, 30), bool)
+    free[2:12, 2:12] = True                                   # room 1
+    for k in range(12, 20):
+        free[k, k] = True                                     # a diagonal ray out of its corner
+    free[12:28, 2:10] = True                                  # its floor going on, then room 2 ...
+    occupied = np.zeros_like(free)
+    for k in range(8):
+        occupied[19 - k % 2, 2 + k] = True                    # ... under a staircase wall
+    free &= ~occupied
+    seeds = np.zeros(free.shape, np.int32)
+    seeds[3:11, 3:11] = 1
+    seeds[22:27, 3:9] = 2
+    lab, _ = room_labels(free, seeds, np.zeros_like(free), 0.1, RoomParams(min_room_m2=100.0),
+                         occupied=occupied)
+    assert (lab[12:20, 12:20].diagonal() == 1).all()
+    rows = np.arange(30)[:, None]
+    below = free & (rows >= 19) & (np.arange(30)[None, :] < 10)
+    below &= ~((rows == 19) & (np.arange(30)[None, :] % 2 == 0))    # (19, odd) cells are above it
+    assert (lab[below & (rows >= 20)] == 2).all()
+    assert (lab[free & (rows >= 12) & (rows <= 17) & (np.arange(30)[None, :] < 10)] == 1).all()
+    # without the corner rule (every non-free cell a wall, as unseen cells are) the ray is cut off
+    lab4, _ = room_labels(free, seeds, np.zeros_like(free), 0.1, RoomParams(min_room_m2=100.0))
+    assert (lab4[12:20, 12:20].diagonal()[1:] == 0).all()
 
 
 def test_a_room_seen_through_its_door_is_a_room_of_its_own():
