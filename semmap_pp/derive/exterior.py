@@ -62,6 +62,7 @@ wall with the window.
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 
@@ -221,9 +222,39 @@ def _hull(rects: np.ndarray):
     return hull if len(hull) >= 3 else None
 
 
+def building_outline(classes: np.ndarray, gap: int) -> np.ndarray:
+    """(H, W) bool: the cells within the building's outline, drawn by its own walls.
+
+    The space outside is found as a disc of diameter ``gap`` cells rolling in from the lattice's
+    border through free and unknown cells: its centres are the cells farther than ``gap / 2``
+    from every occupied cell joined to the border (a wall's gaps no wider than ``gap``, windows
+    and exits, keep it out), the space it sweeps is every cell within ``gap / 2`` of them; the
+    outline holds the rest: the walls and everything they enclose. An outer wall with a wider
+    gap (an unseen wall, a glass front) lets the disc in, and the rooms it reaches are outside.
+
+    >>> c = np.full((40, 40), UNKNOWN, np.uint8)
+    >>> c[10, 10:30] = c[29, 10:30] = OCCUPIED; c[10:30, 10] = c[10:30, 29] = OCCUPIED
+    >>> c[29, 18:22] = FREE                      # a 4-cell exit in the bottom wall
+    >>> inside = building_outline(c, 6)
+    >>> bool(inside[20, 20]), bool(inside[5, 5]), bool(inside[10, 20]), bool(building_outline(c, 3)[20, 20])
+    (True, False, True, False)
+    """
+    c = np.asarray(classes)
+    r = 0.5 * float(gap)
+    pad = int(np.ceil(r)) + 1               # open space around the lattice: its border is outside
+    occ = np.pad(c == OCCUPIED, pad)
+    if not occ.any():
+        return np.zeros(c.shape, dtype=bool)
+    # distance transforms rather than a closing with a disc: linear in the cells at any gap
+    labels, _ = ndimage.label(ndimage.distance_transform_edt(~occ) > r)
+    core = labels == labels[0, 0]
+    swept = ndimage.distance_transform_edt(~core) <= r
+    return ~swept[pad:pad + c.shape[0], pad:pad + c.shape[1]]
+
+
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
                   seen_min: float, outside_min: float = 0.5, across: int = 3,
-                  fan_seen_max: float = 0.0) -> np.ndarray:
+                  fan_seen_max: float = 0.0, outline_gap: int = 0) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -238,7 +269,9 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     a unit is flagged when less than ``fan_seen_max`` of its interior is seen, 0: never). At
     least two units are left: candidates are flagged the one most outside the footprint first
     (ties: the lower share, then the rectangle), so the result does not depend on the order of
-    ``rects``."""
+    ``rects``. With ``outline_gap`` (cells, 0: off) a unit is flagged only when more than
+    ``outside_min`` of its area lies outside :func:`building_outline` too: a unit the building's
+    walls enclose is never exterior."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
@@ -278,9 +311,12 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
                 out = 1.0               # a fan in a notch: flagged first, as wholly outside
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
+    if order and outline_gap > 0:   # the building's own outline: what its walls enclose stays in
+        inside = building_outline(classes, outline_gap)
+        order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside) > outside_min]
     for _key, i in sorted(order)[:max(n - 2, 0)]:
         exterior[i] = True
     return exterior
 
 
-__all__ = ["find_exterior", "ortho_hull", "perimeter_share", "side_shares"]
+__all__ = ["building_outline", "find_exterior", "ortho_hull", "perimeter_share", "side_shares"]
