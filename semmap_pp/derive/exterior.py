@@ -222,7 +222,7 @@ def _hull(rects: np.ndarray):
     return hull if len(hull) >= 3 else None
 
 
-def building_outline(classes: np.ndarray, gap: int) -> np.ndarray:
+def building_outline(classes: np.ndarray, gap: int, object_extent: int = 0) -> np.ndarray:
     """(H, W) bool: the cells within the building's outline, drawn by its own walls.
 
     The space outside is found as a disc of diameter ``gap`` cells rolling in from the lattice's
@@ -231,6 +231,9 @@ def building_outline(classes: np.ndarray, gap: int) -> np.ndarray:
     and exits, keep it out), the space it sweeps is every cell within ``gap / 2`` of them; the
     outline holds the rest: the walls and everything they enclose. An outer wall with a wider
     gap (an unseen wall, a glass front) lets the disc in, and the rooms it reaches are outside.
+    The walls are the occupied cells of 8-connected components longer than ``object_extent``
+    cells along a lattice axis: the obstacles where rays through windows end (trees, cars,
+    clutter outside) are objects, as inside a unit, and do not hold the disc back.
 
     >>> c = np.full((40, 40), UNKNOWN, np.uint8)
     >>> c[10, 10:30] = c[29, 10:30] = OCCUPIED; c[10:30, 10] = c[10:30, 29] = OCCUPIED
@@ -242,7 +245,13 @@ def building_outline(classes: np.ndarray, gap: int) -> np.ndarray:
     c = np.asarray(classes)
     r = 0.5 * float(gap)
     pad = int(np.ceil(r)) + 1               # open space around the lattice: its border is outside
-    occ = np.pad(c == OCCUPIED, pad)
+    occ = c == OCCUPIED
+    if object_extent > 0 and occ.any():
+        labels, _ = ndimage.label(occ, structure=np.ones((3, 3), bool))
+        sizes = [0] + [max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start)
+                       for sl in ndimage.find_objects(labels)]
+        occ = (np.asarray(sizes) > object_extent)[labels] & occ
+    occ = np.pad(occ, pad)
     if not occ.any():
         return np.zeros(c.shape, dtype=bool)
     # distance transforms rather than a closing with a disc: linear in the cells at any gap
@@ -254,7 +263,8 @@ def building_outline(classes: np.ndarray, gap: int) -> np.ndarray:
 
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
                   seen_min: float, outside_min: float = 0.5, across: int = 3,
-                  fan_seen_max: float = 0.0, outline_gap: int = 0) -> np.ndarray:
+                  fan_seen_max: float = 0.0, outline_gap: int = 0,
+                  object_extent: int = 0) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -270,8 +280,9 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     least two units are left: candidates are flagged the one most outside the footprint first
     (ties: the lower share, then the rectangle), so the result does not depend on the order of
     ``rects``. With ``outline_gap`` (cells, 0: off) a unit is flagged only when more than
-    ``outside_min`` of its area lies outside :func:`building_outline` too: a unit the building's
-    walls enclose is never exterior."""
+    ``outside_min`` of its area lies outside :func:`building_outline` too (``object_extent``: the
+    longest occupied component that is an object, not a wall): a unit the building's walls
+    enclose is never exterior."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
@@ -312,7 +323,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
     if order and outline_gap > 0:   # the building's own outline: what its walls enclose stays in
-        inside = building_outline(classes, outline_gap)
+        inside = building_outline(classes, outline_gap, object_extent)
         order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside) > outside_min]
     for _key, i in sorted(order)[:max(n - 2, 0)]:
         exterior[i] = True
