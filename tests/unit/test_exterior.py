@@ -465,3 +465,65 @@ def test_the_outline_keeps_the_fans_outside_the_building():
             got = find_exterior(c, np.array(rects), 2, 0.3, 0.1, fan_seen_max=fan_seen_max,
                                 outline_gap=gap)
             assert got.tolist() == want, (rects, gap)
+
+
+def test_obstacles_where_the_rays_end_outside_are_not_walls_of_the_outline():
+    """Single occupied cells scattered over the fan (trees, cars, clutter where rays end: the
+    synthetic floors' fans hold them) would hold the disc back and put the fan within the outline;
+    components no longer than ``object_extent`` are objects, and the fan stays outside."""
+    from semmap_pp.derive.exterior import building_outline
+
+    c = room_with_window()
+    rng = np.random.default_rng(0)
+    beyond = np.zeros(c.shape, bool)
+    beyond[:, 74:] = True
+    c[beyond & (rng.random(c.shape) < 0.03)] = OCCUPIED
+    rects = np.array([ROOM, FAN, ROOM2])
+    assert building_outline(c, 30)[37, 110] and not building_outline(c, 30, 30)[37, 110]
+    assert find_exterior(c, rects, 2, 0.3, 0.1, outline_gap=30).tolist() == [False, False, False]
+    assert find_exterior(c, rects, 2, 0.3, 0.1, outline_gap=30, object_extent=30).tolist() == [
+        False, True, False]
+
+
+WINGS = Path(__file__).parents[1] / "data" / "wings"
+# W*s of `semmap map` on the plans (seed 0, the model of CHANGELOG.md 2026-12-04): the building's
+# units, then the units the hull rules alone flag; the last two of those are the fans
+WING_WSTARS = {
+    "wing30": ([(199, 79, 300, 160), (199, 159, 300, 240), (199, 239, 300, 320),
+                (199, 319, 300, 400), (199, 399, 300, 480), (299, 79, 340, 549),
+                (340, 79, 440, 160), (340, 159, 440, 240), (340, 239, 440, 320),
+                (340, 319, 440, 400), (340, 399, 440, 480), (354, 805, 472, 883),
+                (315, 547, 512, 630), (470, 805, 512, 846)],
+               [(266, 628, 443, 706), (300, 704, 512, 807), (441, 628, 557, 706),
+                (510, 704, 600, 816), (88, 165, 200, 235), (598, 652, 690, 739)]),
+    "wing45": ([(199, 79, 300, 160), (199, 159, 300, 240), (199, 239, 300, 320),
+                (199, 319, 300, 400), (199, 399, 300, 480), (299, 79, 340, 558),
+                (335, 699, 372, 731), (303, 637, 472, 701), (340, 79, 440, 160),
+                (340, 159, 440, 240), (340, 239, 440, 320), (340, 319, 440, 400),
+                (340, 399, 440, 480), (338, 522, 546, 639), (447, 501, 490, 524),
+                (462, 827, 518, 857), (427, 784, 559, 829)],
+               [(370, 699, 630, 786), (470, 637, 656, 701), (544, 585, 594, 639),
+                (86, 168, 200, 232), (635, 553, 729, 647)]),
+}
+
+
+def test_the_drawn_plans_with_a_wing_at_30_and_45_degrees():
+    """tests/data/wings (make_wings.py): a main wing on the image axes and a second wing at 30 or
+    45 degrees, a fan of rays beyond a window of each. The lattice runs along the main wing;
+    the hull rules call 4 (30 degrees) and 3 (45 degrees) of the second wing's units exterior,
+    with the model's outline only the two fans are."""
+    from semmap_pp.grid import load_map
+
+    for name, (building, flagged) in WING_WSTARS.items():
+        grid = load_map(WINGS / f"{name}.yaml")
+        frame = build_frame(grid, MODEL)
+        assert frame.theta == 0.0 and frame.crop is None
+        c = frame.cells
+        rects = np.array(building + flagged)
+        args = (frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min)
+        kw = dict(across=c.adjacency_dilation, fan_seen_max=c.exterior_fan_seen_max)
+        before = find_exterior(*args, **kw)
+        assert np.flatnonzero(before).tolist() == list(range(len(building), len(rects))), name
+        after = find_exterior(*args, **kw, outline_gap=c.exterior_outline_gap,
+                              object_extent=c.object_max_extent)
+        assert np.flatnonzero(after).tolist() == [len(rects) - 2, len(rects) - 1], name
