@@ -38,6 +38,15 @@ wings (open at its ends, both walls drawn, rooms across them) by how little of i
 rays spread out, so less than ``fan_seen_max`` of its interior cells are seen (free or
 occupied), while a space the robot drove through is seen nearly whole.
 
+Every rule above reads the building's extent off the units; a wing at another angle than the
+lattice breaks them: its units fit its slanted walls poorly, so rays leave their sides, and the
+wing lies outside the hulls of the units that fit. So a unit is flagged only when more than half
+of it lies outside the building's own outline too (:func:`building_outline`): the walls the map
+draws and all they enclose, gaps up to ``outline_gap`` cells (windows, exits) bridged, occupied
+blobs no longer than ``object_extent`` (where rays outside end) not counted as walls. A unit the
+building's walls enclose is never exterior. Where the outer wall has a wider gap (unseen, a glass
+front) the outline lets the outside in, and the rules above decide alone.
+
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
 labels.png, doors, adjacency and objects hold the building's units only (docs/model.md,

@@ -1,7 +1,7 @@
 """Draw the hand-made plans of tests/data/wings: buildings with a wing at another angle than the
 main one, and fans of rays through windows outside them (issue 48).
 
-    python tests/data/wings/make_wings.py      # rewrites wing30.png/.yaml and wing45.png/.yaml
+    python tests/data/wings/make_wings.py      # rewrites wing30, wing45 and pentagon (.png, .yaml)
 
 A plan is drawn at 0.05 m per cell from rectangles in each wing's own frame (metres): walls
 (occupied) first, then floors, doors and windows (free), then the rays beyond the windows (free
@@ -99,6 +99,53 @@ def plan(angle: float) -> np.ndarray:
     return c
 
 
+def pentagon() -> np.ndarray:
+    """A pentagonal plan: a ring corridor (2 m wide, sides of 16 m) with three 4 x 5 m rooms on
+    the outer side of each of its five sides, each side at its own angle, 72 degrees apart; a
+    window with a fan of rays beyond it in one outer room."""
+    shape = (int(44 / RES), int(44 / RES))
+    centre, radius = np.array([22.0, 22.0]), 13.6           # the corridor's centre line corners
+    corners = [centre + radius * np.array([math.cos(math.radians(-90 + 72 * k)),
+                                            math.sin(math.radians(-90 + 72 * k))]) for k in range(5)]
+    walls = np.zeros(shape, bool)
+    floors = np.zeros(shape, bool)
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]]
+    x, y = (cols + 0.5) * RES, (rows + 0.5) * RES
+    for k in range(5):
+        a, b = corners[k], corners[(k + 1) % 5]
+        angle = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+        length = float(np.hypot(*(b - a)))
+        uv = _local(shape, tuple(a), angle)
+        # rooms on the outer side (v < 0: the ring turns clockwise on screen, its outside is left)
+        spaces = [(-1.0, -1.0, length + 1.0, 1.0)]
+        doors = []
+        u0 = (length - 12.0) / 2
+        for i in range(3):
+            spaces.append((u0 + 4 * i, -6.0, u0 + 4 * i + 4, -1.0))
+            doors.append((u0 + 4 * i + 1.5, -1.0 - T, u0 + 4 * i + 2.5, -1.0 + T))
+        for su0, sv0, su1, sv1 in spaces:
+            walls |= _box(uv, su0 - T / 2, sv0 - T / 2, su1 + T / 2, sv1 + T / 2)
+        for su0, sv0, su1, sv1 in spaces:
+            floors |= _box(uv, su0 + T / 2, sv0 + T / 2, su1 - T / 2, sv1 - T / 2)
+        for d in doors:
+            floors |= _box(uv, *d)
+        # the corner: a disc of corridor floor in its walls
+        near = np.hypot(x - a[0], y - a[1])
+        walls |= near <= 1.0 + T
+        floors |= near <= 1.0 - T / 2
+    c = np.full(shape, 205, np.uint8)
+    c[walls] = 0
+    c[floors] = 254
+    # a window in the far wall of the middle room of the side from corner 0 to corner 1
+    a, b = corners[0], corners[1]
+    angle = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+    uv = _local(shape, tuple(a), angle)
+    u_w = float(np.hypot(*(b - a))) / 2
+    c[_box(uv, u_w - 0.5, -6.1, u_w + 0.5, -5.9)] = 254
+    fan(c, *_to_xy(tuple(a), angle, u_w, -6.15), angle - 90.0)
+    return c
+
+
 def write(name: str, grey: np.ndarray) -> None:
     Image.fromarray(grey).save(HERE / f"{name}.png", optimize=True)
     (HERE / f"{name}.yaml").write_text(
@@ -109,3 +156,4 @@ def write(name: str, grey: np.ndarray) -> None:
 if __name__ == "__main__":
     for angle in (30, 45):
         write(f"wing{angle}", plan(float(angle)))
+    write("pentagon", pentagon())
