@@ -486,44 +486,56 @@ def test_obstacles_where_the_rays_end_outside_are_not_walls_of_the_outline():
 
 
 WINGS = Path(__file__).parents[1] / "data" / "wings"
-# W*s of `semmap map` on the plans (seed 0, the model of CHANGELOG.md 2026-12-04): the building's
-# units, then the units the hull rules alone flag; the last two of those are the fans
-WING_WSTARS = {
+# W*s of `semmap map` on the plans (seed 0, the model of CHANGELOG.md 2026-12-04; the lattice at
+# 0 degrees): (the building's units, the units in the building the hull rules alone flag, the fans)
+PLAN_WSTARS = {
     "wing30": ([(199, 79, 300, 160), (199, 159, 300, 240), (199, 239, 300, 320),
                 (199, 319, 300, 400), (199, 399, 300, 480), (299, 79, 340, 549),
                 (340, 79, 440, 160), (340, 159, 440, 240), (340, 239, 440, 320),
                 (340, 319, 440, 400), (340, 399, 440, 480), (354, 805, 472, 883),
                 (315, 547, 512, 630), (470, 805, 512, 846)],
                [(266, 628, 443, 706), (300, 704, 512, 807), (441, 628, 557, 706),
-                (510, 704, 600, 816), (88, 165, 200, 235), (598, 652, 690, 739)]),
+                (510, 704, 600, 816)],
+               [(88, 165, 200, 235), (598, 652, 690, 739)]),
     "wing45": ([(199, 79, 300, 160), (199, 159, 300, 240), (199, 239, 300, 320),
                 (199, 319, 300, 400), (199, 399, 300, 480), (299, 79, 340, 558),
                 (335, 699, 372, 731), (303, 637, 472, 701), (340, 79, 440, 160),
                 (340, 159, 440, 240), (340, 239, 440, 320), (340, 319, 440, 400),
                 (340, 399, 440, 480), (338, 522, 546, 639), (447, 501, 490, 524),
                 (462, 827, 518, 857), (427, 784, 559, 829)],
-               [(370, 699, 630, 786), (470, 637, 656, 701), (544, 585, 594, 639),
-                (86, 168, 200, 232), (635, 553, 729, 647)]),
+               [(370, 699, 630, 786), (470, 637, 656, 701), (544, 585, 594, 639)],
+               [(86, 168, 200, 232), (635, 553, 729, 647)]),
+    "pentagon": ([(141, 417, 207, 463), (160, 378, 232, 419), (160, 461, 232, 501),
+                  (214, 703, 274, 734), (190, 153, 299, 221), (179, 651, 337, 705),
+                  (271, 557, 304, 599), (275, 597, 337, 653), (297, 188, 331, 287),
+                  (329, 217, 352, 247), (329, 155, 411, 219), (335, 642, 483, 725),
+                  (408, 723, 483, 799), (409, 82, 503, 246), (538, 254, 586, 274),
+                  (481, 619, 654, 774), (501, 110, 654, 256), (550, 594, 605, 621),
+                  (584, 254, 642, 291), (603, 587, 642, 621), (640, 258, 681, 621),
+                  (680, 320, 781, 401), (680, 399, 781, 481), (680, 479, 781, 561)],
+                 [(102, 499, 273, 599), (98, 307, 279, 380), (143, 597, 277, 653),
+                  (129, 219, 299, 309)],
+                 [(50, 640, 152, 728)]),
 }
 
 
-def test_the_drawn_plans_with_a_wing_at_30_and_45_degrees():
+def test_the_drawn_plans_with_wings_at_other_angles():
     """tests/data/wings (make_wings.py): a main wing on the image axes and a second wing at 30 or
-    45 degrees, a fan of rays beyond a window of each. The lattice runs along the main wing;
-    the hull rules call 4 (30 degrees) and 3 (45 degrees) of the second wing's units exterior,
-    with the model's outline only the two fans are."""
+    45 degrees, and a pentagonal ring of rooms at five angles, each with a fan of rays beyond a
+    window. The lattice runs along the image axes; the hull rules call 4, 3 and 4 units inside
+    the building exterior, with the model's outline only the fans are."""
     from semmap_pp.grid import load_map
 
-    for name, (building, flagged) in WING_WSTARS.items():
+    for name, (building, inside, fans) in PLAN_WSTARS.items():
         grid = load_map(WINGS / f"{name}.yaml")
         frame = build_frame(grid, MODEL)
-        assert frame.theta == 0.0 and frame.crop is None
+        assert frame.theta == 0.0 and frame.crop is None, name
         c = frame.cells
-        rects = np.array(building + flagged)
+        rects = np.array(building + inside + fans)
         args = (frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min)
         kw = dict(across=c.adjacency_dilation, fan_seen_max=c.exterior_fan_seen_max)
         before = find_exterior(*args, **kw)
         assert np.flatnonzero(before).tolist() == list(range(len(building), len(rects))), name
         after = find_exterior(*args, **kw, outline_gap=c.exterior_outline_gap,
                               object_extent=c.object_max_extent)
-        assert np.flatnonzero(after).tolist() == [len(rects) - 2, len(rects) - 1], name
+        assert np.flatnonzero(after).tolist() == list(range(len(rects) - len(fans), len(rects))), name
