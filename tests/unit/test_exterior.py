@@ -167,6 +167,12 @@ def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
     assert np.count_nonzero(~flags) >= min(n, 2)
     perm = rng.permutation(n)
     assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1), flags[perm])
+    # with the building's outline as well (the random occupied cells: walls, or objects)
+    for gap, extent in ((4, 0), (6, 2)):
+        out = find_exterior(c, rects, 1, 0.6, 0.1, outline_gap=gap, object_extent=extent)
+        assert np.count_nonzero(~out) >= min(n, 2)
+        assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1, outline_gap=gap,
+                                            object_extent=extent), out[perm])
 
 
 def test_two_fans_side_by_side_do_not_shield_each_other():
