@@ -86,6 +86,7 @@ class WorldParams:
     exterior_max_share: float = 0.0
     exterior_seen_min: float = 0.1
     exterior_fan_seen_max: float = 0.0
+    exterior_outline_gap_m: float = 0.0
     wall_min_cells: int = 1
     door_speck_m2: float = 0.0
     passage_gap_m: float = 0.0
@@ -166,6 +167,7 @@ class CellParams:
     exterior_max_share: float = 0.0
     exterior_seen_min: float = 0.1
     exterior_fan_seen_max: float = 0.0
+    exterior_outline_gap: int = 0
     door_speck: int = 1
     passage_gap: int = 0
 
@@ -371,6 +373,7 @@ class Model:
             wall_line_gap=max(1, n(w.wall_line_gap_m)),
             exterior_max_share=w.exterior_max_share, exterior_seen_min=w.exterior_seen_min,
             exterior_fan_seen_max=w.exterior_fan_seen_max,
+            exterior_outline_gap=n(w.exterior_outline_gap_m),
             door_speck=max(1, n(w.door_speck_m2, dims=2)), passage_gap=n(w.passage_gap_m))
 
 
@@ -505,6 +508,9 @@ def load_model(path: str | Path | None = None) -> Model:
         "wall_line_tolerance_m", "wall_line_gap_m")}, **exterior,
         # optional too: model files written before it keep the one-cell minimum
         wall_min_cells=r.optional("world.wall_min_cells", 1, r.integer, lo=1, hi=64),
+        # optional: model files written before it have no outline (exterior units by the hulls only)
+        exterior_outline_gap_m=r.optional("world.exterior_outline_gap_m", 0.0, r.number, lo=0.0,
+                                          hi=100.0),
         # optional: model files written before it keep one-cell specks
         door_speck_m2=r.optional("world.door_speck_m2", 0.0, r.number, lo=0.0, hi=1.0),
         # optional: model files written before it list no passages across free floor

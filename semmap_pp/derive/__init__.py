@@ -77,7 +77,9 @@ def derive_world(frame, world: wm.World) -> Derived:
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
     ext = find_exterior(frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min,
-                        across=c.adjacency_dilation, fan_seen_max=c.exterior_fan_seen_max)
+                        across=c.adjacency_dilation, fan_seen_max=c.exterior_fan_seen_max,
+                        outline_gap=c.exterior_outline_gap,
+                        object_extent=c.object_max_extent)
     inside = {int(s) for s in slots[~ext]}
     exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))
                 for i in np.flatnonzero(ext)]

@@ -38,6 +38,15 @@ wings (open at its ends, both walls drawn, rooms across them) by how little of i
 rays spread out, so less than ``fan_seen_max`` of its interior cells are seen (free or
 occupied), while a space the robot drove through is seen nearly whole.
 
+Every rule above reads the building's extent off the units; a wing at another angle than the
+lattice breaks them: its units fit its slanted walls poorly, so rays leave their sides, and the
+wing lies outside the hulls of the units that fit. So a unit is flagged only when more than half
+of it lies outside the building's own outline too (:func:`building_outline`): the walls the map
+draws and all they enclose, gaps up to ``outline_gap`` cells (windows, exits) bridged, occupied
+blobs no longer than ``object_extent`` (where rays outside end) not counted as walls. A unit the
+building's walls enclose is never exterior. Where the outer wall has a wider gap (unseen, a glass
+front) the outline lets the outside in, and the rules above decide alone.
+
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
 labels.png, doors, adjacency and objects hold the building's units only (docs/model.md,
@@ -62,6 +71,7 @@ wall with the window.
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 
@@ -221,9 +231,49 @@ def _hull(rects: np.ndarray):
     return hull if len(hull) >= 3 else None
 
 
+def building_outline(classes: np.ndarray, gap: int, object_extent: int = 0) -> np.ndarray:
+    """(H, W) bool: the cells within the building's outline, drawn by its own walls.
+
+    The space outside is found as a disc of diameter ``gap`` cells rolling in from the lattice's
+    border through free and unknown cells: its centres are the cells farther than ``gap / 2``
+    from every occupied cell joined to the border (a wall's gaps no wider than ``gap``, windows
+    and exits, keep it out), the space it sweeps is every cell within ``gap / 2`` of them; the
+    outline holds the rest: the walls and everything they enclose. An outer wall with a wider
+    gap (an unseen wall, a glass front) lets the disc in, and the rooms it reaches are outside.
+    The walls are the occupied cells of 8-connected components longer than ``object_extent``
+    cells along a lattice axis: the obstacles where rays through windows end (trees, cars,
+    clutter outside) are objects, as inside a unit, and do not hold the disc back.
+
+    >>> c = np.full((40, 40), UNKNOWN, np.uint8)
+    >>> c[10, 10:30] = c[29, 10:30] = OCCUPIED; c[10:30, 10] = c[10:30, 29] = OCCUPIED
+    >>> c[29, 18:22] = FREE                      # a 4-cell exit in the bottom wall
+    >>> inside = building_outline(c, 6)
+    >>> bool(inside[20, 20]), bool(inside[5, 5]), bool(inside[10, 20]), bool(building_outline(c, 3)[20, 20])
+    (True, False, True, False)
+    """
+    c = np.asarray(classes)
+    r = 0.5 * float(gap)
+    pad = int(np.ceil(r)) + 1               # open space around the lattice: its border is outside
+    occ = c == OCCUPIED
+    if object_extent > 0 and occ.any():
+        labels, _ = ndimage.label(occ, structure=np.ones((3, 3), bool))
+        sizes = [0] + [max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start)
+                       for sl in ndimage.find_objects(labels)]
+        occ = (np.asarray(sizes) > object_extent)[labels] & occ
+    occ = np.pad(occ, pad)
+    if not occ.any():
+        return np.zeros(c.shape, dtype=bool)
+    # distance transforms rather than a closing with a disc: linear in the cells at any gap
+    labels, _ = ndimage.label(ndimage.distance_transform_edt(~occ) > r)
+    core = labels == labels[0, 0]
+    swept = ndimage.distance_transform_edt(~core) <= r
+    return ~swept[pad:pad + c.shape[0], pad:pad + c.shape[1]]
+
+
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
                   seen_min: float, outside_min: float = 0.5, across: int = 3,
-                  fan_seen_max: float = 0.0) -> np.ndarray:
+                  fan_seen_max: float = 0.0, outline_gap: int = 0,
+                  object_extent: int = 0) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -238,7 +288,10 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     a unit is flagged when less than ``fan_seen_max`` of its interior is seen, 0: never). At
     least two units are left: candidates are flagged the one most outside the footprint first
     (ties: the lower share, then the rectangle), so the result does not depend on the order of
-    ``rects``."""
+    ``rects``. With ``outline_gap`` (cells, 0: off) a unit is flagged only when more than
+    ``outside_min`` of its area lies outside :func:`building_outline` too (``object_extent``: the
+    longest occupied component that is an object, not a wall): a unit the building's walls
+    enclose is never exterior."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
@@ -278,9 +331,12 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
                 out = 1.0               # a fan in a notch: flagged first, as wholly outside
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
+    if order and outline_gap > 0:   # the building's own outline: what its walls enclose stays in
+        inside = building_outline(classes, outline_gap, object_extent)
+        order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside) > outside_min]
     for _key, i in sorted(order)[:max(n - 2, 0)]:
         exterior[i] = True
     return exterior
 
 
-__all__ = ["find_exterior", "ortho_hull", "perimeter_share", "side_shares"]
+__all__ = ["building_outline", "find_exterior", "ortho_hull", "perimeter_share", "side_shares"]

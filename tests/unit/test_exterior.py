@@ -167,6 +167,12 @@ def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
     assert np.count_nonzero(~flags) >= min(n, 2)
     perm = rng.permutation(n)
     assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1), flags[perm])
+    # with the building's outline as well (the random occupied cells: walls, or objects)
+    for gap, extent in ((4, 0), (6, 2)):
+        out = find_exterior(c, rects, 1, 0.6, 0.1, outline_gap=gap, object_extent=extent)
+        assert np.count_nonzero(~out) >= min(n, 2)
+        assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1, outline_gap=gap,
+                                            object_extent=extent), out[perm])
 
 
 def test_two_fans_side_by_side_do_not_shield_each_other():
@@ -366,3 +372,176 @@ def test_a_fan_in_the_notch_of_a_u_is_exterior_but_a_corridor_there_is_not():
         assert flags.tolist() == [False, False, False, flagged], notch
         # without the seen-share rule neither is flagged: the orthogonal hull holds both
         assert not find_exterior(c, rects, wall=2, max_share=0.3, seen_min=0.1).any()
+
+
+# ------------------------------------------------------------------ the building's own outline
+
+def rotated_wing_building():
+    """A building of two wings (0.05 m cells): a main wing of two rooms on the lattice, and east
+    of it a 7 x 5 m hall rotated by 30 degrees, drawn into the grid with its own walls, joined to
+    the main wing's upper room by a 1 m door. The hall has a 1 m window in its far wall with a
+    fan of rays beyond it."""
+    c = np.full((300, 380), UNKNOWN, np.uint8)
+    rr, cc = np.mgrid[0:300, 0:380]
+    theta = np.deg2rad(30.0)
+    u = (cc - 205) * np.cos(theta) + (rr - 130) * np.sin(theta)    # along the hall
+    v = -(cc - 205) * np.sin(theta) + (rr - 130) * np.cos(theta)   # across it
+    c[(np.abs(u) <= 73) & (np.abs(v) <= 53)] = OCCUPIED
+    c[(np.abs(u) <= 70) & (np.abs(v) <= 50)] = FREE
+    c[60:200, 20:124] = OCCUPIED                          # the main wing: two rooms
+    c[62:128, 22:120] = FREE
+    c[132:198, 22:120] = FREE
+    door = np.flatnonzero(c[:128, 124] == FREE)[-20:]     # rows where the hall meets the upper room
+    c[door, 120:124] = FREE
+    c[(u > 69) & (u < 75) & (np.abs(v) < 10)] = FREE      # the window in the hall's far wall
+    for dv in np.linspace(-45, 45, 31):                   # rays through it, spreading out
+        for t in np.arange(0.0, 70.0, 0.5):
+            uu, vv = 74 + t, dv * t / 70.0
+            r = int(round(130 + uu * np.sin(theta) + vv * np.cos(theta)))
+            col = int(round(205 + uu * np.cos(theta) - vv * np.sin(theta)))
+            if 0 <= r < 300 and 0 <= col < 380 and c[r, col] == UNKNOWN:
+                c[r, col] = FREE
+    return c
+
+
+MAIN1, MAIN2, WING_FAN = (60, 20, 130, 124), (128, 20, 200, 124), (160, 262, 230, 330)
+HALL_TILINGS = ([(95, 160, 165, 250)], [(70, 150, 130, 260), (128, 140, 190, 270)],
+                [(80, 130, 180, 280)])
+
+
+def test_a_wing_at_another_angle_is_inside_the_outline_and_never_exterior():
+    """The lattice's rectangles do not fit the rotated hall: rays leave their sides through the
+    hall's slanted walls and the hall lies outside the hulls of the main wing's rooms, so the
+    hull rules alone call the hall's units exterior (issue 48). The building's walls enclose the
+    hall: with the outline none of its units is flagged, and the fan beyond its window still is."""
+    from semmap_pp.derive.exterior import building_outline
+
+    c = rotated_wing_building()
+    inside = building_outline(c, 30)                      # 1.5 m at 0.05 m per cell
+    assert inside[130, 205] and inside[95, 70] and inside[170, 70]     # the hall, both rooms
+    assert not inside[200, 300] and not inside[10, 10]                 # the fan, the outside
+    for hall in HALL_TILINGS:
+        rects = np.array([MAIN1, MAIN2, *hall, WING_FAN])
+        before = find_exterior(c, rects, 2, 0.3, 0.1)
+        assert before[2:-1].any(), hall                   # the hull rules alone: the hall is out
+        flags = find_exterior(c, rects, 2, 0.3, 0.1, outline_gap=30)
+        assert flags.tolist() == [False] * (len(rects) - 1) + [True], hall
+
+
+def test_the_outline_bridges_gaps_up_to_its_width_and_no_wider():
+    """A square building whose walls are dashed (0.75 m of wall, 1 m gaps: an outer wall drawn
+    from a few scans, windows, exits) is enclosed at a 1.5 m outline gap; one gap of 2 m lets the
+    disc in, and everything it reaches lies outside."""
+    from semmap_pp.derive.exterior import building_outline
+
+    c = np.full((200, 200), UNKNOWN, np.uint8)
+    c[40:160, 40:160] = FREE
+    for k in range(40, 160, 35):                          # 15 cells of wall, 20 of gap
+        c[38:40, k:k + 15] = c[160:162, k:k + 15] = OCCUPIED
+        c[k:k + 15, 38:40] = c[k:k + 15, 160:162] = OCCUPIED
+    c[38:40, 150:162] = c[150:162, 160:162] = OCCUPIED    # the corners closed
+    c[160:162, 150:162] = c[150:162, 38:40] = OCCUPIED
+    c[38:40, 38:50] = c[38:50, 38:40] = c[160:162, 38:50] = OCCUPIED
+    inside = building_outline(c, 30)
+    assert inside[45:155, 45:155].all()                   # the disc bites a little way into gaps
+    assert inside[40:160, 40:160].mean() > 0.98 and not inside[:30].any()
+    assert not building_outline(c, 15)[100, 100]          # a 0.75 m gap: the disc passes 1 m ones
+    c[38:40, 75:125] = FREE                               # a 2.5 m gap in the top wall
+    assert not building_outline(c, 30)[100, 100]
+    # the hull rules decide alone where the outline lets the outside in: the same flags as without
+    cls = room_with_window()
+    cls[10:12, 20:60] = FREE                              # a 2 m gap in the room's top wall
+    for gap in (0, 30):
+        assert find_exterior(cls, np.array([ROOM, FAN, ROOM2]), 2, 0.3, 0.1,
+                             outline_gap=gap).tolist() == [False, True, False]
+
+
+def test_the_outline_keeps_the_fans_outside_the_building():
+    """Fans beyond a window, side by side, in the concave corner of an L and in the notch of a U
+    (its mouth 2 m wide, wider than the 1.5 m gap): the outline leaves them outside, and each is
+    flagged as without it; the corridor in the notch is not."""
+    cases = [(room_with_window(), [ROOM, FAN, ROOM2], [False, True, False], 0.0),
+             (room_with_window(), [ROOM, (20, 70, 54, 112), (20, 110, 54, 150), ROOM2],
+              [False, True, True, False], 0.0),
+             (l_building_with_corner_fan(), [A, B, CORNER], [False, False, True], 0.0),
+             (u_building("fan"), [UL, UR, UB, NOTCH], [False, False, False, True], 0.7),
+             (u_building("corridor"), [UL, UR, UB, NOTCH], [False, False, False, False], 0.7)]
+    for c, rects, want, fan_seen_max in cases:
+        for gap in (0, 30):
+            got = find_exterior(c, np.array(rects), 2, 0.3, 0.1, fan_seen_max=fan_seen_max,
+                                outline_gap=gap)
+            assert got.tolist() == want, (rects, gap)
+
+
+def test_obstacles_where_the_rays_end_outside_are_not_walls_of_the_outline():
+    """Single occupied cells scattered over the fan (trees, cars, clutter where rays end: the
+    synthetic floors' fans hold them) would hold the disc back and put the fan within the outline;
+    components no longer than ``object_extent`` are objects, and the fan stays outside."""
+    from semmap_pp.derive.exterior import building_outline
+
+    c = room_with_window()
+    rng = np.random.default_rng(0)
+    beyond = np.zeros(c.shape, bool)
+    beyond[:, 74:] = True
+    c[beyond & (rng.random(c.shape) < 0.03)] = OCCUPIED
+    rects = np.array([ROOM, FAN, ROOM2])
+    assert building_outline(c, 30)[37, 110] and not building_outline(c, 30, 30)[37, 110]
+    assert find_exterior(c, rects, 2, 0.3, 0.1, outline_gap=30).tolist() == [False, False, False]
+    assert find_exterior(c, rects, 2, 0.3, 0.1, outline_gap=30, object_extent=30).tolist() == [
+        False, True, False]
+
+
+WINGS = Path(__file__).parents[1] / "data" / "wings"
+# W*s of `semmap map` on the plans (seed 0, the model of CHANGELOG.md 2026-12-04; the lattice at
+# 0 degrees): (the building's units, the units in the building the hull rules alone flag, the fans)
+PLAN_WSTARS = {
+    "wing30": ([(199, 79, 300, 160), (199, 159, 300, 240), (199, 239, 300, 320),
+                (199, 319, 300, 400), (199, 399, 300, 480), (299, 79, 340, 549),
+                (340, 79, 440, 160), (340, 159, 440, 240), (340, 239, 440, 320),
+                (340, 319, 440, 400), (340, 399, 440, 480), (354, 805, 472, 883),
+                (315, 547, 512, 630), (470, 805, 512, 846)],
+               [(266, 628, 443, 706), (300, 704, 512, 807), (441, 628, 557, 706),
+                (510, 704, 600, 816)],
+               [(88, 165, 200, 235), (598, 652, 690, 739)]),
+    "wing45": ([(199, 79, 300, 160), (199, 159, 300, 240), (199, 239, 300, 320),
+                (199, 319, 300, 400), (199, 399, 300, 480), (299, 79, 340, 558),
+                (335, 699, 372, 731), (303, 637, 472, 701), (340, 79, 440, 160),
+                (340, 159, 440, 240), (340, 239, 440, 320), (340, 319, 440, 400),
+                (340, 399, 440, 480), (338, 522, 546, 639), (447, 501, 490, 524),
+                (462, 827, 518, 857), (427, 784, 559, 829)],
+               [(370, 699, 630, 786), (470, 637, 656, 701), (544, 585, 594, 639)],
+               [(86, 168, 200, 232), (635, 553, 729, 647)]),
+    "pentagon": ([(141, 417, 207, 463), (160, 378, 232, 419), (160, 461, 232, 501),
+                  (214, 703, 274, 734), (190, 153, 299, 221), (179, 651, 337, 705),
+                  (271, 557, 304, 599), (275, 597, 337, 653), (297, 188, 331, 287),
+                  (329, 217, 352, 247), (329, 155, 411, 219), (335, 642, 483, 725),
+                  (408, 723, 483, 799), (409, 82, 503, 246), (538, 254, 586, 274),
+                  (481, 619, 654, 774), (501, 110, 654, 256), (550, 594, 605, 621),
+                  (584, 254, 642, 291), (603, 587, 642, 621), (640, 258, 681, 621),
+                  (680, 320, 781, 401), (680, 399, 781, 481), (680, 479, 781, 561)],
+                 [(102, 499, 273, 599), (98, 307, 279, 380), (143, 597, 277, 653),
+                  (129, 219, 299, 309)],
+                 [(50, 640, 152, 728)]),
+}
+
+
+def test_the_drawn_plans_with_wings_at_other_angles():
+    """tests/data/wings (make_wings.py): a main wing on the image axes and a second wing at 30 or
+    45 degrees, and a pentagonal ring of rooms at five angles, each with a fan of rays beyond a
+    window. The lattice runs along the image axes; the hull rules call 4, 3 and 4 units inside
+    the building exterior, with the model's outline only the fans are."""
+    from semmap_pp.grid import load_map
+
+    for name, (building, inside, fans) in PLAN_WSTARS.items():
+        grid = load_map(WINGS / f"{name}.yaml")
+        frame = build_frame(grid, MODEL)
+        assert frame.theta == 0.0 and frame.crop is None, name
+        c = frame.cells
+        rects = np.array(building + inside + fans)
+        args = (frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min)
+        kw = dict(across=c.adjacency_dilation, fan_seen_max=c.exterior_fan_seen_max)
+        before = find_exterior(*args, **kw)
+        assert np.flatnonzero(before).tolist() == list(range(len(building), len(rects))), name
+        after = find_exterior(*args, **kw, outline_gap=c.exterior_outline_gap,
+                              object_extent=c.object_max_extent)
+        assert np.flatnonzero(after).tolist() == list(range(len(rects) - len(fans), len(rects))), name

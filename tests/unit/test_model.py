@@ -33,6 +33,8 @@ def edited(tmp_path, old, new):
     ("exterior_max_share = 0.3", "exterior_max_share = 1.5", "world.exterior_max_share"),
     ("exterior_seen_min = 0.1", 'exterior_seen_min = "low"', "world.exterior_seen_min"),
     ("exterior_fan_seen_max = 0.7", "exterior_fan_seen_max = 1.5", "world.exterior_fan_seen_max"),
+    ("exterior_outline_gap_m = 2.5", "exterior_outline_gap_m = -1.0", "world.exterior_outline_gap_m"),
+    ("exterior_outline_gap_m = 2.5", 'exterior_outline_gap_m = "wide"', "world.exterior_outline_gap_m"),
     ("walls_inside_max = 0.5", "walls_inside_max = 1.5", "diagnostics.walls_inside_max"),
     ('muldoor_scope = "space"', 'muldoor_scope = "building"', "evidence.muldoor_scope"),
     ('muldoor_scope = "space"', "muldoor_scope = 1", "evidence.muldoor_scope"),
@@ -81,10 +83,12 @@ def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path)
 
 
 def test_model_files_without_the_exterior_keys_load_with_the_test_off(tmp_path):
-    old = without_lines(tmp_path, "exterior_", n=3).cells(0.05)
+    old = without_lines(tmp_path, "exterior_", n=4).cells(0.05)
     assert old.exterior_max_share == 0.0 and old.exterior_fan_seen_max == 0.0
+    assert old.exterior_outline_gap == 0                      # no outline: the hull rules alone
     now = load_model().cells(0.05)
     assert now.exterior_max_share == 0.3 and now.exterior_fan_seen_max == 0.7
+    assert now.exterior_outline_gap == 50                     # 2.5 m
 
 
 def test_model_files_without_walls_inside_max_get_the_default(tmp_path):
