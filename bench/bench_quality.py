@@ -136,7 +136,7 @@ def _budget(text: str) -> str | float:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all",
-                        choices=["synthetic", "truth", "surgery", "real", "real-gt", "partial", "ipa", "types", "stability",
+                        choices=["synthetic", "truth", "surgery", "real", "real-gt", "partial", "wings", "ipa", "types", "stability",
                                  "targets", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--seeds", default="0,1,2",
@@ -1127,6 +1127,48 @@ def bench_partial(args, model, rules) -> dict:
             "protocol": "ROSE2 on the partial map's free cells: truth rooms = regions > 200 cells"}
 
 
+WINGS = ROOT / "tests" / "data" / "wings"
+
+
+def bench_wings(args, model, rules) -> dict:
+    """rooms.png on the drawn plans with wings at other angles (tests/data/wings: a second wing at
+    30 and 45 degrees, a pentagonal ring), against their room truth (``NAME_gt.png``, ROSE2's
+    protocol), and the exterior units lying mostly inside the building's rooms."""
+    from PIL import Image
+    from semmap_pp.evaluate import protocol_scores
+    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
+    rows = []
+    for map_path in sorted(WINGS.glob("*.yaml")):
+        name = map_path.stem
+        if not _keep(name, args):
+            continue
+        inputs = load_inputs(map_path, model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
+        ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"wings {name}")
+        if ran is None:
+            continue
+        sm = ran[0].semantic
+        truth = np.asarray(Image.open(WINGS / f"{name}_gt.png")).astype(np.int64)
+        sc = protocol_scores(truth, sm.rooms.labels)
+        inside = 0
+        for slot, eid in sm.exterior_ids.items():
+            r0, c0, r1, c1 = (int(v) for v in sm.world.rects[slot])
+            cells = np.zeros(sm.frame.shape, bool)
+            cells[max(r0, 0):r1, max(c0, 0):c1] = True
+            img = sm.frame.to_image(cells, fill=False) & (sm.grid.classes == 0)
+            if img.any() and (truth[img] > 0).mean() > 0.5:
+                inside += 1
+        row = {"map": name, "units": len(sm.unit_ids), "exterior_units": len(sm.exterior_ids),
+               "exterior_inside": inside, "rooms": len(sm.rooms.rooms), "true_rooms": sc.n_rooms,
+               "precision": round(sc.precision, 4), "recall": round(sc.recall, 4),
+               "run_s": round(ran[0].seconds, 1)}
+        rows.append(row)
+        _save(args, name, sm)
+        _log(args, f"wings {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f}; {row['units']} units "
+                   f"+ {row['exterior_units']} exterior ({inside} inside the building)")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in ("precision", "recall", "exterior_inside", "run_s")},
+            "protocol": "ROSE2 on the plan's free cells: truth rooms = labels > 200 cells"}
+
+
 TYPE_MAPS = [("Fr52_original.png", "training_Fr52.png"), ("NLB_original.png", "training_NLB_furniture.png"),
              ("lab_c_furnitures_original.png", "training_lab_c_furnitures.png"),
              ("lab_d_furnitures_original.png", "training_lab_d_furniture.png"),
@@ -1192,7 +1234,7 @@ def run(args) -> dict:
     subsets = {"all": ["synthetic", "real", "ipa", "types"],
                "targets": ["synthetic", "truth", "real"]}.get(args.subset, [args.subset])
     fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
-           "real": bench_real, "real-gt": bench_real_gt, "partial": bench_partial, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
+           "real": bench_real, "real-gt": bench_real_gt, "partial": bench_partial, "wings": bench_wings, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
     for name in subsets:
         t0 = time.perf_counter()
         out[name] = over_seeds(fns[name], args, model, rules)

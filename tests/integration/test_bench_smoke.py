@@ -136,3 +136,11 @@ def test_quality_over_seeds_refuses_a_bad_list(text, capsys, monkeypatch):
     with pytest.raises(SystemExit, match="--over-seeds"):
         runner.main(["quality", "--tiny", "--over-seeds", text, "--json"])
 
+
+
+def test_quality_wings_scores_rooms_png_against_the_drawn_truth_of_each_plan(capsys, monkeypatch):
+    result = bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "wings", "--maps", "wing30")
+    (row,) = result["wings"]["rows"]
+    assert row["map"] == "wing30" and row["true_rooms"] == 17
+    assert 0 < row["precision"] <= 1 and 0 < row["recall"] <= 1
+    assert 0 <= row["exterior_inside"] <= row["exterior_units"]

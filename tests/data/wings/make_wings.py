@@ -1,13 +1,17 @@
 """Draw the hand-made plans of tests/data/wings: buildings with a wing at another angle than the
 main one, and fans of rays through windows outside them (issue 48).
 
-    python tests/data/wings/make_wings.py      # rewrites wing30, wing45 and pentagon (.png, .yaml)
+    python tests/data/wings/make_wings.py      # rewrites wing30, wing45 and pentagon (.png, .yaml, _gt.png)
 
 A plan is drawn at 0.05 m per cell from rectangles in each wing's own frame (metres): walls
 (occupied) first, then floors, doors and windows (free), then the rays beyond the windows (free
 lines ending in nothing). Everything else is unknown, as in a SLAM map of a building whose outside
 the robot saw only through its windows. The main wing runs along the image axes; the second wing
 joins the main corridor's east end at ``angle`` degrees.
+
+``NAME_gt.png`` is each plan's room truth, as a room segmenter's truth is drawn: a 16-bit image,
+one label per room on its free cells (the main and the second wing's corridor one room, doorways
+and the rays beyond the windows none), for ``bench/run.py quality --subset wings``.
 """
 
 from __future__ import annotations
@@ -146,14 +150,81 @@ def pentagon() -> np.ndarray:
     return c
 
 
-def write(name: str, grey: np.ndarray) -> None:
+def _spaces(length, rooms, depth=5.0, width=2.0, room_from=0.0):
+    """The corridor and room rectangles of :func:`wing` (its doors left out)."""
+    h = width / 2
+    spaces = [(0.0, -h, length, h)]
+    u = room_from
+    for w in rooms:
+        spaces += [(u, -h - depth, u + w, -h), (u, h, u + w, h + depth)]
+        u += w
+    return spaces
+
+
+def plan_truth(angle: float) -> np.ndarray:
+    """(H, W) int32 room labels of :func:`plan`: the two corridors (and the joint) one room, label
+    1; every room its own label."""
+    shape = (int(42 / RES), int(50 / RES))
+    o1, o2 = (4.0, 16.0), (4.0 + 22.0, 16.0)
+    main, other = _local(shape, o1, 0.0), _local(shape, o2, angle)
+    lab = np.zeros(shape, np.int32)
+    lab[_box(main, 20.0, -0.9, 23.0, 0.9) | _box(other, -1.0, -0.9, 2.0, 0.9)] = 1
+    k = 2
+    for uv, spaces in ((main, _spaces(22.0, [4.0] * 5)), (other, _spaces(18.0, [4.5] * 3, room_from=4.5))):
+        for i, (u0, v0, u1, v1) in enumerate(spaces):
+            m = _box(uv, u0, v0, u1, v1) & (lab == 0)
+            if i == 0:
+                lab[m] = 1
+            else:
+                lab[m] = k
+                k += 1
+    return lab
+
+
+def pentagon_truth() -> np.ndarray:
+    """(H, W) int32 room labels of :func:`pentagon`: the ring corridor label 1, every room its own."""
+    shape = (int(44 / RES), int(44 / RES))
+    centre, radius = np.array([22.0, 22.0]), 13.6
+    corners = [centre + radius * np.array([math.cos(math.radians(-90 + 72 * k)),
+                                            math.sin(math.radians(-90 + 72 * k))]) for k in range(5)]
+    lab = np.zeros(shape, np.int32)
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]]
+    x, y = (cols + 0.5) * RES, (rows + 0.5) * RES
+    k = 2
+    for s in range(5):
+        a, b = corners[s], corners[(s + 1) % 5]
+        angle = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+        length = float(np.hypot(*(b - a)))
+        uv = _local(shape, tuple(a), angle)
+        lab[_box(uv, -1.0, -1.0, length + 1.0, 1.0)] = 1
+        u0 = (length - 12.0) / 2
+        for i in range(3):
+            lab[_box(uv, u0 + 4 * i, -6.0, u0 + 4 * i + 4, -1.0) & (lab == 0)] = k
+            k += 1
+        lab[np.hypot(x - a[0], y - a[1]) <= 1.0] = 1
+    return lab
+
+
+def truth_on_floor(labels: np.ndarray, grey: np.ndarray) -> np.ndarray:
+    """``labels`` on the plan's free cells (grey 254) that lie inside the walls of a room, as a
+    truth is drawn: the doorways (a cell of wall between two rooms) and the rays beyond the
+    windows none."""
+    inside = np.zeros(grey.shape, bool)
+    for k in np.unique(labels[labels > 0]):
+        inside |= labels == k
+    return np.where((grey == 254) & inside, labels, 0).astype(np.uint16)
+
+
+def write(name: str, grey: np.ndarray, truth: np.ndarray | None = None) -> None:
     Image.fromarray(grey).save(HERE / f"{name}.png", optimize=True)
     (HERE / f"{name}.yaml").write_text(
         f"image: {name}.png\nresolution: {RES}\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n"
         "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    if truth is not None:
+        Image.fromarray(truth_on_floor(truth, grey)).save(HERE / f"{name}_gt.png", optimize=True)
 
 
 if __name__ == "__main__":
     for angle in (30, 45):
-        write(f"wing{angle}", plan(float(angle)))
-    write("pentagon", pentagon())
+        write(f"wing{angle}", plan(float(angle)), plan_truth(float(angle)))
+    write("pentagon", pentagon(), pentagon_truth())
