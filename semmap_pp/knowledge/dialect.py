@@ -36,15 +36,14 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import clingo
 import clingo.ast as cast
 
 from semmap_pp.errors import RuleError
+from semmap_pp.knowledge import size
+from semmap_pp.knowledge.rule_ast import walk
 
-if TYPE_CHECKING:                  # size reads this module's walk: imported where it is needed
-    from semmap_pp.knowledge.size import GroundingBound
 
 EVIDENCE_PREDICATES = {("unit", 1), ("rolike", 1), ("colike", 1), ("halike", 1),
                        ("muldoor", 1), ("adj", 2)}
@@ -99,7 +98,7 @@ class RuleSet:
     n_hard: int
     n_soft: int
     helpers: tuple[str, ...]
-    bound: GroundingBound = field(compare=False, repr=False)
+    bound: size.GroundingBound = field(compare=False, repr=False)
 
 
 def _pos(text: str, index: int) -> tuple[int, int]:
@@ -322,20 +321,6 @@ def message_error(path, messages: list[str], fallback: str) -> RuleError:
             return RuleError(path, detail, int(m.group("line")), int(m.group("col")))
     detail = " ".join(" ".join(m.split()) for m in messages) or fallback
     return RuleError(path, detail)
-
-
-def walk(node):
-    """Yield ``node`` and every AST node below it."""
-    yield node
-    for key in node.child_keys:
-        value = getattr(node, key)
-        if value is None:
-            continue
-        if isinstance(value, cast.AST):
-            yield from walk(value)
-        else:
-            for item in value:
-                yield from walk(item)
 
 
 def _loc(node) -> tuple[int, int]:
@@ -657,7 +642,6 @@ def _load(top: Path) -> RuleSet:
                  and st.head.ast_type == cast.ASTType.Literal
                  and st.head.atom.ast_type == cast.ASTType.BooleanConstant)
     n_soft = sum(1 for _p, st in kept if st.ast_type == cast.ASTType.Minimize)
-    from semmap_pp.knowledge import size       # imported here: size reads this module's walk
     bound = size.GroundingBound(kept)
     bound.check(size.Sizes.floor(size.FLOOR_UNITS), what=f"a floor of {size.FLOOR_UNITS} units "
                 f"({size.NEIGHBOURS} neighbours each)")
