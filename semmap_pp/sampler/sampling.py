@@ -199,7 +199,8 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     import pymc as pm  # PyMC takes about 1 s to import: only when chains are sampled
     from pymc.sampling.parallel import ParallelSamplingError
 
-    from semmap_pp.sampler.step import WorldStep, world_model, world_to_point  # imports PyMC
+    from semmap_pp.sampler.step import (ChainLimits, ChainSettings, WorldStep,  # imports PyMC
+                                        world_model, world_to_point)
 
     starts = list(starts)
     if not starts:
@@ -218,11 +219,12 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
         # We want the MultiTrace with the burn-in kept (W* may be found while annealing).
         warnings.filterwarnings("ignore", message=".*return_inferencedata=False.*")
         warnings.filterwarnings("ignore", message="Tuning samples will be included.*")
-        step = WorldStep(model.value_vars, target=target, data=data, mix=mix, n_inner=n_inner,
-                         anneal=anneal, cpr_fn=cpr_fn, resolution=resolution,
-                         knowledge_threshold=knowledge_threshold, rng=seed, stop=stop,
-                         deadline=deadline, chain_seconds=chain_seconds, schedule=schedule,
-                         resume=resume, min_draws=min_draws)
+        chain = ChainSettings(mix=mix, n_inner=n_inner, anneal=anneal, cpr_fn=cpr_fn,
+                              resolution=resolution, knowledge_threshold=knowledge_threshold)
+        limits = ChainLimits(stop=stop, deadline=deadline, chain_seconds=chain_seconds,
+                             schedule=schedule, resume=resume, min_draws=min_draws)
+        step = WorldStep(model.value_vars, target=target, data=data, chain=chain, limits=limits,
+                         rng=seed)
         t0 = time.perf_counter()
         try:
             trace = pm.sample(draws=draws, tune=tune, chains=chains, cores=cores, step=step,

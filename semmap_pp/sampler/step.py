@@ -30,6 +30,7 @@ import math
 import multiprocessing
 import signal
 import time
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -144,35 +145,47 @@ def _scalar_stats() -> dict:
     return stats
 
 
-class WorldStep(BlockedStep):
-    """Reversible-jump MCMC over worlds as a PyMC ``BlockedStep``.
+@dataclass(frozen=True)
+class ChainSettings:
+    """How every draw of a :class:`WorldStep` runs and what it reports.
 
-    Parameters
+    Attributes
     ----------
-    vars : list
-        The model's ``rects``, ``active`` and ``types`` value variables (see :func:`world_model`).
-    target : Posterior or callable
-        The target (``start(world) -> tracker``) or a zero-argument callable returning it (use a
-        callable when the target itself does not pickle; it is called once per process).
-    data : KernelData
     mix : Mix, optional
         The kernel mix (default: :func:`semmap_pp.sampler.kernels.default_mix`).
     n_inner : int
         Kernels applied per PyMC draw.
     anneal : float
         Start temperature of the burn-in (1 = no annealing).
-    cpr_fn : callable(tracker) -> float, optional
-        Cell prediction rate of the tracker's current world, recorded per draw (NaN without it).
-    resolution : float
-        Metres per lattice cell, for the ``wall_length`` summary (total unit perimeter).
     knowledge_threshold : float, optional
         Knowledge phase (paper: knowledge is switched on once the world covers enough of the map).
         When given and the target has a knowledge engine, every chain starts with knowledge off; it
         is switched on during burn-in at the first draw whose coverage reaches the threshold, and at
         the first recorded draw at the latest, so every recorded draw has the same target.
+    cpr_fn : callable(tracker) -> float, optional
+        Cell prediction rate of the tracker's current world, recorded per draw (NaN without it).
+    resolution : float
+        Metres per lattice cell, for the ``wall_length`` summary (total unit perimeter).
     callback : callable(dict), optional
         Called after every draw with :func:`draw_info` of its stats, in the process that runs the
         chain (:func:`semmap_pp.sampler.sampling.sample_worlds` reports to the main process instead).
+    """
+
+    mix: object = None
+    n_inner: int = 100
+    anneal: float = 1.0
+    knowledge_threshold: float | None = None
+    cpr_fn: object = None
+    resolution: float = 1.0
+    callback: object = None
+
+
+@dataclass(frozen=True)
+class ChainLimits:
+    """When the chains of a :class:`WorldStep` stop, and where they continue an earlier run.
+
+    Attributes
+    ----------
     stop : callable() -> bool, optional
         Checked before every kernel (e.g. a :class:`StopFlag` set by a SIGINT handler).
     deadline : float, optional
@@ -189,15 +202,36 @@ class WorldStep(BlockedStep):
         draws; a chain stopped before its first draw makes none.
     """
 
+    stop: object = None
+    deadline: float | None = None
+    chain_seconds: float | None = None
+    schedule: tuple[int, int] | None = None
+    resume: object = None
+    min_draws: int = 4
+
+
+class WorldStep(BlockedStep):
+    """Reversible-jump MCMC over worlds as a PyMC ``BlockedStep``.
+
+    Parameters
+    ----------
+    vars : list
+        The model's ``rects``, ``active`` and ``types`` value variables (see :func:`world_model`).
+    target : Posterior or callable
+        The target (``start(world) -> tracker``) or a zero-argument callable returning it (use a
+        callable when the target itself does not pickle; it is called once per process).
+    data : KernelData
+    chain : ChainSettings
+        How every draw runs and what it reports.
+    limits : ChainLimits
+        When a chain stops, and where it continues an earlier run.
+    """
+
     name = "semmap_world"
     stats_dtypes_shapes = _scalar_stats()
 
-    def __init__(self, vars=None, target=None, data=None, *, mix=None, n_inner: int = 100,
-                 anneal: float = 1.0, cpr_fn=None, resolution: float = 1.0,
-                 knowledge_threshold: float | None = None, callback=None, stop=None,
-                 deadline: float | None = None, chain_seconds: float | None = None,
-                 schedule: tuple[int, int] | None = None, resume=None, min_draws: int = 4,
-                 model=None, blocked: bool = True, rng=None):
+    def __init__(self, vars=None, target=None, data=None, *, chain: ChainSettings = ChainSettings(),
+                 limits: ChainLimits = ChainLimits(), model=None, blocked: bool = True, rng=None):
         model = pm.modelcontext(model)
         self.vars = [model.rvs_to_values.get(v, v) for v in (vars or model.value_vars)]
         names = sorted(v.name for v in self.vars)
@@ -205,7 +239,7 @@ class WorldStep(BlockedStep):
             raise ValueError(f"WorldStep owns exactly the variables {VAR_NAMES}, got {names}")
         if target is None or data is None:
             raise ValueError("WorldStep needs a target and the kernel data")
-        if n_inner < 1 or anneal < 1.0:
+        if chain.n_inner < 1 or chain.anneal < 1.0:
             raise ValueError("n_inner must be >= 1 and anneal >= 1")
         self.capacity = int(model.initial_point()["active"].shape[0])
         # The best world and the random state travel as object stats (PyMC's ndarray trace stores
@@ -215,20 +249,20 @@ class WorldStep(BlockedStep):
         self.stats_dtypes = [{k: d for k, (d, _) in self.stats_dtypes_shapes.items()}]
         self._target = target
         self.data = data
-        self.mix = mix if mix is not None else default_mix(data.settings)
+        self.mix = chain.mix if chain.mix is not None else default_mix(data.settings)
         self._kind_index = np.array([KIND_NAMES.index(k) for k in self.mix.kinds])
-        self.n_inner = int(n_inner)
-        self.anneal = float(anneal)
-        self.cpr_fn = cpr_fn
-        self.resolution = float(resolution)
-        self.knowledge_threshold = knowledge_threshold
-        self.callback = callback
-        self.stop = stop
-        self.deadline = deadline
-        self.chain_seconds = chain_seconds
-        self.schedule = schedule
-        self.resume = dict(resume or {})
-        self.min_draws = int(min_draws)
+        self.n_inner = int(chain.n_inner)
+        self.anneal = float(chain.anneal)
+        self.cpr_fn = chain.cpr_fn
+        self.resolution = float(chain.resolution)
+        self.knowledge_threshold = chain.knowledge_threshold
+        self.callback = chain.callback
+        self.stop = limits.stop
+        self.deadline = limits.deadline
+        self.chain_seconds = limits.chain_seconds
+        self.schedule = limits.schedule
+        self.resume = dict(limits.resume or {})
+        self.min_draws = int(limits.min_draws)
         self.rng = np.random.default_rng(rng)
         self.tune = False
         self._chains_set_up = 0
