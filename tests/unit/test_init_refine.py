@@ -471,7 +471,7 @@ def test_the_ascents_validity_test_equals_its_definition():
 def test_the_fragments_a_grown_unit_swallows_equal_their_definition():
     """``_Ascent.absorb``'s compiled selection against its definition (the thin units other than
     the grown one with at least ``share`` of their area inside it) on random worlds."""
-    from semmap_pp.sampler.ascent import _swallowed
+    from semmap_pp.sampler.ascent_walls import _swallowed
     rng = np.random.default_rng(1)
     found = 0
     for _ in range(3000):
