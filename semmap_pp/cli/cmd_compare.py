@@ -73,7 +73,8 @@ def _run(args) -> int:
                                            wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.studies.stability import SeedPlan
 
     if len(args.rules) < 2:

@@ -72,7 +72,8 @@ def _usage(message: str) -> int:
 def _resume_inputs(args):
     """Inputs, settings and resume state of ``--resume DIR``."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.sampler.resume import read_resume
 
     state = read_resume(args.resume, extra_draws=args.draws)
@@ -155,7 +156,8 @@ def run(args) -> int:
     from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
     from semmap_pp.run.outdir import check_out_dir
-    from semmap_pp.run.pipeline import RunSettings, check_inputs_not_outputs
+    from semmap_pp.run.inputs import check_inputs_not_outputs
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.plans.world_file import previous_ids_from_doc, read_run_world
 
@@ -312,7 +314,7 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
     from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_posterior, write_wstar
-    from semmap_pp.run.pipeline import posterior_worlds
+    from semmap_pp.run.spread import posterior_worlds
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.resume import write_resume
 

@@ -274,7 +274,7 @@ def world_evidence_facts(inputs, world_path) -> str:
 
 def _evidence(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
 
     if args.out is not None:
         _check_out_file(args.out, "facts file")
@@ -291,7 +291,7 @@ def _evidence(args) -> int:
 def _label(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.studies.labelled import parse_values
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
 
     _check_out_file(args.out)
     inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))

@@ -154,7 +154,7 @@ def mode_section(rep) -> str:
 
 
 def spread_text(rep) -> str:
-    """Which chains' draws the spread figures hold (:func:`semmap_pp.run.pipeline.spread_chains`).
+    """Which chains' draws the spread figures hold (:func:`semmap_pp.run.results.spread_chains`).
 
     >>> import numpy as np
     >>> from semmap_pp.sampler.diagnostics import convergence
@@ -177,7 +177,7 @@ def spread_text(rep) -> str:
 
 def spread_section(run) -> str:
     """Where the spread figures come from: the sample around W* with its own R-hat and ESS
-    (:class:`semmap_pp.run.pipeline.SpreadSample`), or the search's draws."""
+    (:class:`semmap_pp.run.results.SpreadSample`), or the search's draws."""
     sp = getattr(run, "spread", None)
     if sp is None:
         return f"<p>{e(spread_text(run.report))}</p>"

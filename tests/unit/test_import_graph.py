@@ -23,7 +23,7 @@ STAGES = ("grid", "synth", "lattice", "derive", "knowledge", "target", "sampler"
           "semantic", "run", "plans", "studies", "outputs", "cli")
 MAX_LOOSE = 10
 #: arrows the stage order allows but the layers do not: outputs are handed typed worlds by the run
-#: (semmap_pp.run.pipeline.posterior_worlds) and never call back into it
+#: (semmap_pp.run.spread.posterior_worlds) and never call back into it
 FORBIDDEN = {("outputs", "run"): "outputs write what the run hands them; they never call back into it"}
 #: the folder whose commands import their work when they run: building the parser imports every
 #: cmd_*.py, and ``semmap --help`` (or ``semmap info``) would otherwise import PyMC, ArviZ,

@@ -332,7 +332,7 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
 
     from semmap_pp.sampler.ascent import _Ascent
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.run.pipeline import TargetFactory
+    from semmap_pp.run.target_factory import TargetFactory
     from semmap_pp.target.posterior import Tracker
 
     model = load_model()
@@ -432,7 +432,8 @@ def test_start_worlds_have_room_for_a_building_larger_than_k_max():
     import dataclasses
 
     from semmap_pp.evaluate import default_roi
-    from semmap_pp.run.pipeline import Inputs, start_worlds
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import start_worlds
 
     m = row_of_rooms(6)
     grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
