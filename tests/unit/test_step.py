@@ -13,7 +13,8 @@ from semmap_pp.sampler.kernels import data_from_frame
 from semmap_pp.model import load_model
 from semmap_pp.target.posterior import Posterior
 from semmap_pp.sampler.sampling import sample_worlds
-from semmap_pp.sampler.step import (ChainSettings, WorldStep, point_to_world, world_model,
+from semmap_pp.sampler.chain_settings import ChainSettings
+from semmap_pp.sampler.step import (WorldStep, point_to_world, world_model,
                                     world_to_point)
 
 CAP = 6
