@@ -476,16 +476,7 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
             t = st.ast_type
             if t in _FORBIDDEN:
                 raise RuleError(path, _FORBIDDEN[t], *_loc(st))
-            for node in walk(st):
-                if node.ast_type == cast.ASTType.Function and node.external:
-                    raise RuleError(path, f"@-terms (external function calls) are not allowed: "
-                                    f"@{node.name}", *_loc(node))
-                if node.ast_type == cast.ASTType.TheoryAtom:
-                    raise RuleError(path, "theory atoms are not allowed", *_loc(node))
-                if node.ast_type == cast.ASTType.Interval:
-                    raise RuleError(path, f"intervals ({node}) are not allowed here: a rule works "
-                                    "on the units of the evidence and makes no new values (a fact "
-                                    "may hold them: p(1..3).)", *_loc(node))
+            _check_nodes(path, st)
             if t == cast.ASTType.Program:
                 if st.name != "base" or len(st.parameters):
                     raise RuleError(path, f"#program {st.name} is not allowed: only the base "
@@ -510,39 +501,65 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                 continue
             if t != cast.ASTType.Rule:
                 raise RuleError(path, f"statement not allowed in rule files: {st}", *_loc(st))
-            head = st.head
-            if head.ast_type == cast.ASTType.Literal:
-                if head.atom.ast_type == cast.ASTType.BooleanConstant:
-                    if head.atom.value:
-                        raise RuleError(path, "a rule with head #true is meaningless", *_loc(st))
-                elif head.atom.ast_type == cast.ASTType.SymbolicAtom:
-                    if head.sign != cast.Sign.NoSign:
-                        raise RuleError(path, "negated heads are not allowed", *_loc(head))
-                    sig = atom_signature(head.atom.symbol, path)
-                    if sig in QUERY_PREDICATES:
-                        raise RuleError(path, f"query atom {sig[0]}/{sig[1]} cannot be derived by "
-                                        "a rule: the engine opens it (constrain it with :- or :~)",
-                                        *_loc(head))
-                    if sig in EVIDENCE_PREDICATES and sig not in DERIVABLE_EVIDENCE:
-                        raise RuleError(path, f"evidence atom {sig[0]}/{sig[1]} cannot be derived "
-                                        "by a rule (only adj/2 can, e.g. its symmetric closure)",
-                                        *_loc(head))
-                    if sig[0] in RESERVED_NAMES and sig not in DERIVABLE_EVIDENCE:
-                        raise RuleError(path, f"{sig[0]}/{sig[1]}: {sig[0]} is a reserved "
-                                        "predicate name", *_loc(head))
-                    if sig[0].startswith("_"):
-                        raise RuleError(path, f"{sig[0]}/{sig[1]}: names starting with '_' are "
-                                        "reserved for the engine", *_loc(head))
-                    check_head_terms(head.atom.symbol, st.body, path)
-                    if sig not in DERIVABLE_EVIDENCE:
-                        helpers.add(sig)
-                else:
-                    raise RuleError(path, f"unsupported rule head {head}", *_loc(st))
-            else:
-                raise RuleError(path, "choice rules, disjunctions and head aggregates are not "
-                                "allowed: the engine's frame opens the query atoms", *_loc(st))
+            _check_head(path, st, helpers)
             kept.append((path, st))
-    # weights need every #const; predicates need every helper
+    _check_references(kept, consts, helpers)
+    return kept, consts, helpers
+
+
+def _check_nodes(path: Path, st) -> None:
+    """No @-term, theory atom or interval anywhere in statement ``st``."""
+    for node in walk(st):
+        if node.ast_type == cast.ASTType.Function and node.external:
+            raise RuleError(path, f"@-terms (external function calls) are not allowed: "
+                            f"@{node.name}", *_loc(node))
+        if node.ast_type == cast.ASTType.TheoryAtom:
+            raise RuleError(path, "theory atoms are not allowed", *_loc(node))
+        if node.ast_type == cast.ASTType.Interval:
+            raise RuleError(path, f"intervals ({node}) are not allowed here: a rule works "
+                            "on the units of the evidence and makes no new values (a fact "
+                            "may hold them: p(1..3).)", *_loc(node))
+
+
+def _check_head(path: Path, st, helpers: set) -> None:
+    """The head of rule ``st``: a plain atom of a helper predicate (added to ``helpers``) or of
+    adj/2, or #false; never a query or evidence atom, a reserved name, a choice or disjunction."""
+    head = st.head
+    if head.ast_type == cast.ASTType.Literal:
+        if head.atom.ast_type == cast.ASTType.BooleanConstant:
+            if head.atom.value:
+                raise RuleError(path, "a rule with head #true is meaningless", *_loc(st))
+        elif head.atom.ast_type == cast.ASTType.SymbolicAtom:
+            if head.sign != cast.Sign.NoSign:
+                raise RuleError(path, "negated heads are not allowed", *_loc(head))
+            sig = atom_signature(head.atom.symbol, path)
+            if sig in QUERY_PREDICATES:
+                raise RuleError(path, f"query atom {sig[0]}/{sig[1]} cannot be derived by "
+                                "a rule: the engine opens it (constrain it with :- or :~)",
+                                *_loc(head))
+            if sig in EVIDENCE_PREDICATES and sig not in DERIVABLE_EVIDENCE:
+                raise RuleError(path, f"evidence atom {sig[0]}/{sig[1]} cannot be derived "
+                                "by a rule (only adj/2 can, e.g. its symmetric closure)",
+                                *_loc(head))
+            if sig[0] in RESERVED_NAMES and sig not in DERIVABLE_EVIDENCE:
+                raise RuleError(path, f"{sig[0]}/{sig[1]}: {sig[0]} is a reserved "
+                                "predicate name", *_loc(head))
+            if sig[0].startswith("_"):
+                raise RuleError(path, f"{sig[0]}/{sig[1]}: names starting with '_' are "
+                                "reserved for the engine", *_loc(head))
+            check_head_terms(head.atom.symbol, st.body, path)
+            if sig not in DERIVABLE_EVIDENCE:
+                helpers.add(sig)
+        else:
+            raise RuleError(path, f"unsupported rule head {head}", *_loc(st))
+    else:
+        raise RuleError(path, "choice rules, disjunctions and head aggregates are not "
+                        "allowed: the engine's frame opens the query atoms", *_loc(st))
+
+
+def _check_references(kept, consts: dict, helpers: set) -> None:
+    """Every weight of a kept statement reads a known #const and has priority 0; every predicate
+    is evidence, a query or defined by a rule."""
     known = EVIDENCE_PREDICATES | QUERY_PREDICATES | helpers
     for path, st in kept:
         if st.ast_type == cast.ASTType.Minimize:
@@ -560,7 +577,6 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                                     "(unit/1 rolike/1 colike/1 halike/1 muldoor/1 adj/2), query "
                                     "(room/1 corr/1 hall/1 other/1 sale/2) nor defined by a rule "
                                     "in the rule files", *_loc(node))
-    return kept, consts, helpers
 
 
 def relocate(st, path: Path):
