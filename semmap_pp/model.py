@@ -325,6 +325,21 @@ def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelS
     return s
 
 
+#: The settings class of each stage (docs/architecture.md, "Settings"): the model file's tables, each
+#: read into the class of one stage's folder and validated here; ``Model.<table>`` is that class.
+#: The run's own settings (run lengths, seed) are :class:`semmap_pp.run.results.RunSettings`.
+STAGE_SETTINGS = {
+    "grid": ("outside",),                          # OutsideParams: the free space around the building
+    "lattice": ("lattice",),                       # LatticeParams: θ0 and the lattice's crop
+    "derive": ("world",),                          # WorldParams: walls, doors, objects, unit sides
+    "target": ("sensor", "evidence", "prior"),     # SensorParams, EvidenceParams, PriorParams
+    "knowledge": ("knowledge",),                   # KnowledgeParams: coverage threshold, fixed SaLe
+    "sampler": ("sampler", "kernels", "diagnostics"),  # SamplerParams, KernelSettings, DiagnosticsParams
+    "evaluate": ("evaluate",),                     # EvaluateParams: the default region of interest
+    "semantic": ("rooms",),                        # RoomParams: rooms.png
+}
+
+
 @dataclass(frozen=True)
 class Model:
     path: Path

@@ -251,3 +251,16 @@ def test_the_checker_sees_a_cycle():
     assert module_of("semmap_pp.knowledge.dialect.walk") == ("knowledge", "dialect")
     assert module_of("semmap_pp.knowledge.RuleSet") == ("knowledge", "__init__")
     assert module_of("numpy") is None
+
+
+def test_each_stage_has_its_settings():
+    """Every table of the model file is one stage's settings class (model.STAGE_SETTINGS), the
+    stage a folder of the package, and every field of Model but its path belongs to one stage."""
+    import dataclasses
+
+    from semmap_pp.model import STAGE_SETTINGS, Model
+
+    assert set(STAGE_SETTINGS) <= set(STAGES)
+    tables = [t for group in STAGE_SETTINGS.values() for t in group]
+    fields = [f.name for f in dataclasses.fields(Model) if f.name != "path"]
+    assert sorted(tables) == sorted(fields), "model tables without a stage, or claimed twice"
