@@ -174,7 +174,7 @@ def rc2_hard_rows(best_of=3):
     ev = evidence_from_facts(path.read_text(), str(path))
     rules = load_rules(HERE.parent / "rules" / "halls_to_corridors.lp")
     ms = 1000 * _time(lambda: KnowledgeEngine(rules).map_types(ev), best_of)
-    method = KnowledgeEngine(rules)._ground_map(ev)[5]
+    method = KnowledgeEngine(rules)._ground.ground_map(ev)[5]
     return {"rc2_hard_map_ms": round(ms, 1), "rc2_hard_map_method": method,
             "rc2_hard_units": len(ev.units)}
 

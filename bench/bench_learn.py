@@ -55,7 +55,7 @@ def _ipa_examples(wstars: Path, model_path=None) -> list:
 
     from semmap_pp.cli.cmd_rules import labelled_example_text
     from semmap_pp.knowledge.learn import example_from_text
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
     base = bq.SHARED / "ipa-types"
     out = []
     for map_name, truth_name in bq.TYPE_MAPS:
@@ -73,7 +73,7 @@ def _ipa_examples(wstars: Path, model_path=None) -> list:
 def run(args) -> dict:
     from semmap_pp.knowledge import learn as lm
     from semmap_pp.studies.labelled import synthetic_example
-    from semmap_pp.run.pipeline import DEFAULT_RULES
+    from semmap_pp.resources import DEFAULT_RULES
 
     rules = args.rules or DEFAULT_RULES
     sigma = lm.SIGMA if args.sigma is None else args.sigma

@@ -178,7 +178,7 @@ def add_arguments(parser) -> None:
 # ------------------------------------------------------------------ helpers
 
 def _settings(model, args):
-    from semmap_pp.run.pipeline import RunSettings
+    from semmap_pp.run.results import RunSettings
     over = dict(BUDGETS[args.budget]) if isinstance(args.budget, str) else {}
     for key in ("chains", "cores", "tune", "draws", "n_inner", "anneal"):
         v = getattr(args, key)
@@ -192,7 +192,7 @@ def _settings(model, args):
 def _inputs_from_grid(grid, model, rules):
     from semmap_pp.evaluate import closing_radius_cells, default_roi
     from semmap_pp.lattice.frame import build_frame
-    from semmap_pp.run.pipeline import Inputs
+    from semmap_pp.run.inputs import Inputs
     frame = build_frame(grid, model)
     roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
     return Inputs(grid, model, rules, frame, roi, "default")
@@ -282,7 +282,7 @@ def spread_best(run):
     from semmap_pp.sampler.ascent import polish
     from semmap_pp.sampler.kernels import data_from_frame
     from semmap_pp.semantic.semantic_map import semantic_map
-    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.run.target_factory import run_target
     sp = run.spread
     if sp is None or sp.best_world is None or not sp.best_logp > sp.start_logp:
         return run
@@ -796,7 +796,7 @@ def bench_truth(args, model, rules) -> dict:
     from semmap_pp.sampler.ascent import align_walls
     from semmap_pp.semantic.world_json import world_dict
     from semmap_pp.semantic.semantic_map import semantic_map
-    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.run.target_factory import run_target
     rows = []
     for seed in range(args.first_floor, args.first_floor + args.floors):
         t0 = time.perf_counter()
@@ -865,7 +865,7 @@ def bench_surgery(args, model, rules) -> dict:
     ``delta`` > 0 (the truth scores higher: a search miss), < 0 (the target's own choice) or 0
     (the walls moved back to W*'s: a room seen in part shrinks to its seen part again)."""
     from semmap_pp.sampler.ascent import align_walls
-    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.run.target_factory import run_target
     if args.wstars is None:
         raise SystemExit("--subset surgery needs --wstars DIR (the W*s of --subset synthetic --save DIR)")
     rows = []
@@ -965,7 +965,8 @@ def real_maps(bundled: Path, shared: Path) -> list[tuple[Path, bool]]:
 
 
 def bench_real(args, model, rules) -> dict:
-    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
     rows = []
     for path, bundled in real_maps(ROOT / "data" / "maps", SHARED / "real"):
         if not _keep(path.stem, args):
@@ -1053,7 +1054,8 @@ REAL_GT = ROOT / "bench" / "data" / "real-gt"
 def bench_real_gt(args, model, rules) -> dict:
     from semmap_pp.cells import FREE
     from semmap_pp.evaluate import protocol_scores, read_segmentation, read_segmentation_truth
-    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
     rows = []
     for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
         name = folder.name
@@ -1095,7 +1097,8 @@ def bench_partial(args, model, rules) -> dict:
     import tempfile
     import partial_maps
     from semmap_pp.evaluate import protocol_scores, read_segmentation_truth
-    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
     rows = []
     with tempfile.TemporaryDirectory(prefix="semmap-partial-") as tmp:
         for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
@@ -1136,7 +1139,8 @@ def bench_wings(args, model, rules) -> dict:
     protocol), and the exterior units lying mostly inside the building's rooms."""
     from PIL import Image
     from semmap_pp.evaluate import protocol_scores
-    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
     rows = []
     for map_path in sorted(WINGS.glob("*.yaml")):
         name = map_path.stem
@@ -1213,7 +1217,7 @@ def bench_types(args, model, rules) -> dict:
 def run(args) -> dict:
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
-    from semmap_pp.run.pipeline import DEFAULT_RULES
+    from semmap_pp.resources import DEFAULT_RULES
     if args.tiny:
         for key, value in TINY.items():
             setattr(args, key, value)

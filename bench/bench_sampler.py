@@ -153,7 +153,8 @@ def run(args) -> dict:
     start = tracker.world
     kstart = start
     if args.knowledge_start == "refined":   # the start world of semmap map's first chain
-        from semmap_pp.run.pipeline import load_inputs, start_worlds
+        from semmap_pp.run.inputs import load_inputs
+        from semmap_pp.run.pipeline import start_worlds
         kstart = start_worlds(load_inputs(args.map, rules_path=args.rules), 1,
                               np.random.default_rng(args.seed))[0]
     knowledge = knowledge_rate(args, frame, model, data, kstart)

@@ -327,6 +327,21 @@ def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelS
     return s
 
 
+#: The settings class of each stage (docs/architecture.md, "Settings"): the model file's tables, each
+#: read into the class of one stage's folder and validated here; ``Model.<table>`` is that class.
+#: The run's own settings (run lengths, seed) are :class:`semmap_pp.run.results.RunSettings`.
+STAGE_SETTINGS = {
+    "grid": ("outside",),                          # OutsideParams: the free space around the building
+    "lattice": ("lattice",),                       # LatticeParams: θ0 and the lattice's crop
+    "derive": ("world",),                          # WorldParams: walls, doors, objects, unit sides
+    "target": ("sensor", "evidence", "prior"),     # SensorParams, EvidenceParams, PriorParams
+    "knowledge": ("knowledge",),                   # KnowledgeParams: coverage threshold, fixed SaLe
+    "sampler": ("sampler", "kernels", "diagnostics"),  # SamplerParams, KernelSettings, DiagnosticsParams
+    "evaluate": ("evaluate",),                     # EvaluateParams: the default region of interest
+    "semantic": ("rooms",),                        # RoomParams: rooms.png
+}
+
+
 @dataclass(frozen=True)
 class Model:
     path: Path
@@ -472,6 +487,31 @@ def load_model(path: str | Path | None = None) -> Model:
         The file cannot be read, is not TOML, or a key is missing or invalid.
     """
     path = DEFAULT_MODEL if path is None else Path(path)
+    r = _Reader(path, _read_toml(path))
+    lattice, world, sensor, evidence = _lattice(r), _world(r), _sensor(r), _evidence(r)
+    prior, knowledge = _prior(r), _knowledge(r)
+    evaluate = EvaluateParams(roi_closing_m=r.number("evaluate.roi_closing_m", lo=0.0))
+    sampler = _sampler(r)
+    diagnostics, kernels, outside = _diagnostics(r, prior), _kernels(r, path), _outside(r)
+    rooms = RoomParams()        # optional table (model files written before it: the defaults)
+    if r.has("rooms"):
+        if not isinstance(r.raw("rooms"), dict):
+            raise r.error("rooms", "must be a table")
+        rooms = RoomParams(
+            min_room_m2=r.optional("rooms.min_room_m2", rooms.min_room_m2, r.number, positive=True, hi=1e4),
+            door_max_m=r.optional("rooms.door_max_m", rooms.door_max_m, r.number, positive=True, hi=100.0),
+            open_share_min=r.optional("rooms.open_share_min", rooms.open_share_min, r.number,
+                                      lo=0.0, hi=1.0),
+            band_m=r.optional("rooms.band_m", rooms.band_m, r.number, positive=True, hi=100.0),
+            walled_min=r.optional("rooms.walled_min", rooms.walled_min, r.number, lo=0.0, hi=1.0),
+            wall_blur_m=r.optional("rooms.wall_blur_m", rooms.wall_blur_m, r.number, lo=0.0, hi=10.0))
+    return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
+                 prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
+                 diagnostics=diagnostics, kernels=kernels, outside=outside, rooms=rooms)
+
+
+def _read_toml(path: Path) -> dict:
+    """The TOML document of a model file (a regular UTF-8 file, not too large)."""
     if path.exists() and not path.is_file():  # a directory, FIFO or device
         raise ModelError(path, "cannot read model file: not a regular file")
     try:
@@ -486,8 +526,11 @@ def load_model(path: str | Path | None = None) -> Model:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(path, f"not valid TOML: {exc}") from None
-    r = _Reader(path, doc)
+    return doc
 
+
+def _lattice(r: _Reader) -> LatticeParams:
+    """[lattice]."""
     lattice = LatticeParams(
         identity_below_deg=r.number("lattice.identity_below_deg", lo=0.0, hi=45.0),
         angle_bin_deg=r.number("lattice.angle_bin_deg", positive=True, hi=15.0),
@@ -498,6 +541,11 @@ def load_model(path: str | Path | None = None) -> Model:
         off_axis_min_deg=r.optional("lattice.off_axis_min_deg", 5.0, r.number, positive=True, hi=45.0),
         off_axis_min_gain=r.optional("lattice.off_axis_min_gain", 1.5, r.number, lo=1.0, hi=1000.0),
         off_axis_note_share=r.optional("lattice.off_axis_note_share", 0.0, r.number, lo=0.0, hi=1.0))
+    return lattice
+
+
+def _world(r: _Reader) -> WorldParams:
+    """[world], its lengths checked against each other."""
     # the exterior test is optional (off when its keys are absent: model files written before it)
     exterior = {k: r.number(f"world.{k}", lo=0.0, hi=1.0) for k in
                 ("exterior_max_share", "exterior_seen_min", "exterior_fan_seen_max")
@@ -519,7 +567,11 @@ def load_model(path: str | Path | None = None) -> Model:
         raise r.error("world.door_max_m", "must be >= world.door_min_m")
     if world.max_unit_side_m < world.min_unit_side_m:
         raise r.error("world.max_unit_side_m", "must be >= world.min_unit_side_m")
+    return world
 
+
+def _sensor(r: _Reader) -> SensorParams:
+    """[sensor]: the two tables of the sensor model, psi and the enclosure term."""
     corridor, other = r.sensor_table("sensor.corridor"), r.sensor_table("sensor.other")
     unknown = WORLD_STATES.index("unknown")
     if not np.allclose(corridor[unknown], other[unknown], rtol=0, atol=1e-12):
@@ -532,7 +584,11 @@ def load_model(path: str | Path | None = None) -> Model:
     enclosure = {k: r.number(f"sensor.{k}", lo=0.0, hi=hi) for k, hi in
                  (("enclosure_min_share", 1.0), ("enclosure_cost", None)) if r.has(f"sensor.{k}")}
     sensor = SensorParams(psi=psi, corridor=corridor, other=other, **enclosure)
+    return sensor
 
+
+def _evidence(r: _Reader) -> EvidenceParams:
+    """[evidence]."""
     evidence = EvidenceParams(
         size_measure=r.choice("evidence.size_measure", SIZE_MEASURES),
         hall_min_size=r.number("evidence.hall_min_size", positive=True),
@@ -546,14 +602,22 @@ def load_model(path: str | Path | None = None) -> Model:
         muldoor_scope=r.optional("evidence.muldoor_scope", "unit", r.choice, MULDOOR_SCOPES),
         colike_scope=r.optional("evidence.colike_scope", "unit", r.choice, COLIKE_SCOPES),
         space_width_ratio=r.optional("evidence.space_width_ratio", 2.0, r.number, lo=1.0, hi=100.0))
+    return evidence
 
+
+def _prior(r: _Reader) -> PriorParams:
+    """[prior]."""
     prior = PriorParams(
         n_prior=r.choice("prior.n_prior", N_PRIORS),
         n_mean=r.number("prior.n_mean", positive=True),
         k_max=r.integer("prior.k_max", lo=1, hi=MAX_K),
         sale_sigma_m=r.number("prior.sale_sigma_m", positive=True),
         sale_threshold=r.number("prior.sale_threshold", lo=0.0, hi=1.0))
+    return prior
 
+
+def _knowledge(r: _Reader) -> KnowledgeParams:
+    """[knowledge], its fixed P(SaLe) table symmetric."""
     n = len(UNIT_TYPES)
     raw = r.raw("knowledge.fixed_sale")
     if not isinstance(raw, list) or len(raw) != n:
@@ -565,7 +629,11 @@ def load_model(path: str | Path | None = None) -> Model:
     knowledge = KnowledgeParams(
         coverage_threshold=r.number("knowledge.coverage_threshold", lo=0.0, hi=1.0),
         fixed_sale=fixed)
-    evaluate = EvaluateParams(roi_closing_m=r.number("evaluate.roi_closing_m", lo=0.0))
+    return knowledge
+
+
+def _sampler(r: _Reader) -> SamplerParams:
+    """[sampler]."""
     sampler = SamplerParams(
         chains=r.integer("sampler.chains", lo=1), cores=r.integer("sampler.cores", lo=1),
         tune=r.integer("sampler.tune", lo=0), draws=r.integer("sampler.draws", lo=4),
@@ -575,12 +643,22 @@ def load_model(path: str | Path | None = None) -> Model:
         spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1))
     if not spread_draws_ok(sampler.spread_draws):
         raise r.error("sampler.spread_draws", SPREAD_DRAWS_RULE)
+    return sampler
+
+
+def _diagnostics(r: _Reader, prior: PriorParams) -> DiagnosticsParams:
+    """[diagnostics] (the defect tolerance defaults to twice [prior] sale_sigma_m)."""
     r.raw("diagnostics")                   # a missing table is named as such
     defect_tol = r.optional("diagnostics.defect_tolerance_m", 2.0 * prior.sale_sigma_m, r.number, lo=0.0)
     walls_inside_max = r.optional("diagnostics.walls_inside_max", 0.5, r.number, lo=0.0, hi=1.0)
     diagnostics = DiagnosticsParams(rhat_max=r.number("diagnostics.rhat_max", lo=1.0),
                                     ess_min=r.number("diagnostics.ess_min", lo=0.0),
                                     defect_tolerance_m=defect_tol, walls_inside_max=walls_inside_max)
+    return diagnostics
+
+
+def _kernels(r: _Reader, path: Path) -> KernelSettings:
+    """[kernels], validated by :func:`settings_from_mapping`."""
     kernels = r.raw("kernels")
     if not isinstance(kernels, dict):
         raise r.error("kernels", "must be a table")
@@ -590,6 +668,11 @@ def load_model(path: str | Path | None = None) -> Model:
         raise ModelError(path, f"[kernels]: {exc}") from None
     if not all(math.isfinite(v) for _, v in kernels.weights):
         raise ModelError(path, "[kernels] weights must be finite numbers")
+    return kernels
+
+
+def _outside(r: _Reader) -> OutsideParams:
+    """[outside] (optional)."""
     outside = OutsideParams()   # optional table (model files written before it: the map as it is)
     if r.has("outside"):
         if not isinstance(r.raw("outside"), dict):
@@ -598,21 +681,8 @@ def load_model(path: str | Path | None = None) -> Model:
             mode=r.choice("outside.mode", OUTSIDE_MODES),
             border_open_min=r.number("outside.border_open_min", lo=0.0, hi=1.0),
             seal_gap_m=r.number("outside.seal_gap_m", positive=True))
-    rooms = RoomParams()        # optional table (model files written before it: the defaults)
-    if r.has("rooms"):
-        if not isinstance(r.raw("rooms"), dict):
-            raise r.error("rooms", "must be a table")
-        rooms = RoomParams(
-            min_room_m2=r.optional("rooms.min_room_m2", rooms.min_room_m2, r.number, positive=True, hi=1e4),
-            door_max_m=r.optional("rooms.door_max_m", rooms.door_max_m, r.number, positive=True, hi=100.0),
-            open_share_min=r.optional("rooms.open_share_min", rooms.open_share_min, r.number,
-                                      lo=0.0, hi=1.0),
-            band_m=r.optional("rooms.band_m", rooms.band_m, r.number, positive=True, hi=100.0),
-            walled_min=r.optional("rooms.walled_min", rooms.walled_min, r.number, lo=0.0, hi=1.0),
-            wall_blur_m=r.optional("rooms.wall_blur_m", rooms.wall_blur_m, r.number, lo=0.0, hi=10.0))
-    return Model(path=path, lattice=lattice, world=world, sensor=sensor, evidence=evidence,
-                 prior=prior, knowledge=knowledge, evaluate=evaluate, sampler=sampler,
-                 diagnostics=diagnostics, kernels=kernels, outside=outside, rooms=rooms)
+    return outside
+
 
 
 def _row(r: _Reader, key: str, raw: list, i: int, n: int) -> np.ndarray:

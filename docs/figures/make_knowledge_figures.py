@@ -51,7 +51,10 @@ from semmap_pp.studies.compare import (compare_dict, mean_wall_sd_m, summarise, 
                                        typed_sampled_worlds)
 from semmap_pp.target.defects import ROOM, count_defects, topological_defects  # noqa: E402
 from semmap_pp.knowledge import load_rules  # noqa: E402
-from semmap_pp.run.pipeline import RunSettings, TargetFactory, load_inputs, run_map, run_target  # noqa: E402
+from semmap_pp.run.inputs import load_inputs  # noqa: E402
+from semmap_pp.run.pipeline import run_map  # noqa: E402
+from semmap_pp.run.results import RunSettings  # noqa: E402
+from semmap_pp.run.target_factory import TargetFactory, run_target  # noqa: E402
 
 RULES = {"table3": ROOT / "rules" / "table3.lp", "none": ROOT / "rules" / "none.lp"}
 ORANGE = "#ff8c00"

@@ -196,13 +196,7 @@ def _run_tasks(args, B, maps, out: Path) -> int:
             from distributed import as_completed
             for f in as_completed(list(futures)):
                 t = futures[f]
-                try:
-                    res = f.result()
-                except Exception as exc:      # a worker died with it (KilledWorker) or the task raised
-                    name = type(exc).__name__
-                    why = "a worker died while running it" if name == "KilledWorker" else str(exc) or name
-                    res = {**B.Result(t.map, t.rules, t.seed, t.out, "failed").__dict__,
-                           "error": f"{why} ({name})"}
+                res = _task_result(B, f, t)
                 results[t.out] = res
                 try:
                     running = sum(len(v) for v in client.processing().values())
@@ -215,16 +209,7 @@ def _run_tasks(args, B, maps, out: Path) -> int:
     finally:
         progress.close()
         summary()
-        if client is not None:
-            try:
-                client.close()
-            except Exception:  # noqa: BLE001 - closing a cluster that is going away
-                pass
-        if cluster is not None:
-            try:
-                cluster.close()
-            except Exception:  # noqa: BLE001
-                pass
+        _close(client, cluster)
     if interrupted:
         raise KeyboardInterrupt
     failed = [r for r in results.values() if r["status"] == "failed"]
@@ -234,6 +219,32 @@ def _run_tasks(args, B, maps, out: Path) -> int:
     for r in failed:
         print(f"  failed: {r['out']}: {r['error']}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _task_result(B, future, t) -> dict:
+    """The result row of task ``t`` from its finished ``future``: a failed row when a worker died
+    with it (KilledWorker) or the task raised."""
+    try:
+        return future.result()
+    except Exception as exc:      # a worker died with it (KilledWorker) or the task raised
+        name = type(exc).__name__
+        why = "a worker died while running it" if name == "KilledWorker" else str(exc) or name
+        return {**B.Result(t.map, t.rules, t.seed, t.out, "failed").__dict__,
+                "error": f"{why} ({name})"}
+
+
+def _close(client, cluster) -> None:
+    """Close the Dask client and the local cluster, if any, whatever state they are in."""
+    if client is not None:
+        try:
+            client.close()
+        except Exception:  # noqa: BLE001 - closing a cluster that is going away
+            pass
+    if cluster is not None:
+        try:
+            cluster.close()
+        except Exception:  # noqa: BLE001
+            pass
 
 
 def _has_bokeh() -> bool:

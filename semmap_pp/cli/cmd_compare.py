@@ -66,14 +66,12 @@ def run(args) -> int:
 
 
 def _run(args) -> int:
-    from semmap_pp import atomic
-    from semmap_pp.outputs.figures import compare_png
-    from semmap_pp.studies.compare import (AcrossSeeds, across_dict, across_table, compare_dict,
-                                           compare_table, diffs_section, summarise, typed_sampled_worlds,
-                                           wstar_diffs)
+    from semmap_pp.studies.compare import (AcrossSeeds, across_table, compare_table, diffs_section,
+                                           summarise, typed_sampled_worlds, wstar_diffs)
     from semmap_pp.cli.runs import run_each
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.studies.stability import SeedPlan
 
     if len(args.rules) < 2:
@@ -128,27 +126,36 @@ def _run(args) -> int:
     text += "\n\n" + diffs_section(diffs, seeds[0] if several else None)
     print(text)
     if args.out is not None:
-        out = args.out
-        out.mkdir(parents=True, exist_ok=True)
-        shared = {k: getattr(settings, k) for k in ("chains", "tune", "draws", "n_inner", "anneal", "seed")}
-        which = (f"seeds {', '.join(map(str, seeds))}" if several else f"seed {settings.seed}")
-        head = (f"# Knowledge sets compared on {inputs.grid.source}\n\nSame map, model "
-                f"({inputs.model.path.name}), {which}; {settings.chains} chains x "
-                f"({settings.tune} burn-in + {settings.draws} draws) x {settings.n_inner} kernels. "
-                "Log posteriors are values of different targets; CPR, spread and defects compare "
-                "directly.\n\n")
-        atomic.write_text(out / "compare.md", head + text + "\n")
-        runs, worlds, rows = per_seed[0]
-        doc = compare_dict(rows, map_path=str(inputs.grid.source), settings=shared)
-        doc["wstar_diffs"] = [d.to_dict() for d in diffs]
-        if several:
-            doc["seeds"] = seeds
-            doc["per_seed"] = [{"seed": seed, "rule_sets": compare_dict(r, map_path=doc["map"],
-                                                                       settings=shared)["rule_sets"]}
-                               for seed, (_r, _w, r) in zip(seeds, per_seed)]
-            doc["across_seeds"] = across_dict(cols)
-        atomic.write_text(out / "compare.json", json.dumps(doc, indent=1) + "\n")
-        atomic.write_bytes(out / "compare.png", compare_png(runs, worlds, rows))
-        for name in ("compare.md", "compare.json", "compare.png"):
-            print(out / name)
+        _write(args.out, inputs, settings, seeds, per_seed, cols, text, diffs)
     return 0
+
+
+def _write(out: Path, inputs, settings, seeds, per_seed, cols, text: str, diffs) -> None:
+    """compare.md, compare.json and compare.png into ``out``, each path printed."""
+    from semmap_pp import atomic
+    from semmap_pp.outputs.figures import compare_png
+    from semmap_pp.studies.compare import across_dict, compare_dict
+
+    several = len(seeds) > 1
+    out.mkdir(parents=True, exist_ok=True)
+    shared = {k: getattr(settings, k) for k in ("chains", "tune", "draws", "n_inner", "anneal", "seed")}
+    which = (f"seeds {', '.join(map(str, seeds))}" if several else f"seed {settings.seed}")
+    head = (f"# Knowledge sets compared on {inputs.grid.source}\n\nSame map, model "
+            f"({inputs.model.path.name}), {which}; {settings.chains} chains x "
+            f"({settings.tune} burn-in + {settings.draws} draws) x {settings.n_inner} kernels. "
+            "Log posteriors are values of different targets; CPR, spread and defects compare "
+            "directly.\n\n")
+    atomic.write_text(out / "compare.md", head + text + "\n")
+    runs, worlds, rows = per_seed[0]
+    doc = compare_dict(rows, map_path=str(inputs.grid.source), settings=shared)
+    doc["wstar_diffs"] = [d.to_dict() for d in diffs]
+    if several:
+        doc["seeds"] = seeds
+        doc["per_seed"] = [{"seed": seed, "rule_sets": compare_dict(r, map_path=doc["map"],
+                                                                   settings=shared)["rule_sets"]}
+                           for seed, (_r, _w, r) in zip(seeds, per_seed)]
+        doc["across_seeds"] = across_dict(cols)
+    atomic.write_text(out / "compare.json", json.dumps(doc, indent=1) + "\n")
+    atomic.write_bytes(out / "compare.png", compare_png(runs, worlds, rows))
+    for name in ("compare.md", "compare.json", "compare.png"):
+        print(out / name)

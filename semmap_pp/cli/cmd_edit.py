@@ -96,7 +96,7 @@ def _run(args) -> int:
     from semmap_pp.semantic.semantic_map import semantic_map
     from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
     from semmap_pp.outputs.write import write_plan
-    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.run.target_factory import run_target
     from semmap_pp.plans.edit import apply_edits, edit_origins, id_changes
     from semmap_pp.plans.world_file import pack_world, read_previous_ids, read_world_units
 

@@ -72,7 +72,8 @@ def _usage(message: str) -> int:
 def _resume_inputs(args):
     """Inputs, settings and resume state of ``--resume DIR``."""
     from semmap_pp.errors import SemmapError
-    from semmap_pp.run.pipeline import RunSettings, load_inputs
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.sampler.resume import read_resume
 
     state = read_resume(args.resume, extra_draws=args.draws)
@@ -155,7 +156,8 @@ def run(args) -> int:
     from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
     from semmap_pp.run.outdir import check_out_dir
-    from semmap_pp.run.pipeline import RunSettings, check_inputs_not_outputs
+    from semmap_pp.run.inputs import check_inputs_not_outputs
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.plans.world_file import previous_ids_from_doc, read_run_world
 
@@ -250,14 +252,7 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
             result.notes.insert(0, f"every chain started from {args.start} ({n_units(starts[0])} units)")
         for note in result.notes:
             log(f"note: {note}")
-        meta = {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
-                "model": str(Path(inputs.model.path).resolve()),
-                "rules": str(Path(rules).resolve()) if rules is not None else None,
-                "roi": None if state is None and args.roi is None else
-                (state.meta["inputs"]["roi"] if state is not None else str(Path(args.roi).resolve())),
-                "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args),
-                "lattice": [int(v) for v in inputs.frame.shape]}
-        written, interrupted = _write_outputs(out, result, rules, meta)
+        written, interrupted = _write_outputs(out, result, rules, _run_meta(args, inputs, state, rules))
     finally:
         signal.signal(signal.SIGINT, previous)
     for path in written:
@@ -273,20 +268,7 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
                                  "the world.json this run overwrote" if resumed else None)
         if changes:
             log(changes if resumed else f"{changes} (`semmap diff {ids_from} {out}` lists them)")
-    rep = result.report
-    log(f"chains: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x {rep.n_draws} draws; "
-        f"R-hat and ESS: `semmap diagnose {out}`"
-        + ("" if rep.ok else f"; whether other seeds find the same plan: "
-           f"`semmap stability {result.inputs.grid.source}`") + ")")
-    note = rep.separation_note()
-    if note:
-        log(note)
-    if result.spread is not None:   # the spread figures' draws: the sample around W*
-        rep = result.spread.report
-        log(f"sample around W*: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x "
-            f"{rep.n_draws} draws; `semmap diagnose {out / 'spread.nc'}`)")
-    if rep.shows_mode():
-        log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
+    _log_convergence(log, result, out)
     kept_chains, kept_draws = result.kept
     if result.stopped == "interrupted" and result.search_complete:   # after W*'s search had ended
         what = (f"the sample around W* ({len(result.spread.kept[0])} chain(s) x {result.spread.kept[1]} draws)"
@@ -303,6 +285,35 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
     return 0
 
 
+def _run_meta(args, inputs, state, rules) -> dict:
+    """The inputs of the run as resume.npz and world.json record them (absolute paths)."""
+    return {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
+            "model": str(Path(inputs.model.path).resolve()),
+            "rules": str(Path(rules).resolve()) if rules is not None else None,
+            "roi": None if state is None and args.roi is None else
+            (state.meta["inputs"]["roi"] if state is not None else str(Path(args.roi).resolve())),
+            "map_options": state.meta["inputs"]["map_options"] if state is not None else map_options(args),
+            "lattice": [int(v) for v in inputs.frame.shape]}
+
+
+def _log_convergence(log, result, out: Path) -> None:
+    """Whether the chains (and the sample around W*) converged, and where to read more."""
+    rep = result.report
+    log(f"chains: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x {rep.n_draws} draws; "
+        f"R-hat and ESS: `semmap diagnose {out}`"
+        + ("" if rep.ok else f"; whether other seeds find the same plan: "
+           f"`semmap stability {result.inputs.grid.source}`") + ")")
+    note = rep.separation_note()
+    if note:
+        log(note)
+    if result.spread is not None:   # the spread figures' draws: the sample around W*
+        rep = result.spread.report
+        log(f"sample around W*: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x "
+            f"{rep.n_draws} draws; `semmap diagnose {out / 'spread.nc'}`)")
+    if rep.shows_mode():
+        log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
+
+
 def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]:
     """Write ``resume.npz`` first, then every other output (:func:`semmap_pp.outputs.write.write_all`);
     return the paths written and whether Ctrl-C stopped the writing.
@@ -312,7 +323,7 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
     from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_posterior, write_wstar
-    from semmap_pp.run.pipeline import posterior_worlds
+    from semmap_pp.run.spread import posterior_worlds
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.resume import write_resume
 

@@ -20,6 +20,16 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("rules", help="check rule files and query the knowledge engine")
     sub = parser.add_subparsers(dest="rules_command", metavar="ACTION")
     sub.required = True
+    _add_check(sub)
+    _add_evidence(sub)
+    _add_label(sub)
+    _add_label_synth(sub)
+    _add_learn(sub)
+    _add_list(sub)
+
+
+def _add_check(sub) -> None:
+    """The parser of ``rules check`` and ``rules query``."""
     check = sub.add_parser("check", help="validate rule files (prints ok and how the engine will "
                                          "run them, or the errors)")
     check.add_argument("files", nargs="+", metavar="FILE")
@@ -36,6 +46,10 @@ def register(subparsers) -> None:
                             "max-product, RC2, or clingo optimisation (no soft evidence)")
     query.add_argument("--json", action="store_true", help="print one JSON object")
     query.set_defaults(func=_query)
+
+
+def _add_evidence(sub) -> None:
+    """The parser of ``rules evidence``."""
     evid = sub.add_parser("evidence", help="the evidence of a world.json as a facts file for `rules query`",
                           description="Write the evidence the knowledge engine gets for a world.json "
                                       "(geometry classes, MulDoor, adjacency; its units numbered as "
@@ -49,6 +63,10 @@ def register(subparsers) -> None:
                       help="model file (default models/default.toml): the evidence thresholds")
     add_map_options(evid)
     evid.set_defaults(func=_evidence)
+
+
+def _add_label(sub) -> None:
+    """The parser of ``rules label``."""
     label = sub.add_parser("label", help="a world's evidence with true types: a labelled example "
                                          "for `rules learn`",
                            description="Write a labelled example for `semmap rules learn`: the "
@@ -74,6 +92,10 @@ def register(subparsers) -> None:
                        help="model file (default models/default.toml): the evidence thresholds")
     add_map_options(label)
     label.set_defaults(func=_label)
+
+
+def _add_label_synth(sub) -> None:
+    """The parser of ``rules label-synth``."""
     synth = sub.add_parser("label-synth", help="labelled examples of synthetic floors (their truth)",
                            description="Write one labelled example per synthetic floor "
                                        "(semmap synth's generator): the seen true units as the "
@@ -85,6 +107,10 @@ def register(subparsers) -> None:
                        help="folder for synth-SEED.lp")
     synth.add_argument("--model", metavar="FILE", default=None, help="model file")
     synth.set_defaults(func=_label_synth)
+
+
+def _add_learn(sub) -> None:
+    """The parser of ``rules learn``."""
     learn = sub.add_parser("learn", help="learn the soft rules' weights from labelled examples",
                            description="Learn the weights of a rule file's soft rules by maximum "
                                        "likelihood of the labelled types (pseudo-likelihood where a "
@@ -111,6 +137,10 @@ def register(subparsers) -> None:
                             "left-out one (per-cell accuracy when it has cell counts)")
     learn.add_argument("--json", action="store_true", help="print one JSON object")
     learn.set_defaults(func=_learn)
+
+
+def _add_list(sub) -> None:
+    """The parser of ``rules list``."""
     listing = sub.add_parser("list", help="the shipped rule files and model file, and where they are",
                              description="List the rule files and the model file that ship with "
                                          "semmap_pp, with their paths and what each is: copy one, edit "
@@ -274,7 +304,7 @@ def world_evidence_facts(inputs, world_path) -> str:
 
 def _evidence(args) -> int:
     from semmap_pp import atomic
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
 
     if args.out is not None:
         _check_out_file(args.out, "facts file")
@@ -291,7 +321,7 @@ def _evidence(args) -> int:
 def _label(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.studies.labelled import parse_values
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
 
     _check_out_file(args.out)
     inputs = load_inputs(args.map, model_path=args.model, rules_path=None, map_options=map_options(args))

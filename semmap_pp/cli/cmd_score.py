@@ -74,7 +74,7 @@ def _line(name: str, s: dict, ref: float | None) -> str:
 def run(args) -> int:
     from semmap_pp.sampler.ascent import polish
     from semmap_pp.sampler.kernels import data_from_frame
-    from semmap_pp.run.pipeline import run_target
+    from semmap_pp.run.target_factory import run_target
     from semmap_pp.plans.world_file import read_start_world
 
     rules, inputs = target_inputs(args)

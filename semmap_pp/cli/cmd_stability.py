@@ -50,7 +50,7 @@ def _run(args) -> int:
     from semmap_pp import atomic
     from semmap_pp.cli.runs import run_each
     from semmap_pp.outputs.figures import stability_png
-    from semmap_pp.run.pipeline import RunSettings
+    from semmap_pp.run.results import RunSettings
     from semmap_pp.studies.stability import SeedPlan, Stability
 
     seeds = list(dict.fromkeys(args.seeds))

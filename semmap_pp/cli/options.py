@@ -77,7 +77,8 @@ def add_run_length_options(p: argparse.ArgumentParser, draws_help: str = "record
 def target_inputs(args: argparse.Namespace):
     """The rule file and the loaded inputs (map, model, rules, ROI) that ``args`` name: MAP, the
     options of :func:`add_target_options` and the map options."""
-    from semmap_pp.run.pipeline import DEFAULT_RULES, load_inputs
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
 
     rules = Path(args.rules) if args.rules else DEFAULT_RULES
     return rules, load_inputs(args.map, model_path=args.model, rules_path=rules, roi_path=args.roi,

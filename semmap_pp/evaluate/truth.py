@@ -294,21 +294,10 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
     >>> s.unit_f1, s.type_accuracy, s.adjacency_recall, s.door_recall  # door 8 px = 0.4 m away
     (1.0, 0.5, 1.0, 1.0)
     """
-    if shape is None:
-        shape = (int(_field(truth, "height", truth_source, "top level")),
-                 int(_field(truth, "width", truth_source, "top level")))
-    if resolution is None:
-        resolution = float(_field(truth, "resolution", truth_source, "top level"))
-    if len(shape) != 2 or min(shape) <= 0 or not resolution > 0:
-        raise MapError(truth_source, f"need a positive grid shape and resolution, got {shape}, "
-                                     f"{resolution}")
+    shape, resolution = _grid_of(truth, shape, resolution, truth_source)
     pred_units = _units(pred, "vertices_px", pred_source)
     true_units = _units(truth, "corners_px", truth_source)
-    pred_cells = [np.flatnonzero(polygon_mask(c, shape)) for _, _, c in pred_units]
-    true_cells = [np.flatnonzero(polygon_mask(c, shape)) for _, _, c in true_units]
-    pairs, iou = match_units(pred_cells, true_cells, iou_min)
-    to_true = {pred_units[i][0]: true_units[j][0] for i, j in pairs}
-    match_iou = {pred_units[i][0]: float(iou[i, j]) for i, j in pairs}
+    pairs, to_true, match_iou = _matched(pred_units, true_units, shape, iou_min)
     n_match = len(pairs)
     unit_p = _ratio(n_match, len(pred_units))
     unit_r = _ratio(n_match, len(true_units))
@@ -317,16 +306,60 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
     # Adjacency through the matching.
     true_adj = _pairs(truth, truth_source)
     pred_adj = _pairs(pred, pred_source)
+    adj_tp = _adjacency_hits(pred_adj, true_adj, to_true)
+    true_doors = _doors(truth, truth_source)
+    pred_doors = _doors(pred, pred_source)
+    door_tp = _door_hits(pred_doors, true_doors, to_true, resolution, door_tol_m)
+
+    return WorldScore(
+        unit_precision=unit_p, unit_recall=unit_r,
+        unit_f1=_f1(n_match, len(pred_units), len(true_units)),
+        type_accuracy=_ratio(same_type, n_match),
+        adjacency_precision=_ratio(adj_tp, len(pred_adj)), adjacency_recall=_ratio(adj_tp, len(true_adj)),
+        door_precision=_ratio(door_tp, len(pred_doors)), door_recall=_ratio(door_tp, len(true_doors)),
+        matches=to_true, match_iou=match_iou,
+        n_pred_units=len(pred_units), n_true_units=len(true_units),
+    )
+
+
+def _grid_of(truth: Mapping, shape, resolution, truth_source: str) -> tuple:
+    """``(shape, resolution)``: those given, else the truth's ``[height, width]`` and
+    ``resolution``; checked positive."""
+    if shape is None:
+        shape = (int(_field(truth, "height", truth_source, "top level")),
+                 int(_field(truth, "width", truth_source, "top level")))
+    if resolution is None:
+        resolution = float(_field(truth, "resolution", truth_source, "top level"))
+    if len(shape) != 2 or min(shape) <= 0 or not resolution > 0:
+        raise MapError(truth_source, f"need a positive grid shape and resolution, got {shape}, "
+                                     f"{resolution}")
+    return shape, resolution
+
+
+def _matched(pred_units, true_units, shape, iou_min: float) -> tuple:
+    """``(pairs, predicted id -> true id, predicted id -> IoU)`` of the units matched one to one
+    (:func:`match_units` of their polygons rasterised on ``shape``)."""
+    pred_cells = [np.flatnonzero(polygon_mask(c, shape)) for _, _, c in pred_units]
+    true_cells = [np.flatnonzero(polygon_mask(c, shape)) for _, _, c in true_units]
+    pairs, iou = match_units(pred_cells, true_cells, iou_min)
+    to_true = {pred_units[i][0]: true_units[j][0] for i, j in pairs}
+    match_iou = {pred_units[i][0]: float(iou[i, j]) for i, j in pairs}
+    return pairs, to_true, match_iou
+
+
+def _adjacency_hits(pred_adj, true_adj: set, to_true: dict) -> int:
+    """How many predicted adjacent pairs, mapped to true units through the matching, are true."""
     mapped = set()
     for p in pred_adj:
         a = [to_true.get(x) for x in p]
         if None not in a and len(a) == 2:
             mapped.add(frozenset(a))
-    adj_tp = len(mapped & true_adj)
+    return len(mapped & true_adj)
 
-    # Doors: eligible pairs join the matched unit pair and lie close; one-to-one by distance.
-    true_doors = _doors(truth, truth_source)
-    pred_doors = _doors(pred, pred_source)
+
+def _door_hits(pred_doors, true_doors, to_true: dict, resolution: float, door_tol_m: float) -> int:
+    """How many predicted doors match a true door, one to one by distance: eligible pairs join
+    the matched unit pair and lie within ``max(true width, door_tol_m)`` metres."""
     big = 1e12
     cost = np.full((len(pred_doors), len(true_doors)), big)
     for i, (units, centre, _) in enumerate(pred_doors):
@@ -343,18 +376,4 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
     if cost.size:
         rows, cols = linear_sum_assignment(cost)
         door_tp = int((cost[rows, cols] < big).sum())
-
-    return WorldScore(
-        unit_precision=unit_p,
-        unit_recall=unit_r,
-        unit_f1=_f1(n_match, len(pred_units), len(true_units)),
-        type_accuracy=_ratio(same_type, n_match),
-        adjacency_precision=_ratio(adj_tp, len(pred_adj)),
-        adjacency_recall=_ratio(adj_tp, len(true_adj)),
-        door_precision=_ratio(door_tp, len(pred_doors)),
-        door_recall=_ratio(door_tp, len(true_doors)),
-        matches=to_true,
-        match_iou=match_iou,
-        n_pred_units=len(pred_units),
-        n_true_units=len(true_units),
-    )
+    return door_tp

@@ -36,15 +36,14 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import clingo
 import clingo.ast as cast
 
 from semmap_pp.errors import RuleError
+from semmap_pp.knowledge import size
+from semmap_pp.knowledge.rule_ast import walk
 
-if TYPE_CHECKING:                  # size reads this module's walk: imported where it is needed
-    from semmap_pp.knowledge.size import GroundingBound
 
 EVIDENCE_PREDICATES = {("unit", 1), ("rolike", 1), ("colike", 1), ("halike", 1),
                        ("muldoor", 1), ("adj", 2)}
@@ -99,7 +98,7 @@ class RuleSet:
     n_hard: int
     n_soft: int
     helpers: tuple[str, ...]
-    bound: GroundingBound = field(compare=False, repr=False)
+    bound: size.GroundingBound = field(compare=False, repr=False)
 
 
 def _pos(text: str, index: int) -> tuple[int, int]:
@@ -324,20 +323,6 @@ def message_error(path, messages: list[str], fallback: str) -> RuleError:
     return RuleError(path, detail)
 
 
-def walk(node):
-    """Yield ``node`` and every AST node below it."""
-    yield node
-    for key in node.child_keys:
-        value = getattr(node, key)
-        if value is None:
-            continue
-        if isinstance(value, cast.AST):
-            yield from walk(value)
-        else:
-            for item in value:
-                yield from walk(item)
-
-
 def _loc(node) -> tuple[int, int]:
     while "location" not in node.keys():  # e.g. SymbolicAtom: its term carries the location
         node = getattr(node, node.child_keys[0])
@@ -491,16 +476,7 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
             t = st.ast_type
             if t in _FORBIDDEN:
                 raise RuleError(path, _FORBIDDEN[t], *_loc(st))
-            for node in walk(st):
-                if node.ast_type == cast.ASTType.Function and node.external:
-                    raise RuleError(path, f"@-terms (external function calls) are not allowed: "
-                                    f"@{node.name}", *_loc(node))
-                if node.ast_type == cast.ASTType.TheoryAtom:
-                    raise RuleError(path, "theory atoms are not allowed", *_loc(node))
-                if node.ast_type == cast.ASTType.Interval:
-                    raise RuleError(path, f"intervals ({node}) are not allowed here: a rule works "
-                                    "on the units of the evidence and makes no new values (a fact "
-                                    "may hold them: p(1..3).)", *_loc(node))
+            _check_nodes(path, st)
             if t == cast.ASTType.Program:
                 if st.name != "base" or len(st.parameters):
                     raise RuleError(path, f"#program {st.name} is not allowed: only the base "
@@ -525,39 +501,65 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                 continue
             if t != cast.ASTType.Rule:
                 raise RuleError(path, f"statement not allowed in rule files: {st}", *_loc(st))
-            head = st.head
-            if head.ast_type == cast.ASTType.Literal:
-                if head.atom.ast_type == cast.ASTType.BooleanConstant:
-                    if head.atom.value:
-                        raise RuleError(path, "a rule with head #true is meaningless", *_loc(st))
-                elif head.atom.ast_type == cast.ASTType.SymbolicAtom:
-                    if head.sign != cast.Sign.NoSign:
-                        raise RuleError(path, "negated heads are not allowed", *_loc(head))
-                    sig = atom_signature(head.atom.symbol, path)
-                    if sig in QUERY_PREDICATES:
-                        raise RuleError(path, f"query atom {sig[0]}/{sig[1]} cannot be derived by "
-                                        "a rule: the engine opens it (constrain it with :- or :~)",
-                                        *_loc(head))
-                    if sig in EVIDENCE_PREDICATES and sig not in DERIVABLE_EVIDENCE:
-                        raise RuleError(path, f"evidence atom {sig[0]}/{sig[1]} cannot be derived "
-                                        "by a rule (only adj/2 can, e.g. its symmetric closure)",
-                                        *_loc(head))
-                    if sig[0] in RESERVED_NAMES and sig not in DERIVABLE_EVIDENCE:
-                        raise RuleError(path, f"{sig[0]}/{sig[1]}: {sig[0]} is a reserved "
-                                        "predicate name", *_loc(head))
-                    if sig[0].startswith("_"):
-                        raise RuleError(path, f"{sig[0]}/{sig[1]}: names starting with '_' are "
-                                        "reserved for the engine", *_loc(head))
-                    check_head_terms(head.atom.symbol, st.body, path)
-                    if sig not in DERIVABLE_EVIDENCE:
-                        helpers.add(sig)
-                else:
-                    raise RuleError(path, f"unsupported rule head {head}", *_loc(st))
-            else:
-                raise RuleError(path, "choice rules, disjunctions and head aggregates are not "
-                                "allowed: the engine's frame opens the query atoms", *_loc(st))
+            _check_head(path, st, helpers)
             kept.append((path, st))
-    # weights need every #const; predicates need every helper
+    _check_references(kept, consts, helpers)
+    return kept, consts, helpers
+
+
+def _check_nodes(path: Path, st) -> None:
+    """No @-term, theory atom or interval anywhere in statement ``st``."""
+    for node in walk(st):
+        if node.ast_type == cast.ASTType.Function and node.external:
+            raise RuleError(path, f"@-terms (external function calls) are not allowed: "
+                            f"@{node.name}", *_loc(node))
+        if node.ast_type == cast.ASTType.TheoryAtom:
+            raise RuleError(path, "theory atoms are not allowed", *_loc(node))
+        if node.ast_type == cast.ASTType.Interval:
+            raise RuleError(path, f"intervals ({node}) are not allowed here: a rule works "
+                            "on the units of the evidence and makes no new values (a fact "
+                            "may hold them: p(1..3).)", *_loc(node))
+
+
+def _check_head(path: Path, st, helpers: set) -> None:
+    """The head of rule ``st``: a plain atom of a helper predicate (added to ``helpers``) or of
+    adj/2, or #false; never a query or evidence atom, a reserved name, a choice or disjunction."""
+    head = st.head
+    if head.ast_type == cast.ASTType.Literal:
+        if head.atom.ast_type == cast.ASTType.BooleanConstant:
+            if head.atom.value:
+                raise RuleError(path, "a rule with head #true is meaningless", *_loc(st))
+        elif head.atom.ast_type == cast.ASTType.SymbolicAtom:
+            if head.sign != cast.Sign.NoSign:
+                raise RuleError(path, "negated heads are not allowed", *_loc(head))
+            sig = atom_signature(head.atom.symbol, path)
+            if sig in QUERY_PREDICATES:
+                raise RuleError(path, f"query atom {sig[0]}/{sig[1]} cannot be derived by "
+                                "a rule: the engine opens it (constrain it with :- or :~)",
+                                *_loc(head))
+            if sig in EVIDENCE_PREDICATES and sig not in DERIVABLE_EVIDENCE:
+                raise RuleError(path, f"evidence atom {sig[0]}/{sig[1]} cannot be derived "
+                                "by a rule (only adj/2 can, e.g. its symmetric closure)",
+                                *_loc(head))
+            if sig[0] in RESERVED_NAMES and sig not in DERIVABLE_EVIDENCE:
+                raise RuleError(path, f"{sig[0]}/{sig[1]}: {sig[0]} is a reserved "
+                                "predicate name", *_loc(head))
+            if sig[0].startswith("_"):
+                raise RuleError(path, f"{sig[0]}/{sig[1]}: names starting with '_' are "
+                                "reserved for the engine", *_loc(head))
+            check_head_terms(head.atom.symbol, st.body, path)
+            if sig not in DERIVABLE_EVIDENCE:
+                helpers.add(sig)
+        else:
+            raise RuleError(path, f"unsupported rule head {head}", *_loc(st))
+    else:
+        raise RuleError(path, "choice rules, disjunctions and head aggregates are not "
+                        "allowed: the engine's frame opens the query atoms", *_loc(st))
+
+
+def _check_references(kept, consts: dict, helpers: set) -> None:
+    """Every weight of a kept statement reads a known #const and has priority 0; every predicate
+    is evidence, a query or defined by a rule."""
     known = EVIDENCE_PREDICATES | QUERY_PREDICATES | helpers
     for path, st in kept:
         if st.ast_type == cast.ASTType.Minimize:
@@ -575,7 +577,6 @@ def validate(files: list[tuple[Path, list]]) -> tuple[list[tuple[Path, object]],
                                     "(unit/1 rolike/1 colike/1 halike/1 muldoor/1 adj/2), query "
                                     "(room/1 corr/1 hall/1 other/1 sale/2) nor defined by a rule "
                                     "in the rule files", *_loc(node))
-    return kept, consts, helpers
 
 
 def relocate(st, path: Path):
@@ -657,7 +658,6 @@ def _load(top: Path) -> RuleSet:
                  and st.head.ast_type == cast.ASTType.Literal
                  and st.head.atom.ast_type == cast.ASTType.BooleanConstant)
     n_soft = sum(1 for _p, st in kept if st.ast_type == cast.ASTType.Minimize)
-    from semmap_pp.knowledge import size       # imported here: size reads this module's walk
     bound = size.GroundingBound(kept)
     bound.check(size.Sizes.floor(size.FLOOR_UNITS), what=f"a floor of {size.FLOOR_UNITS} units "
                 f"({size.NEIGHBOURS} neighbours each)")

@@ -183,27 +183,7 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
     >>> ev.colike, ev.muldoor, ev.adj
     (((1, 1.0),), ((1, 0.9),), ((1, 2),))
     """
-    try:
-        stripped, includes = strip_includes(text, path)
-    except Exception as exc:  # RuleError from the include lexer
-        raise EvidenceError(path, getattr(exc, "message", str(exc)), getattr(exc, "line", None),
-                            getattr(exc, "col", None)) from None
-    if includes:
-        raise EvidenceError(path, "#include is not allowed in evidence", *includes[0][1:])
-    try:  # what clingo's lexer mishandles (non-ASCII aborts the process) is refused first
-        check_lexemes(stripped, path)
-    except RuleError as exc:
-        raise EvidenceError(path, exc.message, exc.line, exc.col) from None
-    statements, messages = [], []
-    try:
-        cast.parse_string(stripped, statements.append,
-                          logger=lambda c, m: messages.append(m), message_limit=3)
-    except RuntimeError:
-        m = re.match(r"^.*?:(\d+):(\d+)(?:-\S*)?:\s*error:\s*(.*)$",
-                     (messages or ["::: error: syntax error"])[0].strip().splitlines()[0])
-        if m:
-            raise EvidenceError(path, m.group(3), int(m.group(1)), int(m.group(2))) from None
-        raise EvidenceError(path, "syntax error") from None
+    statements = _parse_facts(text, path)
     units, unary, adj = [], {n: {} for n in SOFT_PREDICATES}, []
     for st in expand_facts(statements, path, error=EvidenceError):   # unit(1..6). is six facts
         t = st.ast_type
@@ -220,20 +200,7 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
         args = sym.arguments if sym.type == clingo.SymbolType.Function else []
         sig = (sym.name, len(args)) if sym.type == clingo.SymbolType.Function else (None, 0)
         if sig == ("soft", 2):
-            atom, prob = args
-            if not (atom.type == clingo.SymbolType.Function and atom.name in SOFT_PREDICATES
-                    and len(atom.arguments) == 1
-                    and atom.arguments[0].type == clingo.SymbolType.Number):
-                raise _fact_error(path, st, "soft/2 takes rolike(U), colike(U), halike(U) or "
-                                  f"muldoor(U) first, got {atom}")
-            if (prob.type != clingo.SymbolType.String or not _PROB_RE.match(prob.string)
-                    or not 0.0 <= float(prob.string) <= 1.0):
-                raise _fact_error(path, st, f'soft evidence probability must be a string '
-                                  f'"0.xx" in [0, 1], got {prob}')
-            u = atom.arguments[0].number
-            if u in unary[atom.name]:
-                raise _fact_error(path, st, f"{atom} is given twice")
-            unary[atom.name][u] = float(prob.string)
+            _soft_fact(path, st, args, unary)
             continue
         if not all(a.type == clingo.SymbolType.Number for a in args):
             text = str(sym)
@@ -255,3 +222,49 @@ def evidence_from_facts(text: str, path: str = _WHERE) -> Evidence:
         return Evidence.build(units, adj=adj, **unary)
     except EvidenceError as exc:
         raise EvidenceError(path, exc.message) from None
+
+
+def _parse_facts(text: str, path: str) -> list:
+    """The statements of an evidence text: no #include, no lexeme clingo mishandles, and clingo's
+    syntax errors as :class:`~semmap_pp.errors.EvidenceError`."""
+    try:
+        stripped, includes = strip_includes(text, path)
+    except Exception as exc:  # RuleError from the include lexer
+        raise EvidenceError(path, getattr(exc, "message", str(exc)), getattr(exc, "line", None),
+                            getattr(exc, "col", None)) from None
+    if includes:
+        raise EvidenceError(path, "#include is not allowed in evidence", *includes[0][1:])
+    try:  # what clingo's lexer mishandles (non-ASCII aborts the process) is refused first
+        check_lexemes(stripped, path)
+    except RuleError as exc:
+        raise EvidenceError(path, exc.message, exc.line, exc.col) from None
+    statements, messages = [], []
+    try:
+        cast.parse_string(stripped, statements.append,
+                          logger=lambda c, m: messages.append(m), message_limit=3)
+    except RuntimeError:
+        m = re.match(r"^.*?:(\d+):(\d+)(?:-\S*)?:\s*error:\s*(.*)$",
+                     (messages or ["::: error: syntax error"])[0].strip().splitlines()[0])
+        if m:
+            raise EvidenceError(path, m.group(3), int(m.group(1)), int(m.group(2))) from None
+        raise EvidenceError(path, "syntax error") from None
+    return statements
+
+
+def _soft_fact(path: str, st, args, unary: dict) -> None:
+    """Record ``soft(atom, "p")`` (its arguments ``args``) in ``unary``, checked."""
+    atom, prob = args
+    if not (atom.type == clingo.SymbolType.Function and atom.name in SOFT_PREDICATES
+            and len(atom.arguments) == 1
+            and atom.arguments[0].type == clingo.SymbolType.Number):
+        raise _fact_error(path, st, "soft/2 takes rolike(U), colike(U), halike(U) or "
+                          f"muldoor(U) first, got {atom}")
+    if (prob.type != clingo.SymbolType.String or not _PROB_RE.match(prob.string)
+            or not 0.0 <= float(prob.string) <= 1.0):
+        raise _fact_error(path, st, f'soft evidence probability must be a string '
+                          f'"0.xx" in [0, 1], got {prob}')
+    u = atom.arguments[0].number
+    if u in unary[atom.name]:
+        raise _fact_error(path, st, f"{atom} is given twice")
+    unary[atom.name][u] = float(prob.string)
+

@@ -504,6 +504,22 @@ def _calibrate_flat(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmo
                     want):  # pragma: no cover - compiled
     """Sum-product on flat cliques: ``(log_z, marginals by elimination step, pair marginals of the
     factors in want)``; the marginals are empty when log_z is not finite."""
+    belief, msg, log_z = _upward(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmoff,
+                                 foff, values)
+    marg = np.zeros(0)
+    pairs = np.zeros(0)
+    if not np.isfinite(log_z):
+        return log_z, marg, pairs
+    marg = _downward(ccard, coff, ssize, soff, parent, emap, eoff, belief, msg)
+    pairs = _factor_marginals(coff, fcl, fmap, fmoff, foff, belief, want)
+    return log_z, marg, pairs
+
+
+@numba.njit(cache=True, nogil=True)
+def _upward(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmoff, foff,
+            values):  # pragma: no cover - compiled
+    """The factors summed into their cliques' beliefs and the messages sent towards the root:
+    ``(beliefs, messages, log_z)``."""
     n = ccard.shape[0]
     belief = np.zeros(coff[n])
     for f in range(fcl.shape[0]):
@@ -535,10 +551,15 @@ def _calibrate_flat(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmo
                 belief[pb + t] += msg[s0 + emap[e0 + t]]
         else:
             log_z += msg[s0]
-    marg = np.zeros(0)
-    pairs = np.zeros(0)
-    if not np.isfinite(log_z):
-        return log_z, marg, pairs
+    return belief, msg, log_z
+
+
+@numba.njit(cache=True, nogil=True)
+def _downward(ccard, coff, ssize, soff, parent, emap, eoff, belief,
+              msg):  # pragma: no cover - compiled
+    """The downward pass (``belief`` made the calibrated clique beliefs, in place) and the
+    marginal of each elimination step's variable."""
+    n = ccard.shape[0]
     moff = np.zeros(n + 1, np.int64)
     for i in range(n):
         moff[i + 1] = moff[i] + ccard[i]
@@ -596,6 +617,12 @@ def _calibrate_flat(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmo
             tot += e
         for k in range(K):
             marg[moff[i] + k] /= tot
+    return marg
+
+
+@numba.njit(cache=True, nogil=True)
+def _factor_marginals(coff, fcl, fmap, fmoff, foff, belief, want):  # pragma: no cover - compiled
+    """The joint marginals of the scopes of the factors ``want`` from the calibrated beliefs."""
     # joint marginals of the wanted factors' scopes (grouped log-sums of their clique)
     poff = np.zeros(want.shape[0] + 1, np.int64)
     for w in range(want.shape[0]):
@@ -633,7 +660,7 @@ def _calibrate_flat(ccard, coff, ssize, soff, parent, emap, eoff, fcl, fmap, fmo
             tot += e
         for q in range(Q):
             pairs[q0 + q] /= tot
-    return log_z, marg, pairs
+    return pairs
 
 
 def calibrate_flat(plan: Plan, tables, want=()):

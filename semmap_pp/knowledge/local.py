@@ -454,7 +454,7 @@ class LocalModel:
     def unit_table(self, key, cut):
         """Unit table of pattern ``key`` with its low ``cut`` soft bits (all or none of them)
         summed out. The marginals and the MAP both use it: the MAP maximises the types, not the
-        soft evidence atoms (engine ``_map_ground``) (cached; do not modify)."""
+        soft evidence atoms (``engine_ground.GroundPath.map_ground``) (cached; do not modify)."""
         hit = self._unit_tables.get((key, cut))
         if hit is None:
             hit = self.unit(key)[0]

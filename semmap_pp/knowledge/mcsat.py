@@ -27,6 +27,7 @@ than a uniform world, so a shorter burn-in suffices.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numba
@@ -603,6 +604,25 @@ def run_mcsat(card, blocks, rng, n_chains, n_iter, burn_in, path=None, jt=None,
     est = marg.sum(axis=1) / total
     return ([est[tree.marg_offsets[v]:tree.marg_offsets[v + 1]] for v in range(len(card))],
             [None if a is None else a.sum(axis=1) / total for a in aux_sum])
+
+
+@dataclass(frozen=True)
+class MCSATSettings:
+    """Chains, iterations and burn-in of MC-SAT (:func:`mcsat_marginals`)."""
+
+    n_chains: int = 768
+    n_iter: int = 38
+    burn_in: int = 12
+
+    def astuple(self) -> tuple[int, int, int]:
+        return (int(self.n_chains), int(self.n_iter), int(self.burn_in))
+
+
+def mcsat_seed(digest: str, evidence_key, settings: tuple[int, int, int], seed: int) -> int:
+    """The MC-SAT seed of one evidence: a hash of (rules, evidence, settings, seed), so MC-SAT
+    results are a deterministic function of them."""
+    text = repr((digest, evidence_key, settings, seed))
+    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
 
 
 def mcsat_marginals(net, rng, n_chains=768, n_iter=38, burn_in=12, jt=None):

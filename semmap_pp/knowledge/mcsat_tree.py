@@ -174,6 +174,32 @@ class BatchTree:
         self.card, self.jt, self.B = card, jt, B
         n = len(card)
         self.n = n
+        factors, rows, msg_row, rescale = self._place_factors(card, scopes, jt, table_max)
+        prod_rows, pp, grouped = self._group_factors(card, factors, n)
+        prod_base = rows
+        rows += len(prod_rows)
+        self.G = np.ones((rows, B), dtype=np.float32)
+        self.prod_base = int(prod_base)
+        idx, ip, nf, cc, MM, sep_ptr, sep_var, sep_stride = self._clique_maps(card, jt, grouped,
+                                                                              prod_base, n)
+        i64 = lambda a: np.array(a, dtype=np.int64)   # noqa: E731
+        lens = [len(r) for r in prod_rows]
+        self._up = (self.G, i64(pp), int(prod_base), i64(np.concatenate([[0], np.cumsum(lens)])
+                                                             if lens else [0]),
+                    i64([t for r in prod_rows for t in r]), i64(idx), i64(ip[:-1]), i64(nf),
+                    i64(cc), i64(MM), i64(msg_row), np.array(rescale, dtype=np.bool_))
+        self._down = (self.G, i64(idx), i64(ip[:-1]), i64(nf), i64(cc), i64(MM),
+                      i64(jt.order), i64(sep_ptr), i64(sep_var), i64(sep_stride))
+        self.rescale = rescale
+        self._x = self._u = None
+        self.marg_offsets = i64(np.concatenate([[0], np.cumsum(card)]))
+
+
+    def _place_factors(self, card, scopes, jt, table_max):
+        """Each block's tables and each clique's message given rows of G, each factor placed on
+        its clique: ``(factors per clique, rows so far, message rows, cliques rescaled)``; sets
+        :attr:`table_rows` and :attr:`sizes`."""
+        n = len(card)
         size = lambda vs: int(np.prod([card[a] for a in vs], dtype=np.int64))   # noqa: E731
         # a message is rescaled per chain only where a bound on its entries could leave the
         # float32 range: log2 of (own states x largest table entries x children's bounds)
@@ -207,6 +233,12 @@ class BatchTree:
                     rescale[i] = True
                 else:
                     bound[p] += bound[i]
+        return factors, rows, msg_row, rescale
+
+    @staticmethod
+    def _group_factors(card, factors, n):
+        """The factors of each clique grouped under the largest factor holding their variables:
+        ``(product rows, their offsets per clique, each clique's group heads)``."""
         # multiply each factor whose variables lie within a larger factor's into that one first
         # (at the larger factor's size, into rows of its own)
         prod_rows = []        # per product row: rows of G to multiply
@@ -237,10 +269,12 @@ class BatchTree:
                 prod_rows.extend(np.array(terms).T.tolist())
             grouped.append(heads)
             pp.append(len(prod_rows))
-        prod_base = rows
-        rows += len(prod_rows)
-        self.G = np.ones((rows, B), dtype=np.float32)
-        self.prod_base = int(prod_base)
+        return prod_rows, pp, grouped
+
+    @staticmethod
+    def _clique_maps(card, jt, grouped, prod_base, n):
+        """Per clique, the rows of G each of its states reads, and its separator's variables and
+        strides: ``(idx, ip, nf, cc, MM, sep_ptr, sep_var, sep_stride)``."""
         idx, ip, nf, cc, MM = [], [0], [], [], []
         sep_ptr, sep_var, sep_stride = [0], [], []
         for i in range(n):
@@ -264,17 +298,7 @@ class BatchTree:
             sep_var.extend(int(a) for a in jt.seps[i])
             sep_stride.extend(int(k) for k in st)
             sep_ptr.append(len(sep_var))
-        i64 = lambda a: np.array(a, dtype=np.int64)   # noqa: E731
-        lens = [len(r) for r in prod_rows]
-        self._up = (self.G, i64(pp), int(prod_base), i64(np.concatenate([[0], np.cumsum(lens)])
-                                                             if lens else [0]),
-                    i64([t for r in prod_rows for t in r]), i64(idx), i64(ip[:-1]), i64(nf),
-                    i64(cc), i64(MM), i64(msg_row), np.array(rescale, dtype=np.bool_))
-        self._down = (self.G, i64(idx), i64(ip[:-1]), i64(nf), i64(cc), i64(MM),
-                      i64(jt.order), i64(sep_ptr), i64(sep_var), i64(sep_stride))
-        self.rescale = rescale
-        self._x = self._u = None
-        self.marg_offsets = i64(np.concatenate([[0], np.cumsum(card)]))
+        return idx, ip, nf, cc, MM, sep_ptr, sep_var, sep_stride
 
     def fresh(self):
         """A tree of the same structure with rows of its own (for reuse across runs)."""

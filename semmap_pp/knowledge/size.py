@@ -39,7 +39,7 @@ import clingo
 import clingo.ast as cast
 
 from semmap_pp.errors import RuleError
-from semmap_pp.knowledge.dialect import walk
+from semmap_pp.knowledge.rule_ast import walk
 
 #: Ground statements (the bound of :class:`GroundingBound`) allowed for one evidence: a
 #: million weak-constraint tuples take clingo and the network reader 1.65 s and 330 MB on a

@@ -154,7 +154,7 @@ def mode_section(rep) -> str:
 
 
 def spread_text(rep) -> str:
-    """Which chains' draws the spread figures hold (:func:`semmap_pp.run.pipeline.spread_chains`).
+    """Which chains' draws the spread figures hold (:func:`semmap_pp.run.results.spread_chains`).
 
     >>> import numpy as np
     >>> from semmap_pp.sampler.diagnostics import convergence
@@ -177,7 +177,7 @@ def spread_text(rep) -> str:
 
 def spread_section(run) -> str:
     """Where the spread figures come from: the sample around W* with its own R-hat and ESS
-    (:class:`semmap_pp.run.pipeline.SpreadSample`), or the search's draws."""
+    (:class:`semmap_pp.run.results.SpreadSample`), or the search's draws."""
     sp = getattr(run, "spread", None)
     if sp is None:
         return f"<p>{e(spread_text(run.report))}</p>"
@@ -207,34 +207,14 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
     files : list of str, optional
         Output file names to describe (default: every file of :data:`FILES`).
     """
-    inputs, s, sm, rep = run.inputs, run.settings, run.semantic, run.report
+    inputs, sm, rep = run.inputs, run.semantic, run.report
     grid = inputs.grid
     map_name = doc["map"]["yaml"] or doc["map"]["image"] or str(grid.source)
-    counts = {t: sum(1 for u in doc["units"] if u["type"] == t) for t in UNIT_TYPES}
     cpr = "–" if doc["cpr"] is None else f"{100 * doc['cpr']:.1f} %"
     verdict = ('<span class="verdict ok">converged</span>' if rep.ok else
                '<span class="verdict fail">NOT converged</span>')
-    summary = _kv([
-        ("map", grid.source), ("image", f"{grid.width} × {grid.height} cells at {grid.resolution} m/cell"),
-        ("building orientation", f"{doc['map']['orientation_deg']:.1f}°"),
-        ("rules", rules_name), ("model", inputs.model.path.name), ("seed", s.seed),
-        ("chains", f"{s.chains} on {s.cores} core(s)"),
-        ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
-        ("sampling time", run.timing_text()),
-        ("W* from chain", run.best_chain + 1), ("generator", f"semmap_pp {__version__}"),
-    ] + ([("stopped early", getattr(run, "stopped"))] if getattr(run, "stopped", None) else [])
-      + [("note", n) for n in run.notes])
-    world = _kv([
-        ("units", f"{len(doc['units'])} (" + ", ".join(f"{counts[t]} {t}" for t in UNIT_TYPES) + ")"),
-        ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])),
-        ("passages", f"{len(doc.get('passages', []))} (open walls, and free floor between units that do "
-                     "not touch)"), ("objects", len(doc["objects"])),
-        ("unexplored areas", len(doc["unexplored"])),
-        ("exterior units", f"{len(doc.get('exterior', []))} (free space seen outside the building; "
-                           "not in the units, labels or graph)"),
-        ("log posterior", f"{sm.log_posterior:.2f}"),
-        ("cell prediction rate", f"{cpr} over the region of interest “{inputs.roi_name}”"),
-    ])
+    summary = _run_summary(run, doc, rules_name)
+    world = _world_summary(doc, regions, sm.log_posterior, cpr, inputs.roi_name)
     names = files if files is not None else list(FILES)
     listing = "".join(f'<li><a href="{e(n)}"><code>{e(n)}</code></a> — {e(FILES.get(n, ""))}</li>' for n in names)
     f = figures.get
@@ -286,6 +266,37 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         "</body></html>",
     ]
     return "\n".join(p for p in parts if p) + "\n"
+
+
+def _run_summary(run, doc: dict, rules_name: str) -> str:
+    """The page's Run table: the map, the rules and model, the run's settings and notes."""
+    inputs, s, grid = run.inputs, run.settings, run.inputs.grid
+    return _kv([
+        ("map", grid.source), ("image", f"{grid.width} × {grid.height} cells at {grid.resolution} m/cell"),
+        ("building orientation", f"{doc['map']['orientation_deg']:.1f}°"),
+        ("rules", rules_name), ("model", inputs.model.path.name), ("seed", s.seed),
+        ("chains", f"{s.chains} on {s.cores} core(s)"),
+        ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
+        ("sampling time", run.timing_text()),
+        ("W* from chain", run.best_chain + 1), ("generator", f"semmap_pp {__version__}"),
+    ] + ([("stopped early", getattr(run, "stopped"))] if getattr(run, "stopped", None) else [])
+      + [("note", n) for n in run.notes])
+
+
+def _world_summary(doc: dict, regions: dict, log_posterior: float, cpr: str, roi_name: str) -> str:
+    """The page's W* table: units by type, regions, doors, passages, objects, log posterior, CPR."""
+    counts = {t: sum(1 for u in doc["units"] if u["type"] == t) for t in UNIT_TYPES}
+    return _kv([
+        ("units", f"{len(doc['units'])} (" + ", ".join(f"{counts[t]} {t}" for t in UNIT_TYPES) + ")"),
+        ("regions", len(set(regions.values()))), ("doors", len(doc["doors"])),
+        ("passages", f"{len(doc.get('passages', []))} (open walls, and free floor between units that do "
+                     "not touch)"), ("objects", len(doc["objects"])),
+        ("unexplored areas", len(doc["unexplored"])),
+        ("exterior units", f"{len(doc.get('exterior', []))} (free space seen outside the building; "
+                           "not in the units, labels or graph)"),
+        ("log posterior", f"{log_posterior:.2f}"),
+        ("cell prediction rate", f"{cpr} over the region of interest “{roi_name}”"),
+    ])
 
 
 def write_report(path: str | os.PathLike, text: str) -> Path:

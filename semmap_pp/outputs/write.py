@@ -1,4 +1,4 @@
-"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.run.pipeline.MapRun`.
+"""Every output file of ``semmap map``, written from one :class:`~semmap_pp.run.results.MapRun`.
 
 Each file is written atomically (:mod:`semmap_pp.atomic`): a reader, or a crash, sees the previous
 complete file or the new one. world.json, labels.png, trace.nc and diagnostics.txt come first, so
@@ -193,7 +193,7 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
     run : MapRun
     worlds : list of World
         The typed sampled worlds of posterior.png and posterior_cells.png, from the run's sample
-        around W* when it has one (:func:`semmap_pp.run.pipeline.posterior_worlds`, usually
+        around W* when it has one (:func:`semmap_pp.run.spread.posterior_worlds`, usually
         :data:`N_SAMPLED_WORLDS` of them): the run hands them over typed, outputs only draw them.
     rules_name : str
         The rule file's name (world.json, trace.nc, report).

@@ -182,93 +182,110 @@ def apply_edits(units: list[tuple[str, tuple]], edits: list[Edit], frame, *, pix
     ``frame`` gives the lattice (shape, the model's cell sizes) and the points' conversion;
     ``path`` is the world file named in errors.
     """
-    c = frame.cells
     keys = [k for k, _ in units]
     dup = sorted({k for k in keys if keys.count(k) > 1})
     if dup:
         raise SemmapError(path, f"unit id {dup[0]} appears twice; ids must be unique to edit by id")
-    current: dict = dict(units)          # key -> rect, in the file's order
-    gone: dict[str, str] = {}            # key -> the edit that removed it
-    new: list[tuple] = []
-    changed: set[str] = set()            # keys whose rectangle an edit made
+    editor = _Editor(dict(units), frame, pixels, path)
+    for edit in edits:
+        editor.apply(edit)
+    return ([(k, tuple(int(v) for v in r), k in editor.changed) for k, r in editor.current.items()]
+            + [(None, tuple(int(v) for v in r), True) for r in editor.new])
 
-    def fail(edit: Edit, message: str):
-        raise SemmapError(path, f"{edit}: {message}")
 
-    def unit(edit: Edit, text: str) -> str:
+class _Editor:
+    """The units of a world as :func:`apply_edits` edits them, one edit at a time."""
+
+    def __init__(self, current: dict, frame, pixels: bool, path):
+        self.current = current               # key -> rect, in the file's order
+        self.gone: dict[str, str] = {}       # key -> the edit that removed it
+        self.new: list[tuple] = []
+        self.changed: set[str] = set()       # keys whose rectangle an edit made
+        self.frame, self.pixels, self.path = frame, pixels, path
+
+    def fail(self, edit: Edit, message: str):
+        raise SemmapError(self.path, f"{edit}: {message}")
+
+    def unit(self, edit: Edit, text: str) -> str:
         k = unit_key(text)
-        if k in gone:
-            fail(edit, f"unit {text} no longer exists after {gone[k]} (edits apply in order; edit the "
-                       f"written file again to change its pieces)")
-        if k not in current:
-            listed = ", ".join(sorted(current, key=lambda s: (s.startswith("X"), len(s), s)))
-            fail(edit, f"no unit {text} in this world (its units: {listed or 'none'})")
+        if k in self.gone:
+            self.fail(edit, f"unit {text} no longer exists after {self.gone[k]} (edits apply in order; "
+                            f"edit the written file again to change its pieces)")
+        if k not in self.current:
+            listed = ", ".join(sorted(self.current, key=lambda s: (s.startswith("X"), len(s), s)))
+            self.fail(edit, f"no unit {text} in this world (its units: {listed or 'none'})")
         return k
 
-    def point(edit: Edit, x: str, y: str) -> Point:
+    def point(self, edit: Edit, x: str, y: str) -> Point:
+        frame, pixels = self.frame, self.pixels
         px, py = to_image(frame, _number(x), _number(y), pixels=pixels)
         h, w = frame.image_shape
         if not (0 <= px <= w and 0 <= py <= h):
-            fail(edit, f"the point {x} {y} lies outside the map ({w} x {h} pixels"
-                       f"{'' if pixels else '; points are map-frame metres, --pixels for pixels'})")
+            self.fail(edit, f"the point {x} {y} lies outside the map ({w} x {h} pixels"
+                            f"{'' if pixels else '; points are map-frame metres, --pixels for pixels'})")
         return to_lattice(frame, px, py, pixels=True)
 
-    def check(edit: Edit, rect, what: str = "the result") -> tuple:
+    def check(self, edit: Edit, rect, what: str = "the result") -> tuple:
+        frame, c = self.frame, self.frame.cells
         r0, c0, r1, c1 = (int(v) for v in rect)
         sides = (r1 - r0, c1 - c0)
         res = frame.resolution
         faults = rect_faults((r0, c0, r1, c1), frame.shape, c.min_side, c.max_side)
         if "small" in faults:
-            fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides are at "
-                       f"least {c.min_side * res:.2f} m, walls included ([world] min_unit_side_m)")
+            self.fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides "
+                            f"are at least {c.min_side * res:.2f} m, walls included ([world] min_unit_side_m)")
         if "large" in faults:
-            fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides are at "
-                       f"most {c.max_side * res:.2f} m ([world] max_unit_side_m)")
+            self.fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides "
+                            f"are at most {c.max_side * res:.2f} m ([world] max_unit_side_m)")
         if "outside" in faults:
-            fail(edit, f"{what} would reach beyond the map's lattice")
+            self.fail(edit, f"{what} would reach beyond the map's lattice")
         return (r0, c0, r1, c1)
 
-    for edit in edits:
+    def remove(self, k: str, edit: Edit) -> None:
+        del self.current[k]
+        self.gone[k] = str(edit)
+
+    def apply(self, edit: Edit) -> None:
+        """One edit: drop, merge, cut, wall or add."""
         try:
             check_args(edit)
         except ValueError as exc:
-            fail(edit, str(exc))
-        a = edit.args
+            self.fail(edit, str(exc))
+        a, current, wall = edit.args, self.current, self.frame.cells.wall
         if edit.kind == "drop":
             for t in a:
-                k = unit(edit, t)
-                del current[k]
-                gone[k] = str(edit)
+                self.remove(self.unit(edit, t), edit)
         elif edit.kind == "merge":
-            ks = [unit(edit, t) for t in a]
+            ks = [self.unit(edit, t) for t in a]
             if len(set(ks)) < len(ks):
-                fail(edit, "a unit is named twice")
+                self.fail(edit, "a unit is named twice")
             rs = np.array([current[k] for k in ks])
             box = (rs[:, 0].min(), rs[:, 1].min(), rs[:, 2].max(), rs[:, 3].max())
-            current[ks[0]] = check(edit, box, "the merged unit")
-            changed.add(ks[0])
+            current[ks[0]] = self.check(edit, box, "the merged unit")
+            self.changed.add(ks[0])
             for k in ks[1:]:
-                del current[k]
-                gone[k] = str(edit)
+                self.remove(k, edit)
         elif edit.kind == "cut":
-            k = unit(edit, a[0])
-            rect = current[k]
-            axis, s, (first, second) = _cut(rect, point(edit, *a[1:3]), point(edit, *a[3:5]), c.wall)
-            if not rect[axis] < s - c.wall < s < rect[axis + 2]:
-                fail(edit, f"the line does not cross unit {a[0]} (it runs along the "
-                           f"{'rows' if axis == 0 else 'columns'} of the lattice; give two points on the "
-                           f"new wall, inside the unit)")
-            check(edit, first, "a piece")
-            check(edit, second, "a piece")
-            del current[k]
-            gone[k] = str(edit)
-            new += [first, second]
+            self.cut(edit)
         elif edit.kind == "wall":
-            k = unit(edit, a[0])
-            current[k] = check(edit, _wall(current[k], point(edit, *a[1:3]), c.wall))
-            changed.add(k)
+            k = self.unit(edit, a[0])
+            current[k] = self.check(edit, _wall(current[k], self.point(edit, *a[1:3]), wall))
+            self.changed.add(k)
         else:   # add
-            new.append(check(edit, _box(point(edit, *a[0:2]), point(edit, *a[2:4]), c.wall),
-                             "the new unit"))
-    return ([(k, tuple(int(v) for v in r), k in changed) for k, r in current.items()]
-            + [(None, tuple(int(v) for v in r), True) for r in new])
+            self.new.append(self.check(edit, _box(self.point(edit, *a[0:2]), self.point(edit, *a[2:4]),
+                                                  wall), "the new unit"))
+
+    def cut(self, edit: Edit) -> None:
+        """A unit cut in two along a new wall through two points."""
+        a, wall = edit.args, self.frame.cells.wall
+        k = self.unit(edit, a[0])
+        rect = self.current[k]
+        axis, s, (first, second) = _cut(rect, self.point(edit, *a[1:3]), self.point(edit, *a[3:5]), wall)
+        if not rect[axis] < s - wall < s < rect[axis + 2]:
+            self.fail(edit, f"the line does not cross unit {a[0]} (it runs along the "
+                            f"{'rows' if axis == 0 else 'columns'} of the lattice; give two points on the "
+                            f"new wall, inside the unit)")
+        self.check(edit, first, "a piece")
+        self.check(edit, second, "a piece")
+        self.remove(k, edit)
+        self.new += [first, second]

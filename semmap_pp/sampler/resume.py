@@ -172,7 +172,7 @@ def _json_safe(v):
 
 
 def write_resume(out_dir, run, inputs_meta: dict) -> Path:
-    """Write ``out_dir/resume.npz`` atomically from a :class:`~semmap_pp.run.pipeline.MapRun`."""
+    """Write ``out_dir/resume.npz`` atomically from a :class:`~semmap_pp.run.results.MapRun`."""
     settings = run.settings
     chains = []
     arrays = {}

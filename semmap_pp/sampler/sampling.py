@@ -30,6 +30,7 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
+from semmap_pp.sampler.chain_settings import ChainLimits, ChainSettings
 
 #: How ``pm.sample`` starts the processes of parallel chains when the caller names none: "fork"
 #: on Linux, the start method of Python 3.12 and 3.13 there, which the project's speed figures
@@ -196,9 +197,6 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     -------
     SampleResult
     """
-    import pymc as pm  # PyMC takes about 1 s to import: only when chains are sampled
-    from pymc.sampling.parallel import ParallelSamplingError
-
     from semmap_pp.sampler.step import WorldStep, world_model, world_to_point  # imports PyMC
 
     starts = list(starts)
@@ -208,41 +206,60 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     model = world_model(capacity)
     initvals = [world_to_point(starts[i % len(starts)]) for i in range(chains)]
     logging.getLogger("pymc").setLevel(logging.ERROR)
-    deadline = chain_seconds = None
-    if budget is not None:
-        deadline = time.time() + budget
-        chain_seconds = budget * min(cores, chains) / chains
+    limits = ChainLimits.of_budget(budget, cores, chains, stop=stop, schedule=schedule,
+                                   resume=resume, min_draws=min_draws)
+    chain = ChainSettings(mix=mix, n_inner=n_inner, anneal=anneal, cpr_fn=cpr_fn,
+                          resolution=resolution, knowledge_threshold=knowledge_threshold)
     recorder = _Recorder(chains, callback, stop, min_draws, sequential=not (cores > 1 and chains > 1))
-    trace = None
     with model, warnings.catch_warnings():
         # We want the MultiTrace with the burn-in kept (W* may be found while annealing).
         warnings.filterwarnings("ignore", message=".*return_inferencedata=False.*")
         warnings.filterwarnings("ignore", message="Tuning samples will be included.*")
-        step = WorldStep(model.value_vars, target=target, data=data, mix=mix, n_inner=n_inner,
-                         anneal=anneal, cpr_fn=cpr_fn, resolution=resolution,
-                         knowledge_threshold=knowledge_threshold, rng=seed, stop=stop,
-                         deadline=deadline, chain_seconds=chain_seconds, schedule=schedule,
-                         resume=resume, min_draws=min_draws)
+        step = WorldStep(model.value_vars, target=target, data=data, chain=chain, limits=limits,
+                         rng=seed)
         t0 = time.perf_counter()
-        try:
-            trace = pm.sample(draws=draws, tune=tune, chains=chains, cores=cores, step=step,
-                              initvals=initvals, random_seed=seed, compute_convergence_checks=False,
-                              return_inferencedata=False, discard_tuned_samples=False,
-                              progressbar=progressbar, callback=recorder,
-                              mp_ctx=DEFAULT_MP_CONTEXT if mp_ctx is None else mp_ctx)
-        except ParallelSamplingError as exc:
-            # a chain in another process failed: the project's own error (a rule file too dense
-            # for this map, say) is raised as itself, so the command prints its one line
-            if isinstance(exc.__cause__, SemmapError):
-                raise exc.__cause__ from None
-            raise
-        except (EOFError, BrokenPipeError, ConnectionError, RuntimeError):
-            # A worker that saw the Ctrl-C itself can close its pipe before the main process ends
-            # the run: what the recorder received is still complete and consistent.
-            if stop is None or not stop():
-                raise
+        trace = _pm_sample(step, initvals, recorder, draws=draws, tune=tune, chains=chains,
+                           cores=cores, seed=seed, progressbar=progressbar, mp_ctx=mp_ctx, stop=stop)
         seconds = time.perf_counter() - t0
     records = recorder.records()
+    best = _best_world(records, resume, capacity)
+    planned = schedule[1] if schedule is not None else tune + draws
+    stopped = _stop_reason(records, resume, stop, budget, planned)
+    return SampleResult(trace, best[2], best[0], best[1], seconds, draws, records, stopped)
+
+
+def _pm_sample(step, initvals, recorder, *, draws, tune, chains, cores, seed, progressbar, mp_ctx,
+               stop):
+    """``pm.sample`` of the world model in context with ``step``: the MultiTrace, or None when a
+    worker that saw the Ctrl-C closed its pipe first (what ``recorder`` received is kept); a
+    project error in another process is raised as itself."""
+    import pymc as pm  # PyMC takes about 1 s to import: only when chains are sampled
+    from pymc.sampling.parallel import ParallelSamplingError
+
+    trace = None
+    try:
+        trace = pm.sample(draws=draws, tune=tune, chains=chains, cores=cores, step=step,
+                          initvals=initvals, random_seed=seed, compute_convergence_checks=False,
+                          return_inferencedata=False, discard_tuned_samples=False,
+                          progressbar=progressbar, callback=recorder,
+                          mp_ctx=DEFAULT_MP_CONTEXT if mp_ctx is None else mp_ctx)
+    except ParallelSamplingError as exc:
+        # a chain in another process failed: the project's own error (a rule file too dense
+        # for this map, say) is raised as itself, so the command prints its one line
+        if isinstance(exc.__cause__, SemmapError):
+            raise exc.__cause__ from None
+        raise
+    except (EOFError, BrokenPipeError, ConnectionError, RuntimeError):
+        # A worker that saw the Ctrl-C itself can close its pipe before the main process ends
+        # the run: what the recorder received is still complete and consistent.
+        if stop is None or not stop():
+            raise
+    return trace
+
+
+def _best_world(records, resume, capacity: int) -> tuple:
+    """``(log p, chain, world)`` of the best world any chain reported (its last draw's, or where
+    a resumed chain that made no draw stood), types left undecided; ``(-inf, 0, None)`` if none."""
     best = (-math.inf, 0, None)
     for c, rec in enumerate(records):
         start = rec.last if rec.last is not None else (resume or {}).get(c)
@@ -252,14 +269,17 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
             r = np.asarray(start.best_rects).reshape(capacity, 4)
             a = np.asarray(start.best_active).reshape(capacity)
             best = (float(start.best_logp), c, wm.make(r, a, np.full(capacity, wm.NO_TYPE)))
+    return best
+
+
+def _stop_reason(records, resume, stop, budget, planned: int) -> str | None:
+    """Why sampling ended early: the stop flag's reason, ``"budget"`` when a chain made fewer
+    than its ``planned`` draws under a budget, or None."""
     if stop is not None and stop():
-        stopped = getattr(stop, "reason", None) or "interrupted"
-    else:
-        planned = schedule[1] if schedule is not None else tune + draws
-        done = [rec.last.draw if rec.last is not None else (resume or {}).get(c, _NONE).draw
-                for c, rec in enumerate(records)]
-        stopped = "budget" if budget is not None and min(done) < planned else None
-    return SampleResult(trace, best[2], best[0], best[1], seconds, draws, records, stopped)
+        return getattr(stop, "reason", None) or "interrupted"
+    done = [rec.last.draw if rec.last is not None else (resume or {}).get(c, _NONE).draw
+            for c, rec in enumerate(records)]
+    return "budget" if budget is not None and min(done) < planned else None
 
 
 class _NoStart(NamedTuple):

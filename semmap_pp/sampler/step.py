@@ -38,6 +38,7 @@ from pymc.step_methods.compound import BlockedStep, Competence
 
 from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.sampler.chain_settings import ChainLimits, ChainSettings
 from semmap_pp.sampler.kernels import KIND_NAMES, default_mix
 from semmap_pp.sampler.mcmc import mh_green
 
@@ -155,49 +156,17 @@ class WorldStep(BlockedStep):
         The target (``start(world) -> tracker``) or a zero-argument callable returning it (use a
         callable when the target itself does not pickle; it is called once per process).
     data : KernelData
-    mix : Mix, optional
-        The kernel mix (default: :func:`semmap_pp.sampler.kernels.default_mix`).
-    n_inner : int
-        Kernels applied per PyMC draw.
-    anneal : float
-        Start temperature of the burn-in (1 = no annealing).
-    cpr_fn : callable(tracker) -> float, optional
-        Cell prediction rate of the tracker's current world, recorded per draw (NaN without it).
-    resolution : float
-        Metres per lattice cell, for the ``wall_length`` summary (total unit perimeter).
-    knowledge_threshold : float, optional
-        Knowledge phase (paper: knowledge is switched on once the world covers enough of the map).
-        When given and the target has a knowledge engine, every chain starts with knowledge off; it
-        is switched on during burn-in at the first draw whose coverage reaches the threshold, and at
-        the first recorded draw at the latest, so every recorded draw has the same target.
-    callback : callable(dict), optional
-        Called after every draw with :func:`draw_info` of its stats, in the process that runs the
-        chain (:func:`semmap_pp.sampler.sampling.sample_worlds` reports to the main process instead).
-    stop : callable() -> bool, optional
-        Checked before every kernel (e.g. a :class:`StopFlag` set by a SIGINT handler).
-    deadline : float, optional
-        ``time.time()`` after which every chain stops (a ``--budget``).
-    chain_seconds : float, optional
-        Each chain also stops this many seconds after it started (its share of the budget).
-    schedule : (int, int), optional
-        ``(burn-in draws, total draws)`` of every chain, counted from the chain's first draw ever;
-        overrides what ``pm.sample`` passes (a resumed run calls it with the remaining draws).
-    resume : mapping of int to ChainStart, optional
-        Per chain number: where that chain continues an earlier run.
-    min_draws : int
-        A chain that has begun is not stopped (by ``stop`` or the deadline) before this many real
-        draws; a chain stopped before its first draw makes none.
+    chain : ChainSettings
+        How every draw runs and what it reports.
+    limits : ChainLimits
+        When a chain stops, and where it continues an earlier run.
     """
 
     name = "semmap_world"
     stats_dtypes_shapes = _scalar_stats()
 
-    def __init__(self, vars=None, target=None, data=None, *, mix=None, n_inner: int = 100,
-                 anneal: float = 1.0, cpr_fn=None, resolution: float = 1.0,
-                 knowledge_threshold: float | None = None, callback=None, stop=None,
-                 deadline: float | None = None, chain_seconds: float | None = None,
-                 schedule: tuple[int, int] | None = None, resume=None, min_draws: int = 4,
-                 model=None, blocked: bool = True, rng=None):
+    def __init__(self, vars=None, target=None, data=None, *, chain: ChainSettings = ChainSettings(),
+                 limits: ChainLimits = ChainLimits(), model=None, blocked: bool = True, rng=None):
         model = pm.modelcontext(model)
         self.vars = [model.rvs_to_values.get(v, v) for v in (vars or model.value_vars)]
         names = sorted(v.name for v in self.vars)
@@ -205,7 +174,7 @@ class WorldStep(BlockedStep):
             raise ValueError(f"WorldStep owns exactly the variables {VAR_NAMES}, got {names}")
         if target is None or data is None:
             raise ValueError("WorldStep needs a target and the kernel data")
-        if n_inner < 1 or anneal < 1.0:
+        if chain.n_inner < 1 or chain.anneal < 1.0:
             raise ValueError("n_inner must be >= 1 and anneal >= 1")
         self.capacity = int(model.initial_point()["active"].shape[0])
         # The best world and the random state travel as object stats (PyMC's ndarray trace stores
@@ -215,20 +184,20 @@ class WorldStep(BlockedStep):
         self.stats_dtypes = [{k: d for k, (d, _) in self.stats_dtypes_shapes.items()}]
         self._target = target
         self.data = data
-        self.mix = mix if mix is not None else default_mix(data.settings)
+        self.mix = chain.mix if chain.mix is not None else default_mix(data.settings)
         self._kind_index = np.array([KIND_NAMES.index(k) for k in self.mix.kinds])
-        self.n_inner = int(n_inner)
-        self.anneal = float(anneal)
-        self.cpr_fn = cpr_fn
-        self.resolution = float(resolution)
-        self.knowledge_threshold = knowledge_threshold
-        self.callback = callback
-        self.stop = stop
-        self.deadline = deadline
-        self.chain_seconds = chain_seconds
-        self.schedule = schedule
-        self.resume = dict(resume or {})
-        self.min_draws = int(min_draws)
+        self.n_inner = int(chain.n_inner)
+        self.anneal = float(chain.anneal)
+        self.cpr_fn = chain.cpr_fn
+        self.resolution = float(chain.resolution)
+        self.knowledge_threshold = chain.knowledge_threshold
+        self.callback = chain.callback
+        self.stop = limits.stop
+        self.deadline = limits.deadline
+        self.chain_seconds = limits.chain_seconds
+        self.schedule = limits.schedule
+        self.resume = dict(limits.resume or {})
+        self.min_draws = int(limits.min_draws)
         self.rng = np.random.default_rng(rng)
         self.tune = False
         self._chains_set_up = 0

@@ -1,6 +1,6 @@
 """Comparing knowledge sets (``semmap compare``): the same map and seed sampled under two rule files.
 
-Pure functions over :class:`~semmap_pp.run.pipeline.MapRun` objects. Per rule set:
+Pure functions over :class:`~semmap_pp.run.results.MapRun` objects. Per rule set:
 
 * W*: its number of units, cell prediction rate (CPR) and log posterior. The log posteriors of two
   rule sets are values of *different* targets (the knowledge changes the types, hence the prior),
@@ -49,7 +49,9 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.plans.diff import diff_worlds
 from semmap_pp.plans.places import places_from_doc
-from semmap_pp.run.pipeline import figure_source, posterior_worlds, run_target, spread_first_draw
+from semmap_pp.run.results import figure_source, spread_first_draw
+from semmap_pp.run.spread import posterior_worlds
+from semmap_pp.run.target_factory import run_target
 from semmap_pp.sampler.diagnostics import SpreadAccumulator, format_rhat
 from semmap_pp.sampler.spread import accumulate, wall_disagreement_m2
 from semmap_pp.semantic.world_json import world_dict
@@ -131,7 +133,7 @@ def mean_wall_sd_m(post, world) -> float:
 
 def typed_sampled_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of ``run``'s chains in the best chain's mode, typed by its own
-    target (knowledge on when it had rules): :func:`semmap_pp.run.pipeline.posterior_worlds`."""
+    target (knowledge on when it had rules): :func:`semmap_pp.run.spread.posterior_worlds`."""
 
     return posterior_worlds(run, n)
 

@@ -128,71 +128,107 @@ def furnish(rng: np.random.Generator, plan: FloorPlan, br: BuildingRasters, p: S
         return True
 
     for i, kind in enumerate(plan.types):
-        bx0, by0, bx1, by1 = _interior(plan, i, br.offset, inset)
+        bx0, by0, bx1, by1 = box = _interior(plan, i, br.offset, inset)
         w, h = bx1 - bx0, by1 - by0
         if w < 4 or h < 4:
             continue
         area = w * h * res * res
         if rng.random() < p.p_pilasters:  # columns or radiators along the walls, at intervals
-            step = m(rng.uniform(p.pilaster_spacing_min, p.pilaster_spacing_max))
-            along, depth = m(rng.uniform(0.2, 0.5)), m(rng.uniform(0.1, 0.3))
-            for s in range(bx0 + step // 2, bx1 - along, step):
-                place((s, by0, s + along, by0 + depth))
-                place((s, by1 - depth, s + along, by1))
-            for s in range(by0 + step // 2, by1 - along, step):
-                place((bx0, s, bx0 + depth, s + along))
-                place((bx1 - depth, s, bx1, s + along))
+            _pilasters(rng, place, m, p, box)
         if kind == "corridor":
-            length = max(w, h) * res
-            for _ in range(int(rng.poisson(p.p_corridor_object * length))):
-                s = m(rng.uniform(0.3, 0.6))
-                t = m(rng.uniform(0.3, 0.5))
-                if w >= h:
-                    x = int(rng.integers(bx0, max(bx0 + 1, bx1 - s)))
-                    y = by0 if rng.random() < 0.5 else by1 - t
-                    place((x, y, x + s, y + t))
-                else:
-                    y = int(rng.integers(by0, max(by0 + 1, by1 - s)))
-                    x = bx0 if rng.random() < 0.5 else bx1 - t
-                    place((x, y, x + t, y + s))
+            _corridor_objects(rng, place, m, p, box, max(w, h) * res)
             continue
         scale = 0.35 if kind == "hall" else 2.0 if kind == "other" else 1.0  # lobby / storage
-        for _ in range(int(rng.poisson(scale * p.furniture_per_m2 * area))):
-            if rng.random() < 0.7:  # against a wall: desks, shelves, cabinets
-                length, depth = m(rng.uniform(0.8, 2.2)), m(rng.uniform(0.4, 0.8))
-                gap = int(rng.integers(0, 3))
-                side = int(rng.integers(4))
-                if side < 2:
-                    x = int(rng.integers(bx0, max(bx0 + 1, bx1 - length)))
-                    y = by0 + gap if side == 0 else by1 - gap - depth
-                    place((x, y, min(x + length, bx1), y + depth))
-                else:
-                    y = int(rng.integers(by0, max(by0 + 1, by1 - length)))
-                    x = bx0 + gap if side == 2 else bx1 - gap - depth
-                    place((x, y, x + depth, min(y + length, by1)))
-            else:  # free-standing: tables, boxes, round tables
-                sx, sy = m(rng.uniform(0.5, 1.6)), m(rng.uniform(0.5, 1.2))
-                x = int(rng.integers(bx0, max(bx0 + 1, bx1 - sx)))
-                y = int(rng.integers(by0, max(by0 + 1, by1 - sy)))
-                place((x, y, min(x + sx, bx1), min(y + sy, by1)), ellipse=rng.random() < 0.3)
-        for _ in range(int(rng.poisson(scale * p.legs_per_m2 * area))):  # tables and chairs: only legs
-            sx, sy = m(rng.uniform(0.4, 1.8)), m(rng.uniform(0.4, 1.0))
-            x = int(rng.integers(bx0 + 2, max(bx0 + 3, bx1 - sx - 2)))
-            y = int(rng.integers(by0 + 2, max(by0 + 3, by1 - sy - 2)))
-            leg = 2 if rng.random() < 0.3 else 1
-            for lx, ly in ((x, y), (x + sx, y), (x, y + sy), (x + sx, y + sy)):
-                if lx + leg <= bx1 and ly + leg <= by1:
-                    place((lx, ly, lx + leg, ly + leg))
-        for _ in range(int(rng.poisson(scale * p.clutter_per_m2 * area))):
-            sx, sy = m(rng.uniform(0.1, 0.3)), m(rng.uniform(0.1, 0.3))
+        _furniture(rng, place, m, box, scale * p.furniture_per_m2 * area)
+        _legs(rng, place, m, box, scale * p.legs_per_m2 * area)
+        _clutter(rng, place, m, box, scale * p.clutter_per_m2 * area)
+        if kind == "hall" and rng.random() < p.p_hall_pillars:
+            _pillars(rng, place, m, p, box)
+    return solid
+
+
+def _pilasters(rng, place, m, p: SynthParams, box) -> None:
+    """Columns or radiators along the four walls of ``box``, at intervals."""
+    bx0, by0, bx1, by1 = box
+    step = m(rng.uniform(p.pilaster_spacing_min, p.pilaster_spacing_max))
+    along, depth = m(rng.uniform(0.2, 0.5)), m(rng.uniform(0.1, 0.3))
+    for s in range(bx0 + step // 2, bx1 - along, step):
+        place((s, by0, s + along, by0 + depth))
+        place((s, by1 - depth, s + along, by1))
+    for s in range(by0 + step // 2, by1 - along, step):
+        place((bx0, s, bx0 + depth, s + along))
+        place((bx1 - depth, s, bx1, s + along))
+
+
+def _corridor_objects(rng, place, m, p: SynthParams, box, length: float) -> None:
+    """Objects along a corridor's walls, Poisson in its ``length`` (metres)."""
+    bx0, by0, bx1, by1 = box
+    w, h = bx1 - bx0, by1 - by0
+    for _ in range(int(rng.poisson(p.p_corridor_object * length))):
+        s = m(rng.uniform(0.3, 0.6))
+        t = m(rng.uniform(0.3, 0.5))
+        if w >= h:
+            x = int(rng.integers(bx0, max(bx0 + 1, bx1 - s)))
+            y = by0 if rng.random() < 0.5 else by1 - t
+            place((x, y, x + s, y + t))
+        else:
+            y = int(rng.integers(by0, max(by0 + 1, by1 - s)))
+            x = bx0 if rng.random() < 0.5 else bx1 - t
+            place((x, y, x + t, y + s))
+
+
+def _furniture(rng, place, m, box, rate: float) -> None:
+    """Furniture blobs (Poisson mean ``rate``): against a wall or free-standing."""
+    bx0, by0, bx1, by1 = box
+    for _ in range(int(rng.poisson(rate))):
+        if rng.random() < 0.7:  # against a wall: desks, shelves, cabinets
+            length, depth = m(rng.uniform(0.8, 2.2)), m(rng.uniform(0.4, 0.8))
+            gap = int(rng.integers(0, 3))
+            side = int(rng.integers(4))
+            if side < 2:
+                x = int(rng.integers(bx0, max(bx0 + 1, bx1 - length)))
+                y = by0 + gap if side == 0 else by1 - gap - depth
+                place((x, y, min(x + length, bx1), y + depth))
+            else:
+                y = int(rng.integers(by0, max(by0 + 1, by1 - length)))
+                x = bx0 + gap if side == 2 else bx1 - gap - depth
+                place((x, y, x + depth, min(y + length, by1)))
+        else:  # free-standing: tables, boxes, round tables
+            sx, sy = m(rng.uniform(0.5, 1.6)), m(rng.uniform(0.5, 1.2))
             x = int(rng.integers(bx0, max(bx0 + 1, bx1 - sx)))
             y = int(rng.integers(by0, max(by0 + 1, by1 - sy)))
-            place((x, y, x + sx, y + sy), ellipse=rng.random() < 0.5)
-        if kind == "hall" and rng.random() < p.p_hall_pillars:
-            step = m(rng.uniform(p.pillar_spacing_min, p.pillar_spacing_max))
-            size = m(rng.uniform(0.3, 0.6))
-            edge = m(1.5)
-            for y in range(by0 + edge + step // 2, by1 - edge, step):
-                for x in range(bx0 + edge + step // 2, bx1 - edge, step):
-                    place((x, y, x + size, y + size))
-    return solid
+            place((x, y, min(x + sx, bx1), min(y + sy, by1)), ellipse=rng.random() < 0.3)
+
+
+def _legs(rng, place, m, box, rate: float) -> None:
+    """Tables and chairs, seen as their legs only (Poisson mean ``rate``)."""
+    bx0, by0, bx1, by1 = box
+    for _ in range(int(rng.poisson(rate))):
+        sx, sy = m(rng.uniform(0.4, 1.8)), m(rng.uniform(0.4, 1.0))
+        x = int(rng.integers(bx0 + 2, max(bx0 + 3, bx1 - sx - 2)))
+        y = int(rng.integers(by0 + 2, max(by0 + 3, by1 - sy - 2)))
+        leg = 2 if rng.random() < 0.3 else 1
+        for lx, ly in ((x, y), (x + sx, y), (x, y + sy), (x + sx, y + sy)):
+            if lx + leg <= bx1 and ly + leg <= by1:
+                place((lx, ly, lx + leg, ly + leg))
+
+
+def _clutter(rng, place, m, box, rate: float) -> None:
+    """Small clutter (Poisson mean ``rate``)."""
+    bx0, by0, bx1, by1 = box
+    for _ in range(int(rng.poisson(rate))):
+        sx, sy = m(rng.uniform(0.1, 0.3)), m(rng.uniform(0.1, 0.3))
+        x = int(rng.integers(bx0, max(bx0 + 1, bx1 - sx)))
+        y = int(rng.integers(by0, max(by0 + 1, by1 - sy)))
+        place((x, y, x + sx, y + sy), ellipse=rng.random() < 0.5)
+
+
+def _pillars(rng, place, m, p: SynthParams, box) -> None:
+    """A grid of pillars in a hall."""
+    bx0, by0, bx1, by1 = box
+    step = m(rng.uniform(p.pillar_spacing_min, p.pillar_spacing_max))
+    size = m(rng.uniform(0.3, 0.6))
+    edge = m(1.5)
+    for y in range(by0 + edge + step // 2, by1 - edge, step):
+        for x in range(bx0 + edge + step // 2, bx1 - edge, step):
+            place((x, y, x + size, y + size))

@@ -41,7 +41,7 @@ def test_a_floor_scanned_at_another_resolution_is_the_same_building():
     """``--resolution 0.1``: the generator scans the same seed's building onto 0.1 m cells."""
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
-    from semmap_pp.run.pipeline import DEFAULT_RULES
+    from semmap_pp.resources import DEFAULT_RULES
 
     floor, grid, inputs = bq._floor(3, load_model(), load_rules(DEFAULT_RULES), resolution=0.1)
     fine = generate_floor(3)
@@ -58,7 +58,7 @@ def test_bench_stability_counts_every_unit_of_the_best_wstar_once():
 
     from semmap_pp.knowledge import load_rules
     from semmap_pp.model import load_model
-    from semmap_pp.run.pipeline import DEFAULT_RULES
+    from semmap_pp.resources import DEFAULT_RULES
 
     parser = argparse.ArgumentParser()
     bq.add_arguments(parser)

@@ -137,7 +137,9 @@ def two_rooms_grid():
 
 def test_summarise_a_tiny_run():
     from semmap_pp.studies.compare import typed_sampled_worlds
-    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings
 
     g = two_rooms_grid()
     f = build_frame(g, MODEL)

@@ -32,7 +32,9 @@ from PIL import Image
 
 from semmap_pp.cli import main
 from semmap_pp.sampler.diagnostics import read_trace
-from semmap_pp.run.pipeline import RunSettings, load_inputs, run_map
+from semmap_pp.run.inputs import load_inputs
+from semmap_pp.run.pipeline import run_map
+from semmap_pp.run.results import RunSettings
 
 ROOT = Path(__file__).resolve().parents[2]
 MAP = ROOT / "tests" / "data" / "maps" / "intel_corner.yaml"

@@ -102,7 +102,9 @@ def _validate(doc):
 def test_semmap_map_explains_the_rooms_not_the_sea(tmp_path):
     """End to end: the map file as a renderer that marks every crossed cell free writes it; the
     run reads the sea as unknown, says so, and W* holds the two rooms, not one unit over all."""
-    from semmap_pp.run.pipeline import RunSettings, load_inputs, run_map
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings
     from semmap_pp import world as wm
 
     path = save_grid(grid_of(building()), tmp_path / "sea.yaml")

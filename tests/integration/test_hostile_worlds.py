@@ -142,7 +142,7 @@ def test_units_that_share_walls_are_not_piled(floor, floor_doc, tmp_path):
 @pytest.fixture(scope="module")
 def intel_unit(tmp_path_factory):
     """A world.json of the intel corner holding one lattice unit (the file the issue copied)."""
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
 
     inputs = load_inputs(INTEL, rules_path=None)
     f = inputs.frame

@@ -11,7 +11,9 @@ from semmap_pp.grid import OccupancyGrid
 from semmap_pp.sampler.kernels import data_from_frame
 from semmap_pp.model import load_model
 from semmap_pp.semantic.semantic_map import semantic_map
-from semmap_pp.run.pipeline import DEFAULT_RULES, LatticeCPR, TargetFactory, run_target
+from semmap_pp.resources import DEFAULT_RULES
+from semmap_pp.run.lattice_cpr import LatticeCPR
+from semmap_pp.run.target_factory import run_target, TargetFactory
 from semmap_pp.target.posterior import Posterior
 
 MODEL = load_model()
@@ -69,7 +71,9 @@ def test_knowledge_switches_on_in_burn_in_and_stays_on_for_recorded_draws():
 
 
 def test_run_map_keeps_recorded_worlds():
-    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map, sampled_worlds
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings, sampled_worlds
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -93,7 +97,7 @@ def test_run_map_keeps_recorded_worlds():
 def test_timing_text_leaves_compiling_draws_out_of_the_rate():
     from types import SimpleNamespace as NS
 
-    from semmap_pp.run.pipeline import MapRun
+    from semmap_pp.run.results import MapRun
 
     def text(*chains):
         return MapRun.timing_text(NS(seconds=2.0, kernels_per_second=1000.0, settings=NS(n_inner=10),
@@ -109,7 +113,9 @@ def test_timing_text_leaves_compiling_draws_out_of_the_rate():
 
 
 def test_run_map_starts_every_chain_from_the_given_world():
-    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -133,7 +139,9 @@ def test_w_star_is_polished_by_greedy_ascent_of_the_full_target():
     import dataclasses
 
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings
 
     g = rooms_grid(door=True)
     rules = load_rules(DEFAULT_RULES)
@@ -183,8 +191,10 @@ def test_the_posterior_spread_is_drawn_from_the_chains_in_the_best_chains_mode()
     """A chain started with one room missing stays thousands of nats below the other (n_inner=1, a
     few draws): the spread figures' worlds come from the other chain only, and sampled_worlds
     draws from the chains it is given."""
-    from semmap_pp.run.pipeline import posterior_worlds
-    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map, sampled_worlds, spread_chains
+    from semmap_pp.run.spread import posterior_worlds
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings, sampled_worlds, spread_chains
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
@@ -223,7 +233,9 @@ def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():
     the model's crop margin, so the run sees the same lattice: the same W*, log posterior and CPR,
     its pixel coordinates shifted by the padding, and labels.png as big as the input."""
     from semmap_pp.semantic.world_json import world_dict
-    from semmap_pp.run.pipeline import Inputs, RunSettings, run_map
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings
 
     def run(pad):
         g = rooms_grid(door=True)
@@ -252,8 +264,10 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     """With spread_draws > 0, run_map samples again after the search: every chain starts at W*
     (paper Fig. 7). W*, its log posterior and the search's draws are those of the run without the
     sample; the spread figures' worlds come from the sample; a run stopped early has none."""
-    from semmap_pp.run.pipeline import posterior_worlds
-    from semmap_pp.run.pipeline import Inputs, RunSettings, figure_source, run_map
+    from semmap_pp.run.spread import posterior_worlds
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import figure_source, RunSettings
 
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)

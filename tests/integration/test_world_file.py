@@ -10,7 +10,7 @@ import pytest
 
 from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
-from semmap_pp.run.pipeline import load_inputs
+from semmap_pp.run.inputs import load_inputs
 from semmap_pp.plans.world_file import read_start_world
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -207,7 +207,7 @@ def test_the_note_names_the_share_and_both_angles_and_can_be_switched_off(square
 
 def test_the_run_gets_the_note_and_world_json_s_map_notes_too(tmp_path, square_wing):
     from semmap_pp.grid import write_map
-    from semmap_pp.run.pipeline import load_inputs
+    from semmap_pp.run.inputs import load_inputs
     from semmap_pp.synth import generate_floor
     both = _side_by_side(square_wing, generate_floor(5, units=8, rotation_deg=30.0).classes)
     image = np.where(both == FREE, 254, np.where(both == OCCUPIED, 0, 205)).astype(np.uint8)

@@ -23,7 +23,7 @@ STAGES = ("grid", "synth", "lattice", "derive", "knowledge", "target", "sampler"
           "semantic", "run", "plans", "studies", "outputs", "cli")
 MAX_LOOSE = 10
 #: arrows the stage order allows but the layers do not: outputs are handed typed worlds by the run
-#: (semmap_pp.run.pipeline.posterior_worlds) and never call back into it
+#: (semmap_pp.run.spread.posterior_worlds) and never call back into it
 FORBIDDEN = {("outputs", "run"): "outputs write what the run hands them; they never call back into it"}
 #: the folder whose commands import their work when they run: building the parser imports every
 #: cmd_*.py, and ``semmap --help`` (or ``semmap info``) would otherwise import PyMC, ArviZ,
@@ -179,3 +179,88 @@ def test_the_checker_sees_a_function_import(tmp_path):
     assert got[1][:3] == ("semmap_pp.run.pipeline", 4, True) and got[1][3] == ""
     assert got[2][3] == "# heavy: compiles"
     assert rank(target_stage(got[1][0])) > rank("lattice")
+
+
+def module_of(dotted: str) -> tuple[str, ...] | None:
+    """The ``semmap_pp`` module a dotted import lands in, as parts below the package (a package's
+    ``__init__`` when no submodule of that name exists), else None."""
+    parts = dotted.split(".")
+    if parts[0] != "semmap_pp":
+        return None
+    parts = parts[1:]
+    while parts:
+        base = PACKAGE.joinpath(*parts)
+        if base.with_suffix(".py").is_file():
+            return tuple(parts)
+        if (base / "__init__.py").is_file():
+            return (*parts, "__init__")
+        parts = parts[:-1]
+    return ("__init__",)
+
+
+def module_edges():
+    """``(module, imported module, where)`` for every import between two modules of one folder
+    (the root's modules form a folder too), those inside functions included."""
+    for path, parts, found in package_imports():
+        for target, line, _in_function, _note in found:
+            dst = module_of(target)
+            if dst is None or dst == parts or dst[:-1] != parts[:-1]:
+                continue
+            yield parts, dst, f"{path.relative_to(PACKAGE.parent)}:{line}"
+
+
+def find_cycle(graph: dict) -> list:
+    """One cycle of ``graph`` (node -> set of nodes) as a list of nodes, first node repeated at
+    the end; empty when there is none."""
+    state: dict = {}
+
+    def dfs(node, trail):
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return trail[trail.index(nxt):] + [nxt]
+            if state.get(nxt) is None:
+                found = dfs(nxt, trail + [nxt])
+                if found:
+                    return found
+        state[node] = 2
+        return []
+
+    for node in sorted(graph):
+        if state.get(node) is None:
+            found = dfs(node, [node])
+            if found:
+                return found
+    return []
+
+
+def test_no_cycle_between_modules_of_a_folder():
+    graph: dict = {}
+    where: dict = {}
+    for src, dst, at in module_edges():
+        graph.setdefault(src, set()).add(dst)
+        where.setdefault((src, dst), at)
+    cycle = find_cycle(graph)
+    steps = [f"{where[a, b]}: {'.'.join(a)} imports {'.'.join(b)}" for a, b in zip(cycle, cycle[1:])]
+    assert not cycle, "a cycle between modules of one folder:\n" + "\n".join(steps)
+
+
+def test_the_checker_sees_a_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}}) == []
+    assert module_of("semmap_pp.knowledge.dialect.walk") == ("knowledge", "dialect")
+    assert module_of("semmap_pp.knowledge.RuleSet") == ("knowledge", "__init__")
+    assert module_of("numpy") is None
+
+
+def test_each_stage_has_its_settings():
+    """Every table of the model file is one stage's settings class (model.STAGE_SETTINGS), the
+    stage a folder of the package, and every field of Model but its path belongs to one stage."""
+    import dataclasses
+
+    from semmap_pp.model import STAGE_SETTINGS, Model
+
+    assert set(STAGE_SETTINGS) <= set(STAGES)
+    tables = [t for group in STAGE_SETTINGS.values() for t in group]
+    fields = [f.name for f in dataclasses.fields(Model) if f.name != "path"]
+    assert sorted(tables) == sorted(fields), "model tables without a stage, or claimed twice"

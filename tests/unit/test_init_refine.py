@@ -332,7 +332,7 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
 
     from semmap_pp.sampler.ascent import _Ascent
     from semmap_pp.knowledge import load_rules
-    from semmap_pp.run.pipeline import TargetFactory
+    from semmap_pp.run.target_factory import TargetFactory
     from semmap_pp.target.posterior import Tracker
 
     model = load_model()
@@ -432,7 +432,8 @@ def test_start_worlds_have_room_for_a_building_larger_than_k_max():
     import dataclasses
 
     from semmap_pp.evaluate import default_roi
-    from semmap_pp.run.pipeline import Inputs, start_worlds
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import start_worlds
 
     m = row_of_rooms(6)
     grid = OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05)
@@ -471,7 +472,7 @@ def test_the_ascents_validity_test_equals_its_definition():
 def test_the_fragments_a_grown_unit_swallows_equal_their_definition():
     """``_Ascent.absorb``'s compiled selection against its definition (the thin units other than
     the grown one with at least ``share`` of their area inside it) on random worlds."""
-    from semmap_pp.sampler.ascent import _swallowed
+    from semmap_pp.sampler.ascent_walls import _swallowed
     rng = np.random.default_rng(1)
     found = 0
     for _ in range(3000):

@@ -16,7 +16,7 @@ from semmap_pp.knowledge.evidence import ground_facts
 from semmap_pp.knowledge.ground import FRAME, ground
 from semmap_pp.knowledge.exact import JunctionTree
 from semmap_pp.knowledge.map import map_clingo, map_rc2
-from semmap_pp.knowledge.mcsat import ClauseStack, ClauseTemplate
+from semmap_pp.knowledge.mcsat import ClauseStack, ClauseTemplate, MCSATSettings
 from semmap_pp.knowledge.mcsat_tree import BatchTree, pick
 
 RULE_FILES = ["rules/table3.lp", "rules/halls_to_corridors.lp", "rules/none.lp"]
@@ -319,7 +319,8 @@ def test_mcsat_contradictory_hard_rules_name_the_file(tmp_path):
 
 
 def test_mcsat_rejects_a_burn_in_as_long_as_the_run():
-    engine = KnowledgeEngine.from_file("rules/table3.lp", method="mcsat", n_iter=5, burn_in=5)
+    engine = KnowledgeEngine.from_file("rules/table3.lp", method="mcsat",
+                                       mcsat=MCSATSettings(n_iter=5, burn_in=5))
     with pytest.raises(RuleError, match="burn_in"):
         engine.infer(Evidence.build([1], rolike={1}))
 

@@ -20,6 +20,7 @@ from semmap_pp.knowledge.lbp import (BPSettings, _exp_tables, _one_factor, _spar
                                      _sparse_plan, cluster, factor_bp, pairwise_bp)
 from semmap_pp.knowledge.local import separate
 from semmap_pp.knowledge.map import map_pairwise_rc2
+from semmap_pp.knowledge.trees import AutoLimits
 
 # Largest LBP error against exact marginals on random floors of 3..6 units with 70 % of the
 # pairs adjacent (types and SaLe, rules/table3.lp): measured 0.0072 over 300 floors.
@@ -434,7 +435,7 @@ def test_general_path_falls_back_to_factor_bp():
     ev = next(loopy_floors())
     types, sale, best, _, _ = oracle(rules, ev)
     assert KnowledgeEngine(rules).infer(ev).method == "exact"      # a small tree: exact
-    r = KnowledgeEngine(rules, auto_max_states_ground=1).infer(ev)
+    r = KnowledgeEngine(rules, auto=AutoLimits(states_ground=1)).infer(ev)
     assert r.method == "lbp" and r.map_method == "rc2"
     assert abs(r.map_cost * 1000 - best) < 1e-6
     err = max([np.abs(r.types[u] - types[u]).max() for u in ev.units]
@@ -452,7 +453,7 @@ def test_map_by_rc2_when_the_map_tree_is_too_large(tmp_path):
     ev = Evidence.build([1, 2, 3, 4], rolike={1, 2, 3, 4},
                         adj=[(1, 2), (2, 3), (3, 4), (1, 4), (1, 3)])
     _, _, best, _, _ = oracle(rules, ev)
-    r = KnowledgeEngine(rules, auto_max_states=4).infer(ev)
+    r = KnowledgeEngine(rules, auto=AutoLimits(states=4)).infer(ev)
     assert r.method == "lbp" and r.map_method == "rc2"
     assert abs(r.map_cost * 1000 - best) < 1e-6
     assert sum(t == "room" for t in r.map_types.values()) == 2   # 1 and 3 adjacent: 2, 4 rooms

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-import semmap_pp.knowledge.engine as engine_module
+import semmap_pp.knowledge.engine_ground as engine_ground
 from semmap_pp.knowledge import Evidence, KnowledgeEngine, load_rules
 from semmap_pp.knowledge.local import LocalModel
 
@@ -94,8 +94,8 @@ def test_map_types_of_the_general_path_equal_the_full_inference(monkeypatch):
     rules = load_rules("rules/halls_to_corridors.lp")
     rng = np.random.default_rng(8)
     grounds = []
-    real_ground = engine_module.ground
-    monkeypatch.setattr(engine_module, "ground",
+    real_ground = engine_ground.ground
+    monkeypatch.setattr(engine_ground, "ground",
                         lambda *a, **k: grounds.append(1) or real_ground(*a, **k))
     for method in ("auto", "lbp"):
         for _ in range(12):

@@ -26,7 +26,9 @@ from semmap_pp.outputs.graphml import world_graph, write_graphml
 from semmap_pp.semantic.regions import (join_regions, passage_pairs, regions_image,
                                        unit_regions, write_regions_png)
 from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_all
-from semmap_pp.run.pipeline import Inputs, MapRun, RunSettings, posterior_worlds
+from semmap_pp.run.inputs import Inputs
+from semmap_pp.run.results import MapRun, RunSettings
+from semmap_pp.run.spread import posterior_worlds
 
 from literal_floor import literal_floor
 
@@ -251,7 +253,7 @@ def test_posterior_cells_see_the_spread(hostile_run):
     from semmap_pp.sampler.spread import cell_probabilities
 
     _, run, _ = hostile_run
-    from semmap_pp.run.pipeline import sampled_worlds
+    from semmap_pp.run.results import sampled_worlds
     worlds = sampled_worlds(run, 1000)
     p_wall, p_type = cell_probabilities(run.semantic.frame.shape, worlds, wall=2)
     assert len(worlds) == 12
@@ -265,7 +267,7 @@ def test_repeated_worlds_are_counted_as_often_as_they_occur(hostile_run):
     adding every world one by one."""
     from semmap_pp.sampler.diagnostics import SpreadAccumulator
     from semmap_pp.sampler.spread import accumulate, rasterise, sampled_box
-    from semmap_pp.run.pipeline import sampled_worlds
+    from semmap_pp.run.results import sampled_worlds
 
     _, run, _ = hostile_run
     ws = sampled_worlds(run, 1000)

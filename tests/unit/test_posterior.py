@@ -569,7 +569,9 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path(monkeypatch):
     "the knowledge-free bound"; the proposals it skips, most of the 4,000, are not evaluated
     here, a minute of the general path: the two floor tests above evaluate every one they skip)."""
     from semmap_pp.sampler.kernels import data_from_frame, default_mix
-    from semmap_pp.run.pipeline import data_start_world, load_inputs, run_target
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.pipeline import data_start_world
+    from semmap_pp.run.target_factory import run_target
 
     root = Path(__file__).resolve().parents[2]
     inputs = load_inputs(root / "tests/data/maps/intel_corner.yaml",
@@ -601,9 +603,10 @@ def test_the_map_types_bound_under_a_rule_set_off_the_fast_path(monkeypatch):
 
 def _pipeline_target(rules):
     """The target ``semmap map`` builds for tests/data/maps/intel_corner.yaml
-    (:func:`semmap_pp.run.pipeline.run_target` of :func:`~semmap_pp.run.pipeline.load_inputs`), with the
+    (:func:`semmap_pp.run.target_factory.run_target` of :func:`~semmap_pp.run.inputs.load_inputs`), with the
     rule file ``rules`` (knowledge on) or none (knowledge off)."""
-    from semmap_pp.run.pipeline import load_inputs, run_target
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.target_factory import run_target
 
     root = Path(__file__).resolve().parents[2]
     kw = {"rules_path": root / "rules" / rules} if rules else {"rules_path": None}

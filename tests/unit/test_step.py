@@ -13,7 +13,9 @@ from semmap_pp.sampler.kernels import data_from_frame
 from semmap_pp.model import load_model
 from semmap_pp.target.posterior import Posterior
 from semmap_pp.sampler.sampling import sample_worlds
-from semmap_pp.sampler.step import WorldStep, point_to_world, world_model, world_to_point
+from semmap_pp.sampler.chain_settings import ChainSettings
+from semmap_pp.sampler.step import (WorldStep, point_to_world, world_model,
+                                    world_to_point)
 
 CAP = 6
 
@@ -125,7 +127,7 @@ def test_parallel_chains_are_forked_on_linux_unless_told_otherwise(problem, monk
 def test_step_pickles_without_its_caches(problem):
     post, data = problem
     with world_model(CAP) as m:
-        step = WorldStep(m.value_vars, target=post, data=data, n_inner=5)
+        step = WorldStep(m.value_vars, target=post, data=data, chain=ChainSettings(n_inner=5))
     step.setup_chain(np.random.default_rng(0), 0, 1)
     step.step(world_to_point(wm.empty(CAP)))
     assert step._tracker is not None

@@ -167,8 +167,30 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
     free = classes == cells.FREE
     occ = classes == cells.OCCUPIED
 
-    hlines, hdoors, hdoor_mask = _lines_and_doors(occ, free, s.wall_line_min, door_min, door_max)
-    vlines, vdoors, vdoor_mask = _lines_and_doors(occ.T, free.T, s.wall_line_min, door_min, door_max)
+    hcum, vcum, wall_lines, doors = _line_evidence(occ, free, s.wall_line_min, door_min, door_max)
+
+    up, down, left, right = free_runs(free)
+
+    cand, pr, pc = _birth_boxes(free, up, down, left, right, m, t, big, s.max_candidates)
+    birth_rects = np.array(cand, np.int64).reshape(-1, 4)
+    birth_weights = np.full(len(birth_rects), 1.0 / max(len(birth_rects), 1))
+
+    n_rows, cdf_rows = _side_tables(h, m, big)
+    n_cols, cdf_cols = _side_tables(w, m, big)
+    for a in (hcum, vcum, up, down, left, right, birth_rects, birth_weights, wall_lines, doors):
+        a.setflags(write=False)
+    maxima = np.column_stack([pr, pc]).astype(np.int64)
+    maxima.setflags(write=False)
+    return KernelData((h, w), m, big, t, g, s, hcum, vcum, up, down, left, right, birth_rects,
+                      birth_weights, (n_rows, n_cols), (cdf_rows, cdf_cols), wall_lines, doors, maxima)
+
+
+def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int):
+    """``(hcum, vcum, wall_lines, doors)``: per row and per column the cumulative count of wall or
+    door cells, and the wall lines and door candidates found along both axes."""
+    h, w = occ.shape
+    hlines, hdoors, hdoor_mask = _lines_and_doors(occ, free, line_min, door_min, door_max)
+    vlines, vdoors, vdoor_mask = _lines_and_doors(occ.T, free.T, line_min, door_min, door_max)
     hmask = (occ | hdoor_mask).astype(np.int32)
     vmask = (occ.T | vdoor_mask).astype(np.int32)
     hcum = np.zeros((h, w + 1), np.int32)
@@ -180,10 +202,13 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
         return np.column_stack([np.full(len(a), axis), a]) if len(a) else np.zeros((0, 4), int)
     wall_lines = np.concatenate([tag(hlines, 0), tag(vlines, 1)]).astype(np.int64)
     doors = np.concatenate([tag(hdoors, 0), tag(vdoors, 1)]).astype(np.int64)
+    return hcum, vcum, wall_lines, doors
 
-    up, down, left, right = free_runs(free)
 
-    # Birth candidates: the free box around each distance-transform maximum and each region centre.
+def _birth_boxes(free, up, down, left, right, m: int, t: int, big: int, max_candidates: int):
+    """Birth candidates: the free box around each distance-transform maximum and each region
+    centre (at most ``max_candidates``, sides within ``[m, big]``); and the maxima's rows and
+    columns."""
     dt = ndimage.distance_transform_edt(free)
     peak = (dt == ndimage.maximum_filter(dt, size=2 * m + 1)) & (dt >= max(1.0, t))
     pr, pc = np.nonzero(peak)
@@ -197,25 +222,15 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
         seeds.append((int(rr[k] + sl[0].start), int(cc[k] + sl[1].start)))
     cand, seen = [], set()
     for r, c in seeds:
-        box = _box(r, c, up, down, left, right, t, (h, w))
+        box = _box(r, c, up, down, left, right, t, free.shape)
         bh, bw = box[2] - box[0], box[3] - box[1]
         if box in seen or not (m <= bh <= big and m <= bw <= big):
             continue
         seen.add(box)
         cand.append(box)
-        if len(cand) >= s.max_candidates:
+        if len(cand) >= max_candidates:
             break
-    birth_rects = np.array(cand, np.int64).reshape(-1, 4)
-    birth_weights = np.full(len(birth_rects), 1.0 / max(len(birth_rects), 1))
-
-    n_rows, cdf_rows = _side_tables(h, m, big)
-    n_cols, cdf_cols = _side_tables(w, m, big)
-    for a in (hcum, vcum, up, down, left, right, birth_rects, birth_weights, wall_lines, doors):
-        a.setflags(write=False)
-    maxima = np.column_stack([pr, pc]).astype(np.int64)
-    maxima.setflags(write=False)
-    return KernelData((h, w), m, big, t, g, s, hcum, vcum, up, down, left, right, birth_rects,
-                      birth_weights, (n_rows, n_cols), (cdf_rows, cdf_cols), wall_lines, doors, maxima)
+    return cand, pr, pc
 
 
 def data_from_frame(frame, settings: KernelSettings | None = None) -> KernelData:

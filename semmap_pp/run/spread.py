@@ -1,0 +1,84 @@
+"""The sample around W* (the paper's Fig. 7): every chain started at W*, under the full target,
+after the search; and the typed worlds the spread figures draw (:func:`posterior_worlds`)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+from semmap_pp import world as wm
+from semmap_pp.errors import SemmapError
+from semmap_pp.run.inputs import Inputs
+from semmap_pp.run.lattice_cpr import LatticeCPR
+from semmap_pp.run.results import (MapRun, RunSettings, SpreadSample, collect_draws, figure_source,
+                                   sampled_worlds, spread_chains, spread_first_draw)
+from semmap_pp.run.target_factory import run_target
+from semmap_pp.sampler.sampling import sample_worlds
+from semmap_pp.sampler.spread import typed_worlds
+
+
+def sample_around(run: MapRun, factory, data, mix, *, planned: bool, log, stop, budget) -> None:
+    """Give ``run`` its sample around W* (:func:`sample_spread`) when ``planned`` and not
+    interrupted first, and say on its report that the spread figures are drawn from it; otherwise a
+    note says why there is none (the figures then use the search's draws)."""
+    why = "sampling stopped early"
+    if planned and stop is not None and stop():        # Ctrl-C while W* was polished
+        run.stopped, why = "interrupted", "interrupted before it began"
+    elif planned:
+        try:
+            run.spread = sample_spread(run.inputs, run.settings, run.world, run.semantic.log_posterior,
+                                       factory, data, mix=mix, log=log, stop=stop, budget=budget)
+        except SemmapError as exc:       # interrupted before any chain of it had 4 draws: keep W*
+            why = exc.message
+            if stop is not None and stop():
+                run.stopped = "interrupted"
+        else:
+            if run.spread.stopped == "interrupted":
+                run.stopped = "interrupted"
+    if run.spread is None:
+        run.notes.append(f"no sample around W*: {why}; the spread figures use the search's draws")
+    else:
+        run.report = run.report.with_figures(False)
+
+
+def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_logp: float, factory,
+                  data, *, mix, log=print, stop=None, budget: float | None = None) -> SpreadSample:
+    """The sample around W* (paper Fig. 7, "starting the Markov chain from the world state W*"):
+    ``settings.chains`` chains, each started at ``wstar``, record ``settings.spread_draws`` draws of
+    ``settings.spread_n_inner`` kernels under the full target (no burn-in; knowledge on from the
+    first draw when W* passes the coverage threshold, as it does once the search has switched it on).
+    The seed is the run's plus one, so the sample's random draws are not the search's."""
+
+    model = inputs.model
+    log(f"sampling around W*: {settings.chains} chains x {settings.spread_draws} draws x "
+        f"{settings.spread_n_inner} kernels, every chain started at W*")
+    t0 = time.perf_counter()
+    result = sample_worlds(factory, data, [wstar], draws=settings.spread_draws, tune=0,
+                           chains=settings.chains, cores=settings.cores, n_inner=settings.spread_n_inner,
+                           seed=settings.seed + 1, anneal=1.0, mix=mix,
+                           cpr_fn=LatticeCPR.from_roi(inputs.frame, inputs.roi),
+                           resolution=inputs.frame.cells.resolution,
+                           knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None,
+                           stop=stop, budget=budget)
+    seconds = time.perf_counter() - t0
+    kept_chains, n_kept, summaries, sample_stats, report, samples, _ = collect_draws(
+        result.records, model, draws_option="--spread-draws")
+    made = sum(len(r.stats.get("logp", ())) for r in result.records)
+    # the best world's log posterior, tracked at every kernel (a recorded draw is every n_inner-th)
+    best = result.best_logp if result.best_world is not None else math.nan
+    spread = SpreadSample(settings.spread_draws, settings.spread_n_inner, summaries, sample_stats, report,
+                          samples, seconds, made * settings.spread_n_inner / seconds if seconds > 0 else 0.0,
+                          float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept),
+                          result.best_world)
+    log(spread.text())
+    return spread
+
+
+def posterior_worlds(run, n: int) -> list:
+    """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
+    draws: :func:`figure_source`), from its chains in the best chain's mode
+    (:func:`spread_chains`) after the draws in which they were still settling
+    (:func:`spread_first_draw`), typed as the sampler typed them."""
+    src = figure_source(run)
+    return typed_worlds(run_target(run.inputs),
+                        sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))

@@ -1,0 +1,294 @@
+"""The greedy ascent's state and its wall moves (:mod:`semmap_pp.sampler.ascent`).
+
+:class:`Climb` holds a tracker of the target and the kernels' data, and takes a candidate world
+only when it raises log p; :class:`WallMoves` moves the walls of units, one edge at a time or every
+edge on one wall together.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.model import MAX_K
+from semmap_pp.target.prior import all_valid
+from semmap_pp.sampler.kernels.shrink_dilate import wall_range
+
+#: The ascent grows a full world's capacity up to this many slots (the model's bound on k_max).
+MAX_CAPACITY = MAX_K
+
+
+# The resolution at which ``[kernels] ascent_peaks`` is given (the maps the model was measured on).
+PEAKS_RESOLUTION = 0.05
+
+
+def ascent_peaks(n: int, resolution: float) -> int:
+    """How many line-evidence peaks a wall move tries at ``resolution`` metres per cell: ``n`` at
+    0.05 m and coarser, ``n`` times 0.05 m / ``resolution`` on finer maps. A finer map draws a
+    wall in more lines of cells, each a peak of its own (at 0.025 m a 0.15 m wall is two lines
+    with an unknown core), so ``n`` peaks reach fewer walls there (CHANGELOG.md, quality
+    change 30). Coarser maps keep ``n``: fewer peaks at 0.1 m helped the floors scanned at 0.1 m and hurt
+    the floors pooled to 0.1 m.
+
+    >>> [ascent_peaks(8, r) for r in (0.0125, 0.025, 0.04, 0.05, 0.1)], ascent_peaks(0, 0.025)
+    ([32, 16, 10, 8, 8], 0)
+    """
+    return max(n, round(n * PEAKS_RESOLUTION / resolution))
+
+
+def _line_peaks(w: np.ndarray, lo: int, k: int) -> list[int]:
+    """Positions (``lo`` + index) of the ``k`` largest local maxima of ``w`` above its floor."""
+    if w.size == 0:
+        return []
+    left = np.concatenate([[-np.inf], w[:-1]])
+    right = np.concatenate([w[1:], [-np.inf]])
+    peak = (w >= left) & (w >= right) & (w > w.min())
+    idx = np.flatnonzero(peak)
+    idx = idx[np.argsort(-w[idx], kind="stable")][:k]
+    return (idx + lo).tolist()
+
+
+@numba.njit(cache=True, nogil=True)
+def _swallowed(rects, active, slot, thin_below, share):  # pragma: no cover - compiled
+    """(K,) bool: the active units other than ``slot`` whose shorter side is below
+    ``thin_below`` and of whose area at least ``share`` lies inside unit ``slot``."""
+    out = np.zeros(rects.shape[0], np.bool_)
+    a0, b0, a1, b1 = rects[slot, 0], rects[slot, 1], rects[slot, 2], rects[slot, 3]
+    for k in range(rects.shape[0]):
+        if not active[k] or k == slot:
+            continue
+        r0, c0, r1, c1 = rects[k, 0], rects[k, 1], rects[k, 2], rects[k, 3]
+        if min(r1 - r0, c1 - c0) >= thin_below:
+            continue
+        inter = max(min(r1, a1) - max(r0, a0), 0) * max(min(c1, b1) - max(c0, b0), 0)
+        out[k] = inter >= share * ((r1 - r0) * (c1 - c0))
+    return out
+
+
+class Climb:
+    """Greedy ascent state: a tracker of the target and the kernels' data."""
+
+    def __init__(self, posterior, world: wm.World, data, *, peaks: int | None = None, local: int = 3,
+                 absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5,
+                 merge_keep: float = 0.5, trim_line_min: float = 0.5):
+        self.posterior = posterior
+        self.tr = posterior.start(world)
+        self.data, self.local = data, local
+        self.absorb_share, self.merge_slack, self.merge_line_max = absorb_share, merge_slack, merge_line_max
+        self.merge_keep, self.trim_line_min = merge_keep, trim_line_min
+        self.resolution, self.evidence = posterior.cells.resolution, posterior.model.evidence
+        self.peaks = ascent_peaks(data.settings.ascent_peaks, self.resolution) if peaks is None else peaks
+
+    @property
+    def world(self) -> wm.World:
+        return self.tr.world
+
+    def free(self, n: int = 1) -> np.ndarray:
+        """The empty slots; when fewer than ``n`` are left, the capacity is doubled first (the
+        tracker rebuilt on the grown world: its log p changes by the slot term only)."""
+        free = wm.free_slots(self.world)
+        if free.size < n and self.world.capacity < MAX_CAPACITY:
+            grown = wm.grow(self.world, min(2 * self.world.capacity, MAX_CAPACITY))
+            self.tr = self.posterior.start(grown)
+            free = wm.free_slots(self.world)
+        return free
+
+    def valid(self, world: wm.World) -> bool:
+        """Inside the lattice, every side within ``[min_side, max_side]`` (the prior's compiled
+        test: the ascent asks it of every candidate)."""
+        return all_valid(world.rects, world.active, self.data.shape, self.data.min_side,
+                         self.data.max_side)
+
+    def propose_above(self, new: wm.World, changed, floor: float):
+        """``new``'s proposal, for a caller that takes it only when its log p exceeds ``floor``.
+
+        A tracker that :attr:`supports_floor` may skip the knowledge inference of a proposal whose
+        type-free upper bound is already below ``floor`` (its ``logp`` is then ``-inf``): the same
+        choices as with every proposal evaluated, fewer inferences.
+        """
+        if getattr(self.tr, "supports_floor", False):
+            return self.tr.propose(new, changed, floor=floor)
+        return self.tr.propose(new, changed)
+
+    def try_world(self, new: wm.World, changed) -> bool:
+        """Accept ``new`` when it raises log p (strictly); returns whether it did."""
+        if not self.valid(new):
+            return False
+        floor = self.tr.logp + 1e-9
+        prop = self.propose_above(new, tuple(int(s) for s in changed), floor)
+        if prop.logp > floor:
+            self.tr.accept(prop)
+            return True
+        return False
+
+    def best_of(self, worlds, changed) -> bool:
+        """Accept the best of ``worlds`` (all differing from the current one in ``changed``) if it helps."""
+        best, best_lp = None, self.tr.logp + 1e-9
+        for new in worlds:
+            if not self.valid(new):
+                continue
+            prop = self.propose_above(new, changed, best_lp)
+            if prop.logp > best_lp:
+                best, best_lp = prop, prop.logp
+        if best is None:
+            return False
+        self.tr.accept(best)
+        return True
+
+    def units(self, within=None) -> list:
+        """The active slots, in slot order: all, or those in the set ``within``."""
+        act = wm.active_slots(self.world).tolist()
+        return act if within is None else [s for s in act if s in within]
+
+    def near(self, slots) -> set:
+        """``slots`` and the active units within two wall bands of any of them."""
+        rects, act, t = self.world.rects, self.world.active, 2 * int(self.data.wall_cells)
+        out = np.zeros(len(act), bool)
+        for s in slots:
+            if act[s]:
+                r = rects[s]
+                out |= ((rects[:, 0] <= r[2] + t) & (rects[:, 2] >= r[0] - t)
+                        & (rects[:, 1] <= r[3] + t) & (rects[:, 3] >= r[1] - t))
+        return set(np.flatnonzero(act & out).tolist())
+
+    def untyped(self) -> wm.World:
+        """The current world with its types left undecided (what the ascent returns)."""
+        return wm.make(self.world.rects, self.world.active, np.full(self.world.capacity, wm.NO_TYPE))
+
+    def removals(self) -> bool:
+        changed = False
+        for s in self.units():
+            changed |= self.try_world(wm.remove(self.world, s), (s,))
+        return changed
+
+
+class WallMoves(Climb):
+    """The wall moves of the ascent: each wall of a unit to its best position, or every edge on
+    one wall together, and a candidate world kept only when its wall-moved units raise log p."""
+
+    def tentative(self, new: wm.World, changed, polish) -> bool:
+        """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo)."""
+        if not self.valid(new):
+            return False
+        old, before = self.world, self.tr.logp
+        self.tr.accept(self.tr.propose(new, tuple(int(s) for s in changed)))
+        for s in polish:
+            self.wall_moves(int(s))
+        if self.tr.logp > before + 1e-9:
+            return True
+        diff = np.flatnonzero((old.active != self.world.active)
+                              | np.any(old.rects != self.world.rects, axis=1))
+        self.tr.accept(self.tr.propose(old, tuple(int(s) for s in diff)))
+        return False
+
+    def absorb(self, world: wm.World, slot: int):
+        """``world`` without the *fragments* lying mostly (``absorb_share``) inside unit ``slot``.
+
+        A fragment is a unit whose shorter side is below ``2 * min_side``: a strip of free space
+        between furniture and a wall, not a room (two rooms are never swallowed by one move).
+        """
+        gone = np.flatnonzero(_swallowed(world.rects, world.active, int(slot),
+                                         2 * int(self.data.min_side),
+                                         float(self.absorb_share))).tolist()
+        for k in gone:
+            world = wm.remove(world, k)
+        return world, gone
+
+    def wall_moves(self, slot: int) -> bool:
+        """Move each wall of ``slot`` to its best candidate position (local steps, line-evidence peaks).
+
+        A wall moved outwards may swallow units lying mostly inside the grown unit (the greedy cover
+        leaves strips of free space between furniture and walls as units of their own): the
+        candidate world drops them, so the move is judged against the world without them.
+        """
+        moved = False
+        for side in range(4):
+            if not self.world.active[slot]:
+                break
+            rect = [int(v) for v in self.world.rects[slot]]
+            best, best_lp = None, self.tr.logp + 1e-9
+            for c in self.positions(rect, side):
+                r = list(rect)
+                r[side] = c
+                new, gone = self.absorb(wm.replace(self.world, slot, r), slot)
+                if not self.valid(new):
+                    continue
+                prop = self.propose_above(new, (slot, *gone), best_lp)
+                if prop.logp > best_lp:
+                    best, best_lp = prop, prop.logp
+            if best is not None:
+                self.tr.accept(best)
+                moved = True
+        return moved
+
+    def positions(self, rect, side: int) -> list:
+        """The candidate positions of wall ``side`` of ``rect``, ascending, its own left out:
+        local steps and line-evidence peaks within the range that keeps the unit valid."""
+        _, lo, hi, w = wall_range(rect, side, self.data)
+        x = int(rect[side])
+        cand = {x + d for d in range(-self.local, self.local + 1)} | set(_line_peaks(w, lo, self.peaks))
+        return sorted(c for c in cand if lo <= c <= hi and c != x)
+
+    def all_wall_moves(self, within=None) -> bool:
+        """:meth:`wall_moves` for every unit active now (of ``within``, when given), in slot order."""
+        changed = False
+        for s in self.units(within):
+            changed |= self.wall_moves(s)
+        return changed
+
+    def wall_group(self, slot: int, side: int) -> list[tuple[int, int]]:
+        """The edges ``(slot, side)`` that lie on the same wall as ``side`` of ``slot``.
+
+        Edges across the same axis within two wall bands of it whose spans overlap or touch the
+        group's (closed under that relation): the facing edges of the units on the other side of a
+        wall and the collinear edges of the units beside it. One wall moved edge by edge cannot
+        move: each edge alone opens a gap or an overlap at the others.
+        """
+        rects, act = self.world.rects, self.world.active
+        axis, tol = side % 2, 2 * int(self.data.wall_cells)
+        x = int(rects[slot][side])
+        edges = [(int(s), k) for s in np.flatnonzero(act) for k in (axis, axis + 2)
+                 if abs(int(rects[s][k]) - x) <= tol]
+        group, span = [(slot, side)], [int(rects[slot][1 - axis]), int(rects[slot][3 - axis])]
+        grew = True
+        while grew:
+            grew = False
+            for s, k in edges:
+                if (s, k) in group:
+                    continue
+                a, b = int(rects[s][1 - axis]), int(rects[s][3 - axis])
+                if a <= span[1] + tol and b >= span[0] - tol:
+                    group.append((s, k))
+                    span = [min(span[0], a), max(span[1], b)]
+                    grew = True
+        return group
+
+    def shared_wall_moves(self) -> set:
+        """Move every edge of a wall together (:meth:`wall_group` of two or more edges).
+
+        Candidates as :meth:`wall_moves` (:meth:`positions` of the first edge), each shifting
+        all the group's edges by the same amount; the best is taken when it raises log p
+        (INTERCHANGE's move, for every unit on the wall rather than one pair). Each group is
+        tried once per call. Returns the slots of the units moved (empty: nothing moved).
+        """
+        moved, seen = set(), set()
+        for slot in self.units():
+            for side in range(4):
+                if not self.world.active[slot] or (slot, side) in seen:
+                    continue
+                group = self.wall_group(slot, side)
+                seen.update(group)
+                if len(group) < 2:
+                    continue
+                rect = [int(v) for v in self.world.rects[slot]]
+                slots = tuple(sorted({s for s, _ in group}))
+                worlds = []
+                for c in self.positions(rect, side):
+                    d, rects = c - rect[side], np.array(self.world.rects)
+                    for s, k in group:
+                        rects[s, k] += d
+                    worlds.append(wm.make(rects, self.world.active, self.world.types))
+                if self.best_of(worlds, slots):
+                    moved.update(slots)
+        return moved
