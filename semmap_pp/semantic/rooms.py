@@ -236,35 +236,50 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     # the strips along each interior (its wall band, a ragged wall's margin) go to it first, so that
     # what is left falls apart into the pieces beyond the walls
     near = geodesic_flood(seeds, passable, max(1, int(round(params.band_m / resolution))), blocked)
-    rest = passable & (near == 0)
-    pieces, n = ndi.label(rest, _EIGHT)
-    seeded = near.copy()
-    extra = []
-    if n:
-        sizes = np.bincount(pieces.ravel(), minlength=n + 1)
-        objs = ndi.find_objects(pieces)
-        for k in range(1, n + 1):
-            if sizes[k] < min_cells or objs[k - 1] is None:
-                continue
-            sl = tuple(slice(max(s.start - 1, 0), s.stop + 1) for s in objs[k - 1])
-            piece = pieces[sl] == k
-            contact = _contact_widths(piece, near[sl])
-            contact[0] = 0
-            if contact.max(initial=0) > door_cells:
-                continue
-            if _walled_share(piece, free[sl], None if walls is None else walls[sl]) >= params.walled_min:
-                extra.append(k)
-                seeded[pieces == k] = n_regions + len(extra)
-            else:                  # rays into the open (a window's fan): no room, not flooded either
-                passable = passable & (pieces != k)
+    seeded, n_extra, passable = _rooms_beyond_doors(near, passable, free, walls, n_regions,
+                                                    min_cells, door_cells, params.walled_min)
     flooded = geodesic_flood(seeded, passable, walls=blocked)
-    # number the rooms 1..k: the regions first (in order), then the rooms seen through their door
-    present = np.bincount(flooded.ravel(), minlength=n_regions + len(extra) + 1)
+    labels, found = _numbered(flooded, n_regions, n_extra)
+    full[box] = labels
+    return full, found
+
+
+def _rooms_beyond_doors(near, passable, free, walls, n_regions, min_cells, door_cells, walled_min):
+    """Step 2 of the module docstring on the seeds grown by their strips (``near``): ``(seeded,
+    rooms added, passable)``, each piece of the floor left that is a room seen through its door
+    labelled ``n_regions + 1, ...``, and the pieces of rays into the open taken out of ``passable``."""
+    pieces, n = ndi.label(passable & (near == 0), _EIGHT)
+    seeded = near.copy()
+    extra = 0
+    if not n:
+        return seeded, extra, passable
+    sizes = np.bincount(pieces.ravel(), minlength=n + 1)
+    objs = ndi.find_objects(pieces)
+    for k in range(1, n + 1):
+        if sizes[k] < min_cells or objs[k - 1] is None:
+            continue
+        sl = tuple(slice(max(s.start - 1, 0), s.stop + 1) for s in objs[k - 1])
+        piece = pieces[sl] == k
+        contact = _contact_widths(piece, near[sl])
+        contact[0] = 0
+        if contact.max(initial=0) > door_cells:
+            continue
+        if _walled_share(piece, free[sl], None if walls is None else walls[sl]) >= walled_min:
+            extra += 1
+            seeded[pieces == k] = n_regions + extra
+        else:                  # rays into the open (a window's fan): no room, not flooded either
+            passable = passable & (pieces != k)
+    return seeded, extra, passable
+
+
+def _numbered(flooded, n_regions, n_extra):
+    """The rooms numbered 1..k, the regions first (in order), then the rooms seen through their
+    door: ``(labels, [(room id, region or 0, cells), ...])``."""
+    present = np.bincount(flooded.ravel(), minlength=n_regions + n_extra + 1)
     lut = np.zeros(present.size, np.int32)
     kept = [old for old in range(1, present.size) if present[old]]
     lut[kept] = np.arange(1, len(kept) + 1, dtype=np.int32)
-    full[box] = lut[flooded]
-    return full, [(int(lut[old]), old if old <= n_regions else 0, int(present[old])) for old in kept]
+    return lut[flooded], [(int(lut[old]), old if old <= n_regions else 0, int(present[old])) for old in kept]
 
 
 def seen_share(mask: np.ndarray) -> float:
