@@ -1,8 +1,8 @@
 """The user docs describe the program as it is: its history is CHANGELOG.md's.
 
 docs/ and README.md are checked for the marks of a lab notebook (a session named, a "What changed"
-entry) and every file a doc or a code comment cites under docs/ must exist (no DESIGN.md the
-project does not ship).
+entry) and every file a doc, a code comment, the model file or a rule file cites under docs/ must
+exist (no DESIGN.md the project does not ship).
 """
 
 from __future__ import annotations
@@ -17,7 +17,9 @@ USER_DOCS = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]
 HISTORY = re.compile(r"(?i:\bsessions?\b)|\bWhat changed\b")
 #: a doc cited by path (docs/NAME.md), or the design notes the project does not ship (DESIGN.md)
 CITED = re.compile(r"\bdocs/([\w-]+\.md)\b|\b(DESIGN\.md)\b")
-SOURCES = [p for p in (ROOT / "semmap_pp").rglob("*.py")] + list((ROOT / "bench").glob("*.py"))
+#: the code, and the files a user edits beside it: the model file and the rule files
+SOURCES = ([p for p in (ROOT / "semmap_pp").rglob("*.py")] + list((ROOT / "bench").glob("*.py"))
+           + list((ROOT / "models").glob("*.toml")) + list((ROOT / "rules").rglob("*.lp")))
 
 
 def history_lines(path: Path, base: Path = ROOT) -> list[str]:
