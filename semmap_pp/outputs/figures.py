@@ -9,7 +9,9 @@ same bytes are written to a file and embedded in report.html.
 
 from __future__ import annotations
 
+import gc
 import io
+import itertools
 import math
 
 import matplotlib
@@ -40,10 +42,17 @@ DPI = 100
 
 
 def png(fig: Figure) -> bytes:
-    """PNG bytes of a figure (then the figure is dropped)."""
+    """PNG bytes of a figure (then the figure is dropped).
+
+    The figure is cleared once saved and unreachable cycles collected: a figure's artists refer to
+    each other, so without this its images (copies of arrays of the input's size, float64 for the
+    probability panels) waited for the garbage collector, and on a campus map the report's figures
+    piled up to several GB."""
     buf = io.BytesIO()
     FigureCanvasAgg(fig)
     fig.savefig(buf, format="png", dpi=DPI)
+    fig.clear()
+    gc.collect()
     return buf.getvalue()
 
 
@@ -309,7 +318,9 @@ def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, 
     block = int(np.ceil((x1 - x0) / (fig.get_figwidth() * DPI / 3)))
     wall = ndimage.maximum_filter(p_wall_image[y0:y1, x0:x1], size=block) if block > 1 else \
         p_wall_image[y0:y1, x0:x1]
-    panels = [("wall", wall)] + [(t, p_type_image[k][y0:y1, x0:x1]) for k, t in enumerate(UNIT_TYPES)]
+    # one panel's image at a time (``p_type_image`` may make each when asked: write_posterior)
+    panels = itertools.chain([("wall", wall)], ((t, p_type_image[k][y0:y1, x0:x1]) for k, t in enumerate(UNIT_TYPES)))
+    del wall
     im = None
     for ax, (name, p) in zip(axes[1:], panels):
         im = ax.imshow(p, extent=(x0, x1, y1, y0), cmap="magma", vmin=0.0, vmax=1.0, interpolation="nearest")
@@ -348,10 +359,16 @@ def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
         colours[ids] = palette[(ids - 1) % 20]
         colours[ids, 3] = 0.7
         _show(ax, colours[regions_image], box)
+        # each region's centre from one pass over its cells (sums of whole numbers, exact in float64:
+        # the same means as each region's own nonzero(), without a pass over the image per region)
+        ys, xs = np.nonzero(regions_image > 0)
+        lab = regions_image[ys, xs].astype(np.intp)
+        n = np.bincount(lab)
+        sx, sy = np.bincount(lab, weights=xs), np.bincount(lab, weights=ys)
+        del ys, xs, lab
         for rid in ids:
-            ys, xs = np.nonzero(regions_image == rid)
-            ax.text(xs.mean() + 0.5, ys.mean() + 0.5, str(int(rid)), ha="center", va="center", fontsize=8,
-                    fontweight="bold")
+            ax.text(sx[rid] / n[rid] + 0.5, sy[rid] / n[rid] + 0.5, str(int(rid)), ha="center", va="center",
+                    fontsize=8, fontweight="bold")
     fig.subplots_adjust(0.005, 0.1 / fig.get_figheight(), 0.995, 0.995)
     return png(fig)
 

@@ -299,12 +299,12 @@ class MapRun:
 SLOW_DRAW_FACTOR = 50.0
 
 
-def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm.World | None = None
-                 ) -> list[wm.World]:
+def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm.World | None = None,
+                 data=None) -> list[wm.World]:
     """One start world per chain: the greedy data-driven world (:func:`data_start_world`, or
     ``base`` when given: it does not depend on the seed), then dispersed variants of it drawn
     with ``rng``."""
-    clean = data_start_world(inputs) if base is None else base
+    clean = data_start_world(inputs, data) if base is None else base
     c = inputs.frame.cells
     worlds = [clean]
     for _ in range(1, chains):
@@ -312,7 +312,7 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm
     return worlds
 
 
-def data_start_world(inputs: Inputs) -> wm.World:
+def data_start_world(inputs: Inputs, data=None) -> wm.World:
     """The greedy data-driven start world of chain 1, refined by the knowledge-free ascent
     (deterministic: the same for every seed).
 
@@ -332,8 +332,9 @@ def data_start_world(inputs: Inputs) -> wm.World:
         clean = wm.add(clean, i, base.rects[s])
     ks = model.kernels
     if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/sampler/ascent.py)
-        clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
-                             rounds=ks.start_rounds)
+        if data is None:   # the caller's kernel data of the same frame and settings, else made here
+            data = data_from_frame(frame, ks)
+        clean = refine_world(Posterior(frame, model, None), clean, data, rounds=ks.start_rounds)
     return clean
 
 
@@ -375,7 +376,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         if starts is None:   # minutes on a large map: say so before, and how long after
             log(f"{head}; building the start worlds")
             t_start = time.perf_counter()
-            starts = start_worlds(inputs, settings.chains, rng, base=base_start)
+            starts = start_worlds(inputs, settings.chains, rng, base=base_start, data=data)
             made = "shared" if base_start is not None else f"{time.perf_counter() - t_start:.1f} s"
             log(f"start world: {wm.n_units(starts[0])} units ({made})")
         else:

@@ -39,6 +39,7 @@ True
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numba
@@ -167,8 +168,27 @@ def gain_table(sensor) -> np.ndarray:
     return gain
 
 
+#: The products :func:`prepare` made, per frame (weakly: they go with the frame) and sensor model.
+_PREPARED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def prepare(frame, model) -> LikelihoodData:
-    """Build the per-map sensor-model products for a :class:`~semmap_pp.lattice.frame.Frame`."""
+    """The per-map sensor-model products for a :class:`~semmap_pp.lattice.frame.Frame`.
+
+    Made once per frame and sensor model (the same objects): a run builds its target several times
+    (start worlds, sampling, W*'s scoring, the sample around W*, the typed sampled worlds), and on a
+    campus map each build was tens of seconds and several hundred MB of the same read-only arrays.
+    """
+    cached = _PREPARED.get(frame)
+    if cached is not None and cached[0] is model.sensor:
+        return cached[1]
+    data = _prepare(frame, model)
+    _PREPARED[frame] = (model.sensor, data)
+    return data
+
+
+def _prepare(frame, model) -> LikelihoodData:
+    """:func:`prepare`, made anew."""
     cls = frame.classes
     xcode = np.full(cls.shape, X_FREE, dtype=np.uint8)
     xcode[cls == UNKNOWN] = X_UNKNOWN
