@@ -18,10 +18,13 @@ floor of :data:`FLOORS` is written by :func:`campus_floor` (a rectangular corrid
 of rooms along its outside, rotated by ``--floor-angle``, unknown around and inside the loop), and
 ``semmap map FLOOR.yaml --out DIR`` (model defaults, or ``--map-args``) runs in a subprocess of a
 fresh interpreter that measures it: wall time and the peak resident set size of the largest
-process of the run (``getrusage(RUSAGE_CHILDREN).ru_maxrss``, what ``/usr/bin/time -v`` reports).
-``intel`` is a floor of intel's size (0.28 M known cells, a 0.76 M-cell canvas), ``campus`` one
-shaped like the MIT infinite corridor (a 0.9 km loop: 2.05 M known cells in a 23.9 M-cell
-canvas). The result gives time and peak against the known cells and, for each floor against the
+process of the run (``getrusage(RUSAGE_CHILDREN).ru_maxrss``, what ``/usr/bin/time -v`` reports)
+and ``tree_pss_mib``, the largest proportional set size of the run's processes together (the
+chains' worker processes included, shared pages counted once; polled every 0.5 s).
+``intel`` is a floor of intel's size (0.28 M known cells, a 0.76 M-cell canvas), ``mid`` one
+between (1.0 M known cells in a 6.2 M-cell canvas), ``campus`` one shaped like the MIT infinite
+corridor (a 0.9 km loop: 2.05 M known cells in a 23.9 M-cell canvas). ``--plot PNG`` draws time
+and peak against known cells on log-log axes (docs/figures/large_runs.png). The result gives time and peak against the known cells and, for each floor against the
 first, the ratios of known cells, time and peak (``time_over_known``: the time ratio over the
 known-cell ratio; issue 54 asks for at most 1.5 on the campus floor).
 
@@ -43,21 +46,51 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 #: ``--tiny``: the arguments it sets
-TINY = {"sizes": [200, 300], "canvas": 600, "canvas_floor": 200, "floor_scale": 0.25,
+TINY = {"sizes": [200, 300], "canvas": 600, "canvas_floor": 200, "floor_scale": 0.15, "floors": ["intel", "campus"],
         "map_args": "--chains 1 --cores 1 --tune 2 --draws 4 --n-inner 5 --spread-draws 0"}
 
 #: The whole-run floors (:func:`campus_floor`): the loop's outer sides along the building's axes, m.
 FLOORS = {"intel": {"side_u_m": 40.0, "side_v_m": 30.0},
+          "mid": {"side_u_m": 120.0, "side_v_m": 100.0},
           "campus": {"side_u_m": 225.0, "side_v_m": 215.0}}
 
 WHOLE_CHILD = r"""
-import json, resource, subprocess, sys, time
+import json, os, resource, subprocess, sys, threading, time
+
+def tree_pss_kib(root):
+    # proportional set size of root and its descendants (shared pages split between them), KiB
+    kids = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    kids.setdefault(int(fh.read().rsplit(")", 1)[1].split()[1]), []).append(int(d))
+            except OSError:
+                pass
+    total, todo = 0, [root]
+    while todo:
+        pid = todo.pop()
+        todo.extend(kids.get(pid, []))
+        try:
+            with open(f"/proc/{pid}/smaps_rollup") as fh:
+                total += sum(int(ln.split()[1]) for ln in fh if ln.startswith("Pss:"))
+        except OSError:
+            pass
+    return total
+
 t = time.perf_counter()
-done = subprocess.run(sys.argv[1:], capture_output=True, text=True)
+proc = subprocess.Popen(sys.argv[1:], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+peak_tree = [0]
+def poll():
+    while proc.poll() is None:
+        peak_tree[0] = max(peak_tree[0], tree_pss_kib(proc.pid))
+        time.sleep(0.5)
+threading.Thread(target=poll, daemon=True).start()
+_, err = proc.communicate()
 wall = time.perf_counter() - t
 peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-print(json.dumps({"rc": done.returncode, "wall_s": round(wall, 2), "peak_mib": round(peak / 1024, 1),
-                  "stderr": done.stderr[-3000:]}))
+print(json.dumps({"rc": proc.returncode, "wall_s": round(wall, 2), "peak_mib": round(peak / 1024, 1),
+                  "tree_pss_mib": round(peak_tree[0] / 1024, 1), "stderr": err[-3000:]}))
 """
 
 CHILD = r"""
@@ -118,6 +151,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--floor-angle", type=float, default=5.0, help="rotation of the whole-run floors, degrees")
     parser.add_argument("--floor-scale", type=float, default=1.0, help="the whole-run floors' sides times this")
     parser.add_argument("--map-args", default="", help="more arguments of the whole runs' `semmap map`")
+    parser.add_argument("--plot", type=Path, default=None, help="a log-log PNG of time and peak against known cells")
     parser.add_argument("--tiny", action="store_true", help="small maps (a check that it runs)")
 
 
@@ -227,7 +261,8 @@ def measure_floors(args, rng, d: Path) -> dict:
                "mib_per_m_known": round(m["peak_mib"] / (known / 1e6), 1)}
         rows.append(row)
         print(f"whole run {name}: {canvas / 1e6:.2f} M canvas, {known / 1e6:.2f} M known cells: "
-              f"{m['wall_s']} s, peak {m['peak_mib']} MiB, {m['units']} units", file=sys.stderr, flush=True)
+              f"{m['wall_s']} s, peak {m['peak_mib']} MiB (all processes {m['tree_pss_mib']} MiB), "
+              f"{m['units']} units", file=sys.stderr, flush=True)
     for row in rows[1:]:
         first = rows[0]
         k = row["known_cells"] / first["known_cells"]
@@ -235,8 +270,37 @@ def measure_floors(args, rng, d: Path) -> dict:
             "known_ratio": round(k, 2), "canvas_ratio": round(row["canvas_cells"] / first["canvas_cells"], 2),
             "time_ratio": round(row["wall_s"] / first["wall_s"], 2),
             "peak_ratio": round(row["peak_mib"] / first["peak_mib"], 2),
+            "tree_pss_ratio": round(row["tree_pss_mib"] / max(first["tree_pss_mib"], 1e-9), 2),
             "time_over_known": round(row["wall_s"] / first["wall_s"] / k, 2)}
-    return {"angle_deg": args.floor_angle, "map_args": args.map_args, "floors": rows}
+    out = {"angle_deg": args.floor_angle, "map_args": args.map_args, "floors": rows}
+    if args.plot is not None:
+        plot_floors(out, args.plot)
+    return out
+
+
+def plot_floors(whole: dict, path: Path) -> None:
+    """Wall time and peak RSS of the whole runs against their known cells, log-log, with the line
+    of proportion through the first floor."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rows = whole["floors"]
+    known = np.array([r["known_cells"] for r in rows], float) / 1e6
+    fig = Figure(figsize=(9, 3.8), dpi=100)
+    FigureCanvasAgg(fig)
+    for ax, key, unit in zip(fig.subplots(1, 2), ("wall_s", "peak_mib"), ("wall time, s", "peak RSS, MiB")):
+        y = np.array([r[key] for r in rows], float)
+        ax.loglog(known, y, "o-", label="semmap map")
+        ax.loglog(known, y[0] * known / known[0], "--", color="grey", label="proportional to known cells")
+        for r, k, v in zip(rows, known, y):
+            ax.annotate(f"{r['floor']} ({r['canvas_cells'] / 1e6:.1f} M canvas)", (k, v), fontsize=8,
+                        xytext=(4, -10), textcoords="offset points")
+        ax.set_xlabel("known cells, millions")
+        ax.set_ylabel(unit)
+        ax.grid(True, which="both", alpha=0.3)
+    fig.axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
 
 
 def measure(path: Path, cells: int, model: Path | None = None) -> dict:
