@@ -178,11 +178,10 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
-    pngs |= {
-        "posterior": fig.posterior_png(sm, worlds, ess),
-        "posterior_cells": fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0),
-                                                   _ImageChannels(sm.frame, p_type), len(worlds), ess),
-    }
+    cells_png = fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0), _ImageChannels(sm.frame, p_type),
+                                        len(worlds), ess)
+    del p_wall, p_type   # lattice-sized float64: not kept through the other figures
+    pngs |= {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png}
     for name in ("posterior", "posterior_cells"):
         atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")
