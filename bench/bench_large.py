@@ -244,13 +244,14 @@ def measure_whole(yaml_path: Path, out_dir: Path, map_args: str) -> dict:
     return m
 
 
-def measure_floors(args, rng, d: Path) -> dict:
+def measure_floors(args, d: Path) -> dict:
     """The whole runs of ``args.floors`` (see the module docstring), one after the other."""
     from semmap_pp.grid import write_map
 
     rows = []
     for name in args.floors:
         sides = {k: v * args.floor_scale for k, v in FLOORS[name].items()}
+        rng = np.random.default_rng((args.seed, list(FLOORS).index(name)))   # each floor its own clutter
         image = campus_floor(sides["side_u_m"], sides["side_v_m"], args.floor_angle, args.resolution, rng)
         canvas, known = image.size, int(np.count_nonzero(image != 205))
         path = write_map(d / f"{name}.yaml", image, args.resolution)
@@ -295,6 +296,9 @@ def plot_floors(whole: dict, path: Path) -> None:
         for r, k, v in zip(rows, known, y):
             ax.annotate(f"{r['floor']} ({r['canvas_cells'] / 1e6:.1f} M canvas)", (k, v), fontsize=8,
                         xytext=(4, -10), textcoords="offset points")
+        ax.set_xticks(known, [f"{k:.2f}" for k in known], minor=False)
+        ax.set_xticks([], minor=True)
+        ax.set_xlim(known[0] / 1.3, known[-1] * 2.5)
         ax.set_xlabel("known cells, millions")
         ax.set_ylabel(unit)
         ax.grid(True, which="both", alpha=0.3)
@@ -332,7 +336,7 @@ def run(args) -> dict:
             print(f"{n}x{n}: load {m['phases']['load_map']['s']} s, all phases {m['total_s']} s, "
                   f"peak {m['peak_mib']} MiB over {m['base_rss_mib']} MiB", file=sys.stderr, flush=True)
         canvas = measure_canvas(args, rng, Path(d)) if args.canvas else None
-        whole = measure_floors(args, np.random.default_rng(args.seed), Path(d)) if args.floors else None
+        whole = measure_floors(args, Path(d)) if args.floors else None
     small = rows[0]
     for m in rows:
         scale = m["cells"] / small["cells"]
