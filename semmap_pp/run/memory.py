@@ -25,11 +25,11 @@ from semmap_pp.cells import UNKNOWN
 from semmap_pp.errors import MapError
 
 #: The interpreter with numpy, scipy, numba, PyMC and ArviZ imported, bytes.
-BASE_BYTES = 400 * 2**20
+BASE_BYTES = 500 * 2**20
 #: Bytes per lattice cell at the peak (kernel data, likelihood tables, the lattice itself).
-PER_LATTICE_CELL = 110
+PER_LATTICE_CELL = 80
 #: Bytes per input image cell at the peak (the outputs of the input's size).
-PER_IMAGE_CELL = 60
+PER_IMAGE_CELL = 30
 #: Bytes per known cell at the peak.
 PER_KNOWN_CELL = 300
 
