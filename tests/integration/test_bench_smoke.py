@@ -59,7 +59,7 @@ def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
             assert 0 < f["known_cells"] < f["canvas_cells"] and f["wall_s"] > 0 and f["peak_mib"] > 0
             assert f["units"] >= 1 and f["log"][-1].startswith("W*: ")
         ratios = campus["vs_intel"]
-        assert ratios["known_ratio"] > 1 and ratios["canvas_ratio"] > ratios["known_ratio"]
+        assert ratios["known_ratio"] > 1 and ratios["canvas_ratio"] > 1
         assert ratios["time_over_known"] > 0
     elif name == "learn":
         assert [r["map"] for r in result["rows"]] == ["synth-0", "synth-1", "synth-2"]
