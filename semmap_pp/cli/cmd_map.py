@@ -44,6 +44,9 @@ def register(subparsers) -> None:
                    help="draws per chain of the sample around W* that the spread figures are drawn from "
                         "(paper Fig. 7; model file default 1000; 0: none, the figures use the search's draws)")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
+    p.add_argument("--max-memory", type=_memory_size, metavar="SIZE", default=None,
+                   help="refuse a map whose run is estimated to need more memory at its peak than SIZE "
+                        "(e.g. 2G, 800M; default: the machine's memory)")
     p.add_argument("--budget", type=_seconds, metavar="SECONDS",
                    help="stop sampling after SECONDS of wall time and keep the draws made "
                         "(the result then depends on the machine's speed)")
@@ -62,6 +65,17 @@ def register(subparsers) -> None:
                    help="seconds between plain progress lines (default 5)")
     add_map_options(p)
     p.set_defaults(func=run)
+
+
+def _memory_size(text: str) -> int:
+    from semmap_pp.run.memory import parse_size
+    try:
+        n = parse_size(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if n <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return n
 
 
 def _usage(message: str) -> int:
@@ -153,6 +167,7 @@ def _install_sigint(stop):
 
 
 def run(args) -> int:
+    from semmap_pp.run.memory import check_memory
     from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
     from semmap_pp.run.outdir import check_out_dir
@@ -203,6 +218,7 @@ def run(args) -> int:
         previous_places = _places_or_none(doc, ids_from)   # what the new plan is compared with
 
     h, w = inputs.grid.shape
+    check_memory(inputs, args.max_memory)   # the estimated peak, before any sampling
     check_free_space(out, needed_bytes(h * w))
     with lock_out_dir(out):      # held until every file is written: one run at a time in a folder
         if state is None or out.resolve() != args.resume.resolve():

@@ -380,13 +380,38 @@ class Frame:
         y0, y1 = max(int(math.floor(y.min())) - 1, 0), min(int(math.ceil(y.max())) + 2, h)
         if x0 >= x1 or y0 >= y1:
             return out
-        yy, xx = np.mgrid[y0:y1, x0:x1]
-        rows, cols = self.image_to_lattice(xx, yy)
-        ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
-        ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
-        part = out[y0:y1, x0:x1]
-        part[ok] = a[ri[ok], ci[ok]]
+        for b0 in range(y0, y1, BAND_ROWS):   # in bands of rows: the coordinates of a band only
+            b1 = min(b0 + BAND_ROWS, y1)
+            yy, xx = np.mgrid[b0:b1, x0:x1]
+            rows, cols = self.image_to_lattice(xx, yy)
+            ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
+            ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
+            part = out[b0:b1, x0:x1]
+            part[ok] = a[ri[ok], ci[ok]]
         return out
+
+    def lattice_pixels(self, i0: int, i1: int, j0: int = 0, j1: int | None = None):
+        """The image pixel under the centre of each lattice cell of rows ``i0:i1``, columns
+        ``j0:j1`` (default: every column): ``(xi, yi, inside)``, the pixel's column and row
+        (``np.rint`` of :meth:`lattice_to_image`, intp) and whether it lies in the image. Callers
+        go over the lattice in bands of :data:`BAND_ROWS` rows (:meth:`bands`), so that these
+        arrays stay the size of a band, not of the lattice."""
+        j1 = self.classes.shape[1] if j1 is None else j1
+        rows, cols = np.mgrid[i0:i1, j0:j1]
+        x, y = self.lattice_to_image(rows, cols)
+        xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
+        h, w = self.image_shape
+        return xi, yi, (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+
+    def bands(self, i0: int = 0, i1: int | None = None):
+        """``(b0, b1)`` row ranges of at most :data:`BAND_ROWS` rows covering ``i0:i1``."""
+        i1 = self.classes.shape[0] if i1 is None else i1
+        return [(b, min(b + BAND_ROWS, i1)) for b in range(i0, i1, BAND_ROWS)]
+
+
+#: Rows of the lattice (or the image) resampled at a time: the float64 coordinates of a band, not
+#: of the whole lattice (on a 23 M-cell campus canvas those were 1.5 GB at once).
+BAND_ROWS = 256
 
 
 #: The lattice is cropped only when the part kept holds at most this share of the whole lattice's
@@ -471,13 +496,12 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
                 crop = (i0, j0, hl, wl)
             else:
                 i0, j0, i1, j1 = 0, 0, hl, wl
-        rows, cols = np.mgrid[i0:i1, j0:j1]
-        x, y = probe.lattice_to_image(rows, cols)
-        xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
-        inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
-        lat = np.full(rows.shape, UNKNOWN, dtype=np.uint8)
-        lat[inside] = classes[yi[inside], xi[inside]]
-        outside = ~inside
+        lat = np.full((i1 - i0, j1 - j0), UNKNOWN, dtype=np.uint8)
+        outside = np.ones(lat.shape, dtype=bool)
+        for b0, b1 in probe.bands(i0, i1):   # in bands: no coordinate array of the lattice's size
+            xi, yi, inside = probe.lattice_pixels(b0, b1, j0, j1)
+            lat[b0 - i0:b1 - i0][inside] = classes[yi[inside], xi[inside]]
+            outside[b0 - i0:b1 - i0] = ~inside
     lat.setflags(write=False)
     outside.setflags(write=False)
     return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin, crop)

@@ -9,7 +9,9 @@ same bytes are written to a file and embedded in report.html.
 
 from __future__ import annotations
 
+import gc
 import io
+import itertools
 import math
 
 import matplotlib
@@ -40,10 +42,17 @@ DPI = 100
 
 
 def png(fig: Figure) -> bytes:
-    """PNG bytes of a figure (then the figure is dropped)."""
+    """PNG bytes of a figure (then the figure is dropped).
+
+    The figure is cleared once saved and unreachable cycles collected: a figure's artists refer to
+    each other, so without this its images (copies of arrays of the input's size, float64 for the
+    probability panels) waited for the garbage collector, and on a campus map the report's figures
+    piled up to several GB."""
     buf = io.BytesIO()
     FigureCanvasAgg(fig)
     fig.savefig(buf, format="png", dpi=DPI)
+    fig.clear()
+    gc.collect()
     return buf.getvalue()
 
 
@@ -112,9 +121,35 @@ def _axes(box, *, extra_h: float = 0.0, ncols: int = 1, nrows: int = 1, long_sid
     return fig, axes
 
 
-def _show(ax, rgb, box, **kw):
+#: A picture of more cells than this is shown from every ``step``-th cell (:func:`display_step`).
+DECIMATE_MIN_CELLS = 4_000_000
+
+
+def display_step(ax, box) -> int:
+    """1, or for a ``box`` of more than :data:`DECIMATE_MIN_CELLS` cells the whole cells per screen
+    pixel of the panel ``ax`` (its share of the figure, rounded down): the step between the cells
+    a picture is drawn from. Matplotlib resamples an image through float copies of tens of bytes
+    per cell; on a campus canvas of 24 M cells one figure took 1-3 GB, for a panel of a few
+    hundred thousand pixels. The maps of the paper and the benchmarks (up to 1.5 M cells) are
+    drawn from every cell."""
     y0, y1, x0, x1 = box
-    ax.imshow(rgb[y0:y1, x0:x1], extent=(x0, x1, y1, y0), interpolation="nearest", **kw)
+    if (y1 - y0) * (x1 - x0) <= DECIMATE_MIN_CELLS:
+        return 1
+    fig = ax.get_figure()
+    nrows, ncols = ax.get_subplotspec().get_gridspec().get_geometry()
+    per_px = max((x1 - x0) / (fig.get_figwidth() * DPI / ncols), (y1 - y0) / (fig.get_figheight() * DPI / nrows))
+    return max(1, int(per_px))
+
+
+def _show(ax, rgb, box, step: int | None = None, **kw):
+    """``rgb[y0:y1, x0:x1]`` on ``ax`` (every ``step``-th cell: :func:`display_step`); ``rgb`` may
+    be a function of a slice pair, called for the cells shown only."""
+    y0, y1, x0, x1 = box
+    step = display_step(ax, box) if step is None else step
+    rows, cols = slice(y0, y1, step), slice(x0, x1, step)
+    part = rgb(rows, cols) if callable(rgb) else rgb[rows, cols]
+    ax.imshow(part, extent=(x0, x0 + part.shape[1] * step, y0 + part.shape[0] * step, y0),
+              interpolation="nearest", **kw)
 
 
 def _unit_centres(doc) -> dict[int, tuple[float, float]]:
@@ -309,10 +344,16 @@ def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, 
     block = int(np.ceil((x1 - x0) / (fig.get_figwidth() * DPI / 3)))
     wall = ndimage.maximum_filter(p_wall_image[y0:y1, x0:x1], size=block) if block > 1 else \
         p_wall_image[y0:y1, x0:x1]
-    panels = [("wall", wall)] + [(t, p_type_image[k][y0:y1, x0:x1]) for k, t in enumerate(UNIT_TYPES)]
+    step = display_step(axes[1], box)
+    # one panel's image at a time (``p_type_image`` may make each when asked: write_posterior)
+    panels = itertools.chain([("wall", wall)], ((t, p_type_image[k][y0:y1, x0:x1]) for k, t in enumerate(UNIT_TYPES)))
+    del wall
     im = None
     for ax, (name, p) in zip(axes[1:], panels):
-        im = ax.imshow(p, extent=(x0, x1, y1, y0), cmap="magma", vmin=0.0, vmax=1.0, interpolation="nearest")
+        p = p[::step, ::step]
+        im = ax.imshow(p, extent=(x0, x0 + p.shape[1] * step, y0 + p.shape[0] * step, y0), cmap="magma",
+                       vmin=0.0, vmax=1.0, interpolation="nearest")
+        del p
         ax.set_title(f"p({name})", fontsize=10)
     fig.subplots_adjust(0.005, 0.6 / fig.get_figheight(), 0.995, 1 - 0.3 / fig.get_figheight(), wspace=0.02,
                         hspace=0.3 / (fig.get_figheight() / 2))
@@ -329,7 +370,9 @@ def roi_png(sm, roi_name: str) -> bytes:
     _show(ax, classified_rgb(sm.grid.classes), box)
     h, w = sm.roi.shape
     if sm.roi.any() and not sm.roi.all():
-        ax.contour(np.arange(w) + 0.5, np.arange(h) + 0.5, sm.roi.astype(float), levels=[0.5],
+        step = display_step(ax, (0, h, 0, w))   # every step-th cell of a canvas of millions
+        ax.contour(np.arange(0, w, step) + 0.5, np.arange(0, h, step) + 0.5,
+                   sm.roi[::step, ::step].astype(float), levels=[0.5],
                    colors=[MAGENTA], linewidths=1.5, linestyles="dashed")
     fig.text(0.5, 0.1 / fig.get_figheight(), f"region of interest: {roi_name}", ha="center", fontsize=9)
     fig.subplots_adjust(0.005, 0.3 / fig.get_figheight(), 0.995, 0.995)
@@ -347,11 +390,17 @@ def regions_preview_png(sm, regions_image: np.ndarray) -> bytes:
         colours = np.zeros((int(ids.max()) + 1, 4))
         colours[ids] = palette[(ids - 1) % 20]
         colours[ids, 3] = 0.7
-        _show(ax, colours[regions_image], box)
+        _show(ax, lambda rows, cols: colours[regions_image[rows, cols]], box)
+        # each region's centre from one pass over its cells (sums of whole numbers, exact in float64:
+        # the same means as each region's own nonzero(), without a pass over the image per region)
+        ys, xs = np.nonzero(regions_image > 0)
+        lab = regions_image[ys, xs].astype(np.intp)
+        n = np.bincount(lab)
+        sx, sy = np.bincount(lab, weights=xs), np.bincount(lab, weights=ys)
+        del ys, xs, lab
         for rid in ids:
-            ys, xs = np.nonzero(regions_image == rid)
-            ax.text(xs.mean() + 0.5, ys.mean() + 0.5, str(int(rid)), ha="center", va="center", fontsize=8,
-                    fontweight="bold")
+            ax.text(sx[rid] / n[rid] + 0.5, sy[rid] / n[rid] + 0.5, str(int(rid)), ha="center", va="center",
+                    fontsize=8, fontweight="bold")
     fig.subplots_adjust(0.005, 0.1 / fig.get_figheight(), 0.995, 0.995)
     return png(fig)
 

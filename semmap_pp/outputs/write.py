@@ -151,6 +151,21 @@ def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=
     return WstarFiles(written, doc, pngs, regions, region_img)
 
 
+class _ImageChannels:
+    """``(k, H, W)`` lattice channels seen as image channels, each resampled
+    (:meth:`~semmap_pp.lattice.frame.Frame.to_image`, fill 0) only when asked for: one channel's
+    image at a time, not a stack of all of them (four float64 images of the input's size)."""
+
+    def __init__(self, frame, channels: np.ndarray):
+        self.frame, self.channels = frame, channels
+
+    def __len__(self) -> int:
+        return len(self.channels)
+
+    def __getitem__(self, k: int) -> np.ndarray:
+        return self.frame.to_image(self.channels[k], fill=0.0)
+
+
 def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
                     other_files: tuple[str, ...] = ()) -> list[Path]:
     """posterior.png, posterior_cells.png and report.html, after :func:`write_wstar`; the paths
@@ -163,12 +178,10 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
-    pngs |= {
-        "posterior": fig.posterior_png(sm, worlds, ess),
-        "posterior_cells": fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0),
-                                                   sm.frame.to_image(p_type.transpose(1, 2, 0), fill=0.0)
-                                                   .transpose(2, 0, 1), len(worlds), ess),
-    }
+    cells_png = fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0), _ImageChannels(sm.frame, p_type),
+                                        len(worlds), ess)
+    del p_wall, p_type   # lattice-sized float64: not kept through the other figures
+    pngs |= {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png}
     for name in ("posterior", "posterior_cells"):
         atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")

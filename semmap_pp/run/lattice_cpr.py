@@ -48,12 +48,11 @@ class LatticeCPR:
     @classmethod
     def from_roi(cls, frame: Frame, roi_image: np.ndarray) -> "LatticeCPR":
         hl, wl = frame.shape
-        rows, cols = np.mgrid[0:hl, 0:wl]
-        x, y = frame.lattice_to_image(rows, cols)
-        xi, yi = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
-        h, w = roi_image.shape
-        ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h) & ~frame.outside
-        n_roi = int(np.count_nonzero(roi_image[yi[ok], xi[ok]]))
+        n_roi = 0
+        for b0, b1 in frame.bands():   # in bands of rows (memory of a band, not of the lattice)
+            xi, yi, inside = frame.lattice_pixels(b0, b1)
+            ok = inside & ~frame.outside[b0:b1]
+            n_roi += int(np.count_nonzero(roi_image[yi[ok], xi[ok]]))
         return cls(n_roi, hl * wl - n_roi)
 
     def __call__(self, tracker) -> float:

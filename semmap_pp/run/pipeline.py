@@ -38,12 +38,12 @@ from semmap_pp.target.posterior import Posterior
 from semmap_pp.target.walls_inside import walls_inside
 
 
-def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm.World | None = None
-                 ) -> list[wm.World]:
+def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm.World | None = None,
+                 data=None) -> list[wm.World]:
     """One start world per chain: the greedy data-driven world (:func:`data_start_world`, or
     ``base`` when given: it does not depend on the seed), then dispersed variants of it drawn
     with ``rng``."""
-    clean = data_start_world(inputs) if base is None else base
+    clean = data_start_world(inputs, data) if base is None else base
     c = inputs.frame.cells
     worlds = [clean]
     for _ in range(1, chains):
@@ -51,7 +51,7 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm
     return worlds
 
 
-def data_start_world(inputs: Inputs) -> wm.World:
+def data_start_world(inputs: Inputs, data=None) -> wm.World:
     """The greedy data-driven start world of chain 1, refined by the knowledge-free ascent
     (deterministic: the same for every seed).
 
@@ -71,15 +71,17 @@ def data_start_world(inputs: Inputs) -> wm.World:
         clean = wm.add(clean, i, base.rects[s])
     ks = model.kernels
     if ks.start_rounds:  # greedy ascent of the knowledge-free target (semmap_pp/sampler/ascent.py)
-        clean = refine_world(Posterior(frame, model, None), clean, data_from_frame(frame, ks),
-                             rounds=ks.start_rounds)
+        if data is None:   # the caller's kernel data of the same frame and settings, else made here
+            data = data_from_frame(frame, ks)
+        clean = refine_world(Posterior(frame, model, None), clean, data, rounds=ks.start_rounds)
     return clean
 
 
-def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, base_start):
+def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, base_start, data=None):
     """Where the chains start and how long they run, said in the log: ``(first start worlds,
     start worlds, burn-in and draws pm.sample is asked for, schedule, chain starts, history)``,
-    for a new run (data-driven or given start worlds) or one that resumes an earlier run."""
+    for a new run (data-driven or given start worlds) or one that resumes an earlier run; ``data``
+    is the run's kernel data, which the start worlds' ascent reuses."""
     frame = inputs.frame
     head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
             f"orientation {math.degrees(frame.theta):.1f} deg")
@@ -88,7 +90,7 @@ def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, b
         if starts is None:   # minutes on a large map: say so before, and how long after
             log(f"{head}; building the start worlds")
             t_start = time.perf_counter()
-            starts = start_worlds(inputs, settings.chains, rng, base=base_start)
+            starts = start_worlds(inputs, settings.chains, rng, base=base_start, data=data)
             made = "shared" if base_start is not None else f"{time.perf_counter() - t_start:.1f} s"
             log(f"start world: {wm.n_units(starts[0])} units ({made})")
         else:
@@ -165,7 +167,7 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     data = data_from_frame(frame, kernel_settings)
     factory = TargetFactory(frame, model, inputs.rules)
     first, starts, pm_tune, pm_draws, schedule, chain_starts, history = _chain_plan(
-        inputs, settings, log=log, resume=resume, starts=starts, base_start=base_start)
+        inputs, settings, log=log, resume=resume, starts=starts, base_start=base_start, data=data)
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=pm_draws, tune=pm_tune,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.n_inner,

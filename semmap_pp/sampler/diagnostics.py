@@ -536,9 +536,10 @@ class SpreadAccumulator:
         """Count one world ``count`` times: its wall cells and, per cell, the type index of its unit
         (-1 none)."""
         self.n += count
-        self.wall += count * wall_mask
+        # in place, on the cells counted (no int64 products of the whole box): the same counts
+        self.wall[np.asarray(wall_mask, dtype=bool)] += count
         for t in range(len(UNIT_TYPES)):
-            self.types[t] += count * (type_index == t)
+            self.types[t][type_index == t] += count
 
     def p_wall(self) -> np.ndarray:
         return self.wall / max(self.n, 1)

@@ -102,9 +102,11 @@ def cell_probabilities(shape, worlds, wall: int) -> tuple[np.ndarray, np.ndarray
     acc, box = accumulate(worlds, shape, wall)
     p_wall = np.zeros(shape)
     p_type = np.zeros((len(UNIT_TYPES),) + tuple(shape))
-    if worlds:
-        p_wall[box[0]:box[2], box[1]:box[3]] = acc.p_wall()
-        p_type[:, box[0]:box[2], box[1]:box[3]] = acc.p_type()
+    if worlds:   # one channel at a time (acc.p_type() of every channel at once: 4 float64 boxes)
+        n = max(acc.n, 1)
+        p_wall[box[0]:box[2], box[1]:box[3]] = acc.wall / n
+        for k in range(len(UNIT_TYPES)):
+            p_type[k, box[0]:box[2], box[1]:box[3]] = acc.types[k] / n
     return p_wall, p_type
 
 

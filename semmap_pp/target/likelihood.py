@@ -39,6 +39,7 @@ True
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numba
@@ -167,8 +168,27 @@ def gain_table(sensor) -> np.ndarray:
     return gain
 
 
+#: The products :func:`prepare` made, per frame (weakly: they go with the frame) and sensor model.
+_PREPARED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def prepare(frame, model) -> LikelihoodData:
-    """Build the per-map sensor-model products for a :class:`~semmap_pp.lattice.frame.Frame`."""
+    """The per-map sensor-model products for a :class:`~semmap_pp.lattice.frame.Frame`.
+
+    Made once per frame and sensor model (the same objects): a run builds its target several times
+    (start worlds, sampling, W*'s scoring, the sample around W*, the typed sampled worlds), and on a
+    campus map each build was tens of seconds and several hundred MB of the same read-only arrays.
+    """
+    cached = _PREPARED.get(frame)
+    if cached is not None and cached[0] is model.sensor:
+        return cached[1]
+    data = _prepare(frame, model)
+    _PREPARED[frame] = (model.sensor, data)
+    return data
+
+
+def _prepare(frame, model) -> LikelihoodData:
+    """:func:`prepare`, made anew."""
     cls = frame.classes
     xcode = np.full(cls.shape, X_FREE, dtype=np.uint8)
     xcode[cls == UNKNOWN] = X_UNKNOWN
@@ -298,25 +318,44 @@ def _bbox(rects: np.ndarray, shape) -> tuple[int, int, int, int] | None:
     return r0, c0, r1, c1
 
 
+#: Side of the tiles :func:`full_tallies` categorises one at a time, cells.
+TALLY_TILE = 512
+
+
 def full_tallies(data: LikelihoodData, rects: np.ndarray, corridor: np.ndarray):
     """Category histogram (24,) int64 and Σγ of a world, computed from scratch.
 
-    Only the bounding box of the units is categorised; every cell outside it is R_OUT.
+    The units' bounding box is categorised tile by tile (:data:`TALLY_TILE` cells a side), each
+    tile with the units that reach into it; a tile no unit reaches is left out (its cells are
+    R_OUT, as in the empty world). The tallies are integer counts, so they are those of the whole
+    box at once; the work and memory follow the units' cover, not their bounding box (the units
+    along a campus's corridor loop span the whole map).
     """
     rects = np.asarray(rects).reshape(-1, 4)
+    corridor = np.asarray(corridor).reshape(-1)
     hist = data.xhist.copy()
     box = _bbox(rects, data.shape)
     if box is None:
         return hist, 0
     r0, c0, r1, c1 = box
-    counts = np.zeros((3, r1 - r0, c1 - c0), dtype=np.int16)
-    for rect, corr in zip(rects, np.asarray(corridor).reshape(-1)):
-        _add_unit(counts, rect, bool(corr), data.wall, +1, r0, c0)
-    x = data.xcode[r0:r1, c0:c1]
-    cat, gamma = categorise(counts, x)
-    hist -= np.bincount(x.ravel(), minlength=N_CATEGORIES)
-    hist += np.bincount(cat.ravel(), minlength=N_CATEGORIES)
-    return hist, int(gamma.sum(dtype=np.int64))
+    gamma_total = 0
+    for a0 in range(r0, r1, TALLY_TILE):
+        a1 = min(a0 + TALLY_TILE, r1)
+        across = (rects[:, 0] < a1) & (rects[:, 2] > a0)
+        for b0 in range(c0, c1, TALLY_TILE):
+            b1 = min(b0 + TALLY_TILE, c1)
+            here = np.flatnonzero(across & (rects[:, 1] < b1) & (rects[:, 3] > b0))
+            if here.size == 0:
+                continue
+            counts = np.zeros((3, a1 - a0, b1 - b0), dtype=np.int16)
+            for i in here:
+                _add_unit(counts, rects[i], bool(corridor[i]), data.wall, +1, a0, b0)
+            x = data.xcode[a0:a1, b0:b1]
+            cat, gamma = categorise(counts, x)
+            hist -= np.bincount(x.ravel(), minlength=N_CATEGORIES)
+            hist += np.bincount(cat.ravel(), minlength=N_CATEGORIES)
+            gamma_total += int(gamma.sum(dtype=np.int64))
+    return hist, gamma_total
 
 
 def full_loglik(data: LikelihoodData, rects, corridor) -> float:

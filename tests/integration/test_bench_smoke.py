@@ -53,6 +53,14 @@ def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
     elif name == "large":
         assert [m["cells"] for m in result["sizes"]] == [200 ** 2, 300 ** 2]
         assert result["canvas"]["crop"]["lattice"] != result["canvas"]["whole"]["lattice"]
+        intel, campus = result["whole"]["floors"]        # whole `semmap map` runs, in subprocesses
+        assert (intel["floor"], campus["floor"]) == ("intel", "campus")
+        for f in (intel, campus):
+            assert 0 < f["known_cells"] < f["canvas_cells"] and f["wall_s"] > 0 and f["peak_mib"] > 0
+            assert f["units"] >= 1 and f["log"][-1].startswith("W*: ")
+        ratios = campus["vs_intel"]
+        assert ratios["known_ratio"] > 1 and ratios["canvas_ratio"] > 1
+        assert ratios["time_over_known"] > 0
     elif name == "learn":
         assert [r["map"] for r in result["rows"]] == ["synth-0", "synth-1", "synth-2"]
         assert all(0 <= r["accuracy_learned"] <= 1 for r in result["rows"])

@@ -70,12 +70,23 @@ def runs(mask: np.ndarray):
     return rows, starts, ends
 
 
+#: Rows :func:`_run_back` works on at a time (its int64 temporaries are a band's, not the map's).
+RUN_BAND_ROWS = 256
+
+
 def _run_back(mask: np.ndarray) -> np.ndarray:
-    """Length of the run of True ending at each cell going left (cell included; 0 if False)."""
+    """Length of the run of True ending at each cell going left (cell included; 0 if False).
+
+    >>> _run_back(np.array([[1, 1, 0, 1], [0, 1, 1, 1]], bool)).tolist()
+    [[1, 2, 0, 1], [0, 1, 2, 3]]
+    """
     h, w = mask.shape
-    idx = np.broadcast_to(np.arange(w), (h, w))
-    last_false = np.maximum.accumulate(np.where(mask, -1, idx), axis=1)
-    return (idx - last_false).astype(np.int32)
+    out = np.empty((h, w), np.int32)
+    idx = np.arange(w)
+    for r0 in range(0, h, RUN_BAND_ROWS):
+        last_false = np.maximum.accumulate(np.where(mask[r0:r0 + RUN_BAND_ROWS], -1, idx), axis=1)
+        out[r0:r0 + RUN_BAND_ROWS] = idx - last_false
+    return out
 
 
 def free_runs(free: np.ndarray):
