@@ -45,11 +45,10 @@ def wing(uv, length, rooms, depth=5.0, width=2.0, room_from=0.0):
     """(walls, floors) masks of a corridor u in [0, length], |v| <= width / 2, with rooms of the
     widths ``rooms`` on both sides (from ``room_from`` on) and a 1 m door into each."""
     h = width / 2
-    spaces = [(0.0, -h, length, h)]
+    spaces = _spaces(length, rooms, depth, width, room_from)
     doors = []
     u = room_from
     for w in rooms:
-        spaces += [(u, -h - depth, u + w, -h), (u, h, u + w, h + depth)]
         doors += [(u + w / 2 - 0.5, -h - T, u + w / 2 + 0.5, -h + T),
                   (u + w / 2 - 0.5, h - T, u + w / 2 + 0.5, h + T)]
         u += w
@@ -151,7 +150,7 @@ def pentagon() -> np.ndarray:
 
 
 def _spaces(length, rooms, depth=5.0, width=2.0, room_from=0.0):
-    """The corridor and room rectangles of :func:`wing` (its doors left out)."""
+    """The corridor and the rooms of :func:`wing` as ``(u0, v0, u1, v1)`` rectangles, metres."""
     h = width / 2
     spaces = [(0.0, -h, length, h)]
     u = room_from
