@@ -21,12 +21,18 @@ BENCH = Path(__file__).resolve().parents[2] / "bench"
 NAMES = sorted(p.stem[len("bench_"):] for p in BENCH.glob("bench_*.py"))
 
 
-def bench(capsys, monkeypatch, *argv) -> dict:
-    """The JSON result of ``bench/run.py *argv --json`` (the last line it prints)."""
+def bench_runner(monkeypatch):
+    """``bench/run.py`` as a module (its ``main(argv)``)."""
     monkeypatch.setattr(sys, "path", list(sys.path))      # run.py puts bench/ first: undone after
     spec = importlib.util.spec_from_file_location("bench_runner", BENCH / "run.py")
     runner = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(runner)
+    return runner
+
+
+def bench(capsys, monkeypatch, *argv) -> dict:
+    """The JSON result of ``bench/run.py *argv --json`` (the last line it prints)."""
+    runner = bench_runner(monkeypatch)
     capsys.readouterr()
     assert runner.main([*argv, "--json"]) == 0
     out = capsys.readouterr().out.strip().splitlines()
@@ -137,12 +143,8 @@ def test_quality_over_seeds_gives_each_seed_its_rows_and_the_mean_of_their_means
 
 @pytest.mark.parametrize("text", ["0,x", "1,1", "-1", ","])
 def test_quality_over_seeds_refuses_a_bad_list(text, capsys, monkeypatch):
-    monkeypatch.setattr(sys, "path", list(sys.path))
-    spec = importlib.util.spec_from_file_location("bench_runner", BENCH / "run.py")
-    runner = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(runner)
     with pytest.raises(SystemExit, match="--over-seeds"):
-        runner.main(["quality", "--tiny", "--over-seeds", text, "--json"])
+        bench_runner(monkeypatch).main(["quality", "--tiny", "--over-seeds", text, "--json"])
 
 
 
