@@ -1138,6 +1138,7 @@ def bench_wings(args, model, rules) -> dict:
     30 and 45 degrees, a pentagonal ring), against their room truth (``NAME_gt.png``, ROSE2's
     protocol), and the exterior units lying mostly inside the building's rooms."""
     from PIL import Image
+    from semmap_pp.cells import FREE
     from semmap_pp.evaluate import protocol_scores
     from semmap_pp.resources import DEFAULT_RULES
     from semmap_pp.run.inputs import load_inputs
@@ -1154,11 +1155,11 @@ def bench_wings(args, model, rules) -> dict:
         truth = np.asarray(Image.open(WINGS / f"{name}_gt.png")).astype(np.int64)
         sc = protocol_scores(truth, sm.rooms.labels)
         inside = 0
-        for slot, eid in sm.exterior_ids.items():
+        for slot in sm.exterior_ids:
             r0, c0, r1, c1 = (int(v) for v in sm.world.rects[slot])
             cells = np.zeros(sm.frame.shape, bool)
             cells[max(r0, 0):r1, max(c0, 0):c1] = True
-            img = sm.frame.to_image(cells, fill=False) & (sm.grid.classes == 0)
+            img = sm.frame.to_image(cells, fill=False) & (sm.grid.classes == FREE)
             if img.any() and (truth[img] > 0).mean() > 0.5:
                 inside += 1
         row = {"map": name, "units": len(sm.unit_ids), "exterior_units": len(sm.exterior_ids),
@@ -1284,8 +1285,8 @@ def combine_seeds(parts: dict) -> dict:
     for seed, part in parts.items():
         rows += [{**row, "sampler_seed": seed} for row in part.get("rows", [])]
         by_seed[seed] = part.get("means", {})
-    keys = [k for k in next(iter(by_seed.values()), {}) if all(
-        isinstance(m.get(k), (int, float)) and m.get(k) is not None for m in by_seed.values())]
+    keys = [k for k in next(iter(by_seed.values()), {})
+            if all(isinstance(m.get(k), (int, float)) for m in by_seed.values())]
     first = next(iter(parts.values()))
     return {**{k: v for k, v in first.items() if k not in ("rows", "means")}, "rows": rows,
             "means": {k: round(float(np.mean([m[k] for m in by_seed.values()])), 4) for k in keys},
