@@ -10,8 +10,9 @@ the robot saw only through its windows. The main wing runs along the image axes;
 joins the main corridor's east end at ``angle`` degrees.
 
 ``NAME_gt.png`` is each plan's room truth, as a room segmenter's truth is drawn: a 16-bit image,
-one label per room on its free cells (the main and the second wing's corridor one room, doorways
-and the rays beyond the windows none), for ``bench/run.py quality --subset wings``.
+one label per room on its free cells (the main and the second wing's corridor one room; a doorway
+takes the room or corridor it lies in; the rays beyond the windows none), for
+``bench/run.py quality --subset wings``.
 """
 
 from __future__ import annotations
@@ -205,13 +206,9 @@ def pentagon_truth() -> np.ndarray:
 
 
 def truth_on_floor(labels: np.ndarray, grey: np.ndarray) -> np.ndarray:
-    """``labels`` on the plan's free cells (grey 254) that lie inside the walls of a room, as a
-    truth is drawn: the doorways (a cell of wall between two rooms) and the rays beyond the
-    windows none."""
-    inside = np.zeros(grey.shape, bool)
-    for k in np.unique(labels[labels > 0]):
-        inside |= labels == k
-    return np.where((grey == 254) & inside, labels, 0).astype(np.uint16)
+    """``labels`` on the plan's free cells (grey 254), as a truth is drawn: the rays beyond the
+    windows, in no room, are none."""
+    return np.where((grey == 254) & (labels > 0), labels, 0).astype(np.uint16)
 
 
 def write(name: str, grey: np.ndarray, truth: np.ndarray | None = None) -> None:
