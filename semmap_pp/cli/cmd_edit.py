@@ -98,7 +98,7 @@ def _run(args) -> int:
     from semmap_pp.outputs.write import write_plan
     from semmap_pp.run.target_factory import run_target
     from semmap_pp.plans.edit import apply_edits, edit_origins, id_changes
-    from semmap_pp.plans.world_file import pack_world, read_previous_ids, read_world_units
+    from semmap_pp.plans.world_file import pack_world, read_previous_ids, read_world_units, through_door_keys
 
     if args.out.is_dir() and args.world.parent.resolve() == args.out.resolve():
         raise OutputError(args.out, "is the directory of WORLD_JSON: its run's other files (trace.nc, "
@@ -118,7 +118,9 @@ def _run(args) -> int:
         world = snap_walls(post, world, data_from_frame(inputs.frame, settings),
                            [i for i, (_, _, changed) in enumerate(edited) if changed], reach=reach)
     terms = post.evaluate(world)
-    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms, previous=previous)
+    flagged = through_door_keys(args.world)   # an edited unit is no longer the one added over a fan
+    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, terms=terms, previous=previous,
+                      through_door=[i for i, (k, _, changed) in enumerate(edited) if k in flagged and not changed])
     rows = [{"world": str(args.world), **score_world(inputs, post, before)},
             {"world": str(args.out / "world.json"), **scores_of(sm, terms)}]
     doc = world_dict(sm, rules=rules.name, model=inputs.model.path.name, seed=None, roi_name=inputs.roi_name)

@@ -219,6 +219,21 @@ def read_start_world(path: str | os.PathLike, frame, grid, capacity: int) -> wm.
     return pack_world([rect for _, rect in read_world_units(path, frame, grid)], capacity, path)
 
 
+def through_door_keys(path: str | os.PathLike) -> set[str]:
+    """The keys (:func:`read_world_units`) of the units of the world.json at ``path`` flagged
+    ``"seen_through_door": true`` (added over a room seen only through its door); a flag that is
+    not a boolean is an error naming the unit."""
+    doc = read_world_doc(path)
+    keys = set()
+    for i, u in enumerate(doc.get("units", [])):
+        flag = u.get("seen_through_door", False) if isinstance(u, dict) else False
+        if not isinstance(flag, bool):
+            raise SemmapError(path, f"units[{i}]: 'seen_through_door' must be true or false, got {got(flag)}")
+        if flag:
+            keys.add(str(u.get("id", i + 1)))
+    return keys
+
+
 def pack_world(rects, capacity: int, path=None) -> wm.World:
     """Lattice rectangles as a world (types unassigned) in ``capacity`` slots or the smallest
     doubling of it that holds them; more than :data:`semmap_pp.model.MAX_K` is an error naming

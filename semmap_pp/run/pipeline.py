@@ -27,12 +27,13 @@ from semmap_pp.run.lattice_cpr import LatticeCPR
 from semmap_pp.run.results import MapRun, RunSettings, collect_draws
 from semmap_pp.run.spread import sample_around
 from semmap_pp.run.target_factory import TargetFactory, run_target
-from semmap_pp.sampler.ascent import polish, refine_world
+from semmap_pp.sampler.ascent import add_units, polish, refine_world
 from semmap_pp.sampler.kernels import data_from_frame, default_mix
 from semmap_pp.sampler.resume import merge_records
 from semmap_pp.sampler.sampling import sample_worlds
 from semmap_pp.sampler.start_worlds import dispersed_world, start_world
 from semmap_pp.semantic.ids import carried_text
+from semmap_pp.semantic.rooms import through_door_boxes
 from semmap_pp.semantic.semantic_map import semantic_map
 from semmap_pp.target.posterior import Posterior
 from semmap_pp.target.walls_inside import walls_inside
@@ -118,7 +119,9 @@ def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, b
 
 def _wstar_map(inputs: Inputs, post, best: wm.World, data, *, log, previous_ids):
     """The semantic map of W*: ``best`` polished by greedy ascent of the full target ``post``
-    (when ``[kernels] polish_rounds``), its units' ids carried over from ``previous_ids``."""
+    (when ``[kernels] polish_rounds``), then given a unit over each room that rooms.png finds
+    seen through its door where the target gains by it (:func:`_through_door_units`), its units'
+    ids carried over from ``previous_ids``."""
     kernel_settings = inputs.model.kernels
     polished = None
     if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
@@ -130,9 +133,27 @@ def _wstar_map(inputs: Inputs, post, best: wm.World, data, *, log, previous_ids)
     if polished is not None:            # sm.log_posterior is W*'s, evaluated once
         log(f"W* polished by greedy ascent: log posterior {sm.log_posterior - polished[0]:+.1f} "
             f"in {polished[1]:.1f} s")
+        sm = _through_door_units(inputs, post, sm, data, log=log, previous_ids=previous_ids)
     if sm.id_record is not None:
         log(carried_text(sm.id_record))
     return sm
+
+
+def _through_door_units(inputs: Inputs, post, sm, data, *, log, previous_ids):
+    """``sm`` with a unit added over each room seen only through its door that no unit covers
+    (:func:`~semmap_pp.semantic.rooms.through_door_boxes`), where the target gains by it
+    (:func:`~semmap_pp.sampler.ascent.add_units`): a fan of rays into a room is free space the
+    kernels' birth table has no box for. The added units are rooms of their own in rooms.png
+    (``SemanticMap.through_door``). ``sm`` itself when there is none or none is kept."""
+    boxes = through_door_boxes(sm)
+    if not boxes:
+        return sm
+    world, born = add_units(post, sm.world, data, boxes)
+    log(f"rooms seen through their door: {len(born)} of {len(boxes)} added to W* as units")
+    if not born:
+        return sm
+    return semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi, previous=previous_ids,
+                        through_door=born)
 
 
 def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,

@@ -39,7 +39,7 @@ from semmap_pp.sampler.ascent_cuts import CutMoves
 from semmap_pp.sampler.ascent_joins import JoinMoves
 from semmap_pp.sampler.ascent_walls import MAX_CAPACITY, PEAKS_RESOLUTION, ascent_peaks
 
-__all__ = ["MAX_CAPACITY", "PEAKS_RESOLUTION", "align_walls", "ascent_peaks", "polish",
+__all__ = ["MAX_CAPACITY", "PEAKS_RESOLUTION", "add_units", "align_walls", "ascent_peaks", "polish",
            "refine_world", "snap_walls"]
 
 
@@ -139,6 +139,29 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     without the births too, no W* measured changed at all (quality change 36)."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
                         double_cuts=False, births=False)
+
+
+def add_units(posterior, world: wm.World, data, boxes) -> tuple[wm.World, list[int]]:
+    """Each of ``boxes`` (lattice rectangles ``(r0, c0, r1, c1)``, walls included) added to
+    ``world`` as a unit, its walls then moved to their best positions (:meth:`_Ascent.tentative`),
+    and kept only when the log posterior rises: a proposal from outside the kernels' birth table
+    (the run proposes the rooms that rooms.png finds seen through their door and no unit covers:
+    a fan of rays into a room has no large empty box for the birth table to find). Returns the
+    world, whose log posterior is at least ``world``'s (types left undecided), and the slots of
+    the units kept; ``(world, [])`` when ``world``'s log posterior is not finite or no box is
+    kept."""
+    asc = _Ascent(posterior, world, data)
+    if not np.isfinite(asc.tr.logp):
+        return world, []
+    born = []
+    for box in boxes:
+        slot = int(asc.free(1)[0])
+        if asc.tentative(wm.add(asc.world, slot, tuple(int(v) for v in box)), (slot,), [slot]):
+            born.append(slot)
+    if not born:
+        return world, []
+    out = asc.untyped()
+    return out, [s for s in born if out.active[s]]
 
 
 def snap_walls(posterior, world: wm.World, data, slots, *, reach: int, rounds: int = 2) -> wm.World:

@@ -61,16 +61,21 @@ class Room:
     seen_share : float
         ``cells`` over the area of the convex hull of its cells: 1 for a room seen whole and
         empty, less for one seen in part (a fan of rays through its door) or cluttered.
+    through_door : bool
+        Its unit was added to W* over a room seen through its door
+        (``SemanticMap.through_door``).
     """
 
     id: int
     units: tuple
     cells: int
     seen_share: float
+    through_door: bool = False
 
     @property
     def seen_through_door(self) -> bool:
-        return not self.units
+        """Seen only through its door: no unit covers it, or its unit was added over such a room."""
+        return not self.units or self.through_door
 
 
 @dataclass(frozen=True)
@@ -378,14 +383,18 @@ def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     units, neither a corridor nor a hall, whose floor meets through a gap wider than a double door
     (``door_max_m``, :func:`wide_opening`): the open side of a room that a partition, a stub of
     wall or a row of cupboards half divides. A corridor's or a hall's openings, however wide, lead
-    into the rooms along it."""
+    into the rooms along it. A unit added over a room seen through its door
+    (``sm.through_door``) is a room of its own: it joins no other unit."""
     ids, rects, classes = sm.slot_ids, sm.world.rects, sm.frame.door_classes
+    alone = {ids[s] for s in sm.through_door if s in ids}
     wall = sm.frame.cells.wall
     width = params.door_max_m / sm.frame.resolution
     free = None
-    pairs, doors, decided = list(passage_pairs(sm)), [], {}
+    pairs, doors, decided = [p for p in passage_pairs(sm) if not alone & set(p)], [], {}
     for d in sm.derived.doors:
         pair = tuple(sorted((ids[d.p], ids[d.q])))
+        if alone & set(pair):
+            decided[pair] = False
         if pair not in decided:
             joined = opening_share(classes, rects[d.p], rects[d.q], wall) >= params.open_share_min
             if not joined and not _THROUGH_TYPES & {sm.type_of(pair[0]), sm.type_of(pair[1])}:
@@ -422,10 +431,33 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     for uid, rid in region.items():
         units_of.setdefault(rid, []).append(uid)
     objs = ndi.find_objects(labels)
-    rooms = tuple(Room(k, tuple(units_of.get(rid, ())) if rid else (), n,
-                       seen_share(labels[objs[k - 1]] == k)) for k, rid, n in found)
+    alone = {sm.slot_ids[s] for s in sm.through_door if s in sm.slot_ids}
+    rooms = []
+    for k, rid, n in found:
+        units = tuple(units_of.get(rid, ())) if rid else ()
+        rooms.append(Room(k, units, n, seen_share(labels[objs[k - 1]] == k),
+                          bool(units) and set(units) <= alone))
+    rooms = tuple(rooms)
     return Rooms(labels, rooms)
 
 
-__all__ = ["Room", "Rooms", "room_labels", "room_joins", "rooms_of", "opening_share", "seen_share", "wide_opening",
+def through_door_boxes(sm) -> list[tuple[int, int, int, int]]:
+    """The lattice rectangle ``(r0, c0, r1, c1)`` of each room of ``sm.rooms`` seen through its
+    door that no unit covers: the bounding box of its cells on the lattice, with the wall band
+    around it, clipped to the lattice; largest room first. What the run proposes to add to W*
+    (:func:`semmap_pp.sampler.ascent.add_units`: kept only where the target gains)."""
+    frame, rooms = sm.frame, sm.rooms
+    wall = int(frame.cells.wall)
+    h, w = frame.shape
+    boxes = []
+    for room in sorted((r for r in rooms.rooms if r.seen_through_door), key=lambda r: -r.cells):
+        ys, xs = np.nonzero(rooms.labels == room.id)
+        rows, cols = frame.image_to_lattice(xs, ys)
+        r0, c0 = int(np.rint(rows.min())) - wall, int(np.rint(cols.min())) - wall
+        r1, c1 = int(np.rint(rows.max())) + 1 + wall, int(np.rint(cols.max())) + 1 + wall
+        boxes.append((max(r0, 0), max(c0, 0), min(r1, h), min(c1, w)))
+    return boxes
+
+
+__all__ = ["Room", "Rooms", "room_labels", "through_door_boxes", "room_joins", "rooms_of", "opening_share", "seen_share", "wide_opening",
            "geodesic_flood"]

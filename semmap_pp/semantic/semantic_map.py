@@ -43,6 +43,8 @@ class SemanticMap:
     id_record : dict or None, how the unit ids were carried from an earlier world.json
         (:func:`semmap_pp.semantic.ids.carry_ids`; world.json's ``ids``), None when numbered 1..n
     room_params : the model's ``[rooms]``, how :attr:`rooms` are made
+    through_door : frozenset of the slots of the units added over rooms seen through their door
+        (each a room of its own in :attr:`rooms`, flagged ``seen_through_door``)
     """
 
     grid: object
@@ -60,6 +62,7 @@ class SemanticMap:
     exterior_ids: dict = field(default_factory=dict)
     id_record: dict | None = None
     room_params: RoomParams = RoomParams()
+    through_door: frozenset = frozenset()
 
     @property
     def unit_ids(self) -> list[int]:
@@ -139,11 +142,12 @@ def label_lattice(shape, world: wm.World, slot_ids: dict, wall: int) -> np.ndarr
 
 
 def semantic_map(grid, frame, posterior, world: wm.World, *, roi: np.ndarray | None = None,
-                 terms=None, previous=None) -> SemanticMap:
+                 terms=None, previous=None, through_door=()) -> SemanticMap:
     """Derive the semantic map of ``world`` (types re-assigned by ``posterior``); ``terms``:
     ``posterior.evaluate(world)`` when the caller has it already; ``previous``: the units of an
     earlier world.json (:func:`semmap_pp.plans.world_file.read_previous_ids`) whose ids to carry over,
-    instead of numbering the units 1..n."""
+    instead of numbering the units 1..n; ``through_door``: the slots of units added over rooms
+    seen through their door (:func:`semmap_pp.sampler.ascent.add_units`)."""
 
     terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world
@@ -168,7 +172,7 @@ def semantic_map(grid, frame, posterior, world: wm.World, *, roi: np.ndarray | N
     rate, _ = cpr(grid.classes, states_img, roi)
     return SemanticMap(grid, frame, world, slot_ids, derived, marginals, labels_lat, states_img,
                        labels_img, roi, float(rate), float(terms.total), exterior_ids, id_record,
-                       posterior.model.rooms)
+                       posterior.model.rooms, frozenset(int(s) for s in through_door))
 
 
 __all__ = ["SemanticMap", "semantic_map", "number_units", "label_lattice",

@@ -133,6 +133,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
             "type_marginals": {t: round(float(marg[k]), 6) for k, t in enumerate(UNIT_TYPES)},
             **_rect_geometry(frame, world.rects[s], res),
             **_seen(frame, world.rects[s]),
+            "seen_through_door": s in sm.through_door,
             "doors": [o["id"] for o in doors if uid in o["units"]],
             "passages": [o["id"] for o in passages if uid in o["units"]],
             "objects": [o["id"] for o in objects if o["unit"] == uid],

@@ -12,6 +12,7 @@ from PIL import Image
 from scipy import ndimage as ndi
 
 from semmap_pp.cli import main
+from semmap_pp.cells import FREE
 from semmap_pp.errors import ModelError
 from semmap_pp.evaluate import (colour_room_labels, colour_segment_labels, protocol_scores,
                                 read_segmentation, read_segmentation_truth)
@@ -317,7 +318,9 @@ def test_a_run_writes_rooms_png_and_world_json_rooms_that_agree(run_dir):
     assert [r["cells"] for r in doc["rooms"]] == counts.tolist()
     units = {u["id"] for u in doc["units"]}
     for r in doc["rooms"]:
-        assert set(r["units"]) <= units and r["seen_through_door"] == (not r["units"])
+        flagged = {u["id"] for u in doc["units"] if u["seen_through_door"]}
+        assert set(r["units"]) <= units
+        assert r["seen_through_door"] == (not r["units"] or set(r["units"]) <= flagged)
         assert 0 < r["seen_share"] <= 1
     owned = [u for r in doc["rooms"] for u in r["units"]]
     assert len(owned) == len(set(owned))                    # a unit grows one room at most
@@ -439,3 +442,103 @@ def test_room_joins_takes_a_wide_gap_between_rooms_but_not_a_corridors(types, ga
     pairs, doors = room_joins(_FakeMap(classes, rp, rq, types), RoomParams(open_share_min=1.0))
     assert (pairs == [(1, 2)]) is one_room
     assert len(doors) == (0 if one_room else 1)
+
+
+# --- a room seen through its door becomes a unit -------------------------------------------------
+
+def corridor_and_fan_room(tmp_path: Path) -> Path:
+    """A map_server map (0.05 m cells) of a corridor the robot drove and, below it, a room seen only
+    through its 0.9 m door: 720 rays cast from one scan position in the corridor end on the first
+    occupied cell (the corridor's walls, the room's walls); cells no ray reached are unknown. The
+    room's rays fan out from its door; between the fan and the room's side walls it is unknown."""
+    H, W = 170, 240
+    occ = np.zeros((H, W), bool)
+    occ[20:22, 20:220] = occ[58:60, 20:220] = True          # the corridor's walls
+    occ[20:60, 20:22] = occ[20:60, 218:220] = True
+    occ[60:152, 68:70] = occ[60:152, 170:172] = True         # the room's side walls
+    occ[150:152, 68:172] = True                              # its far wall
+    occ[58:60, 110:128] = False                              # the door
+    seen = np.zeros((H, W), bool)
+    seen[22:58, 22:218] = True
+    y0, x0 = 40.5, 119.5
+    for a in np.linspace(0, 2 * np.pi, 720, endpoint=False):
+        for t in np.arange(0, 160, 0.5):
+            iy, ix = int(y0 + t * np.sin(a)), int(x0 + t * np.cos(a))
+            if not (0 <= iy < H and 0 <= ix < W):
+                break
+            seen[iy, ix] = True
+            if occ[iy, ix]:
+                break
+    img = np.full((H, W), 205, np.uint8)
+    img[seen] = 254
+    img[seen & occ] = 0
+    Image.fromarray(img).save(tmp_path / "fan.pgm")
+    (tmp_path / "fan.yaml").write_text("image: fan.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n"
+                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    return tmp_path / "fan.yaml"
+
+
+@pytest.fixture(scope="module")
+def fan_world(tmp_path_factory):
+    """The fan map's inputs, full target and kernel data, and the semantic map of a W* that holds
+    the corridor only (the unit the data-driven start world gives it)."""
+    from semmap_pp import world as wm
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run import pipeline
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.target_factory import run_target
+    from semmap_pp.sampler.kernels import data_from_frame
+    from semmap_pp.semantic.semantic_map import semantic_map
+    inputs = load_inputs(corridor_and_fan_room(tmp_path_factory.mktemp("fan")), rules_path=DEFAULT_RULES)
+    post = run_target(inputs)
+    start = pipeline.data_start_world(inputs)
+    corridor = [tuple(int(v) for v in start.rects[s]) for s in wm.active_slots(start)
+                if start.rects[s][2] <= 62]
+    assert len(corridor) == 1
+    world = wm.add(wm.empty(8), 0, corridor[0])
+    sm = semantic_map(inputs.grid, inputs.frame, post, world, roi=inputs.roi)
+    return inputs, post, data_from_frame(inputs.frame, inputs.model.kernels), sm
+
+
+def test_a_room_seen_through_its_door_becomes_a_unit_of_w_star_and_a_room_of_its_own(fan_world):
+    from semmap_pp.run.pipeline import _through_door_units
+    from semmap_pp.semantic.world_json import world_dict
+    inputs, post, data, sm = fan_world
+    fan = (inputs.grid.classes == FREE) & (np.arange(inputs.grid.height)[:, None] >= 62)
+    before = [r for r in sm.rooms.rooms if r.seen_through_door]
+    assert len(before) == 1 and before[0].units == ()              # rooms.png finds it, no unit covers it
+    out = _through_door_units(inputs, post, sm, data, log=lambda m: None, previous_ids=None)
+    assert out.log_posterior > sm.log_posterior                     # kept because the target gains
+    assert len(out.through_door) == 1
+    slot = next(iter(out.through_door))
+    uid = out.slot_ids[slot]
+    covered = out.labels_image == uid
+    assert covered[fan].mean() > 0.9                                # the unit lies over the fan
+    room = [r for r in out.rooms.rooms if uid in r.units]
+    assert len(room) == 1 and room[0].units == (uid,) and room[0].seen_through_door
+    doc = world_dict(out)
+    assert [u["seen_through_door"] for u in doc["units"]] == [u["id"] == uid for u in doc["units"]]
+    assert [r["seen_through_door"] for r in doc["rooms"]] == [uid in r["units"] for r in doc["rooms"]]
+
+
+def test_a_unit_added_over_a_room_seen_through_its_door_joins_no_other(fan_world):
+    """The same W* with the fan's unit: unflagged, the wide door between it and the corridor can
+    make them one room; flagged, never (its room is the fan's)."""
+    from semmap_pp.run.pipeline import _through_door_units
+    from semmap_pp.semantic.rooms import room_joins
+    inputs, post, data, sm = fan_world
+    out = _through_door_units(inputs, post, sm, data, log=lambda m: None, previous_ids=None)
+    uid = out.slot_ids[next(iter(out.through_door))]
+    pairs, _ = room_joins(out, out.room_params)
+    assert all(uid not in p for p in pairs)
+
+
+def test_a_box_the_target_does_not_gain_by_is_not_added(fan_world):
+    """Once the fan's room has its unit, a box over the unknown beside it gains nothing wherever
+    its walls move: the world is returned as it was."""
+    from semmap_pp.run.pipeline import _through_door_units
+    from semmap_pp.sampler.ascent import add_units
+    inputs, post, data, sm = fan_world
+    full = _through_door_units(inputs, post, sm, data, log=lambda m: None, previous_ids=None).world
+    world, born = add_units(post, full, data, [(100, 180, 160, 236)])
+    assert born == [] and world is full
