@@ -542,3 +542,20 @@ def test_a_box_the_target_does_not_gain_by_is_not_added(fan_world):
     full = _through_door_units(inputs, post, sm, data, log=lambda m: None, previous_ids=None).world
     world, born = add_units(post, full, data, [(100, 180, 160, 236)])
     assert born == [] and world is full
+
+
+def test_semmap_edit_keeps_the_flag_of_an_unedited_unit_over_a_room_seen_through_its_door(fan_world, tmp_path):
+    from semmap_pp.run.pipeline import _through_door_units
+    from semmap_pp.semantic.world_json import dumps, world_dict
+    inputs, post, data, sm = fan_world
+    out = _through_door_units(inputs, post, sm, data, log=lambda m: None, previous_ids=None)
+    doc = world_dict(out)
+    flagged = [u["id"] for u in doc["units"] if u["seen_through_door"]]
+    others = [u["id"] for u in doc["units"] if not u["seen_through_door"]]
+    assert len(flagged) == 1 and others
+    (tmp_path / "world.json").write_text(dumps(doc))
+    assert main(["edit", str(inputs.grid.source), str(tmp_path / "world.json"), "--out", str(tmp_path / "e"),
+                 "--drop", *map(str, others)]) == 0
+    edited = json.loads((tmp_path / "e" / "world.json").read_text())
+    assert [u["seen_through_door"] for u in edited["units"]] == [True]
+    assert [r["seen_through_door"] for r in edited["rooms"] if r["units"]] == [True]
