@@ -16,7 +16,10 @@ share is open, as where a corridor ends in a hall — and is an open passage too
 (docs/model.md). A jamb is a wall the map shows: lines closed by unknown cells alone
 (no occupied cell: the unseen margin along a wall, where a corridor narrows) count as reached, so
 a corridor piece meeting the next through its whole seen width is joined by a passage
-(CHANGELOG.md, quality change 40). Passages are not doors, but their cells are open: the
+(CHANGELOG.md, quality change 40). A run that would be a passage is checked across the strip
+widened by one wall band on each side (:func:`wide_lines`): a wall the shared band misses by a
+cell or two walls the units apart, and only the stretches free there are openings
+(:func:`_passage_or_doors`). Passages are not doors, but their cells are open: the
 world's cell states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
 
 Examples
@@ -176,10 +179,15 @@ def _passage_or_doors(classes, rp, rq, cells, run: Door, first: int):
     checked on the widened strip (:func:`wide_lines`): a passage when every one of its lines is
     free there too; else the two units are walled apart beside the band, and its stretches free
     there are the openings, each a door when at most ``door_max`` wide (their jambs are that
-    wall), a passage when wider. ``first``: the strip's first line index on the map."""
+    wall), a passage when wider. A wall is a stretch of at least ``door_min`` closed lines:
+    shorter ones (a jagged corner, a wall's end) are read as open. ``first``: the strip's first
+    line index on the map."""
     wide = wide_lines(classes, rp, rq, cells.wall)
     lo = (run.box[0] if run.vertical else run.box[1]) - first
-    part = wide[lo:lo + run.width]
+    part = wide[lo:lo + run.width].copy()
+    for s, e in open_runs(~part):          # a wall is at least a door's width long; shorter
+        if e - s < cells.door_min:         # closed stretches (a jagged corner) are ignored
+            part[s:e] = True
     if part.all():
         return [], [run]
     doors, passages = [], []
@@ -355,26 +363,38 @@ def _wide_split(classes, vertical, a0, b0, k0, k1, wlo, whi, door_min,
                 door_max):  # pragma: no cover - compiled
     """``(doors, passages)`` of a would-be passage on lines ``k0..k1`` of the strip at ``(a0,
     b0)``, checked across ``wlo..whi`` (the widened strip): :func:`_passage_or_doors` compiled."""
+    n = k1 - k0
+    line_open = np.ones(n, np.bool_)
+    for k in range(n):
+        for m in range(wlo, whi):
+            r, c = (a0 + k0 + k, m) if vertical else (m, b0 + k0 + k)
+            if classes[r, c] != FREE:
+                line_open[k] = False
+                break
+    closed = 0
+    k = 0
+    while k < n:                  # closed stretches shorter than a door: read as open
+        if line_open[k]:
+            k += 1
+            continue
+        e = k
+        while e < n and not line_open[e]:
+            e += 1
+        if e - k < door_min:
+            line_open[k:e] = True
+        else:
+            closed += e - k
+        k = e
     doors = 0
     passages = 0
     run = 0
-    closed = 0
-    for k in range(k0, k1 + 1):
-        is_open = False
-        if k < k1:
-            is_open = True
-            for m in range(wlo, whi):
-                r, c = (a0 + k, m) if vertical else (m, b0 + k)
-                if classes[r, c] != FREE:
-                    is_open = False
-                    break
-            if not is_open:
-                closed += 1
+    for k in range(n + 1):
+        is_open = k < n and line_open[k]
         if is_open:
             run += 1
         else:
             if run >= door_min:
-                if run > door_max or (closed == 0 and k == k1):
+                if run > door_max or (closed == 0 and k == n):
                     passages += 1
                 else:
                     doors += 1

@@ -301,7 +301,8 @@ def test_a_wall_beside_the_shared_band_makes_a_would_be_passage_a_door():
     cell beside it (a slanted wall, a band rounded to the lattice), over all but a door's width:
     the units are walled apart there, so the opening is a door of that width, not a passage
     that would make them one space. With the wall gone the opening is a passage again; a wall
-    beyond the widened strip (two bands away) does not count."""
+    beyond the widened strip (two bands away), or one beside the band shorter than a door, does
+    not count."""
     from semmap_pp.derive.doors import opening_counts, openings_between
 
     cells = load_model().cells(0.05)                     # wall 2, doors 10..50 cells
@@ -318,4 +319,7 @@ def test_a_wall_beside_the_shared_band_makes_a_would_be_passage_a_door():
     assert opening_counts(m, left, right, cells) == (0, 1)
     m[2:40, 32] = OCCUPIED                                # two bands away from the shared one
     assert opening_counts(m, left, right, cells) == (0, 1)
+    assert [d.width for d in openings_between(m, left, right, cells)[1]] == [56]
+    m[20:29, 30] = OCCUPIED                               # beside the band, shorter than a door:
+    assert opening_counts(m, left, right, cells) == (0, 1)   # a jagged corner, not a wall
     assert [d.width for d in openings_between(m, left, right, cells)[1]] == [56]
