@@ -16,7 +16,10 @@ share is open, as where a corridor ends in a hall — and is an open passage too
 (docs/model.md). A jamb is a wall the map shows: lines closed by unknown cells alone
 (no occupied cell: the unseen margin along a wall, where a corridor narrows) count as reached, so
 a corridor piece meeting the next through its whole seen width is joined by a passage
-(CHANGELOG.md, quality change 40). Passages are not doors, but their cells are open: the
+(CHANGELOG.md, quality change 40). A run that would be a passage is checked across the strip
+widened by one wall band on each side (:func:`wide_lines`): a wall the shared band misses by a
+cell or two walls the units apart, and only the stretches free there are openings
+(:func:`_passage_or_doors`). Passages are not doors, but their cells are open: the
 world's cell states make them FREE, as door cells (:mod:`semmap_pp.derive.states`).
 
 Examples
@@ -142,7 +145,60 @@ def openings_between(classes: np.ndarray, rp, rq, cells, p: int = 0,
         while e < n_lines and not line_walled[e]:
             e += 1
         no_jamb = s <= cells.wall and e >= n_lines - cells.wall
-        (passages if width > cells.door_max or no_jamb else doors).append(door)
+        if width > cells.door_max or no_jamb:
+            d, p_ = _passage_or_doors(classes, rp, rq, cells, door, a0 if vertical else b0)
+            doors += d
+            passages += p_
+        else:
+            doors.append(door)
+    return doors, passages
+
+
+def wide_lines(classes: np.ndarray, rp, rq, wall: int):
+    """Which lines of the connecting wall of ``rp`` and ``rq`` are free across the strip widened
+    by one wall band on each side, within the two rectangles and the map (bool per line of
+    :func:`wall_strip`'s strip), or None without a strip. A wall the shared band misses by a cell
+    or two (a slanted wall, a band rounded to the lattice) closes these lines."""
+    cw = connecting_wall(rp, rq, wall)
+    if cw is None:
+        return None
+    (r0, c0, r1, c1), vertical = cw
+    a = 1 if vertical else 0
+    lo_unit = min(int(rp[a]), int(rq[a]))
+    hi_unit = max(int(rp[a + 2]), int(rq[a + 2]))
+    H, W = classes.shape
+    if vertical:
+        c0, c1 = max(c0 - wall, lo_unit, 0), min(c1 + wall, hi_unit, W)
+        return (classes[max(r0, 0):min(r1, H), c0:c1] == FREE).all(axis=1)
+    r0, r1 = max(r0 - wall, lo_unit, 0), min(r1 + wall, hi_unit, H)
+    return (classes[r0:r1, max(c0, 0):min(c1, W)] == FREE).all(axis=0)
+
+
+def _passage_or_doors(classes, rp, rq, cells, run: Door, first: int):
+    """A run of open lines that would be a passage (too wide for a door, or without jambs),
+    checked on the widened strip (:func:`wide_lines`): a passage when every one of its lines is
+    free there too; else the two units are walled apart beside the band, and its stretches free
+    there are the openings, each a door when at most ``door_max`` wide (their jambs are that
+    wall), a passage when wider. A wall is a stretch of at least ``door_min`` closed lines:
+    shorter ones (a jagged corner, a wall's end) are read as open. ``first``: the strip's first
+    line index on the map."""
+    wide = wide_lines(classes, rp, rq, cells.wall)
+    lo = (run.box[0] if run.vertical else run.box[1]) - first
+    part = wide[lo:lo + run.width].copy()
+    for s, e in open_runs(~part):          # a wall is at least a door's width long; shorter
+        if e - s < cells.door_min:         # closed stretches (a jagged corner) are ignored
+            part[s:e] = True
+    if part.all():
+        return [], [run]
+    doors, passages = [], []
+    for s, e in open_runs(part):
+        width = e - s
+        if width < cells.door_min:
+            continue
+        k0 = (run.box[0] if run.vertical else run.box[1]) + s
+        box = ((k0, run.box[1], k0 + width, run.box[3]) if run.vertical
+               else (run.box[0], k0, run.box[2], k0 + width))
+        (passages if width > cells.door_max else doors).append(run._replace(box=box, width=width))
     return doors, passages
 
 
@@ -263,6 +319,10 @@ def _opening_counts(classes, rp, rq, wall, door_min, door_max):  # pragma: no co
         if (a1 - a0) != (r1 - r0):
             return 0, 0
         n_lines, n_across = b1 - b0, a1 - a0
+    lo_unit = min(rp[a], rq[a])
+    hi_unit = max(rp[a + 2], rq[a + 2])
+    wlo = max(lo - wall, lo_unit, 0)             # the widened strip across the wall (wide_lines)
+    whi = min(hi + wall, hi_unit, W if vertical else H)
     count = 0
     passages = 0
     run = 0
@@ -289,11 +349,57 @@ def _opening_counts(classes, rp, rq, wall, door_min, door_max):  # pragma: no co
                         e += 1
                     passage = s <= wall and e >= n_lines - wall
                 if passage:
-                    passages += 1
+                    d, q = _wide_split(classes, vertical, a0, b0, k - run, k, wlo, whi, door_min, door_max)
+                    count += d
+                    passages += q
                 else:
                     count += 1
             run = 0
     return count, passages
+
+
+@numba.njit(cache=True, nogil=True)
+def _wide_split(classes, vertical, a0, b0, k0, k1, wlo, whi, door_min,
+                door_max):  # pragma: no cover - compiled
+    """``(doors, passages)`` of a would-be passage on lines ``k0..k1`` of the strip at ``(a0,
+    b0)``, checked across ``wlo..whi`` (the widened strip): :func:`_passage_or_doors` compiled."""
+    n = k1 - k0
+    line_open = np.ones(n, np.bool_)
+    for k in range(n):
+        for m in range(wlo, whi):
+            r, c = (a0 + k0 + k, m) if vertical else (m, b0 + k0 + k)
+            if classes[r, c] != FREE:
+                line_open[k] = False
+                break
+    closed = 0
+    k = 0
+    while k < n:                  # closed stretches shorter than a door: read as open
+        if line_open[k]:
+            k += 1
+            continue
+        e = k
+        while e < n and not line_open[e]:
+            e += 1
+        if e - k < door_min:
+            line_open[k:e] = True
+        else:
+            closed += e - k
+        k = e
+    doors = 0
+    passages = 0
+    run = 0
+    for k in range(n + 1):
+        is_open = k < n and line_open[k]
+        if is_open:
+            run += 1
+        else:
+            if run >= door_min:
+                if run > door_max or (closed == 0 and k == n):
+                    passages += 1
+                else:
+                    doors += 1
+            run = 0
+    return doors, passages
 
 
 def opening_counts(classes: np.ndarray, rp, rq, cells) -> tuple[int, int]:

@@ -294,3 +294,32 @@ def test_compiled_opening_counts_equal_the_detector_on_unknown_rich_maps():
         assert opening_counts(m, a, b, CELLS) == (len(doors), len(passages))
         seen.add((len(doors) > 0, len(passages) > 0))
     assert seen >= {(True, False), (False, True)}
+
+
+def test_a_wall_beside_the_shared_band_makes_a_would_be_passage_a_door():
+    """Two rooms whose rectangles share a band the map shows free, but whose wall stands one
+    cell beside it (a slanted wall, a band rounded to the lattice), over all but a door's width:
+    the units are walled apart there, so the opening is a door of that width, not a passage
+    that would make them one space. With the wall gone the opening is a passage again; a wall
+    beyond the widened strip (two bands away), or one beside the band shorter than a door, does
+    not count."""
+    from semmap_pp.derive.doors import opening_counts, openings_between
+
+    cells = load_model().cells(0.05)                     # wall 2, doors 10..50 cells
+    m = np.zeros((60, 60), np.uint8)
+    m[0, :] = m[-1, :] = m[:, 0] = m[:, -1] = OCCUPIED
+    left, right = (0, 0, 60, 30), (0, 28, 60, 60)         # shared band: columns 28..29
+    m[2:40, 30] = OCCUPIED                                # the wall, beside the band, rows 2..39
+    doors, passages = openings_between(m, left, right, cells)
+    assert [(d.box, d.width) for d in doors] == [((40, 28, 58, 30), 18)] and passages == []
+    assert opening_counts(m, left, right, cells) == (1, 0)
+    m[2:40, 30] = FREE
+    doors, passages = openings_between(m, left, right, cells)
+    assert doors == [] and [d.width for d in passages] == [56]
+    assert opening_counts(m, left, right, cells) == (0, 1)
+    m[2:40, 32] = OCCUPIED                                # two bands away from the shared one
+    assert opening_counts(m, left, right, cells) == (0, 1)
+    assert [d.width for d in openings_between(m, left, right, cells)[1]] == [56]
+    m[20:29, 30] = OCCUPIED                               # beside the band, shorter than a door:
+    assert opening_counts(m, left, right, cells) == (0, 1)   # a jagged corner, not a wall
+    assert [d.width for d in openings_between(m, left, right, cells)[1]] == [56]

@@ -77,7 +77,7 @@ def test_an_opening_is_a_passage_when_wider_than_a_door_or_the_whole_wall():
     assert widths() == ([], [])                                  # closed
     cls[10:30, 18:20] = FREE
     assert widths() == ([20], [])                                # a door, wall on both sides
-    cls[2:38, 18:20] = FREE
+    cls[2:38, 18:22] = FREE
     assert widths() == ([], [36])                                # no wall left: a corridor cut in two
     big = np.full((100, 40), FREE, np.uint8)
     big[:, 18:20] = OCCUPIED
