@@ -115,14 +115,7 @@ def generate_floor(seed: int, *, units: int | None = None, rotation_deg: float |
     >>> len(f.truth["units"]), f.image.dtype.name, f.truth_labels.shape == f.image.shape
     (3, 'uint8', True)
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if units is not None and not (2 <= int(units) <= MAX_UNITS):
-        raise ValueError(f"units must be between 2 and {MAX_UNITS}, got {units!r}")
-    if rotation_deg is not None and not math.isfinite(float(rotation_deg)):
-        raise ValueError(f"rotation_deg must be finite, got {rotation_deg!r}")
-    if not (math.isfinite(float(resolution)) and 0.01 <= float(resolution) <= 0.2):
-        raise ValueError(f"resolution must be within [0.01, 0.2] m, got {resolution!r}")
+    _check_args(seed, units, rotation_deg, resolution)
     n_wings = _check_wings(wings, wing_angle_deg, units)
     p = params or SynthParams()
     res = float(resolution)
@@ -161,6 +154,17 @@ def generate_floor(seed: int, *, units: int | None = None, rotation_deg: float |
     return Floor(image=classes_to_image(classes), classes=classes, resolution=res, truth=truth,
                  truth_labels=np.ascontiguousarray(labels, dtype=np.uint16),
                  poses_px=poses - np.array([c0, r0]) if len(poses) else poses)
+
+
+def _check_args(seed, units, rotation_deg, resolution) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if units is not None and not (2 <= int(units) <= MAX_UNITS):
+        raise ValueError(f"units must be between 2 and {MAX_UNITS}, got {units!r}")
+    if rotation_deg is not None and not math.isfinite(float(rotation_deg)):
+        raise ValueError(f"rotation_deg must be finite, got {rotation_deg!r}")
+    if not (math.isfinite(float(resolution)) and 0.01 <= float(resolution) <= 0.2):
+        raise ValueError(f"resolution must be within [0.01, 0.2] m, got {resolution!r}")
 
 
 def _check_wings(wings, wing_angle_deg, units) -> int:
