@@ -656,6 +656,19 @@ def _rooms_vs_truth(sm, truth_labels) -> dict:
             "rooms_outside": outside}
 
 
+def _recall_by_wing(truth: dict, matches: dict) -> dict:
+    """A floor of wings' unit recall wing by wing (``"0"``: the link corridors); ``{}`` for a
+    one-wing floor."""
+    if "wings" not in truth:
+        return {}
+    found = set(matches.values())
+    out = {}
+    for u in truth["units"]:
+        n, k = out.get(str(u["wing"]), (0, 0))
+        out[str(u["wing"])] = (n + 1, k + (u["id"] in found))
+    return {"unit_recall_by_wing": {w: round(k / n, 4) for w, (n, k) in sorted(out.items())}}
+
+
 def bench_synthetic(args, model, rules, floors=None) -> dict:
     """The synthetic subset; ``floors``: ``[(group, seed, generate_floor arguments)]`` instead of
     the one-wing floors of seeds ``first_floor ..`` (rows then carry their ``group``)."""
@@ -696,6 +709,7 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "unit_f1_with_exterior": round(sx.unit_f1, 4),
                **_rooms_vs_truth(sm, floor.truth_labels),
+               **_recall_by_wing(floor.truth, sc.matches),
                "observed_units": len(observed_truth(floor.truth)["units"]),
                "type_accuracy_observed": _r4(so.type_accuracy),
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
@@ -1212,6 +1226,9 @@ def bench_synthetic_wings(args, model, rules) -> dict:
         rows = [r for r in out["rows"] if r.get("group") == g]
         if rows:
             groups[g] = {"floors": len(rows), **{k: _mean(rows, k) for k in WING_KEYS}}
+            by_wing = [r["unit_recall_by_wing"] for r in rows if "unit_recall_by_wing" in r]
+            for w in sorted({w for b in by_wing for w in b}):
+                groups[g][f"unit_recall_wing_{w}"] = _mean([b for b in by_wing if w in b], w)
     base = groups.get("manhattan")
     for g, m in groups.items():
         if base is not None and g != "manhattan":

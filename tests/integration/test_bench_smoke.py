@@ -166,3 +166,5 @@ def test_quality_synthetic_wings_scores_a_floor_of_wings_beside_the_manhattan_on
     assert 0 < row["rooms_precision"] <= 1 and 0 < row["rooms_recall"] <= 1
     assert part["groups"]["wings2-30"]["floors"] == 1 and part["seeds"] == [1, 1]
     assert part["groups"]["wings2-30"]["unit_f1"] == row["unit_f1"]
+    assert set(row["unit_recall_by_wing"]) == {"0", "1", "2"}
+    assert all(0 <= v <= 1 for v in row["unit_recall_by_wing"].values())
