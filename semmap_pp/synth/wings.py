@@ -85,8 +85,11 @@ def overlap(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether two convex polygons overlap with positive area (separating axes).
 
     >>> sq = polygon_of([0, 0, 2, 2])
-    >>> overlap(sq, sq + 1.0), overlap(sq, sq + 2.0), overlap(sq, sq @ rot(45.0).T + 2.5)
+    >>> diamond = sq @ rot(45.0).T                    # corners (0, 0), (1.41, -1.41), ...
+    >>> overlap(sq, sq + 1.0), overlap(sq, sq + 2.0), overlap(sq, diamond + 1.0)
     (True, False, True)
+    >>> overlap(sq, diamond + [1.5, 2.9])            # bounding boxes overlap, the shapes do not
+    False
     """
     for poly in (a, b):
         edges = np.roll(poly, -1, axis=0) - poly
