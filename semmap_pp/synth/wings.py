@@ -167,10 +167,10 @@ def _try_pair(rng, a: Part, plan_b, alpha, sa, sb, placed, p, res, margin, wall,
         u = M - rot(phi) @ c_b
         wing = Part(plan_b, (a.angle + phi) % 360.0, tuple(a.site([u])[0]), "wing", wing_b)
         quad = np.array([S - wl / 2 * t, S + wl / 2 * t, sides[1][1], sides[0][1]])
+        # the link 0.5 m short of both walls: each end pulled back along the link's sides
         inner = quad + 0.0
         inner[:2] += cells(0.5, res) * n
-        inner[2:] -= cells(0.5, res) * (inner[2:] - inner[:2]) / np.linalg.norm(
-            inner[2:] - inner[:2], axis=1, keepdims=True)
+        inner[2:] -= cells(0.5, res) * n
         mine = [wing.site(polygon_of(r, wall)) for r in plan_b.rects.tolist()]
         if _clashes(mine, placed) or _clashes([a.site(inner)], placed + [
                 m for j, m in enumerate(mine) if j != ib]):
