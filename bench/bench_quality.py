@@ -1,6 +1,6 @@
 """Quality of the whole pipeline: synthetic truth, real-map CPR, ipa segmentation and typing.
 
-``python bench/run.py quality --json [--subset synthetic|truth|surgery|real|ipa|types|stability|targets|all] [--floors N] [--budget B]``
+``python bench/run.py quality --json [--subset synthetic|synthetic-wings|truth|surgery|real|ipa|types|stability|targets|all] [--floors N] [--budget B]``
 
 Every map goes through :func:`semmap_pp.run.pipeline.run_map` with the model file's defaults (``--budget
 model``), a shorter run (``--budget quick``) or the model's run capped at a number of seconds of
@@ -22,6 +22,12 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   ``--pool K`` runs the floors as maps of K times coarser cells (:func:`pooled_floor`);
   ``--resolution R`` has the generator render them at R metres per cell (the same seeds and
   buildings, scanned onto coarser or finer cells).
+* **synthetic-wings**: floors of wings (``generate_floor(seed, wings=, wing_angle_deg=)``): two
+  wings at 30 and at 45 degrees, three wings at angles drawn from the seed, beside the one-wing
+  floors of the same seeds, each scored as the synthetic subset scores its floors (unit F1, door
+  F1, types, CPR, rooms.png P/R by the ROSE2 protocol); ``groups`` holds each group's means and
+  their difference from the Manhattan floors (:func:`bench_synthetic_wings`). ``--held-out`` runs
+  the seeds from :data:`HELD_OUT_FIRST` on, which no setting was tuned on; ``--maps`` keeps groups.
 * **truth**: the ceiling of the synthetic targets: the same floors with the seen true units as the
   world (:func:`truth_world`, walls aligned by :func:`semmap_pp.sampler.ascent.align_walls`), derived and
   scored as W* is (:func:`bench_truth`); ``--outside-from DIR`` adds the units outside the building
@@ -136,12 +142,14 @@ def _budget(text: str) -> str | float:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all",
-                        choices=["synthetic", "truth", "surgery", "real", "real-gt", "partial", "wings", "ipa", "types", "stability",
+                        choices=["synthetic", "synthetic-wings", "truth", "surgery", "real", "real-gt", "partial", "wings", "ipa", "types", "stability",
                                  "targets", "all"])
     parser.add_argument("--floors", type=int, default=30, help="synthetic floors (seeds 0..N-1)")
     parser.add_argument("--seeds", default="0,1,2",
                         help="sampler seeds of --subset stability, comma-separated (default 0,1,2)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
+    parser.add_argument("--held-out", action="store_true",
+                        help=f"synthetic-wings: the held-out seeds ({HELD_OUT_FIRST} + --first-floor on)")
     parser.add_argument("--furniture", action="store_true",
                         help="ipa: the plans with furniture drawn in (NAME_furnitures.png), same truth")
     parser.add_argument("--resolution", type=float, default=0.05,
@@ -584,12 +592,13 @@ def pooled_floor(floor, k: int):
                                resolution=floor.resolution * k, truth=truth, poses_px=floor.poses_px / k)
 
 
-def _floor(seed: int, model, rules, pool: int = 1, resolution: float = 0.05):
+def _floor(seed: int, model, rules, pool: int = 1, resolution: float = 0.05, **kind):
     """Synthetic floor ``seed`` rendered at ``resolution`` (then pooled ``pool`` x ``pool``), its
-    grid and the pipeline's inputs for it (default ROI)."""
+    grid and the pipeline's inputs for it (default ROI); ``kind``: more arguments of
+    ``generate_floor`` (``wings``, ``wing_angle_deg``)."""
     from semmap_pp.grid import OccupancyGrid
     from semmap_pp.synth import generate_floor
-    floor = pooled_floor(generate_floor(seed, resolution=resolution), pool)
+    floor = pooled_floor(generate_floor(seed, resolution=resolution, **kind), pool)
     grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32), floor.resolution,
                          source=Path(f"synth-{seed}"))
     return floor, grid, _inputs_from_grid(grid, model, rules)
@@ -647,16 +656,35 @@ def _rooms_vs_truth(sm, truth_labels) -> dict:
             "rooms_outside": outside}
 
 
-def bench_synthetic(args, model, rules) -> dict:
+def _recall_by_wing(truth: dict, matches: dict) -> dict:
+    """A floor of wings' unit recall wing by wing (``"0"``: the link corridors); ``{}`` for a
+    one-wing floor."""
+    if "wings" not in truth:
+        return {}
+    found = set(matches.values())
+    out = {}
+    for u in truth["units"]:
+        n, k = out.get(str(u["wing"]), (0, 0))
+        out[str(u["wing"])] = (n + 1, k + (u["id"] in found))
+    return {"unit_recall_by_wing": {w: round(k / n, 4) for w, (n, k) in sorted(out.items())}}
+
+
+def bench_synthetic(args, model, rules, floors=None) -> dict:
+    """The synthetic subset; ``floors``: ``[(group, seed, generate_floor arguments)]`` instead of
+    the one-wing floors of seeds ``first_floor ..`` (rows then carry their ``group``)."""
     from semmap_pp.evaluate import score_world
     from semmap_pp.semantic.world_json import world_dict
     rows = []
     seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
-    for seed in range(args.first_floor, args.first_floor + args.floors):
+    if floors is None:
+        floors = [(None, s, {}) for s in range(args.first_floor, args.first_floor + args.floors)]
+    for group, seed, kind in floors:
         t0 = time.perf_counter()
-        floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution)
+        floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution, **kind)
         settings = _settings(model, args)
-        ran = _run_or_record(args, inputs, settings, rows, {"seed": seed}, f"synth {seed:3d}")
+        label = f"synth {seed:3d}" if group is None else f"{group} {seed:3d}"
+        ran = _run_or_record(args, inputs, settings, rows, {"seed": seed} | (
+            {} if group is None else {"group": group}), label)
         if ran is None:
             continue
         run, clock = ran
@@ -670,7 +698,7 @@ def bench_synthetic(args, model, rules) -> dict:
             for e in pred.get("exterior", [])])
         sx = score_world(with_ext, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
         dp, dr = sc.door_precision, sc.door_recall
-        row = {"seed": seed, "rotation": round(float(floor.truth.get("rotation_deg", math.nan)), 1)
+        row = {"seed": seed, **({} if group is None else {"group": group}), "rotation": round(float(floor.truth.get("rotation_deg", math.nan)), 1)
                if isinstance(floor.truth.get("rotation_deg"), (int, float)) else None,
                "shape": list(floor.classes.shape), "true_units": len(floor.truth["units"]),
                "units": len(sm.unit_ids), "exterior": len(sm.exterior_ids),
@@ -681,6 +709,7 @@ def bench_synthetic(args, model, rules) -> dict:
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "unit_f1_with_exterior": round(sx.unit_f1, 4),
                **_rooms_vs_truth(sm, floor.truth_labels),
+               **_recall_by_wing(floor.truth, sc.matches),
                "observed_units": len(observed_truth(floor.truth)["units"]),
                "type_accuracy_observed": _r4(so.type_accuracy),
                "errors": error_breakdown(pred, floor.truth, floor.classes.shape),
@@ -690,8 +719,8 @@ def bench_synthetic(args, model, rules) -> dict:
         rows.append(row)
         for k, v in seen_by_class(pred, floor.truth, sc.matches).items():
             seen.setdefault(k, []).extend(v)
-        _save(args, f"synth-{seed}", sm)
-        _log(args, f"synth {seed:3d}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} (building {row['cpr_building']})  "
+        _save(args, f"synth-{seed}" if group is None else f"{group}-{seed}", sm)
+        _log(args, f"{label}: {row['units']:3d}/{row['true_units']:3d} units  CPR {row['cpr']:.3f} (building {row['cpr_building']})  "
                    f"F1 {row['unit_f1']:.3f} (seen {row['unit_f1_observed']:.3f}, either L {row['unit_f1_either_l']:.3f}, visible {row['unit_f1_visible']:.3f})  types {row['type_accuracy']}  "
                    f"doors {row['door_f1']} (seen {row['door_f1_observed']}, visible {row['door_f1_visible']})  "
                    f"{row['seconds']} s")
@@ -1174,6 +1203,46 @@ def bench_wings(args, model, rules) -> dict:
             "protocol": "ROSE2 on the plan's free cells: truth rooms = labels > 200 cells"}
 
 
+#: the groups of ``--subset synthetic-wings``: name -> ``generate_floor`` arguments
+WING_GROUPS = {"manhattan": {}, "wings2-30": {"wings": 2, "wing_angle_deg": 30.0},
+               "wings2-45": {"wings": 2, "wing_angle_deg": 45.0}, "wings3-drawn": {"wings": 3}}
+#: seeds from here on are held out: no setting of the model or the generator was tuned on them
+HELD_OUT_FIRST = 1000
+WING_KEYS = ("unit_f1", "door_f1", "type_accuracy", "cpr", "cpr_building", "unit_f1_visible",
+             "rooms_precision", "rooms_recall", "seconds")
+
+
+def bench_synthetic_wings(args, model, rules) -> dict:
+    """Floors of wings (:data:`WING_GROUPS`: two wings at 30 and at 45 degrees, three at angles
+    drawn from the seed) beside the one-wing floors of the same seeds, scored as the synthetic
+    subset scores its floors; means per group and each group's difference from the Manhattan
+    floors. ``--held-out`` takes the seeds from :data:`HELD_OUT_FIRST` on."""
+    first = HELD_OUT_FIRST + args.first_floor if args.held_out else args.first_floor
+    floors = [(g, seed, kind) for g, kind in WING_GROUPS.items() if _keep(g, args)
+              for seed in range(first, first + args.floors)]
+    out = bench_synthetic(args, model, rules, floors)
+    groups = {}
+    for g in WING_GROUPS:
+        rows = [r for r in out["rows"] if r.get("group") == g]
+        if rows:
+            groups[g] = {"floors": len(rows), **{k: _mean(rows, k) for k in WING_KEYS}}
+            by_wing = [r["unit_recall_by_wing"] for r in rows if "unit_recall_by_wing" in r]
+            for w in sorted({w for b in by_wing for w in b}):
+                groups[g][f"unit_recall_wing_{w}"] = _mean([b for b in by_wing if w in b], w)
+    base = groups.get("manhattan")
+    for g, m in groups.items():
+        if base is not None and g != "manhattan":
+            m["minus_manhattan"] = {k: round(m[k] - base[k], 4) for k in WING_KEYS[:-1]
+                                    if m[k] is not None and base[k] is not None}
+        _log(args, f"{g}: {m['floors']} floors  unit F1 {m['unit_f1']}  door F1 {m['door_f1']}  "
+                   f"types {m['type_accuracy']}  CPR {m['cpr']}  rooms P {m['rooms_precision']} "
+                   f"R {m['rooms_recall']}")
+    out["groups"] = groups
+    out["seeds"] = [first, first + args.floors - 1]
+    out["held_out"] = bool(args.held_out)
+    return out
+
+
 TYPE_MAPS = [("Fr52_original.png", "training_Fr52.png"), ("NLB_original.png", "training_NLB_furniture.png"),
              ("lab_c_furnitures_original.png", "training_lab_c_furnitures.png"),
              ("lab_d_furnitures_original.png", "training_lab_d_furniture.png"),
@@ -1238,7 +1307,7 @@ def run(args) -> dict:
            "published": PUBLISHED, "targets": TARGETS}
     subsets = {"all": ["synthetic", "real", "ipa", "types"],
                "targets": ["synthetic", "truth", "real"]}.get(args.subset, [args.subset])
-    fns = {"synthetic": bench_synthetic, "truth": bench_truth, "surgery": bench_surgery,
+    fns = {"synthetic": bench_synthetic, "synthetic-wings": bench_synthetic_wings, "truth": bench_truth, "surgery": bench_surgery,
            "real": bench_real, "real-gt": bench_real_gt, "partial": bench_partial, "wings": bench_wings, "ipa": bench_ipa, "types": bench_types, "stability": bench_stability}
     for name in subsets:
         t0 = time.perf_counter()

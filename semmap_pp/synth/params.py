@@ -98,3 +98,7 @@ class SynthParams:
     max_outside: float = 4.0          # rays beyond this distance from the building are cropped
     p_axis_aligned: float = 0.35      # rotation 0 when none is given
     p_right_angle: float = 0.15       # rotation 90 / 180 / 270 when none is given
+
+    # --- wings (generate_floor(wings=K), K >= 2) ----------------------------------------------
+    wing_angle_min: float = 15.0      # angle of a wing against the one before, when none is given
+    wing_angle_max: float = 75.0

@@ -154,3 +154,17 @@ def test_quality_wings_scores_rooms_png_against_the_drawn_truth_of_each_plan(cap
     assert row["map"] == "wing30" and row["true_rooms"] == 17
     assert 0 < row["precision"] <= 1 and 0 < row["recall"] <= 1
     assert 0 <= row["exterior_inside"] <= row["exterior_units"]
+
+
+def test_quality_synthetic_wings_scores_a_floor_of_wings_beside_the_manhattan_ones(capsys, monkeypatch):
+    result = bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "synthetic-wings",
+                   "--maps", "wings2-30")
+    part = result["synthetic-wings"]
+    (row,) = part["rows"]
+    assert row["group"] == "wings2-30" and row["seed"] == 1 and row["true_units"] >= 7
+    assert 0 < row["cpr"] <= 1 and 0 <= row["unit_f1"] <= 1
+    assert 0 < row["rooms_precision"] <= 1 and 0 < row["rooms_recall"] <= 1
+    assert part["groups"]["wings2-30"]["floors"] == 1 and part["seeds"] == [1, 1]
+    assert part["groups"]["wings2-30"]["unit_f1"] == row["unit_f1"]
+    assert set(row["unit_recall_by_wing"]) == {"0", "1", "2"}
+    assert all(0 <= v <= 1 for v in row["unit_recall_by_wing"].values())
