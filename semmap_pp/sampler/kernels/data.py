@@ -202,12 +202,10 @@ def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int):
     h, w = occ.shape
     hlines, hdoors, hdoor_mask = _lines_and_doors(occ, free, line_min, door_min, door_max)
     vlines, vdoors, vdoor_mask = _lines_and_doors(occ.T, free.T, line_min, door_min, door_max)
-    hmask = (occ | hdoor_mask).astype(np.int32)
-    vmask = (occ.T | vdoor_mask).astype(np.int32)
-    hcum = np.zeros((h, w + 1), np.int32)
-    np.cumsum(hmask, axis=1, out=hcum[:, 1:])
+    hcum = np.zeros((h, w + 1), np.int32)     # the masks summed as bool into int32: no int32 copies
+    np.cumsum(occ | hdoor_mask, axis=1, out=hcum[:, 1:])
     vcum = np.zeros((w, h + 1), np.int32)
-    np.cumsum(vmask, axis=1, out=vcum[:, 1:])
+    np.cumsum(occ.T | vdoor_mask, axis=1, out=vcum[:, 1:])
 
     def tag(a, axis):
         return np.column_stack([np.full(len(a), axis), a]) if len(a) else np.zeros((0, 4), int)
@@ -216,14 +214,67 @@ def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int):
     return hcum, vcum, wall_lines, doors
 
 
+#: Side of the tiles :func:`dt_maxima` works on, cells.
+DT_TILE = 512
+#: Its first halo beyond the maximum filter's reach, cells (doubled until the distances are exact).
+DT_HALO = 64
+
+
+def _tile_maxima(free, box, m: int, t: int):
+    """:func:`dt_maxima` of the cells of ``box`` ``(r0, c0, r1, c1)``, from a crop of ``free``
+    around it: rows, columns (in the lattice) and distances."""
+    h, w = free.shape
+    r0, c0, r1, c1 = box
+    halo = m + DT_HALO
+    while True:
+        a0, b0, a1, b1 = max(r0 - halo, 0), max(c0 - halo, 0), min(r1 + halo, h), min(c1 + halo, w)
+        crop = free[a0:a1, b0:b1]
+        dt = ndimage.distance_transform_edt(crop)
+        whole = (a0, b0, a1, b1) == (0, 0, h, w)
+        # a cell's distance in the crop is the lattice's when it is at most the cell's distance to
+        # the crop's border inside the lattice: every cell the filter reads lies halo - m from it
+        near = dt[max(r0 - m, 0) - a0:min(r1 + m, h) - a0, max(c0 - m, 0) - b0:min(c1 + m, w) - b0]
+        if whole or ((~crop).any() and near.max() <= halo - m):
+            break
+        halo *= 2
+    inner = (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
+    top = ndimage.maximum_filter(dt, size=2 * m + 1)[inner]
+    dt = dt[inner]
+    rr, cc = np.nonzero((dt == top) & (dt >= max(1.0, t)))
+    return rr + r0, cc + c0, dt[rr, cc]
+
+
+def dt_maxima(free: np.ndarray, m: int, t: int):
+    """The maxima of the free space's distance transform: the cells whose distance (at least
+    ``max(1, t)``) is the largest within the ``2m+1`` square around them; their rows, columns in
+    row-major order and distances. The same cells and values as the transform and its maximum
+    filter over the whole lattice, computed tile by tile (:data:`DT_TILE`) on the tiles that hold
+    free cells, each from a crop around it large enough for exact distances: a campus floor's
+    lattice is mostly unknown canvas, and the whole lattice's float64 transform and filter were
+    16 bytes per cell beside scipy's int32 feature transform."""
+    h, w = free.shape
+    rows, cols, dist = [], [], []
+    for r0 in range(0, h, DT_TILE):
+        for c0 in range(0, w, DT_TILE):
+            box = (r0, c0, min(r0 + DT_TILE, h), min(c0 + DT_TILE, w))
+            if free[box[0]:box[2], box[1]:box[3]].any():
+                r, c, d = _tile_maxima(free, box, m, t)
+                rows.append(r)
+                cols.append(c)
+                dist.append(d)
+    if not rows:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
+    rows, cols, dist = np.concatenate(rows), np.concatenate(cols), np.concatenate(dist)
+    order = np.lexsort((cols, rows))
+    return rows[order], cols[order], dist[order]
+
+
 def _birth_boxes(free, up, down, left, right, m: int, t: int, big: int, max_candidates: int):
     """Birth candidates: the free box around each distance-transform maximum and each region
     centre (at most ``max_candidates``, sides within ``[m, big]``); and the maxima's rows and
     columns."""
-    dt = ndimage.distance_transform_edt(free)
-    peak = (dt == ndimage.maximum_filter(dt, size=2 * m + 1)) & (dt >= max(1.0, t))
-    pr, pc = np.nonzero(peak)
-    order = np.argsort(-dt[pr, pc], kind="stable")
+    pr, pc, peak_dt = dt_maxima(free, m, t)
+    order = np.argsort(-peak_dt, kind="stable")
     pr, pc = pr[order], pc[order]
     seeds = list(zip(pr.tolist(), pc.tolist()))
     labels, n_regions = ndimage.label(free)
