@@ -25,7 +25,7 @@ from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
 from semmap_pp.outputs.types_layer import write_types_layer
 from semmap_pp.sampler.diagnostics import to_datatree, write_trace
-from semmap_pp.sampler.spread import cell_probabilities
+from semmap_pp.sampler.spread import accumulate
 from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
 
@@ -151,19 +151,29 @@ def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=
     return WstarFiles(written, doc, pngs, regions, region_img)
 
 
-class _ImageChannels:
-    """``(k, H, W)`` lattice channels seen as image channels, each resampled
-    (:meth:`~semmap_pp.lattice.frame.Frame.to_image`, fill 0) only when asked for: one channel's
-    image at a time, not a stack of all of them (four float64 images of the input's size)."""
+class _SpreadImages:
+    """Per-cell p(wall) and p(type) of typed ``worlds`` in the input image's frame, from their counts
+    on the lattice box they lie in (:func:`~semmap_pp.sampler.spread.accumulate`), each image made
+    (:meth:`~semmap_pp.lattice.frame.Frame.box_to_image`, 0 outside the box) only when asked for:
+    one at a time, and no lattice-sized float64 array (:func:`~semmap_pp.sampler.spread.cell_probabilities`'s
+    values, resampled as ``to_image`` resamples them)."""
 
-    def __init__(self, frame, channels: np.ndarray):
-        self.frame, self.channels = frame, channels
+    def __init__(self, frame, worlds: list):
+        self.frame = frame
+        self.acc, self.box = accumulate(worlds, frame.shape, frame.cells.wall)
+        self.n = max(self.acc.n, 1)
+
+    def _image(self, counts: np.ndarray) -> np.ndarray:
+        return self.frame.box_to_image(counts / self.n, self.box, fill=0.0)
+
+    def wall(self) -> np.ndarray:
+        return self._image(self.acc.wall)
 
     def __len__(self) -> int:
-        return len(self.channels)
+        return len(self.acc.types)
 
     def __getitem__(self, k: int) -> np.ndarray:
-        return self.frame.to_image(self.channels[k], fill=0.0)
+        return self._image(self.acc.types[k])
 
 
 def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
@@ -174,13 +184,12 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     sm = run.semantic
     written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
         wstar.regions, wstar.region_img
-    p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
+    images = _SpreadImages(sm.frame, worlds)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
-    cells_png = fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0), _ImageChannels(sm.frame, p_type),
-                                        len(worlds), ess)
-    del p_wall, p_type   # lattice-sized float64: not kept through the other figures
+    cells_png = fig.posterior_cells_png(sm, images.wall(), images, len(worlds), ess)
+    del images   # the counts: not kept through the other figures
     pngs |= {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png}
     for name in ("posterior", "posterior_cells"):
         atomic.write_bytes(out / f"{name}.png", pngs[name])
