@@ -1,0 +1,93 @@
+"""Read-only arrays a run shares with its chains' processes instead of copying them.
+
+The lattice-sized tables of a run (the kernels' line prefix sums and free-run lengths, the
+likelihood's codes and prefix sums: 40 bytes per lattice cell) are built once in the main process,
+then written as ``.npy`` files into the run's temporary folder and mapped into memory read-only
+(:func:`share`). A mapped array pickles as its file's path, so a chain's process (started by
+``pm.sample``, which pickles the step and the target's factory) maps the same file instead of
+receiving a copy, and every process holds in memory only the pages it reads: those of the cells
+near the units, not the unknown canvas around a campus floor's known band. The values, dtypes and
+shapes are those of the arrays given: nothing a kernel or the likelihood computes changes.
+
+>>> import tempfile
+>>> folder = tempfile.mkdtemp()
+>>> a = share(np.arange(6, dtype=np.int32).reshape(2, 3), folder)
+>>> type(a).__name__, a.dtype.name, a.flags.writeable, a[1].tolist()
+('SharedArray', 'int32', False, [3, 4, 5])
+>>> import pickle
+>>> b = pickle.loads(pickle.dumps(a))         # a path travels, not the values
+>>> len(pickle.dumps(a)) < 200, b.tolist() == a.tolist(), share(a, folder) is a
+(True, True, True)
+>>> type(pickle.loads(pickle.dumps(a[:, 1:]))).__name__   # a view is pickled as an ordinary copy
+'ndarray'
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import os
+import shutil
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+_COUNTER = itertools.count()
+
+
+class SharedArray(np.ndarray):
+    """A read-only array mapped from a ``.npy`` file; pickled as the file's path (see the module).
+
+    Views and results of it are ordinary arrays when pickled (their values are copied)."""
+
+    _path: str | None = None
+
+    def __array_finalize__(self, obj) -> None:
+        self._path = None
+
+    def __reduce__(self):
+        if self._path is None or not os.path.exists(self._path):
+            return np.asarray(self).copy().__reduce__()
+        return (open_shared, (self._path,))
+
+
+def open_shared(path: str) -> SharedArray:
+    """The array of the ``.npy`` file ``path``, mapped into memory read-only."""
+    view = np.asarray(np.load(path, mmap_mode="r")).view(SharedArray)
+    view._path = str(path)
+    return view
+
+
+def share(array: np.ndarray, folder: str | os.PathLike) -> np.ndarray:
+    """``array`` written into ``folder`` and mapped from there (:class:`SharedArray`); an array
+    already mapped from a file of ``folder`` is returned as it is."""
+    folder = Path(folder)
+    if isinstance(array, SharedArray) and array._path is not None and Path(array._path).parent == folder:
+        return array
+    path = folder / f"{os.getpid()}-{next(_COUNTER)}.npy"
+    np.save(path, np.ascontiguousarray(array), allow_pickle=False)
+    return open_shared(str(path))
+
+
+def share_fields(obj, names, folder: str | os.PathLike):
+    """A copy of ``obj`` (a NamedTuple or a dataclass) with its arrays ``names`` shared (:func:`share`)."""
+    new = {name: share(getattr(obj, name), folder) for name in names}
+    if dataclasses.is_dataclass(obj):
+        return dataclasses.replace(obj, **new)
+    return obj._replace(**new)
+
+
+@contextmanager
+def shared_folder():
+    """A temporary folder for a run's shared arrays, removed when the run ends (the processes that
+    mapped a file keep it until they unmap it; the run's chains have all ended by then)."""
+    path = tempfile.mkdtemp(prefix="semmap-arrays-")
+    try:
+        yield path
+    finally:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+__all__ = ["SharedArray", "open_shared", "share", "share_fields", "shared_folder"]
