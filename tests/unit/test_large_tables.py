@@ -1,0 +1,150 @@
+"""Large maps' tables computed per tile and shared with the chains' processes give what the whole
+lattice's computation gave (semmap_pp/sampler/kernels/data.py, semmap_pp/run/shared.py)."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from semmap_pp.run import shared
+from semmap_pp.sampler.kernels import data as kd
+
+
+def whole_lattice_maxima(free, m, t):
+    """The maxima as computed before: the transform and its maximum filter over the whole lattice."""
+    dt = ndimage.distance_transform_edt(free)
+    peak = (dt == ndimage.maximum_filter(dt, size=2 * m + 1)) & (dt >= max(1.0, t))
+    pr, pc = np.nonzero(peak)
+    return pr, pc, dt[pr, pc]
+
+
+def random_free(rng, h, w):
+    """Free rectangles of several sizes on an unknown lattice, with a few blocked cells."""
+    free = np.zeros((h, w), bool)
+    for _ in range(rng.integers(1, 12)):
+        r0, c0 = rng.integers(0, h), rng.integers(0, w)
+        free[r0:r0 + rng.integers(1, h), c0:c0 + rng.integers(1, w)] = True
+    free[rng.random((h, w)) < rng.choice([0.0, 0.01, 0.1])] = False
+    return free
+
+
+@pytest.mark.parametrize("seed", range(40))
+@pytest.mark.parametrize("tile,halo", [(16, 1), (7, 0), (512, 64)])
+def test_tiled_maxima_equal_the_whole_lattice(monkeypatch, seed, tile, halo):
+    rng = np.random.default_rng(seed)
+    monkeypatch.setattr(kd, "DT_TILE", tile)
+    monkeypatch.setattr(kd, "DT_HALO", halo)
+    free = random_free(rng, int(rng.integers(5, 90)), int(rng.integers(5, 90)))
+    m, t = int(rng.integers(1, 6)), int(rng.integers(1, 3))
+    want = whole_lattice_maxima(free, m, t)
+    got = kd.dt_maxima(free, m, t)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_tiled_maxima_of_all_free_and_no_free_lattices(monkeypatch):
+    monkeypatch.setattr(kd, "DT_TILE", 8)
+    for free in (np.ones((20, 30), bool), np.zeros((20, 30), bool)):
+        for a, b in zip(kd.dt_maxima(free, 2, 1), whole_lattice_maxima(free, 2, 1)):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_a_shared_array_keeps_its_values_and_travels_as_its_path(tmp_path):
+    a = np.random.default_rng(0).integers(-5, 5000, (300, 200)).astype(np.int32)
+    s = shared.share(a, tmp_path)
+    assert isinstance(s, shared.SharedArray) and s.dtype == a.dtype and not s.flags.writeable
+    np.testing.assert_array_equal(s, a)
+    blob = pickle.dumps(s)
+    assert len(blob) < 1000                       # the path, not 240 kB of values
+    back = pickle.loads(blob)
+    np.testing.assert_array_equal(back, a)
+    assert Path(back._path) == Path(s._path)
+    assert shared.share(s, tmp_path) is s         # already in the folder: not written again
+    again = shared.share(s, tmp_path / "other") if (tmp_path / "other").mkdir() is None else None
+    assert Path(again._path).parent == tmp_path / "other"
+
+
+def test_a_shared_array_whose_file_is_gone_pickles_its_values(tmp_path):
+    with shared.shared_folder() as folder:
+        s = shared.share(np.arange(10), folder)
+    assert not Path(s._path).exists()
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(s)), np.arange(10))
+
+
+def test_shared_kernel_data_give_the_same_proposals(tmp_path):
+    from semmap_pp import cells
+    from semmap_pp.run.pipeline import KERNEL_TABLES
+    from semmap_pp.sampler.kernels import build_data
+
+    rng = np.random.default_rng(3)
+    classes = np.full((40, 50), cells.FREE, np.uint8)
+    classes[rng.random(classes.shape) < 0.05] = cells.OCCUPIED
+    classes[::10, :] = cells.OCCUPIED
+    data = build_data(classes, min_side=3, wall_cells=1)
+    mapped = shared.share_fields(data, KERNEL_TABLES, tmp_path)
+    back = pickle.loads(pickle.dumps(mapped))
+    for name in data._fields:
+        a, b = getattr(data, name), getattr(back, name)
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+    assert all(isinstance(getattr(back, n), shared.SharedArray) for n in KERNEL_TABLES)
+
+
+def random_frame(rng, theta_deg):
+    """A frame of a random map: a known block in an unknown canvas, at ``theta_deg``."""
+    import math
+
+    from semmap_pp import cells
+    from semmap_pp.lattice.frame import build_frame_from_classes
+    from semmap_pp.model import load_model
+
+    h, w = int(rng.integers(60, 140)), int(rng.integers(60, 140))
+    img = np.full((h, w), cells.UNKNOWN, np.uint8)
+    r0, c0 = int(rng.integers(0, h // 2)), int(rng.integers(0, w // 2))
+    img[r0:r0 + h // 3, c0:c0 + w // 3] = cells.FREE
+    img[r0, c0:c0 + w // 3] = cells.OCCUPIED
+    return build_frame_from_classes(img, 0.05, load_model(), theta=math.radians(theta_deg))
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("theta_deg", [0.0, 5.0, 33.0])
+def test_a_box_resampled_is_the_lattice_array_resampled(seed, theta_deg):
+    rng = np.random.default_rng(seed)
+    f = random_frame(rng, theta_deg)
+    h, w = f.shape
+    r0, c0 = int(rng.integers(0, h)), int(rng.integers(0, w))
+    r1, c1 = int(rng.integers(r0, h + 1)), int(rng.integers(c0, w + 1))
+    part = rng.random((r1 - r0, c1 - c0))
+    whole = np.zeros(f.shape)
+    whole[r0:r1, c0:c1] = part
+    np.testing.assert_array_equal(f.box_to_image(part, (r0, c0, r1, c1), fill=0.0), f.to_image(whole, fill=0.0))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_spread_images_equal_the_lattice_probabilities_resampled(seed):
+    from semmap_pp import world as wm
+    from semmap_pp.outputs.write import _SpreadImages
+    from semmap_pp.sampler.spread import cell_probabilities
+
+    rng = np.random.default_rng(seed)
+    f = random_frame(rng, float(rng.choice([0.0, 7.0])))
+    h, w = f.shape
+    worlds = []
+    for _ in range(int(rng.integers(0, 5))):
+        world = wm.empty(4)
+        for slot in range(int(rng.integers(1, 4))):
+            r0, c0 = int(rng.integers(0, h - 8)), int(rng.integers(0, w - 8))
+            rect = (r0, c0, r0 + int(rng.integers(6, 20)), c0 + int(rng.integers(6, 20)))
+            world = wm.add(world, slot, rect, type_index=int(rng.integers(0, 4)))
+        worlds += [world] * int(rng.integers(1, 3))
+    p_wall, p_type = cell_probabilities(f.shape, worlds, f.cells.wall)
+    images = _SpreadImages(f, worlds)
+    np.testing.assert_array_equal(images.wall(), f.to_image(p_wall, fill=0.0))
+    assert len(images) == len(p_type)
+    for k in range(len(p_type)):
+        np.testing.assert_array_equal(images[k], f.to_image(p_type[k], fill=0.0))
