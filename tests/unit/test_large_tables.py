@@ -125,10 +125,10 @@ def test_a_box_resampled_is_the_lattice_array_resampled(seed, theta_deg):
     np.testing.assert_array_equal(f.box_to_image(part, (r0, c0, r1, c1), fill=0.0), f.to_image(whole, fill=0.0))
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_spread_images_equal_the_lattice_probabilities_resampled(seed):
+@pytest.mark.parametrize("seed", range(8))
+def test_spread_panels_equal_the_lattice_probabilities_resampled(seed):
     from semmap_pp import world as wm
-    from semmap_pp.outputs.write import _SpreadImages
+    from semmap_pp.outputs.write import SpreadImages
     from semmap_pp.sampler.spread import cell_probabilities
 
     rng = np.random.default_rng(seed)
@@ -143,8 +143,30 @@ def test_spread_images_equal_the_lattice_probabilities_resampled(seed):
             world = wm.add(world, slot, rect, type_index=int(rng.integers(0, 4)))
         worlds += [world] * int(rng.integers(1, 3))
     p_wall, p_type = cell_probabilities(f.shape, worlds, f.cells.wall)
-    images = _SpreadImages(f, worlds)
-    np.testing.assert_array_equal(images.wall(), f.to_image(p_wall, fill=0.0))
-    assert len(images) == len(p_type)
-    for k in range(len(p_type)):
-        np.testing.assert_array_equal(images[k], f.to_image(p_type[k], fill=0.0))
+    images = SpreadImages(f, worlds)
+    ih, iw = f.image_shape
+    y0, x0 = int(rng.integers(0, ih // 2)), int(rng.integers(0, iw // 2))
+    box = (y0, int(rng.integers(y0 + 1, ih + 1)), x0, int(rng.integers(x0 + 1, iw + 1)))
+    for block, step in ((1, 1), (3, 1), (4, 3), (7, 2)):
+        crop = f.to_image(p_wall, fill=0.0)[box[0]:box[1], box[2]:box[3]]
+        want = ndimage.maximum_filter(crop, size=block) if block > 1 else crop
+        np.testing.assert_array_equal(images.wall_panel(box, block, step), want[::step, ::step])
+        for k in range(len(p_type)):
+            want = f.to_image(p_type[k], fill=0.0)[box[0]:box[1], box[2]:box[3]][::step, ::step]
+            np.testing.assert_array_equal(images.type_panel(k, box, step), want)
+
+
+def test_wall_panel_bands_match_one_filter(monkeypatch):
+    from semmap_pp import world as wm
+    from semmap_pp.outputs import write
+    from semmap_pp.sampler.spread import cell_probabilities
+
+    monkeypatch.setattr(write, "PANEL_BAND_ROWS", 3)    # many bands, each with its margin
+    f = random_frame(np.random.default_rng(1), 7.0)
+    world = wm.add(wm.empty(2), 0, (5, 5, 40, 30), type_index=1)
+    worlds = [world, wm.add(world, 1, (10, 28, 30, 50), type_index=0)]
+    p_wall, _ = cell_probabilities(f.shape, worlds, f.cells.wall)
+    ih, iw = f.image_shape
+    for block, step in ((5, 1), (6, 2), (9, 4)):
+        want = ndimage.maximum_filter(f.to_image(p_wall, fill=0.0), size=block)[::step, ::step]
+        np.testing.assert_array_equal(write.SpreadImages(f, worlds).wall_panel((0, ih, 0, iw), block, step), want)
