@@ -16,6 +16,7 @@ Rules are read once, at the start: a rule file edited while a run is going does 
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -25,7 +26,7 @@ from semmap_pp import world as wm
 from semmap_pp.run.inputs import Inputs
 from semmap_pp.run.lattice_cpr import LatticeCPR
 from semmap_pp.run.results import MapRun, RunSettings, collect_draws
-from semmap_pp.run.shared import share_fields, shared_folder
+from semmap_pp.run.shared import share, share_fields, shared_folder
 from semmap_pp.run.spread import sample_around
 from semmap_pp.run.target_factory import TargetFactory, run_target
 from semmap_pp.sampler.ascent import polish, refine_world
@@ -178,7 +179,8 @@ def shared_tables(inputs: Inputs, folder) -> tuple:
     """The run's kernel data and target factory, their lattice-sized tables mapped from files of
     ``folder`` (:mod:`semmap_pp.run.shared`): the same values, held once for all processes."""
     frame, model = inputs.frame, inputs.model
-    data = share_fields(data_from_frame(frame, model.kernels), KERNEL_TABLES, folder)
+    data = share_fields(data_from_frame(frame, model.kernels, store=functools.partial(share, folder=folder)),
+                        KERNEL_TABLES, folder)
     likelihood = share_fields(prepare(frame, model), LIKELIHOOD_TABLES, folder)
     remember(frame, model, likelihood)
     return data, TargetFactory(frame, model, inputs.rules, likelihood)

@@ -89,14 +89,19 @@ def _run_back(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def free_runs(free: np.ndarray):
-    """``(up, down, left, right)`` run lengths of free cells from every cell, cell included."""
-    left = _run_back(free)
-    right = _run_back(free[:, ::-1])[:, ::-1]
-    up = _run_back(free.T).T
-    down = _run_back(free.T[:, ::-1])[:, ::-1].T
-    return (np.ascontiguousarray(up), np.ascontiguousarray(down),
-            np.ascontiguousarray(left), np.ascontiguousarray(right))
+def free_runs(free: np.ndarray, store=None):
+    """``(up, down, left, right)`` run lengths of free cells from every cell, cell included; each
+    passed through ``store`` (see :func:`build_data`) as soon as it is made."""
+    store = _keep if store is None else store
+    up = store(np.ascontiguousarray(_run_back(free.T).T))
+    down = store(np.ascontiguousarray(_run_back(free.T[:, ::-1])[:, ::-1].T))
+    left = store(np.ascontiguousarray(_run_back(free)))
+    right = store(np.ascontiguousarray(_run_back(free[:, ::-1])[:, ::-1]))
+    return up, down, left, right
+
+
+def _keep(array: np.ndarray) -> np.ndarray:
+    return array
 
 
 def _lines_and_doors(occ: np.ndarray, free: np.ndarray, line_min: int, door_min: int, door_max: int):
@@ -143,7 +148,7 @@ def _box(r, c, up, down, left, right, t, shape):
 
 def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_share: int = 0,
                max_side: int | None = None, door_min: int = 1, door_max: int = 0,
-               settings: KernelSettings | None = None) -> KernelData:
+               settings: KernelSettings | None = None, store=None) -> KernelData:
     """Build the kernels' data from the lattice class map.
 
     Parameters
@@ -160,6 +165,11 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
     door_min, door_max : int
         Widths of a free gap in a wall that counts as a door candidate (``door_max=0``: none).
     settings : KernelSettings, optional
+    store : callable(array) -> array, optional
+        Each lattice-sized table (line prefix sums, free-run lengths) is passed through it as soon
+        as it is made and the result kept (a run maps them from files it shares with its chains'
+        processes: ``run.shared.share``), so that the tables made so far need not all be held in
+        memory while the next is made. Default: kept as made.
 
     Returns
     -------
@@ -178,9 +188,10 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
     free = classes == cells.FREE
     occ = classes == cells.OCCUPIED
 
-    hcum, vcum, wall_lines, doors = _line_evidence(occ, free, s.wall_line_min, door_min, door_max)
+    store = _keep if store is None else store
+    hcum, vcum, wall_lines, doors = _line_evidence(occ, free, s.wall_line_min, door_min, door_max, store)
 
-    up, down, left, right = free_runs(free)
+    up, down, left, right = free_runs(free, store)
 
     cand, pr, pc = _birth_boxes(free, up, down, left, right, m, t, big, s.max_candidates)
     birth_rects = np.array(cand, np.int64).reshape(-1, 4)
@@ -196,16 +207,21 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
                       birth_weights, (n_rows, n_cols), (cdf_rows, cdf_cols), wall_lines, doors, maxima)
 
 
-def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int):
+def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int, store=_keep):
     """``(hcum, vcum, wall_lines, doors)``: per row and per column the cumulative count of wall or
-    door cells, and the wall lines and door candidates found along both axes."""
+    door cells (each passed through ``store``), and the wall lines and door candidates found along
+    both axes."""
     h, w = occ.shape
     hlines, hdoors, hdoor_mask = _lines_and_doors(occ, free, line_min, door_min, door_max)
-    vlines, vdoors, vdoor_mask = _lines_and_doors(occ.T, free.T, line_min, door_min, door_max)
     hcum = np.zeros((h, w + 1), np.int32)     # the masks summed as bool into int32: no int32 copies
     np.cumsum(occ | hdoor_mask, axis=1, out=hcum[:, 1:])
+    del hdoor_mask
+    hcum = store(hcum)
+    vlines, vdoors, vdoor_mask = _lines_and_doors(occ.T, free.T, line_min, door_min, door_max)
     vcum = np.zeros((w, h + 1), np.int32)
     np.cumsum(occ.T | vdoor_mask, axis=1, out=vcum[:, 1:])
+    del vdoor_mask
+    vcum = store(vcum)
 
     def tag(a, axis):
         return np.column_stack([np.full(len(a), axis), a]) if len(a) else np.zeros((0, 4), int)
@@ -295,12 +311,14 @@ def _birth_boxes(free, up, down, left, right, m: int, t: int, big: int, max_cand
     return cand, pr, pc
 
 
-def data_from_frame(frame, settings: KernelSettings | None = None) -> KernelData:
-    """Kernel data for a :class:`~semmap_pp.lattice.frame.Frame`, sizes from its model cells.
+def data_from_frame(frame, settings: KernelSettings | None = None, store=None) -> KernelData:
+    """Kernel data for a :class:`~semmap_pp.lattice.frame.Frame`, sizes from its model cells
+    (``store``: as :func:`build_data`).
 
     Adjacent units share a wall by overlapping their wall bands (``wall_share = wall``), the
     convention of :mod:`semmap_pp.target.likelihood` (overlapping wall bands cost no overlap penalty).
     """
     c = frame.cells
     return build_data(frame.classes, min_side=c.min_side, max_side=c.max_side, wall_cells=c.wall,
-                      wall_share=c.wall, door_min=c.door_min, door_max=c.door_max, settings=settings)
+                      wall_share=c.wall, door_min=c.door_min, door_max=c.door_max, settings=settings,
+                      store=store)
