@@ -6,7 +6,9 @@ then written as ``.npy`` files into the run's temporary folder and mapped into m
 (:func:`share`). A mapped array pickles as its file's path, so a chain's process (started by
 ``pm.sample``, which pickles the step and the target's factory) maps the same file instead of
 receiving a copy, and every process holds in memory only the pages it reads: those of the cells
-near the units, not the unknown canvas around a campus floor's known band. The values, dtypes and
+near the units, not the unknown canvas around a campus floor's known band (each file is dropped
+from the page cache once written and mapped without read-ahead, so that a process maps the
+pages it reads, not those around them). The values, dtypes and
 shapes are those of the arrays given: nothing a kernel or the likelihood computes changes.
 
 >>> import tempfile
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import mmap
 import os
 import shutil
 import tempfile
@@ -54,10 +57,35 @@ class SharedArray(np.ndarray):
 
 
 def open_shared(path: str) -> SharedArray:
-    """The array of the ``.npy`` file ``path``, mapped into memory read-only."""
-    view = np.asarray(np.load(path, mmap_mode="r")).view(SharedArray)
+    """The array of the ``.npy`` file ``path``, mapped into memory read-only, its pages read one at
+    a time when first touched (``MADV_RANDOM``: no read-ahead of the pages around)."""
+    mapped = np.load(path, mmap_mode="r")
+    advise = getattr(mmap, "MADV_RANDOM", None)
+    if advise is not None and getattr(mapped, "_mmap", None) is not None:
+        try:
+            mapped._mmap.madvise(advise)
+        except (OSError, ValueError):   # a system without it: the same values, more pages resident
+            pass
+    view = np.asarray(mapped).view(SharedArray)
     view._path = str(path)
     return view
+
+
+def _drop_cached(path: Path) -> None:
+    """Write ``path`` to disk and drop it from the page cache: a page a process maps is then read
+    when the process touches it, not mapped with the cached pages around it (the kernel's
+    fault-around: 16 pages a fault, so a column of a table read down its rows mapped every row
+    whole). Where the system cannot, the pages stay cached: the same values."""
+    if not hasattr(os, "posix_fadvise"):
+        return
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+        os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def share(array: np.ndarray, folder: str | os.PathLike) -> np.ndarray:
@@ -68,6 +96,7 @@ def share(array: np.ndarray, folder: str | os.PathLike) -> np.ndarray:
         return array
     path = folder / f"{os.getpid()}-{next(_COUNTER)}.npy"
     np.save(path, np.ascontiguousarray(array), allow_pickle=False)
+    _drop_cached(path)
     return open_shared(str(path))
 
 
