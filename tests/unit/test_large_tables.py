@@ -170,3 +170,39 @@ def test_wall_panel_bands_match_one_filter(monkeypatch):
     for block, step in ((5, 1), (6, 2), (9, 4)):
         want = ndimage.maximum_filter(f.to_image(p_wall, fill=0.0), size=block)[::step, ::step]
         np.testing.assert_array_equal(write.SpreadImages(f, worlds).wall_panel((0, ih, 0, iw), block, step), want)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_tiled_closing_equals_the_whole_map_transforms(monkeypatch, seed):
+    import importlib
+
+    cpr = importlib.import_module("semmap_pp.evaluate.cpr")   # the package's name cpr is a function
+    rng = np.random.default_rng(seed)
+    monkeypatch.setattr(cpr, "CLOSING_TILE", int(rng.integers(3, 25)))
+    h, w = int(rng.integers(5, 80)), int(rng.integers(5, 80))
+    mask = rng.random((h, w)) < rng.choice([0.02, 0.2, 0.6])
+    mask[:, : int(rng.integers(0, w))] = False            # an empty part, tiles without mask cells
+    r = int(rng.integers(1, 6))
+    whole = ndimage.distance_transform_edt(ndimage.distance_transform_edt(~mask) <= r) > r
+    if mask.any() and not (ndimage.distance_transform_edt(~mask) <= r).all():
+        np.testing.assert_array_equal(cpr.closing_disk(mask, r), whole)
+
+
+def test_kernel_data_stored_as_made_are_the_same_tables(tmp_path):
+    import functools
+
+    from semmap_pp import cells
+    from semmap_pp.run.pipeline import KERNEL_TABLES
+    from semmap_pp.sampler.kernels import build_data
+
+    rng = np.random.default_rng(5)
+    classes = rng.choice(np.array([cells.FREE, cells.UNKNOWN, cells.OCCUPIED], np.uint8), (60, 45), p=[.7, .2, .1])
+    kw = dict(min_side=3, wall_cells=1, door_min=1, door_max=4)
+    plain = build_data(classes, **kw)
+    stored = build_data(classes, **kw, store=functools.partial(shared.share, folder=tmp_path))
+    for name in plain._fields:
+        a, b = getattr(plain, name), getattr(stored, name)
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+    assert all(isinstance(getattr(stored, n), shared.SharedArray) for n in KERNEL_TABLES)
