@@ -206,3 +206,28 @@ def test_kernel_data_stored_as_made_are_the_same_tables(tmp_path):
             assert a.dtype == b.dtype
             np.testing.assert_array_equal(a, b)
     assert all(isinstance(getattr(stored, n), shared.SharedArray) for n in KERNEL_TABLES)
+
+
+def test_spread_counts_in_uint16_equal_int32_counts():
+    from semmap_pp import world as wm
+    from semmap_pp.sampler.diagnostics import SpreadAccumulator
+    from semmap_pp.sampler.spread import accumulate, rasterise
+
+    rng = np.random.default_rng(2)
+    worlds = []
+    for _ in range(30):
+        w = wm.empty(3)
+        for slot in range(3):
+            r0, c0 = int(rng.integers(0, 30)), int(rng.integers(0, 30))
+            w = wm.add(w, slot, (r0, c0, r0 + int(rng.integers(4, 12)), c0 + int(rng.integers(4, 12))),
+                       type_index=int(rng.integers(0, 4)))
+        worlds += [w] * int(rng.integers(1, 400))      # counts over 255 per cell
+    acc, box = accumulate(worlds, (50, 50), 1)
+    assert acc.wall.dtype == np.uint16
+    ref = SpreadAccumulator(acc.shape)
+    for w in worlds:
+        ref.add(*rasterise(w, box, 1))
+    assert ref.wall.dtype == np.int32 and acc.n == ref.n
+    np.testing.assert_array_equal(acc.wall, ref.wall)
+    np.testing.assert_array_equal(acc.types, ref.types)
+    np.testing.assert_array_equal(acc.p_wall(), ref.p_wall())
