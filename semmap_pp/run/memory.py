@@ -16,6 +16,7 @@ True
 
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 
@@ -38,6 +39,21 @@ def estimate_peak_bytes(*, lattice_cells: int, image_cells: int, known_cells: in
     """The estimated peak resident set size of ``semmap map`` on a map of these sizes, bytes."""
     return int(BASE_BYTES + PER_LATTICE_CELL * lattice_cells + PER_IMAGE_CELL * image_cells
                + PER_KNOWN_CELL * known_cells)
+
+
+def trim_heap() -> bool:
+    """Give the C heap's free memory back to the system (glibc's ``malloc_trim``); whether it could.
+
+    numpy's arrays under glibc's mmap threshold (which rises to 32 MiB once a larger array is
+    freed) come from the heap, and the heap keeps what they freed: after a campus floor's search
+    about 100 MiB on the middle floor, resident through the outputs that follow. Elsewhere
+    (another C library, no ``libc.so.6``) nothing is done.
+    """
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
 
 
 def machine_memory_bytes() -> int | None:

@@ -25,6 +25,7 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.run.inputs import Inputs
 from semmap_pp.run.lattice_cpr import LatticeCPR
+from semmap_pp.run.memory import trim_heap
 from semmap_pp.run.results import MapRun, RunSettings, collect_draws
 from semmap_pp.run.shared import share, share_fields, shared_folder
 from semmap_pp.run.spread import sample_around
@@ -171,8 +172,10 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     """
 
     with shared_folder() as folder:   # the lattice tables the chains' processes map, not copy
-        return _run_map(inputs, settings, folder, log=log, callback=callback, stop=stop, budget=budget,
-                        resume=resume, starts=starts, base_start=base_start, previous_ids=previous_ids)
+        run = _run_map(inputs, settings, folder, log=log, callback=callback, stop=stop, budget=budget,
+                       resume=resume, starts=starts, base_start=base_start, previous_ids=previous_ids)
+    trim_heap()   # what the search freed, given back before the outputs' images are made
+    return run
 
 
 def shared_tables(inputs: Inputs, folder) -> tuple:
