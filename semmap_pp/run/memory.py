@@ -48,8 +48,8 @@ def trim_heap() -> bool:
     """Give the C heap's free memory back to the system (glibc's ``malloc_trim``); whether it could.
 
     numpy's arrays under glibc's mmap threshold (which rises to 32 MiB once a larger array is
-    freed) come from the heap, and the heap keeps what they freed: after a campus floor's search
-    about 100 MiB on the middle floor, resident through the outputs that follow. Elsewhere
+    freed) come from the heap, and the heap keeps what they freed: after the middle floor's search
+    of docs/benchmarks.md 94 MiB, resident through the outputs that follow. Elsewhere
     (another C library, no ``libc.so.6``) nothing is done.
     """
     try:
