@@ -88,19 +88,27 @@ def _drop_cached(path: Path) -> None:
         os.close(fd)
 
 
-def share(array: np.ndarray, folder: str | os.PathLike) -> np.ndarray:
+def share(array: np.ndarray, folder: str | os.PathLike | None) -> np.ndarray:
     """``array`` written into ``folder`` and mapped from there (:class:`SharedArray`); an array
-    already mapped from a file of ``folder`` is returned as it is."""
+    already mapped from a file of ``folder`` is returned as it is, and so is ``array`` where there
+    is no folder or the file cannot be written (a full disk: the run holds and copies its tables
+    as an ordinary array, with the same values)."""
+    if folder is None:
+        return array
     folder = Path(folder)
     if isinstance(array, SharedArray) and array._path is not None and Path(array._path).parent == folder:
         return array
     path = folder / f"{os.getpid()}-{next(_COUNTER)}.npy"
-    np.save(path, np.ascontiguousarray(array), allow_pickle=False)
-    _drop_cached(path)
-    return open_shared(str(path))
+    try:
+        np.save(path, np.ascontiguousarray(array), allow_pickle=False)
+        _drop_cached(path)
+        return open_shared(str(path))
+    except OSError:
+        path.unlink(missing_ok=True)
+        return array
 
 
-def share_fields(obj, names, folder: str | os.PathLike):
+def share_fields(obj, names, folder: str | os.PathLike | None):
     """A copy of ``obj`` (a NamedTuple or a dataclass) with its arrays ``names`` shared (:func:`share`)."""
     new = {name: share(getattr(obj, name), folder) for name in names}
     if dataclasses.is_dataclass(obj):
@@ -112,7 +120,11 @@ def share_fields(obj, names, folder: str | os.PathLike):
 def shared_folder():
     """A temporary folder for a run's shared arrays, removed when the run ends (the processes that
     mapped a file keep it until they unmap it; the run's chains have all ended by then)."""
-    path = tempfile.mkdtemp(prefix="semmap-arrays-")
+    try:
+        path = tempfile.mkdtemp(prefix="semmap-arrays-")
+    except OSError:          # no temporary folder to write: the tables stay ordinary arrays
+        yield None
+        return
     try:
         yield path
     finally:

@@ -231,3 +231,11 @@ def test_spread_counts_in_uint16_equal_int32_counts():
     np.testing.assert_array_equal(acc.wall, ref.wall)
     np.testing.assert_array_equal(acc.types, ref.types)
     np.testing.assert_array_equal(acc.p_wall(), ref.p_wall())
+
+
+def test_without_a_folder_to_write_the_arrays_stay_ordinary(tmp_path):
+    a = np.arange(12).reshape(3, 4)
+    assert shared.share(a, None) is a
+    missing = tmp_path / "gone"                    # np.save cannot write there
+    assert shared.share(a, missing) is a
+    assert not list(tmp_path.iterdir())
