@@ -8,6 +8,10 @@ Plain mode (stderr is not a terminal, e.g. a log file or the tests) prints one l
 draw (``sampling started``), then one line every ``every`` seconds, each with the latest draw::
 
     progress: chain 1/2 burn-in draw 12/16 | log p -23345.1 | units 10 | CPR 0.853 | T 3.20 | 4.1 s, ~2.0 s left
+
+A chain's first draw slower than :data:`COMPILE_SECONDS` compiled code on first use (numba, once
+after an install or an update of the package; later runs load it from the cache): a plain line
+says so when it ends, and the rich table's caption gives it.
 """
 
 from __future__ import annotations
@@ -15,6 +19,21 @@ from __future__ import annotations
 import math
 import sys
 import time
+
+
+#: A chain's first draw slower than this, seconds, is said to have compiled code on first use.
+COMPILE_SECONDS = 1.0
+
+
+def compile_text(seconds: dict) -> str:
+    """What the progress says of the first draws that compiled code (``seconds``: chain -> s).
+
+    >>> compile_text({0: 7.84, 1: 9.1})
+    'first draw of chain 1 7.8 s, chain 2 9.1 s: compiling code on first use (numba; once after an install or an update, later runs load it from the cache)'
+    """
+    each = ", ".join(f"chain {c + 1} {s:.1f} s" for c, s in sorted(seconds.items()))
+    return (f"first draw of {each}: compiling code on first use (numba; once after an install or an "
+            f"update, later runs load it from the cache)")
 
 
 class Progress:
@@ -56,6 +75,7 @@ class Progress:
         self._first: dict[int, float] = {}     # chain -> elapsed seconds at its first draw
         self._last: dict[int, float] = {}      # chain -> elapsed seconds at its latest draw
         self._count: dict[int, int] = {}       # chain -> draws made
+        self.compiled: dict[int, float] = {}   # chain -> seconds of a first draw that compiled code
         self.t0 = self.clock()
         self._next_line = 0.0
         self._live = None
@@ -102,6 +122,11 @@ class Progress:
             self._first.setdefault(chain, now)
             self._last[chain] = now
             self._count[chain] = self._count.get(chain, 0) + 1
+            slow = self._count[chain] == 1 and info.get("seconds", 0.0) > COMPILE_SECONDS
+            if slow:
+                self.compiled[chain] = info["seconds"]
+                if self.mode == "plain":
+                    print(f"progress: {compile_text({chain: info['seconds']})}", file=self.stream, flush=True)
         self.latest[chain] = info
         if self.mode == "plain":
             if now >= self._next_line:
@@ -132,7 +157,8 @@ class Progress:
         caption = (f"{self.elapsed():.0f} s elapsed, "
                    + ("time left unknown" if not math.isfinite(left) else f"about {left:.0f} s left")
                    + (f" (budget {self.budget:g} s)" if self.budget is not None else "")
-                   + " - Ctrl-C stops and writes what is done")
+                   + " - Ctrl-C stops and writes what is done"
+                   + (f"\n{compile_text(self.compiled)}" if self.compiled else ""))
         table = Table(title="semmap map: sampling", caption=caption)
         for col in ("chain", "phase", "draw", "log posterior", "best", "units", "CPR", "T"):
             table.add_column(col, justify="right")

@@ -143,8 +143,39 @@ def closing_disk(mask: np.ndarray, radius: int) -> np.ndarray:
     r = int(radius)
     if r <= 0 or not m.any():
         return m.copy()
-    dilated = ndi.distance_transform_edt(~m) <= r
-    return ndi.distance_transform_edt(dilated) > r
+    h, w = m.shape
+    out = np.zeros((h, w), dtype=bool)
+    for r0 in range(0, h, CLOSING_TILE):
+        for c0 in range(0, w, CLOSING_TILE):
+            _close_tile(m, r, (r0, c0, min(r0 + CLOSING_TILE, h), min(c0 + CLOSING_TILE, w)), out)
+    return out
+
+
+#: Side of the tiles :func:`closing_disk` works on, cells: its distance transforms are a tile's
+#: and its margin's (float64 and scipy's int32 feature transform: 16 bytes a cell), not the map's.
+CLOSING_TILE = 1024
+
+
+def _close_tile(m: np.ndarray, r: int, tile, out: np.ndarray) -> None:
+    """:func:`closing_disk` of the cells of ``tile`` ``(r0, c0, r1, c1)`` into ``out``. A cell of the
+    dilation needs the mask within ``r`` of it, a cell of the closing the dilation within ``r``:
+    the mask within ``2r`` of the tile decides it (a transform on a crop gives the whole array's
+    distance wherever that distance is within the crop, and a larger one, also over ``r``,
+    where it is not)."""
+    h, w = m.shape
+    r0, c0, r1, c1 = tile
+    a0, b0, a1, b1 = max(r0 - 2 * r, 0), max(c0 - 2 * r, 0), min(r1 + 2 * r, h), min(c1 + 2 * r, w)
+    crop = m[a0:a1, b0:b1]
+    if not crop.any():       # no mask cell near: the tile is outside the dilation, so the closing
+        return
+    dilated = ndi.distance_transform_edt(~crop) <= r
+    d0, e0, d1, e1 = max(r0 - r, 0), max(c0 - r, 0), min(r1 + r, h), min(c1 + r, w)
+    near = dilated[d0 - a0:d1 - a0, e0 - b0:e1 - b0]
+    inner = (slice(r0 - d0, r1 - d0), slice(c0 - e0, c1 - e0))
+    if near.all():           # no cell outside the dilation within r: the whole tile is closed
+        out[r0:r1, c0:c1] = True
+        return
+    out[r0:r1, c0:c1] = (ndi.distance_transform_edt(near) > r)[inner]
 
 
 def default_roi(input_classes: np.ndarray, closing_radius_cells: int) -> np.ndarray:

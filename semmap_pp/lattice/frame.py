@@ -363,31 +363,49 @@ class Frame:
         a = np.asarray(lattice_array)
         if a.shape[:2] != self.classes.shape:
             raise ValueError(f"expected a lattice array of shape {self.classes.shape}, got {a.shape}")
-        if self.theta == 0.0:
-            if self.crop is None:
-                return a.copy()
-            i0, j0 = self.crop[:2]
-            out = np.full(tuple(self.image_shape) + a.shape[2:], fill, dtype=a.dtype)
-            out[i0:i0 + a.shape[0], j0:j0 + a.shape[1]] = a
-            return out
+        if self.theta == 0.0 and self.crop is None:
+            return a.copy()
+        return self.box_to_image(a, (0, 0) + a.shape[:2], fill)
+
+    def box_to_image(self, box_array: np.ndarray, box, fill=0, window=None, step: int = 1) -> np.ndarray:
+        """:meth:`to_image` of an array that covers the lattice box ``(r0, c0, r1, c1)`` only:
+        image pixels whose centre falls outside the box take ``fill`` (the same image as
+        :meth:`to_image` of a lattice array holding ``fill`` outside the box, without one).
+        ``window`` ``(y0, y1, x0, x1)`` and ``step``: only the pixels ``[y0:y1:step, x0:x1:step]``
+        of that image (default: all of it)."""
+        a = np.asarray(box_array)
+        r0, c0, r1, c1 = (int(v) for v in box)
+        if a.shape[:2] != (r1 - r0, c1 - c0):
+            raise ValueError(f"expected an array of the box's shape {(r1 - r0, c1 - c0)}, got {a.shape}")
         h, w = self.image_shape
-        hl, wl = a.shape[:2]
-        out = np.full((h, w) + a.shape[2:], fill, dtype=a.dtype)
-        # only the pixels of the lattice's footprint (its corners' bounding box, a cell wider)
-        x, y = self.lattice_to_image(np.array([-0.5, -0.5, hl - 0.5, hl - 0.5]),
-                                     np.array([-0.5, wl - 0.5, -0.5, wl - 0.5]))
-        x0, x1 = max(int(math.floor(x.min())) - 1, 0), min(int(math.ceil(x.max())) + 2, w)
-        y0, y1 = max(int(math.floor(y.min())) - 1, 0), min(int(math.ceil(y.max())) + 2, h)
-        if x0 >= x1 or y0 >= y1:
+        y0, y1, x0, x1 = (0, h, 0, w) if window is None else (int(v) for v in window)
+        ys, xs = np.arange(y0, y1, step), np.arange(x0, x1, step)
+        if self.theta == 0.0:
+            i0, j0 = self.crop[:2] if self.crop is not None else (0, 0)
+            ri, ci = ys - i0, xs - j0
+            out = np.full((len(ys), len(xs)) + a.shape[2:], fill, dtype=a.dtype)
+            ok_r, ok_c = (ri >= r0) & (ri < r1), (ci >= c0) & (ci < c1)
+            out[np.ix_(ok_r, ok_c)] = a[np.ix_(ri[ok_r] - r0, ci[ok_c] - c0)]
             return out
-        for b0 in range(y0, y1, BAND_ROWS):   # in bands of rows: the coordinates of a band only
-            b1 = min(b0 + BAND_ROWS, y1)
-            yy, xx = np.mgrid[b0:b1, x0:x1]
-            rows, cols = self.image_to_lattice(xx, yy)
-            ri, ci = np.rint(rows).astype(np.intp), np.rint(cols).astype(np.intp)
-            ok = (ri >= 0) & (ri < hl) & (ci >= 0) & (ci < wl)
-            part = out[b0:b1, x0:x1]
-            part[ok] = a[ri[ok], ci[ok]]
+        out = np.full((len(ys), len(xs)) + a.shape[2:], fill, dtype=a.dtype)
+        # only the pixels of the box's footprint (its corners' bounding box, a cell wider)
+        x, y = self.lattice_to_image(np.array([r0 - 0.5, r0 - 0.5, r1 - 0.5, r1 - 0.5]),
+                                     np.array([c0 - 0.5, c1 - 0.5, c0 - 0.5, c1 - 0.5]))
+        fx0, fx1 = max(int(math.floor(x.min())) - 1, 0), min(int(math.ceil(x.max())) + 2, w)
+        fy0, fy1 = max(int(math.floor(y.min())) - 1, 0), min(int(math.ceil(y.max())) + 2, h)
+        cols = np.flatnonzero((xs >= fx0) & (xs < fx1))
+        rows = np.flatnonzero((ys >= fy0) & (ys < fy1))
+        if not len(cols) or not len(rows) or r0 >= r1 or c0 >= c1:
+            return out
+        k0, k1 = cols[0], cols[-1] + 1
+        for b0 in range(rows[0], rows[-1] + 1, BAND_ROWS):   # in bands of rows: a band's coordinates only
+            b1 = min(b0 + BAND_ROWS, rows[-1] + 1)
+            yy, xx = np.meshgrid(ys[b0:b1], xs[k0:k1], indexing="ij")
+            lr, lc = self.image_to_lattice(xx, yy)
+            ri, ci = np.rint(lr).astype(np.intp), np.rint(lc).astype(np.intp)
+            ok = (ri >= r0) & (ri < r1) & (ci >= c0) & (ci < c1)
+            part = out[b0:b1, k0:k1]
+            part[ok] = a[ri[ok] - r0, ci[ok] - c0]
         return out
 
     def lattice_pixels(self, i0: int, i1: int, j0: int = 0, j1: int | None = None):

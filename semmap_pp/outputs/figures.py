@@ -9,6 +9,7 @@ same bytes are written to a file and embedded in report.html.
 
 from __future__ import annotations
 
+import functools
 import gc
 import io
 import itertools
@@ -327,12 +328,15 @@ def posterior_png(sm, worlds, ess: float | None = None) -> bytes:
     return png(fig)
 
 
-def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, n_worlds: int,
-                        ess: float | None = None) -> bytes:
+def posterior_cells_png(sm, images, n_worlds: int, ess: float | None = None) -> bytes:
     """posterior_cells.png: per-cell probability of wall and of each unit type over sampled worlds
     (the colour bar's label gives ``ess``, as :func:`posterior_png`).
 
-    ``p_wall_image`` (H, W) and ``p_type_image`` (4, H, W) in the input image's frame.
+    ``images`` gives the panels' pixels in the input image's frame, each only when drawn:
+    ``images.wall_panel(box, block, step)``, the largest p(wall) of each ``block``-square of the
+    pixels of ``box`` ``(y0, y1, x0, x1)`` (``scipy.ndimage.maximum_filter``), every ``step``-th
+    row and column; ``images.type_panel(k, box, step)``, p(type ``k``) at every ``step``-th
+    pixel (``outputs.write.SpreadImages``).
     """
     box = crop_box(sm)
     fig, axes = _axes(box, ncols=3, nrows=2, extra_h=0.9, long_side=1500)
@@ -342,15 +346,14 @@ def posterior_cells_png(sm, p_wall_image: np.ndarray, p_type_image: np.ndarray, 
     # a wall is 2-3 cells thick: on a panel narrower than the map, nearest-neighbour display drops it,
     # so each screen pixel shows the largest probability of the cells it covers
     block = int(np.ceil((x1 - x0) / (fig.get_figwidth() * DPI / 3)))
-    wall = ndimage.maximum_filter(p_wall_image[y0:y1, x0:x1], size=block) if block > 1 else \
-        p_wall_image[y0:y1, x0:x1]
     step = display_step(axes[1], box)
-    # one panel's image at a time (``p_type_image`` may make each when asked: write_posterior)
-    panels = itertools.chain([("wall", wall)], ((t, p_type_image[k][y0:y1, x0:x1]) for k, t in enumerate(UNIT_TYPES)))
-    del wall
+    # one panel's pixels at a time, each made when drawn
+    panels = itertools.chain([("wall", lambda: images.wall_panel(box, block, step))],
+                             ((t, functools.partial(images.type_panel, k, box, step))
+                              for k, t in enumerate(UNIT_TYPES)))
     im = None
-    for ax, (name, p) in zip(axes[1:], panels):
-        p = p[::step, ::step]
+    for ax, (name, make) in zip(axes[1:], panels):
+        p = make()
         im = ax.imshow(p, extent=(x0, x0 + p.shape[1] * step, y0 + p.shape[0] * step, y0), cmap="magma",
                        vmin=0.0, vmax=1.0, interpolation="nearest")
         del p

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy import ndimage
 
 from semmap_pp import atomic
 from semmap_pp.errors import printable
@@ -25,7 +26,7 @@ from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
 from semmap_pp.outputs.types_layer import write_types_layer
 from semmap_pp.sampler.diagnostics import to_datatree, write_trace
-from semmap_pp.sampler.spread import cell_probabilities
+from semmap_pp.sampler.spread import accumulate
 from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
 from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
 
@@ -151,19 +152,44 @@ def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=
     return WstarFiles(written, doc, pngs, regions, region_img)
 
 
-class _ImageChannels:
-    """``(k, H, W)`` lattice channels seen as image channels, each resampled
-    (:meth:`~semmap_pp.lattice.frame.Frame.to_image`, fill 0) only when asked for: one channel's
-    image at a time, not a stack of all of them (four float64 images of the input's size)."""
+class SpreadImages:
+    """Per-cell p(wall) and p(type) of typed ``worlds`` in the input image's frame, from their counts
+    on the lattice box they lie in (:func:`~semmap_pp.sampler.spread.accumulate`), made
+    (:meth:`~semmap_pp.lattice.frame.Frame.box_to_image`, 0 outside the box) only for the pixels a
+    panel of posterior_cells.png shows (:func:`~semmap_pp.outputs.figures.posterior_cells_png`):
+    the values of :func:`~semmap_pp.sampler.spread.cell_probabilities` resampled by ``to_image``,
+    without a lattice-sized or image-sized float64 array."""
 
-    def __init__(self, frame, channels: np.ndarray):
-        self.frame, self.channels = frame, channels
+    def __init__(self, frame, worlds: list):
+        self.frame = frame
+        self.acc, self.box = accumulate(worlds, frame.shape, frame.cells.wall)
+        self.n = max(self.acc.n, 1)
 
-    def __len__(self) -> int:
-        return len(self.channels)
+    def image(self, counts: np.ndarray, window=None, step: int = 1) -> np.ndarray:
+        """``counts / n`` in the image frame: the pixels ``window[y0:y1:step, x0:x1:step]``."""
+        return self.frame.box_to_image(counts / self.n, self.box, fill=0.0, window=window, step=step)
 
-    def __getitem__(self, k: int) -> np.ndarray:
-        return self.frame.to_image(self.channels[k], fill=0.0)
+    def type_panel(self, k: int, box, step: int) -> np.ndarray:
+        return self.image(self.acc.types[k], box, step)
+
+    def wall_panel(self, box, block: int, step: int) -> np.ndarray:
+        """``maximum_filter(p_wall[y0:y1, x0:x1], size=block)[::step, ::step]``, in bands of
+        rows each with ``block`` rows of margin (the filter reads ``block // 2`` of them)."""
+        y0, y1, x0, x1 = box
+        if block <= 1:
+            return self.image(self.acc.wall, box, step)
+        rows = np.arange(y0, y1, step)
+        out = []
+        for i in range(0, len(rows), PANEL_BAND_ROWS):
+            want = rows[i:i + PANEL_BAND_ROWS]
+            a0, a1 = max(int(want[0]) - block, y0), min(int(want[-1]) + block + 1, y1)
+            part = ndimage.maximum_filter(self.image(self.acc.wall, (a0, a1, x0, x1)), size=block)
+            out.append(part[want - a0, ::step])
+        return np.concatenate(out) if out else np.zeros((0, len(range(x0, x1, step))))
+
+
+#: Output rows of :meth:`SpreadImages.wall_panel` per band.
+PANEL_BAND_ROWS = 64
 
 
 def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
@@ -174,13 +200,12 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     sm = run.semantic
     written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
         wstar.regions, wstar.region_img
-    p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
+    images = SpreadImages(sm.frame, worlds)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
-    cells_png = fig.posterior_cells_png(sm, sm.frame.to_image(p_wall, fill=0.0), _ImageChannels(sm.frame, p_type),
-                                        len(worlds), ess)
-    del p_wall, p_type   # lattice-sized float64: not kept through the other figures
+    cells_png = fig.posterior_cells_png(sm, images, len(worlds), ess)
+    del images   # the counts: not kept through the other figures
     pngs |= {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png}
     for name in ("posterior", "posterior_cells"):
         atomic.write_bytes(out / f"{name}.png", pngs[name])

@@ -1,12 +1,15 @@
 """The memory a run will need, estimated before it starts, and the check against ``--max-memory``.
 
-A run's peak resident set size follows three sizes of its map: the lattice's cells (the kernels'
-and the likelihood's per-cell tables), the input image's cells (the outputs that are images of the
-input: labels, rooms, regions, figures) and the known cells (what the units cover: the spread
-counts, the knowledge engine's networks grow with the units). :func:`estimate_peak_bytes` is a
-linear bound fitted to `bench/run.py large`'s whole runs (docs/benchmarks.md, "Whole runs against
-known cells") with a margin: the peak of the run's largest process, as ``/usr/bin/time -v``
-reports it; each chain's worker process holds its own copy of the lattice tables besides.
+A run's peak resident set size follows three sizes of its map: the lattice's cells (the
+likelihood's prefix sums while they are made: about 24 bytes a cell for a moment; the kernels' and
+the likelihood's tables themselves are mapped from files, :mod:`semmap_pp.run.shared`, and only
+the pages read are resident), the input image's cells (the outputs that are images of the input:
+rooms.png's flood holds 16 bytes a pixel) and the known cells (what the units cover, the pages of
+the tables they read, the knowledge engine's networks that grow with the units).
+:func:`estimate_peak_bytes` is a linear bound fitted to `bench/run.py large`'s whole runs
+(docs/benchmarks.md, "Whole runs against known cells") with a margin: the peak of the run's
+largest process, as ``/usr/bin/time -v`` reports it (the chains' worker processes map the same
+tables; they do not copy them).
 
 >>> estimate_peak_bytes(lattice_cells=0, image_cells=0, known_cells=0) == BASE_BYTES
 True
@@ -16,6 +19,7 @@ True
 
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 
@@ -26,18 +30,33 @@ from semmap_pp.errors import MapError
 
 #: The interpreter with numpy, scipy, numba, PyMC and ArviZ imported, bytes.
 BASE_BYTES = 500 * 2**20
-#: Bytes per lattice cell at the peak (kernel data, likelihood tables, the lattice itself).
-PER_LATTICE_CELL = 80
+#: Bytes per lattice cell at the peak (the likelihood's prefix sums being made, the lattice itself).
+PER_LATTICE_CELL = 16
 #: Bytes per input image cell at the peak (the outputs of the input's size).
-PER_IMAGE_CELL = 30
-#: Bytes per known cell at the peak.
-PER_KNOWN_CELL = 300
+PER_IMAGE_CELL = 10
+#: Bytes per known cell at the peak (the units, the table pages they read, the knowledge engine).
+PER_KNOWN_CELL = 570
 
 
 def estimate_peak_bytes(*, lattice_cells: int, image_cells: int, known_cells: int) -> int:
     """The estimated peak resident set size of ``semmap map`` on a map of these sizes, bytes."""
     return int(BASE_BYTES + PER_LATTICE_CELL * lattice_cells + PER_IMAGE_CELL * image_cells
                + PER_KNOWN_CELL * known_cells)
+
+
+def trim_heap() -> bool:
+    """Give the C heap's free memory back to the system (glibc's ``malloc_trim``); whether it could.
+
+    numpy's arrays under glibc's mmap threshold (which rises to 32 MiB once a larger array is
+    freed) come from the heap, and the heap keeps what they freed: after the middle floor's search
+    of docs/benchmarks.md 94 MiB, resident through the outputs that follow. Elsewhere
+    (another C library, no ``libc.so.6``) nothing is done.
+    """
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
 
 
 def machine_memory_bytes() -> int | None:

@@ -16,6 +16,7 @@ Rules are read once, at the start: a rule file edited while a run is going does 
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -24,7 +25,9 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.run.inputs import Inputs
 from semmap_pp.run.lattice_cpr import LatticeCPR
+from semmap_pp.run.memory import trim_heap
 from semmap_pp.run.results import MapRun, RunSettings, collect_draws
+from semmap_pp.run.shared import share, share_fields, shared_folder
 from semmap_pp.run.spread import sample_around
 from semmap_pp.run.target_factory import TargetFactory, run_target
 from semmap_pp.sampler.ascent import add_units, polish, refine_world
@@ -35,8 +38,14 @@ from semmap_pp.sampler.start_worlds import dispersed_world, start_world
 from semmap_pp.semantic.ids import carried_text
 from semmap_pp.semantic.rooms import through_door_boxes
 from semmap_pp.semantic.semantic_map import semantic_map
+from semmap_pp.target.likelihood import prepare, remember
 from semmap_pp.target.posterior import Posterior
 from semmap_pp.target.walls_inside import walls_inside
+
+
+#: The kernel data's and the likelihood's lattice-sized arrays (:func:`shared_tables`).
+KERNEL_TABLES = ("hcum", "vcum", "free_up", "free_down", "free_left", "free_right")
+LIKELIHOOD_TABLES = ("xcode", "xsum")
 
 
 def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm.World | None = None,
@@ -183,10 +192,30 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         same place (:mod:`semmap_pp.semantic.ids`); W* itself is the same as without.
     """
 
+    with shared_folder() as folder:   # the lattice tables the chains' processes map, not copy
+        run = _run_map(inputs, settings, folder, log=log, callback=callback, stop=stop, budget=budget,
+                       resume=resume, starts=starts, base_start=base_start, previous_ids=previous_ids)
+    trim_heap()   # what the search freed, given back before the outputs' images are made
+    return run
+
+
+def shared_tables(inputs: Inputs, folder) -> tuple:
+    """The run's kernel data and target factory, their lattice-sized tables mapped from files of
+    ``folder`` (:mod:`semmap_pp.run.shared`): the same values, held once for all processes."""
+    frame, model = inputs.frame, inputs.model
+    data = share_fields(data_from_frame(frame, model.kernels, store=functools.partial(share, folder=folder)),
+                        KERNEL_TABLES, folder)
+    likelihood = share_fields(prepare(frame, model), LIKELIHOOD_TABLES, folder)
+    remember(frame, model, likelihood)
+    return data, TargetFactory(frame, model, inputs.rules, likelihood)
+
+
+def _run_map(inputs: Inputs, settings: RunSettings, folder, *, log, callback, stop, budget, resume, starts,
+             base_start, previous_ids) -> MapRun:
+    """:func:`run_map` with the shared tables' ``folder``."""
     model, frame = inputs.model, inputs.frame
     kernel_settings = model.kernels
-    data = data_from_frame(frame, kernel_settings)
-    factory = TargetFactory(frame, model, inputs.rules)
+    data, factory = shared_tables(inputs, folder)
     first, starts, pm_tune, pm_draws, schedule, chain_starts, history = _chain_plan(
         inputs, settings, log=log, resume=resume, starts=starts, base_start=base_start, data=data)
     t0 = time.perf_counter()

@@ -527,10 +527,13 @@ class SpreadAccumulator:
     n: int = 0
     wall: np.ndarray = field(init=False)
     types: np.ndarray = field(init=False)
+    #: the counts' dtype: ``uint16`` where the caller knows fewer than 65,536 worlds will be added
+    #: (half the memory of a campus floor's box), int32 otherwise
+    dtype: type = np.int32
 
     def __post_init__(self):
-        self.wall = np.zeros(self.shape, np.int32)
-        self.types = np.zeros((len(UNIT_TYPES),) + tuple(self.shape), np.int32)
+        self.wall = np.zeros(self.shape, self.dtype)
+        self.types = np.zeros((len(UNIT_TYPES),) + tuple(self.shape), self.dtype)
 
     def add(self, wall_mask: np.ndarray, type_index: np.ndarray, count: int = 1) -> None:
         """Count one world ``count`` times: its wall cells and, per cell, the type index of its unit

@@ -84,7 +84,9 @@ def accumulate(worlds, shape, wall: int) -> tuple[SpreadAccumulator, tuple[int, 
     A world repeated in ``worlds`` (a chain that stayed put: most draws near W*) is rasterised once
     and counted as often as it occurs, which gives the same counts."""
     box = sampled_box(worlds, shape)
-    acc = SpreadAccumulator((box[2] - box[0], box[3] - box[1]))
+    # a count is at most the number of worlds: uint16 holds it exactly below 65,536 worlds
+    acc = SpreadAccumulator((box[2] - box[0], box[3] - box[1]),
+                            dtype=np.uint16 if len(worlds) < 2 ** 16 else np.int32)
     counts: dict[bytes, list] = {}
     for w in worlds:
         key = w.rects.tobytes() + w.active.tobytes() + w.types.tobytes()

@@ -130,7 +130,8 @@ def draw_info(stats: dict) -> dict:
             "phase": "burn-in" if stats["burn_in"] else "sampling", "stopped": bool(stats["stopped"]),
             "logp": float(stats["logp"]), "best_logp": float(stats["best_logp"]),
             "n_units": int(stats["n_units"]), "cpr": float(stats["cpr"]),
-            "temperature": float(stats["temperature"]), "accept": float(stats["accept"])}
+            "temperature": float(stats["temperature"]), "accept": float(stats["accept"]),
+            "seconds": float(stats.get("seconds", 0.0))}
 
 
 def _scalar_stats() -> dict:

@@ -187,6 +187,12 @@ def prepare(frame, model) -> LikelihoodData:
     return data
 
 
+def remember(frame, model, data: LikelihoodData) -> None:
+    """Make ``data`` what :func:`prepare` returns for ``frame`` and ``model`` from now on: the same
+    products held otherwise (mapped from files a run shares with its chains' processes)."""
+    _PREPARED[frame] = (model.sensor, data)
+
+
 def _prepare(frame, model) -> LikelihoodData:
     """:func:`prepare`, made anew."""
     cls = frame.classes

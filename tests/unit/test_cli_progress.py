@@ -57,3 +57,20 @@ def test_sequential_chains_and_the_budget_cap():
     assert p.done == 5
     q = Progress(2, 20, mode="none", parallel=4, clock=clock)   # parallel capped by the chains
     assert q.parallel == 2
+
+
+def test_a_first_draw_that_compiled_code_is_said_with_its_cause():
+    """A chain's first draw over COMPILE_SECONDS gets a line naming the compiling; a fast first
+    draw, or a slow later one, does not."""
+    out = io.StringIO()
+    p = Progress(2, 80, mode="plain", stream=out, parallel=2, clock=Clock())
+    with p:
+        p(dict(info(0, 0), seconds=7.5))
+        p(dict(info(1, 0), seconds=0.01))
+        p(dict(info(1, 1), seconds=9.0))
+    lines = [ln for ln in out.getvalue().splitlines() if "compiling code on first use" in ln]
+    assert len(lines) == 1 and "chain 1 7.5 s" in lines[0]
+    assert p.compiled == {0: 7.5}
+    quiet = Progress(1, 10, mode="none", clock=Clock())
+    quiet(info(0, 0))                     # records without the time of the draw: nothing said
+    assert quiet.compiled == {}

@@ -89,14 +89,19 @@ def _run_back(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def free_runs(free: np.ndarray):
-    """``(up, down, left, right)`` run lengths of free cells from every cell, cell included."""
-    left = _run_back(free)
-    right = _run_back(free[:, ::-1])[:, ::-1]
-    up = _run_back(free.T).T
-    down = _run_back(free.T[:, ::-1])[:, ::-1].T
-    return (np.ascontiguousarray(up), np.ascontiguousarray(down),
-            np.ascontiguousarray(left), np.ascontiguousarray(right))
+def free_runs(free: np.ndarray, store=None):
+    """``(up, down, left, right)`` run lengths of free cells from every cell, cell included; each
+    passed through ``store`` (see :func:`build_data`) as soon as it is made."""
+    store = _keep if store is None else store
+    up = store(np.ascontiguousarray(_run_back(free.T).T))
+    down = store(np.ascontiguousarray(_run_back(free.T[:, ::-1])[:, ::-1].T))
+    left = store(np.ascontiguousarray(_run_back(free)))
+    right = store(np.ascontiguousarray(_run_back(free[:, ::-1])[:, ::-1]))
+    return up, down, left, right
+
+
+def _keep(array: np.ndarray) -> np.ndarray:
+    return array
 
 
 def _lines_and_doors(occ: np.ndarray, free: np.ndarray, line_min: int, door_min: int, door_max: int):
@@ -143,7 +148,7 @@ def _box(r, c, up, down, left, right, t, shape):
 
 def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_share: int = 0,
                max_side: int | None = None, door_min: int = 1, door_max: int = 0,
-               settings: KernelSettings | None = None) -> KernelData:
+               settings: KernelSettings | None = None, store=None) -> KernelData:
     """Build the kernels' data from the lattice class map.
 
     Parameters
@@ -160,6 +165,11 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
     door_min, door_max : int
         Widths of a free gap in a wall that counts as a door candidate (``door_max=0``: none).
     settings : KernelSettings, optional
+    store : callable(array) -> array, optional
+        Each lattice-sized table (line prefix sums, free-run lengths) is passed through it as soon
+        as it is made and the result kept (a run maps them from files it shares with its chains'
+        processes: ``run.shared.share``), so that the tables made so far need not all be held in
+        memory while the next is made. Default: kept as made.
 
     Returns
     -------
@@ -178,9 +188,10 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
     free = classes == cells.FREE
     occ = classes == cells.OCCUPIED
 
-    hcum, vcum, wall_lines, doors = _line_evidence(occ, free, s.wall_line_min, door_min, door_max)
+    store = _keep if store is None else store
+    hcum, vcum, wall_lines, doors = _line_evidence(occ, free, s.wall_line_min, door_min, door_max, store)
 
-    up, down, left, right = free_runs(free)
+    up, down, left, right = free_runs(free, store)
 
     cand, pr, pc = _birth_boxes(free, up, down, left, right, m, t, big, s.max_candidates)
     birth_rects = np.array(cand, np.int64).reshape(-1, 4)
@@ -196,18 +207,21 @@ def build_data(classes: np.ndarray, *, min_side: int, wall_cells: int, wall_shar
                       birth_weights, (n_rows, n_cols), (cdf_rows, cdf_cols), wall_lines, doors, maxima)
 
 
-def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int):
+def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int, store=_keep):
     """``(hcum, vcum, wall_lines, doors)``: per row and per column the cumulative count of wall or
-    door cells, and the wall lines and door candidates found along both axes."""
+    door cells (each passed through ``store``), and the wall lines and door candidates found along
+    both axes."""
     h, w = occ.shape
     hlines, hdoors, hdoor_mask = _lines_and_doors(occ, free, line_min, door_min, door_max)
+    hcum = np.zeros((h, w + 1), np.int32)     # the masks summed as bool into int32: no int32 copies
+    np.cumsum(occ | hdoor_mask, axis=1, out=hcum[:, 1:])
+    del hdoor_mask
+    hcum = store(hcum)
     vlines, vdoors, vdoor_mask = _lines_and_doors(occ.T, free.T, line_min, door_min, door_max)
-    hmask = (occ | hdoor_mask).astype(np.int32)
-    vmask = (occ.T | vdoor_mask).astype(np.int32)
-    hcum = np.zeros((h, w + 1), np.int32)
-    np.cumsum(hmask, axis=1, out=hcum[:, 1:])
     vcum = np.zeros((w, h + 1), np.int32)
-    np.cumsum(vmask, axis=1, out=vcum[:, 1:])
+    np.cumsum(occ.T | vdoor_mask, axis=1, out=vcum[:, 1:])
+    del vdoor_mask
+    vcum = store(vcum)
 
     def tag(a, axis):
         return np.column_stack([np.full(len(a), axis), a]) if len(a) else np.zeros((0, 4), int)
@@ -216,14 +230,67 @@ def _line_evidence(occ, free, line_min: int, door_min: int, door_max: int):
     return hcum, vcum, wall_lines, doors
 
 
+#: Side of the tiles :func:`dt_maxima` works on, cells.
+DT_TILE = 512
+#: Its first halo beyond the maximum filter's reach, cells (doubled until the distances are exact).
+DT_HALO = 64
+
+
+def _tile_maxima(free, box, m: int, t: int):
+    """:func:`dt_maxima` of the cells of ``box`` ``(r0, c0, r1, c1)``, from a crop of ``free``
+    around it: rows, columns (in the lattice) and distances."""
+    h, w = free.shape
+    r0, c0, r1, c1 = box
+    halo = m + DT_HALO
+    while True:
+        a0, b0, a1, b1 = max(r0 - halo, 0), max(c0 - halo, 0), min(r1 + halo, h), min(c1 + halo, w)
+        crop = free[a0:a1, b0:b1]
+        dt = ndimage.distance_transform_edt(crop)
+        whole = (a0, b0, a1, b1) == (0, 0, h, w)
+        # a cell's distance in the crop is the lattice's when it is at most the cell's distance to
+        # the crop's border inside the lattice: every cell the filter reads lies halo - m from it
+        near = dt[max(r0 - m, 0) - a0:min(r1 + m, h) - a0, max(c0 - m, 0) - b0:min(c1 + m, w) - b0]
+        if whole or ((~crop).any() and near.max() <= halo - m):
+            break
+        halo *= 2
+    inner = (slice(r0 - a0, r1 - a0), slice(c0 - b0, c1 - b0))
+    top = ndimage.maximum_filter(dt, size=2 * m + 1)[inner]
+    dt = dt[inner]
+    rr, cc = np.nonzero((dt == top) & (dt >= max(1.0, t)))
+    return rr + r0, cc + c0, dt[rr, cc]
+
+
+def dt_maxima(free: np.ndarray, m: int, t: int):
+    """The maxima of the free space's distance transform: the cells whose distance (at least
+    ``max(1, t)``) is the largest within the ``2m+1`` square around them; their rows, columns in
+    row-major order and distances. The same cells and values as the transform and its maximum
+    filter over the whole lattice, computed tile by tile (:data:`DT_TILE`) on the tiles that hold
+    free cells, each from a crop around it large enough for exact distances: a campus floor's
+    lattice is mostly unknown canvas, and the whole lattice's float64 transform and filter were
+    16 bytes per cell beside scipy's int32 feature transform."""
+    h, w = free.shape
+    rows, cols, dist = [], [], []
+    for r0 in range(0, h, DT_TILE):
+        for c0 in range(0, w, DT_TILE):
+            box = (r0, c0, min(r0 + DT_TILE, h), min(c0 + DT_TILE, w))
+            if free[box[0]:box[2], box[1]:box[3]].any():
+                r, c, d = _tile_maxima(free, box, m, t)
+                rows.append(r)
+                cols.append(c)
+                dist.append(d)
+    if not rows:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
+    rows, cols, dist = np.concatenate(rows), np.concatenate(cols), np.concatenate(dist)
+    order = np.lexsort((cols, rows))
+    return rows[order], cols[order], dist[order]
+
+
 def _birth_boxes(free, up, down, left, right, m: int, t: int, big: int, max_candidates: int):
     """Birth candidates: the free box around each distance-transform maximum and each region
     centre (at most ``max_candidates``, sides within ``[m, big]``); and the maxima's rows and
     columns."""
-    dt = ndimage.distance_transform_edt(free)
-    peak = (dt == ndimage.maximum_filter(dt, size=2 * m + 1)) & (dt >= max(1.0, t))
-    pr, pc = np.nonzero(peak)
-    order = np.argsort(-dt[pr, pc], kind="stable")
+    pr, pc, peak_dt = dt_maxima(free, m, t)
+    order = np.argsort(-peak_dt, kind="stable")
     pr, pc = pr[order], pc[order]
     seeds = list(zip(pr.tolist(), pc.tolist()))
     labels, n_regions = ndimage.label(free)
@@ -244,12 +311,14 @@ def _birth_boxes(free, up, down, left, right, m: int, t: int, big: int, max_cand
     return cand, pr, pc
 
 
-def data_from_frame(frame, settings: KernelSettings | None = None) -> KernelData:
-    """Kernel data for a :class:`~semmap_pp.lattice.frame.Frame`, sizes from its model cells.
+def data_from_frame(frame, settings: KernelSettings | None = None, store=None) -> KernelData:
+    """Kernel data for a :class:`~semmap_pp.lattice.frame.Frame`, sizes from its model cells
+    (``store``: as :func:`build_data`).
 
     Adjacent units share a wall by overlapping their wall bands (``wall_share = wall``), the
     convention of :mod:`semmap_pp.target.likelihood` (overlapping wall bands cost no overlap penalty).
     """
     c = frame.cells
     return build_data(frame.classes, min_side=c.min_side, max_side=c.max_side, wall_cells=c.wall,
-                      wall_share=c.wall, door_min=c.door_min, door_max=c.door_max, settings=settings)
+                      wall_share=c.wall, door_min=c.door_min, door_max=c.door_max, settings=settings,
+                      store=store)
