@@ -87,17 +87,17 @@ class Rooms:
 
 
 @numba.njit(cache=True, nogil=True)
-def _flood(labels, passable, walls, max_steps):  # pragma: no cover - compiled
+def _flood(labels, passable, walls, max_steps, queue, steps):  # pragma: no cover - compiled
     """Breadth-first geodesic flood: every passable 0-cell reachable from a labelled cell in at most
     ``max_steps`` steps (any number when negative) takes the label of the nearest one. Steps go to
     the 4 neighbours, and to the 4 diagonal ones unless both cells beside the diagonal are
     ``walls`` (a ray's cells touch at their corners; a wall drawn as a staircase is not crossed);
-    ties go to the label that reached the cell first (row-major order of the seeds)."""
+    ties go to the label that reached the cell first (row-major order of the seeds). ``queue``
+    holds a cell index per cell (``h * w`` of them), ``steps`` each cell's steps from its seed
+    (used only when ``max_steps`` is not negative)."""
     h, w = labels.shape
     out = labels.copy()
-    n = h * w
-    steps = np.zeros(n, np.int64)
-    queue = np.empty(n, np.int64)     # cell index; int64: a canvas may exceed 2**31 cells
+    bounded = max_steps >= 0
     head = 0
     tail = 0
     for i in range(h):
@@ -111,7 +111,7 @@ def _flood(labels, passable, walls, max_steps):  # pragma: no cover - compiled
         i = k // w
         j = k - i * w
         lab = out[i, j]
-        if max_steps >= 0 and steps[k] >= max_steps:
+        if bounded and steps[k] >= max_steps:
             continue
         for d in range(8):
             di = _DI[d]
@@ -123,7 +123,8 @@ def _flood(labels, passable, walls, max_steps):  # pragma: no cover - compiled
             if d >= 4 and walls[ii, j] and walls[i, jj]:
                 continue
             out[ii, jj] = lab
-            steps[ii * w + jj] = steps[k] + 1
+            if bounded:
+                steps[ii * w + jj] = steps[k] + 1
             queue[tail] = ii * w + jj
             tail += 1
     return out
@@ -155,7 +156,12 @@ def geodesic_flood(labels: np.ndarray, passable: np.ndarray, max_steps: int = -1
     """
     passable = np.ascontiguousarray(passable, np.bool_)
     walls = ~passable if walls is None else np.ascontiguousarray(walls, np.bool_)
-    return _flood(np.ascontiguousarray(labels, np.int32), passable, walls, int(max_steps))
+    n = passable.size
+    # int32 indexes while the image has fewer than 2**31 cells: 4 bytes a cell instead of 8 (a
+    # campus canvas has tens of millions); steps are kept only for a bounded flood
+    queue = np.empty(n, np.int32 if n < 2**31 else np.int64)
+    steps = np.zeros(n if max_steps >= 0 else 1, np.int32 if 0 <= max_steps < 2**31 else np.int64)
+    return _flood(np.ascontiguousarray(labels, np.int32), passable, walls, int(max_steps), queue, steps)
 
 
 def _contact_widths(piece: np.ndarray, seeds: np.ndarray) -> np.ndarray:

@@ -427,6 +427,7 @@ class _FakeMap:
                                      resolution=0.05)
         self.derived = SimpleNamespace(doors=[Door(0, 1, (30, 38, 42, 42), True, 12)], passages=[])
         self._types = dict(zip((1, 2), types))
+        self.through_door = frozenset()
 
     def type_of(self, uid):
         return self._types[uid]
