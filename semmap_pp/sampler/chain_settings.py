@@ -28,6 +28,12 @@ class ChainSettings:
         Cell prediction rate of the tracker's current world, recorded per draw (NaN without it).
     resolution : float
         Metres per lattice cell, for the ``wall_length`` summary (total unit perimeter).
+    ladder : tuple of float
+        Replica exchange: the likelihood exponents of the chain's rungs, the cold one (the target
+        sampled and recorded) first (:mod:`semmap_pp.sampler.replicas`); ``(1.0,)``: one world,
+        the target as it is.
+    swaps : int
+        Swap proposals between neighbouring rungs after every draw's kernels.
     callback : callable(dict), optional
         Called after every draw with :func:`~semmap_pp.sampler.step.draw_info` of its stats, in the process that runs the
         chain (:func:`semmap_pp.sampler.sampling.sample_worlds` reports to the main process instead).
@@ -40,6 +46,8 @@ class ChainSettings:
     cpr_fn: object = None
     resolution: float = 1.0
     callback: object = None
+    ladder: tuple = (1.0,)
+    swaps: int = 1
 
 
 @dataclass(frozen=True)
