@@ -188,6 +188,14 @@ class SamplerParams:
     #: figures then use the search's draws). Optional: a model file without the keys gets 0.
     spread_draws: int = 0
     spread_n_inner: int = 20
+    #: The sample around W*'s likelihood is raised to 1 / A, A the correlation area (cells) of
+    #: W*'s residuals over lags up to this many metres (semmap_pp.target.tempering; 0: exponent 1).
+    spread_correlation_lag_m: float = 0.0
+    #: Replica exchange in the sample around W*: rungs per chain (1: none), each the next one's
+    #: likelihood exponent times spread_ladder_ratio, and swap proposals per draw.
+    spread_rungs: int = 1
+    spread_ladder_ratio: float = 0.5
+    spread_swaps: int = 1
 
 
 @dataclass(frozen=True)
@@ -640,7 +648,13 @@ def _sampler(r: _Reader) -> SamplerParams:
         n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
         start_factor=r.integer("sampler.start_factor", lo=1),
         spread_draws=r.optional("sampler.spread_draws", 0, r.integer, lo=0, hi=MAX_SPREAD_DRAWS),
-        spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1))
+        spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1),
+        spread_correlation_lag_m=r.optional("sampler.spread_correlation_lag_m", 0.0, r.number,
+                                            lo=0.0, hi=100.0),
+        spread_rungs=r.optional("sampler.spread_rungs", 1, r.integer, lo=1, hi=64),
+        spread_ladder_ratio=r.optional("sampler.spread_ladder_ratio", 0.5, r.number, positive=True,
+                                       hi=1.0),
+        spread_swaps=r.optional("sampler.spread_swaps", 1, r.integer, lo=0, hi=10_000))
     if not spread_draws_ok(sampler.spread_draws):
         raise r.error("sampler.spread_draws", SPREAD_DRAWS_RULE)
     return sampler

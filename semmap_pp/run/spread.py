@@ -13,8 +13,10 @@ from semmap_pp.run.lattice_cpr import LatticeCPR
 from semmap_pp.run.results import (MapRun, RunSettings, SpreadSample, collect_draws, figure_source,
                                    sampled_worlds, spread_chains, spread_first_draw)
 from semmap_pp.run.target_factory import run_target
+from semmap_pp.sampler.replicas import geometric_ladder
 from semmap_pp.sampler.sampling import sample_worlds
 from semmap_pp.sampler.spread import typed_worlds
+from semmap_pp.target.tempering import likelihood_exponent
 
 
 def sample_around(run: MapRun, factory, data, mix, *, planned: bool, log, stop, budget) -> None:
@@ -27,7 +29,8 @@ def sample_around(run: MapRun, factory, data, mix, *, planned: bool, log, stop, 
     elif planned:
         try:
             run.spread = sample_spread(run.inputs, run.settings, run.world, run.semantic.log_posterior,
-                                       factory, data, mix=mix, log=log, stop=stop, budget=budget)
+                                       factory, data, mix=mix, log=log, stop=stop, budget=budget,
+                                       dispersed=run.starts[1:])
         except SemmapError as exc:       # interrupted before any chain of it had 4 draws: keep W*
             why = exc.message
             if stop is not None and stop():
@@ -42,24 +45,40 @@ def sample_around(run: MapRun, factory, data, mix, *, planned: bool, log, stop, 
 
 
 def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_logp: float, factory,
-                  data, *, mix, log=print, stop=None, budget: float | None = None) -> SpreadSample:
+                  data, *, mix, log=print, stop=None, budget: float | None = None,
+                  dispersed=()) -> SpreadSample:
     """The sample around W* (paper Fig. 7, "starting the Markov chain from the world state W*"):
     ``settings.chains`` chains, each started at ``wstar``, record ``settings.spread_draws`` draws of
     ``settings.spread_n_inner`` kernels under the full target (no burn-in; knowledge on from the
     first draw when W* passes the coverage threshold, as it does once the search has switched it on).
-    The seed is the run's plus one, so the sample's random draws are not the search's."""
+    The seed is the run's plus one, so the sample's random draws are not the search's.
+
+    With ``[sampler] spread_correlation_lag_m`` the likelihood is raised to ``1 / A``, A the
+    correlation area of W*'s residuals (:func:`~semmap_pp.target.tempering.likelihood_exponent`),
+    and with ``spread_rungs > 1`` every chain exchanges worlds with hotter replicas
+    (:mod:`semmap_pp.sampler.replicas`); chains 2.. then start from ``dispersed`` (the search's
+    dispersed start worlds) instead of W*, so that their meeting is a test of convergence."""
 
     model = inputs.model
+    p = model.sampler
+    lag = p.spread_correlation_lag_m
+    exponent, area = likelihood_exponent(run_target(inputs) if lag > 0 else None, wstar, lag)
+    ladder = geometric_ladder(exponent, p.spread_rungs, p.spread_ladder_ratio)
+    starts = [wstar] + [w for w in dispersed if w.capacity == wstar.capacity] if len(ladder) > 1 else [wstar]
     log(f"sampling around W*: {settings.chains} chains x {settings.spread_draws} draws x "
-        f"{settings.spread_n_inner} kernels, every chain started at W*")
+        f"{settings.spread_n_inner} kernels, " + ("every chain started at W*" if len(starts) == 1
+                                                 else "chain 1 started at W*, the others dispersed"))
+    if exponent != 1.0 or len(ladder) > 1:
+        log(f"likelihood to the power 1/{area:.1f} (the correlation area of W*'s residuals, cells); "
+            f"{len(ladder)} replicas per chain, exponents " + ", ".join(f"{b:.3g}" for b in ladder))
     t0 = time.perf_counter()
-    result = sample_worlds(factory, data, [wstar], draws=settings.spread_draws, tune=0,
+    result = sample_worlds(factory, data, starts, draws=settings.spread_draws, tune=0,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.spread_n_inner,
                            seed=settings.seed + 1, anneal=1.0, mix=mix,
                            cpr_fn=LatticeCPR.from_roi(inputs.frame, inputs.roi),
                            resolution=inputs.frame.cells.resolution,
                            knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None,
-                           stop=stop, budget=budget)
+                           stop=stop, budget=budget, ladder=ladder, swaps=p.spread_swaps)
     seconds = time.perf_counter() - t0
     kept_chains, n_kept, summaries, sample_stats, report, samples, _ = collect_draws(
         result.records, model, draws_option="--spread-draws")
