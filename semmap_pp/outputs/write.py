@@ -60,10 +60,16 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
     spread_nc = out / "spread.nc"
     if getattr(run, "spread", None) is not None:
         sp = run.spread
-        written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs={
-            "map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
-            "chains": settings.chains, "tune": 0, "draws": sp.draws, "n_inner": sp.n_inner,
-            "start": "W*"}), spread_nc))
+        attrs = {"map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
+                 "chains": settings.chains, "tune": 0, "draws": sp.draws, "n_inner": sp.n_inner,
+                 "start": "W*"}
+        t = sp.tempering
+        if t.on:    # opt-in (--tempered): the ladder the cold chains were drawn under
+            attrs |= {"likelihood_exponent": t.ladder[0], "correlation_area": t.area,
+                      "rungs": len(t.ladder), "ladder": ", ".join(f"{b:.6g}" for b in t.ladder),
+                      "swaps": t.swaps, "other_chains_start": "dispersed" if t.dispersed else "W*"}
+        written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs=attrs),
+                                   spread_nc))
     elif spread_nc.exists():      # an earlier run's, in a directory written again with --force
         spread_nc.unlink()
     atomic.write_text(out / "diagnostics.txt", diagnostics_text(run, rules_path))

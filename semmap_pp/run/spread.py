@@ -3,6 +3,7 @@ after the search; and the typed worlds the spread figures draw (:func:`posterior
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -10,7 +11,7 @@ from semmap_pp import world as wm
 from semmap_pp.errors import SemmapError
 from semmap_pp.run.inputs import Inputs
 from semmap_pp.run.lattice_cpr import LatticeCPR
-from semmap_pp.run.results import (MapRun, RunSettings, SpreadSample, collect_draws, figure_source,
+from semmap_pp.run.results import (MapRun, RunSettings, SpreadSample, Tempering, collect_draws, figure_source,
                                    sampled_worlds, spread_chains, spread_first_draw)
 from semmap_pp.run.target_factory import run_target
 from semmap_pp.sampler.replicas import geometric_ladder
@@ -53,24 +54,28 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     first draw when W* passes the coverage threshold, as it does once the search has switched it on).
     The seed is the run's plus one, so the sample's random draws are not the search's.
 
-    With ``[sampler] spread_correlation_lag_m`` the likelihood is raised to ``1 / A``, A the
-    correlation area of W*'s residuals (:func:`~semmap_pp.target.tempering.likelihood_exponent`),
-    and with ``spread_rungs > 1`` every chain exchanges worlds with hotter replicas
+    Opt-in, with ``[sampler] spread_tempered`` (``semmap map --tempered``): the likelihood is
+    raised to ``1 / A``, A the correlation area of W*'s residuals within
+    ``spread_correlation_lag_m`` (:func:`~semmap_pp.target.tempering.likelihood_exponent`), and
+    with ``spread_rungs > 1`` every chain exchanges worlds with hotter replicas
     (:mod:`semmap_pp.sampler.replicas`); chains 2.. then start from ``dispersed`` (the search's
     dispersed start worlds) instead of W*, so that their meeting is a test of convergence."""
 
     model = inputs.model
     p = model.sampler
-    lag = p.spread_correlation_lag_m
+    lag = p.spread_correlation_lag_m if p.spread_tempered else 0.0
     exponent, area = likelihood_exponent(run_target(inputs) if lag > 0 else None, wstar, lag)
-    ladder = geometric_ladder(exponent, p.spread_rungs, p.spread_ladder_ratio)
+    ladder = geometric_ladder(exponent, p.spread_rungs if p.spread_tempered else 1, p.spread_ladder_ratio)
     starts = [wstar] + [w for w in dispersed if w.capacity == wstar.capacity] if len(ladder) > 1 else [wstar]
+    dispersed_chains = len(ladder) > 1 and len(starts) > 1 and settings.chains > 1
     log(f"sampling around W*: {settings.chains} chains x {settings.spread_draws} draws x "
-        f"{settings.spread_n_inner} kernels, " + ("every chain started at W*" if len(starts) == 1
-                                                 else "chain 1 started at W*, the others dispersed"))
+        f"{settings.spread_n_inner} kernels, " + ("chain 1 started at W*, the others at the search's "
+                                                 "dispersed starts" if dispersed_chains
+                                                 else "every chain started at W*"))
     if exponent != 1.0 or len(ladder) > 1:
-        log(f"likelihood to the power 1/{area:.1f} (the correlation area of W*'s residuals, cells); "
-            f"{len(ladder)} replicas per chain, exponents " + ", ".join(f"{b:.3g}" for b in ladder))
+        log(f"tempered (--tempered): likelihood to the power 1/{area:.1f} (the correlation area of W*'s "
+            f"residuals, cells); {len(ladder)} replica(s) per chain, exponents "
+            + ", ".join(f"{b:.3g}" for b in ladder) + f"; {p.spread_swaps} swap(s) per draw")
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=settings.spread_draws, tune=0,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.spread_n_inner,
@@ -85,10 +90,14 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     made = sum(len(r.stats.get("logp", ())) for r in result.records)
     # the best world's log posterior, tracked at every kernel (a recorded draw is every n_inner-th)
     best = result.best_logp if result.best_world is not None else math.nan
+    if len(ladder) > 1:
+        report = dataclasses.replace(report, tempered=True)
+    kernels = made * settings.spread_n_inner * len(ladder)      # every rung runs n_inner kernels
     spread = SpreadSample(settings.spread_draws, settings.spread_n_inner, summaries, sample_stats, report,
-                          samples, seconds, made * settings.spread_n_inner / seconds if seconds > 0 else 0.0,
+                          samples, seconds, kernels / seconds if seconds > 0 else 0.0,
                           float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept),
-                          result.best_world)
+                          result.best_world, Tempering(ladder, area, p.spread_swaps if len(ladder) > 1 else 0,
+                                                       dispersed_chains))
     log(spread.text())
     return spread
 
