@@ -25,9 +25,10 @@ from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
 from semmap_pp.outputs.types_layer import write_types_layer
 from semmap_pp.sampler.diagnostics import to_datatree, write_trace
+from semmap_pp.sampler.marginals import door_marginals, unit_marginals
 from semmap_pp.sampler.spread import cell_probabilities
 from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
-from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
+from semmap_pp.semantic.world_json import with_posterior, world_dict, write_labels_png, write_world_json
 
 #: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
 N_SAMPLED_WORLDS = 1000
@@ -180,6 +181,12 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     sm = run.semantic
     written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
         wstar.regions, wstar.region_img
+    if worlds:      # world.json again, with the posterior marginals over the sampled worlds
+        doc = with_posterior(doc, sm, unit_marginals(sm.world, worlds),
+                             dict(zip(sm.derived.doors, door_marginals(sm.frame, sm.derived.doors, worlds))),
+                             worlds=len(worlds), source="the sample around W*" if run.spread is not None
+                             else "the search's draws")
+        write_world_json(out / "world.json", doc)
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
