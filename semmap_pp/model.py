@@ -198,6 +198,9 @@ class SamplerParams:
     spread_rungs: int = 1
     spread_ladder_ratio: float = 0.5
     spread_swaps: int = 1
+    #: With spread_tempered: rung k's kernels also run at temperature spread_temperature_ratio^k
+    #: (its whole target, prior and knowledge too, to the power 1 / T; 1: likelihood-only ladder).
+    spread_temperature_ratio: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -663,7 +666,9 @@ def _sampler(r: _Reader) -> SamplerParams:
         spread_rungs=r.optional("sampler.spread_rungs", 1, r.integer, lo=1, hi=64),
         spread_ladder_ratio=r.optional("sampler.spread_ladder_ratio", 0.5, r.number, positive=True,
                                        hi=1.0),
-        spread_swaps=r.optional("sampler.spread_swaps", 1, r.integer, lo=0, hi=10_000))
+        spread_swaps=r.optional("sampler.spread_swaps", 1, r.integer, lo=0, hi=10_000),
+        spread_temperature_ratio=r.optional("sampler.spread_temperature_ratio", 1.0, r.number, lo=1.0,
+                                            hi=1e6))
     if not spread_draws_ok(sampler.spread_draws):
         raise r.error("sampler.spread_draws", SPREAD_DRAWS_RULE)
     return sampler

@@ -68,7 +68,8 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
         if t.on:    # opt-in (--tempered): the ladder the cold chains were drawn under
             attrs |= {"likelihood_exponent": t.ladder[0], "correlation_area": t.area,
                       "rungs": len(t.ladder), "ladder": ", ".join(f"{b:.6g}" for b in t.ladder),
-                      "swaps": t.swaps, "other_chains_start": "dispersed" if t.dispersed else "W*"}
+                      "swaps": t.swaps, "other_chains_start": "dispersed" if t.dispersed else "W*",
+                      "temperatures": ", ".join(f"{v:.6g}" for v in t.temperatures)}
         written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs=attrs),
                                    spread_nc))
     elif spread_nc.exists():      # an earlier run's, in a directory written again with --force

@@ -54,6 +54,7 @@ class Tempering:
     area: float = 1.0
     swaps: int = 0
     dispersed: bool = False
+    temperatures: tuple = (1.0,)    # per rung (the cold one 1): its kernels' temperature
 
     @property
     def on(self) -> bool:
@@ -67,6 +68,8 @@ class Tempering:
         if len(self.ladder) > 1:
             out += (f", {len(self.ladder)} replicas per chain (exponents "
                     + ", ".join(f"{b:.3g}" for b in self.ladder) + f"), {self.swaps} swap(s) per draw")
+            if any(t != 1.0 for t in self.temperatures):
+                out += " at temperatures " + ", ".join(f"{t:.3g}" for t in self.temperatures)
         return out
 
 

@@ -14,7 +14,7 @@ from semmap_pp.run.lattice_cpr import LatticeCPR
 from semmap_pp.run.results import (MapRun, RunSettings, SpreadSample, Tempering, collect_draws, figure_source,
                                    sampled_worlds, spread_chains, spread_first_draw)
 from semmap_pp.run.target_factory import run_target
-from semmap_pp.sampler.replicas import geometric_ladder
+from semmap_pp.sampler.replicas import geometric_ladder, geometric_temperatures
 from semmap_pp.sampler.sampling import sample_worlds
 from semmap_pp.sampler.spread import typed_worlds
 from semmap_pp.target.tempering import likelihood_exponent
@@ -66,6 +66,7 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     lag = p.spread_correlation_lag_m if p.spread_tempered else 0.0
     exponent, area = likelihood_exponent(run_target(inputs) if lag > 0 else None, wstar, lag)
     ladder = geometric_ladder(exponent, p.spread_rungs if p.spread_tempered else 1, p.spread_ladder_ratio)
+    heat = geometric_temperatures(len(ladder), p.spread_temperature_ratio if p.spread_tempered else 1.0)
     starts = [wstar] + [w for w in dispersed if w.capacity == wstar.capacity] if len(ladder) > 1 else [wstar]
     dispersed_chains = len(ladder) > 1 and len(starts) > 1 and settings.chains > 1
     log(f"sampling around W*: {settings.chains} chains x {settings.spread_draws} draws x "
@@ -75,7 +76,8 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     if exponent != 1.0 or len(ladder) > 1:
         log(f"tempered (--tempered): likelihood to the power 1/{area:.1f} (the correlation area of W*'s "
             f"residuals, cells); {len(ladder)} replica(s) per chain, exponents "
-            + ", ".join(f"{b:.3g}" for b in ladder) + f"; {p.spread_swaps} swap(s) per draw")
+            + ", ".join(f"{b:.3g}" for b in ladder) + f"; {p.spread_swaps} swap(s) per draw"
+            + ("; temperatures " + ", ".join(f"{t:.3g}" for t in heat) if heat[-1] != 1.0 else ""))
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=settings.spread_draws, tune=0,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.spread_n_inner,
@@ -83,7 +85,8 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
                            cpr_fn=LatticeCPR.from_roi(inputs.frame, inputs.roi),
                            resolution=inputs.frame.cells.resolution,
                            knowledge_threshold=model.knowledge.coverage_threshold if inputs.rules else None,
-                           stop=stop, budget=budget, ladder=ladder, swaps=p.spread_swaps)
+                           stop=stop, budget=budget, ladder=ladder, swaps=p.spread_swaps,
+                           temperatures=heat if heat[-1] != 1.0 else None)
     seconds = time.perf_counter() - t0
     kept_chains, n_kept, summaries, sample_stats, report, samples, _ = collect_draws(
         result.records, model, draws_option="--spread-draws")
@@ -97,7 +100,7 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
                           samples, seconds, kernels / seconds if seconds > 0 else 0.0,
                           float(wstar_logp), best, result.stopped, (tuple(kept_chains), n_kept),
                           result.best_world, Tempering(ladder, area, p.spread_swaps if len(ladder) > 1 else 0,
-                                                       dispersed_chains))
+                                                       dispersed_chains, heat))
     log(spread.text())
     return spread
 

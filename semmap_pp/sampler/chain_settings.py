@@ -34,6 +34,9 @@ class ChainSettings:
         the target as it is.
     swaps : int
         Swap proposals between neighbouring rungs after every draw's kernels.
+    temperatures : tuple of float, optional
+        One temperature per rung of ``ladder`` (the cold one 1): a rung's kernels sample its
+        target to the power ``1 / T``; None: every rung at 1.
     callback : callable(dict), optional
         Called after every draw with :func:`~semmap_pp.sampler.step.draw_info` of its stats, in the process that runs the
         chain (:func:`semmap_pp.sampler.sampling.sample_worlds` reports to the main process instead).
@@ -48,6 +51,7 @@ class ChainSettings:
     callback: object = None
     ladder: tuple = (1.0,)
     swaps: int = 1
+    temperatures: tuple | None = None
 
 
 @dataclass(frozen=True)

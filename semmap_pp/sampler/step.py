@@ -193,7 +193,7 @@ class WorldStep(BlockedStep):
         self.resolution = float(chain.resolution)
         self.knowledge_threshold = chain.knowledge_threshold
         self.callback = chain.callback
-        self.ladder = Ladder(chain.ladder)
+        self.ladder = Ladder(chain.ladder, chain.temperatures)
         self.swaps = int(chain.swaps)
         self.stop = limits.stop
         self.deadline = limits.deadline
@@ -343,9 +343,11 @@ class WorldStep(BlockedStep):
         self._kernels(tr, temp, attempted, accepted, cold=True)
         swapped = math.nan
         if len(self.ladder) > 1:
-            for hot in self.ladder.hot():
-                self._kernels(hot, temp, np.zeros(k, np.int64), np.zeros(k, np.int64), cold=False)
-            tried, done = swap_round(self.rng, self.ladder.replicas, self.swaps)
+            heat = self.ladder.temperatures
+            for t_k, hot in zip(heat[1:], self.ladder.hot()):
+                self._kernels(hot, temp * t_k, np.zeros(k, np.int64), np.zeros(k, np.int64), cold=False)
+            tried, done = swap_round(self.rng, self.ladder.replicas, self.swaps,
+                                     heat if self.ladder.heated else None)
             swapped = done / tried if tried else math.nan
             if self.ladder.replicas[0] is not tr:
                 tr = self._tracker = self.ladder.replicas[0]

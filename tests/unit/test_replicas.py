@@ -108,7 +108,7 @@ class _TableTracker:
         self.logp = self.loglik + self.logprior
 
 
-def swap_round_matrix(ell, prior, ladder, n, n_swaps, ratio=rp.swap_log_ratio):
+def swap_round_matrix(ell, prior, ladder, n, n_swaps, ratio=rp.swap_log_ratio, temps=None):
     """The exact transition matrix of :func:`replicas.swap_round` over joint states (one state
     index per rung), from the acceptance :func:`replicas.swap_log_ratio` gives."""
     k = len(ladder)
@@ -119,7 +119,8 @@ def swap_round_matrix(ell, prior, ladder, n, n_swaps, ratio=rp.swap_log_ratio):
         for i in range(k - 1):
             a = _TableTracker(ell, prior, ladder[i], s[i])
             b = _TableTracker(ell, prior, ladder[i + 1], s[i + 1])
-            acc = math.exp(min(0.0, ratio(a, b))) / (k - 1)
+            r = ratio(a, b) if temps is None else ratio(a, b, temps[i], temps[i + 1])
+            acc = math.exp(min(0.0, r)) / (k - 1)
             t = list(s)
             t[i], t[i + 1] = t[i + 1], t[i]
             rows.append(index[s]), cols.append(index[tuple(t)]), vals.append(acc)
@@ -131,7 +132,7 @@ def swap_round_matrix(ell, prior, ladder, n, n_swaps, ratio=rp.swap_log_ratio):
     return out, joint
 
 
-def joint_chain(ladder, n_inner=2, n_swaps=2, ratio=rp.swap_log_ratio, seed=5):
+def joint_chain(ladder, n_inner=2, n_swaps=2, ratio=rp.swap_log_ratio, seed=5, temps=None):
     """Tiny kernel worlds (3 x 4 lattice, one slot): the exact matrices of a draw of the joint
     chain, every rung's ``n_inner`` kernels of the default mix then ``n_swaps`` swaps."""
     data = build_data(tiny_classes((3, 4)), min_side=2, wall_cells=1, max_side=3, door_min=1,
@@ -142,8 +143,9 @@ def joint_chain(ladder, n_inner=2, n_swaps=2, ratio=rp.swap_log_ratio, seed=5):
     prior = rng.normal(0.0, 1.0, len(states))
     mix = default_mix(SETTINGS)
     kernels = []
-    for b in ladder:
-        p, _ = transition_matrix(states, data, mix, b * ell + prior)
+    heat = temps if temps is not None else (1.0,) * len(ladder)
+    for b, t in zip(ladder, heat):      # MH at temperature t: the rung's target to the power 1/t
+        p, _ = transition_matrix(states, data, mix, (b * ell + prior) / t)
         pk = sparse.identity(len(states), format="csr")
         for _ in range(n_inner):
             pk = pk @ p
@@ -151,8 +153,8 @@ def joint_chain(ladder, n_inner=2, n_swaps=2, ratio=rp.swap_log_ratio, seed=5):
     moves = kernels[0]
     for pk in kernels[1:]:
         moves = sparse.kron(moves, pk, format="csr")     # the rungs move independently
-    swaps, joint = swap_round_matrix(ell, prior, ladder, len(states), n_swaps, ratio)
-    logpi = np.array([sum(b * ell[s[i]] + prior[s[i]] for i, b in enumerate(ladder)) for s in joint])
+    swaps, joint = swap_round_matrix(ell, prior, ladder, len(states), n_swaps, ratio, temps)
+    logpi = np.array([sum((b * ell[s[i]] + prior[s[i]]) / heat[i] for i, b in enumerate(ladder)) for s in joint])
     pi = np.exp(logpi - logpi.max())
     return moves, swaps, pi / pi.sum(), states, joint
 
@@ -172,6 +174,27 @@ def test_the_joint_chain_leaves_the_product_target_invariant(ladder):
     assert off.sum() > 0.05 * len(joint)
 
 
+@pytest.mark.parametrize("ladder, temps", [((1.0, 1.0), (1.0, 3.0)), ((0.8, 0.4, 0.1), (1.0, 2.0, 4.0))])
+def test_rungs_at_temperatures_keep_the_product_of_their_heated_targets_invariant(ladder, temps):
+    """Rungs whose kernels run at temperature T (the prior flattened too, not only the
+    likelihood): swaps with the full log ratio leave the product of ``π_k^(1/T_k)`` invariant."""
+    moves, swaps, pi, states, joint = joint_chain(ladder, temps=temps)
+    for p in (moves, swaps):
+        flow = sparse.diags(pi) @ p
+        assert abs(flow - flow.T).max() <= 1e-12 * abs(flow).max()
+    draw = moves @ swaps
+    assert np.max(np.abs(pi @ draw - pi)) < 1e-12 * pi.max()
+    off = swaps - sparse.diags(swaps.diagonal())
+    assert off.sum() > 0.05 * len(joint)
+
+
+def test_a_heated_swap_that_leaves_out_the_prior_breaks_the_invariance():
+    """The likelihood-only ratio is wrong once the prior is heated too: the check catches it."""
+    moves, swaps, pi, _, _ = joint_chain((1.0, 0.5), temps=(1.0, 3.0), n_swaps=1,
+                                         ratio=lambda a, b, ti=1.0, tj=1.0: rp.swap_log_ratio(a, b))
+    assert np.max(np.abs(pi @ (moves @ swaps) - pi)) > 1e-4 * pi.max()
+
+
 def test_a_wrong_swap_ratio_breaks_the_invariance():
     """The check above can fail: a swap ratio with the exponents' difference of the wrong sign."""
     moves, swaps, pi, _, _ = joint_chain((1.0, 0.3), ratio=lambda a, b: -rp.swap_log_ratio(a, b))
@@ -179,10 +202,12 @@ def test_a_wrong_swap_ratio_breaks_the_invariance():
     assert np.max(np.abs(pi @ draw - pi)) > 1e-4 * pi.max()
 
 
-def test_the_cold_rung_of_the_step_samples_the_cold_target():
+@pytest.mark.parametrize("temps", [None, (1.0, 2.0, 4.0)])
+def test_the_cold_rung_of_the_step_samples_the_cold_target(temps):
     """The PyMC step with three rungs (kernels on every rung, swaps, the cold rung recorded) on the
-    project's tempered Posterior: the recorded worlds' frequencies match the cold target's
-    enumerated probabilities (chi-square on the number of units and on the first unit's area)."""
+    project's tempered Posterior, the hot rungs also heated or not: the recorded worlds'
+    frequencies match the cold target's enumerated probabilities (chi-square on the total unit
+    area)."""
     from scipy import stats
 
     from semmap_pp.sampler.kernels import data_from_frame
@@ -202,7 +227,7 @@ def test_the_cold_rung_of_the_step_samples_the_cold_target():
     for s, p in zip(states, pi):
         expect[keys.index(area(s))] += p
     res = sample_worlds(post, data_from_frame(frame), [wm.empty(2)], draws=3000, tune=50, chains=1,
-                        cores=1, n_inner=4, seed=3, ladder=ladder, swaps=2)
+                        cores=1, n_inner=4, seed=3, ladder=ladder, swaps=2, temperatures=temps)
     rec = res.records[0]
     assert np.all(rec.stats["beta"] == ladder[0])
     assert np.nanmean(rec.stats["swap_accept"]) > 0.05
