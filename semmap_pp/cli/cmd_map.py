@@ -384,9 +384,10 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         saving[0] = False
         if pressed:
             raise KeyboardInterrupt
-        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules)
-        written += write_posterior(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), wstar,
-                                   rules_name=rules.name, other_files=(RESUME_FILE,))
+        # typed before world.json, which holds the posterior marginals over them
+        worlds = posterior_worlds(run, N_SAMPLED_WORLDS)
+        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
+        written += write_posterior(out, run, worlds, wstar, rules_name=rules.name, other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
         return written, True
     return written, False

@@ -46,12 +46,25 @@ def diagnostics_text(run, rules_path) -> str:
     return text
 
 
-def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
-    """world.json, labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
+def posterior_doc(doc: dict, run, worlds: list) -> dict:
+    """world.json's content with the posterior marginals of W*'s units and doors over the typed
+    sampled ``worlds`` (:mod:`semmap_pp.sampler.marginals`); ``doc`` itself without worlds."""
+    if not worlds:
+        return doc
+    sm = run.semantic
+    doors = dict(zip(sm.derived.doors, door_marginals(sm.frame, sm.derived.doors, worlds)))
+    return with_posterior(doc, sm, unit_marginals(sm.world, worlds), doors, worlds=len(worlds),
+                          source="the sample around W*" if getattr(run, "spread", None) is not None
+                          else "the search's draws")
+
+
+def write_core(out: Path, run, *, rules_name: str, rules_path, worlds=None) -> tuple[list[Path], dict]:
+    """world.json (with the posterior marginals over ``worlds``, the typed sampled worlds, when
+    given), labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
 
     inputs, settings, sm = run.inputs, run.settings, run.semantic
-    doc = world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
-                     roi_name=inputs.roi_name)
+    doc = posterior_doc(world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
+                                   roi_name=inputs.roi_name), run, worlds)
     written = [write_world_json(out / "world.json", doc), write_labels_png(out / "labels.png", sm.labels_image)]
     tree = to_datatree(run.summaries, sample_stats=run.sample_stats,
                        attrs={"map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed,
@@ -142,17 +155,18 @@ class WstarFiles(NamedTuple):
     region_img: np.ndarray
 
 
-def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None) -> WstarFiles:
+def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
+                worlds=None) -> WstarFiles:
     """The files of W* (world.json, labels.png, trace.nc, spread.nc, diagnostics.txt and the plan
-    files of :func:`write_plan`) into ``out_dir``, created if missing. The first half of
-    :func:`write_all`: a caller that makes the sampled worlds only now (``semmap map``) has these
-    complete before it rebuilds the run's target for them."""
+    files of :func:`write_plan`) into ``out_dir``, created if missing; world.json with the
+    posterior marginals over ``worlds`` (the typed sampled worlds) when given. The first half of
+    :func:`write_all`."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
     sm = run.semantic
     written, doc = write_core(out, run, rules_name=rules_name,
-                              rules_path=rules_path if rules_path is not None else rules_name)
+                              rules_path=rules_path if rules_path is not None else rules_name, worlds=worlds)
 
     plan, pngs, regions, region_img = write_plan(out, sm, doc)
     written += plan
@@ -182,12 +196,6 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     sm = run.semantic
     written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
         wstar.regions, wstar.region_img
-    if worlds:      # world.json again, with the posterior marginals over the sampled worlds
-        doc = with_posterior(doc, sm, unit_marginals(sm.world, worlds),
-                             dict(zip(sm.derived.doors, door_marginals(sm.frame, sm.derived.doors, worlds))),
-                             worlds=len(worlds), source="the sample around W*" if run.spread is not None
-                             else "the search's draws")
-        write_world_json(out / "world.json", doc)
     p_wall, p_type = cell_probabilities(sm.frame.shape, worlds, sm.frame.cells.wall)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
@@ -235,9 +243,9 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
     stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`):
     the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
     """
-    wstar = write_wstar(out_dir, run, rules_name=rules_name, rules_path=rules_path)
+    wstar = write_wstar(out_dir, run, rules_name=rules_name, rules_path=rules_path, worlds=worlds)
     return write_posterior(out_dir, run, worlds, wstar, rules_name=rules_name, other_files=other_files)
 
 
-__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core",
+__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core", "posterior_doc",
            "write_plan", "diagnostics_text"]

@@ -292,6 +292,11 @@ class ConvergenceReport:
             factor = self.ess_min / low
             more = (f"about {factor:,.0f} times as many draws ({self.draws_option} "
                     f"{math.ceil(self.n_draws * factor)}) for ESS {self.ess_min:g}")
+        if all(_constant(np.asarray(q.chain_means)) and all(sd == 0 for sd in q.chain_sds)
+               for q in self.quantities):
+            return ("no summary moved in any chain: every draw is the chains' start world, and the "
+                    "kernels' proposals were all refused; more draws change nothing until the chains "
+                    "move (a sample that flattens the target: `semmap map --tempered`)")
         if rhat_fail and (self.separated_chains() or any(q.rhat > 1.1 for q in self.quantities
                                                          if math.isfinite(q.rhat))
                           or any(math.isinf(q.rhat) for q in self.quantities)):

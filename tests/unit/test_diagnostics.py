@@ -356,3 +356,9 @@ def test_a_passing_verdict_has_no_failure_or_remedy():
     rep = dg.convergence({"log_posterior": rng.normal(size=(4, 400))}, rhat_max=1.05, ess_min=100)
     assert rep.ok and rep.failed() == "" and rep.remedy() == ""
     assert "\nconverged" in rep.to_text() and "failed:" not in rep.to_text()
+
+
+def test_chains_that_never_moved_are_not_told_to_draw_more():
+    frozen = dg.convergence({"log_posterior": np.full((2, 8), -10.0), "n_units": np.full((2, 8), 3.0)},
+                            rhat_max=1.01, ess_min=400)
+    assert not frozen.ok and "no summary moved" in frozen.remedy() and "times as many draws" not in frozen.remedy()
