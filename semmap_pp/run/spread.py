@@ -1,5 +1,7 @@
 """The sample around W* (the paper's Fig. 7): every chain started at W*, under the full target,
-after the search; and the typed worlds the spread figures draw (:func:`posterior_worlds`)."""
+after the search (opt-in, ``semmap map --tempered``: a tempered likelihood with replica exchange,
+chains 2.. from the search's dispersed starts); and the typed worlds the spread figures and
+world.json's posterior marginals are drawn from (:func:`posterior_worlds`)."""
 
 from __future__ import annotations
 
@@ -76,7 +78,8 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
     if exponent != 1.0 or len(ladder) > 1:
         log(f"tempered (--tempered): likelihood to the power 1/{area:.1f} (the correlation area of W*'s "
             f"residuals, cells); {len(ladder)} replica(s) per chain, exponents "
-            + ", ".join(f"{b:.3g}" for b in ladder) + f"; {p.spread_swaps} swap(s) per draw"
+            + ", ".join(f"{b:.3g}" for b in ladder)
+            + (f"; {p.spread_swaps} swap(s) per draw" if len(ladder) > 1 else "")
             + ("; temperatures " + ", ".join(f"{t:.3g}" for t in heat) if heat[-1] != 1.0 else ""))
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=settings.spread_draws, tune=0,
@@ -109,7 +112,8 @@ def posterior_worlds(run, n: int) -> list:
     """Up to ``n`` recorded worlds of the run's sample around W* (or, without one, of its own
     draws: :func:`figure_source`), from its chains in the best chain's mode
     (:func:`spread_chains`) after the draws in which they were still settling
-    (:func:`spread_first_draw`), typed as the sampler typed them."""
+    (:func:`spread_first_draw`), typed as the sampler typed them: what posterior.png,
+    posterior_cells.png and world.json's posterior marginals are made of."""
     src = figure_source(run)
     return typed_worlds(run_target(run.inputs),
                         sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))
