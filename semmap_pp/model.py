@@ -188,6 +188,19 @@ class SamplerParams:
     #: figures then use the search's draws). Optional: a model file without the keys gets 0.
     spread_draws: int = 0
     spread_n_inner: int = 20
+    #: Opt-in (``semmap map --tempered``): the sample around W* with its likelihood raised to
+    #: 1 / A, A the correlation area (cells) of W*'s residuals over lags up to
+    #: ``spread_correlation_lag_m`` metres (semmap_pp.target.tempering; 0: exponent 1), and replica
+    #: exchange over ``spread_rungs`` rungs (1: none), each the next one's likelihood exponent times
+    #: ``spread_ladder_ratio``, ``spread_swaps`` swap proposals per draw. Off: the plain sample.
+    spread_tempered: bool = False
+    spread_correlation_lag_m: float = 0.0
+    spread_rungs: int = 1
+    spread_ladder_ratio: float = 0.5
+    spread_swaps: int = 1
+    #: With spread_tempered: rung k's kernels also run at temperature spread_temperature_ratio^k
+    #: (its whole target, prior and knowledge too, to the power 1 / T; 1: likelihood-only ladder).
+    spread_temperature_ratio: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -447,6 +460,12 @@ class _Reader:
             raise self.error(key, f"must be <= {hi}, got {v}")
         return int(v)
 
+    def flag(self, key: str) -> bool:
+        v = self.raw(key)
+        if not isinstance(v, bool):
+            raise self.error(key, f"expected true or false, got {type(v).__name__}")
+        return v
+
     def choice(self, key: str, options: tuple[str, ...]) -> str:
         v = self.raw(key)
         if not isinstance(v, str) or v not in options:
@@ -640,7 +659,16 @@ def _sampler(r: _Reader) -> SamplerParams:
         n_inner=r.integer("sampler.n_inner", lo=1), anneal=r.number("sampler.anneal", lo=1.0),
         start_factor=r.integer("sampler.start_factor", lo=1),
         spread_draws=r.optional("sampler.spread_draws", 0, r.integer, lo=0, hi=MAX_SPREAD_DRAWS),
-        spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1))
+        spread_n_inner=r.optional("sampler.spread_n_inner", 20, r.integer, lo=1),
+        spread_tempered=r.optional("sampler.spread_tempered", False, r.flag),
+        spread_correlation_lag_m=r.optional("sampler.spread_correlation_lag_m", 0.0, r.number,
+                                            lo=0.0, hi=100.0),
+        spread_rungs=r.optional("sampler.spread_rungs", 1, r.integer, lo=1, hi=64),
+        spread_ladder_ratio=r.optional("sampler.spread_ladder_ratio", 0.5, r.number, positive=True,
+                                       hi=1.0),
+        spread_swaps=r.optional("sampler.spread_swaps", 1, r.integer, lo=0, hi=10_000),
+        spread_temperature_ratio=r.optional("sampler.spread_temperature_ratio", 1.0, r.number, lo=1.0,
+                                            hi=1e6))
     if not spread_draws_ok(sampler.spread_draws):
         raise r.error("sampler.spread_draws", SPREAD_DRAWS_RULE)
     return sampler

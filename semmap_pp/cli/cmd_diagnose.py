@@ -51,11 +51,15 @@ def _clean(v):
 def diagnose(tree, rhat_max: float, ess_min: float, *, figures: bool = True) -> dict:
     """Everything ``semmap diagnose`` reports, from a trace DataTree (``figures``: whether the
     run's spread figures were drawn from this trace's draws)."""
+    from dataclasses import replace
+
     from semmap_pp.sampler.diagnostics import convergence
 
     around = tree.attrs.get("start") == "W*"      # spread.nc: the sample around W*
     report = convergence(tree, rhat_max=rhat_max, ess_min=ess_min,
                          draws_option="--spread-draws" if around else "--draws").with_figures(figures)
+    if int(tree.attrs.get("rungs", 1)) > 1:      # a sample with replica exchange (--tempered)
+        report = replace(report, tempered=True)
     post = tree["posterior"]
     # A chain thousands of nats below the best one carries no posterior mass worth summarising;
     # pooled, its draws would report the spread between modes (docs/sampler.md).
@@ -74,7 +78,7 @@ def diagnose(tree, rhat_max: float, ess_min: float, *, figures: bool = True) -> 
     if "sample_stats" in tree.children:
         stats = tree["sample_stats"]
         for name in stats.data_vars:
-            if name.startswith("accept"):
+            if name.startswith("accept") or name == "swap_accept":
                 a = np.asarray(stats[name].values, float)
                 accept[name] = float(np.nanmean(a)) if np.isfinite(a).any() else math.nan
     attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in tree.attrs.items()}
@@ -110,7 +114,8 @@ def format_text(d: dict) -> str:
                      f"{s['q95']:>12.4g}")
     if d["acceptance"]:
         lines += ["", "acceptance (mean over draws): " + ", ".join(
-            f"{k.removeprefix('accept_') if k != 'accept' else 'all'} {v:.3f}" for k, v in d["acceptance"].items())]
+            f"{k.removeprefix('accept_') if k != 'accept' else 'all'} {v:.3f}" for k, v in d["acceptance"].items())
+            + (" (swap: replica exchange between neighbouring rungs)" if "swap_accept" in d["acceptance"] else "")]
     for k, v in d["stored_spread"].items():
         lines.append(f"{k}: {v}")
     return "\n".join(lines)

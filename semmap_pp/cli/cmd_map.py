@@ -21,6 +21,7 @@ from pathlib import Path
 
 from semmap_pp.cli.argtypes import seed as seed_type
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
+from semmap_pp.cli.argtypes import positive_int as _positive_int
 from semmap_pp.cli.argtypes import seconds as _seconds
 from semmap_pp.cli.options import (add_map_options, add_run_length_options, add_target_options, map_options,
                                    target_inputs)
@@ -43,6 +44,13 @@ def register(subparsers) -> None:
     p.add_argument("--spread-draws", type=_non_negative_int, default=None, metavar="N",
                    help="draws per chain of the sample around W* that the spread figures are drawn from "
                         "(paper Fig. 7; model file default 1000; 0: none, the figures use the search's draws)")
+    p.add_argument("--tempered", action="store_true",
+                   help="opt-in: the sample around W* under the likelihood raised to 1/A (A the correlation "
+                        "area of W*'s residuals) with replica exchange ([sampler] spread_rungs rungs; "
+                        "docs/sampler.md, \"Replica exchange\"); slower, and measured not to converge either")
+    p.add_argument("--rungs", type=_positive_int, default=None, metavar="N",
+                   help="rungs of the replica exchange per chain (implies --tempered; 1: the tempered "
+                        "likelihood without replicas; default the model file's spread_rungs)")
     p.add_argument("--force", action="store_true", help="write into a non-empty DIR")
     p.add_argument("--max-memory", type=_memory_size, metavar="SIZE", default=None,
                    help="refuse a map whose run is estimated to need more memory at its peak than SIZE "
@@ -207,6 +215,7 @@ def run(args) -> int:
             from semmap_pp.plans.world_file import read_start_world
             starts = [read_start_world(args.start, inputs.frame, inputs.grid, inputs.model.prior.k_max)]
 
+    inputs = _tempering(inputs, args)
     ids_from = args.ids_from
     if ids_from is None and state is not None:   # a resumed run keeps the ids its world.json carried
         ids_from = carried_ids_source(args.resume)
@@ -301,6 +310,19 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
     return 0
 
 
+def _tempering(inputs, args):
+    """``inputs`` with the model's ``[sampler] spread_tempered`` switched on by ``--tempered`` or
+    ``--rungs N`` (which also sets ``spread_rungs``); unchanged without them."""
+    if not args.tempered and args.rungs is None:
+        return inputs
+    import dataclasses
+
+    s = inputs.model.sampler
+    s = dataclasses.replace(s, spread_tempered=True,
+                            spread_rungs=args.rungs if args.rungs is not None else s.spread_rungs)
+    return dataclasses.replace(inputs, model=dataclasses.replace(inputs.model, sampler=s))
+
+
 def _run_meta(args, inputs, state, rules) -> dict:
     """The inputs of the run as resume.npz and world.json record them (absolute paths)."""
     return {"map": str(Path(inputs.grid.source).resolve()) if inputs.grid.source else None,
@@ -319,6 +341,8 @@ def _log_convergence(log, result, out: Path) -> None:
         f"R-hat and ESS: `semmap diagnose {out}`"
         + ("" if rep.ok else f"; whether other seeds find the same plan: "
            f"`semmap stability {result.inputs.grid.source}`") + ")")
+    if not rep.ok:
+        log(f"  failed: {rep.failed()}\n  to fix: {rep.remedy()}")
     note = rep.separation_note()
     if note:
         log(note)
@@ -326,6 +350,8 @@ def _log_convergence(log, result, out: Path) -> None:
         rep = result.spread.report
         log(f"sample around W*: {'converged' if rep.ok else 'NOT converged'} ({rep.n_chains} x "
             f"{rep.n_draws} draws; `semmap diagnose {out / 'spread.nc'}`)")
+        if not rep.ok:
+            log(f"  failed: {rep.failed()}\n  to fix: {rep.remedy()}")
     if rep.shows_mode():
         log(f"{rep.within_mode.heading(rep.n_chains)}: {rep.within_mode.verdict()}")
 
@@ -358,9 +384,10 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         saving[0] = False
         if pressed:
             raise KeyboardInterrupt
-        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules)
-        written += write_posterior(out, run, posterior_worlds(run, N_SAMPLED_WORLDS), wstar,
-                                   rules_name=rules.name, other_files=(RESUME_FILE,))
+        # typed before world.json, which holds the posterior marginals over them
+        worlds = posterior_worlds(run, N_SAMPLED_WORLDS)
+        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
+        written += write_posterior(out, run, worlds, wstar, rules_name=rules.name, other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
         return written, True
     return written, False

@@ -185,7 +185,41 @@ def spread_section(run) -> str:
     verdict = "converged" if rep.ok else "NOT converged"
     return (f"<p>{e(line[0].upper() + line[1:])}. {e(spread_text(rep))}</p>"
             f"<p>Its chains: {verdict} ({rep.n_chains} chains × {rep.n_draws} draws, spread.nc).</p>"
-            + convergence_table(rep) + mode_section(rep))
+            + failure_text(rep) + convergence_table(rep) + mode_section(rep))
+
+
+def posterior_marginals_section(doc: dict) -> str:
+    """The posterior marginals over the sampled worlds (world.json's ``posterior_exists``,
+    ``posterior_type``; :mod:`semmap_pp.sampler.marginals`) beside the knowledge engine's type
+    marginals given W* (``type_marginals``); "" when world.json has none."""
+    pm = doc.get("posterior_marginals")
+    if pm is None:
+        return ""
+    rows = []
+    for u in doc["units"]:
+        pt, tm = u.get("posterior_type"), u["type_marginals"]
+        rows.append([_td(u["id"], True), _td(u["type"]), _td(f"{tm[u['type']]:.2f}", True),
+                     _td(f"{u['posterior_exists']:.2f}", True)]
+                    + [_td("–" if pt is None else f"{pt[t]:.2f}", True) for t in UNIT_TYPES])
+    units = _table(["unit", "type (W*)", "engine p(type | W*)", "p(exists)"]
+                   + [f"posterior p({t})" for t in UNIT_TYPES], rows)
+    doors = _table(["door", "units", "width (m)", "p(there)"],
+                   [[_td(d["id"], True), _td(" – ".join(map(str, d["units"]))), _td(f"{d['width_m']:.2f}", True),
+                     _td(f"{d['posterior_exists']:.2f}", True)] for d in doc["doors"]]) if doc["doors"] else ""
+    return (f"<h3>Posterior marginals of W*'s units and doors</h3><p>Counted over the {pm['worlds']} "
+            f"sampled worlds ({e(pm['source'])}): a unit exists where {e(pm['unit_exists'])}; its "
+            f"posterior type is {e(pm['unit_type'])} (– when none has one); a door is there where "
+            f"{e(pm['door_exists'])}. The knowledge engine's type marginals (the W* table) are "
+            f"conditional on W*'s geometry; these are over the sampled worlds, and rest on as many "
+            f"independent worlds as the ESS above says.</p>" + units + doors)
+
+
+def failure_text(rep) -> str:
+    """A failing verdict's paragraph: which summaries failed by which quantity, and what would fix
+    it (:meth:`~semmap_pp.sampler.diagnostics.ConvergenceReport.failed`, ``remedy``); "" if it passed."""
+    if rep.ok:
+        return ""
+    return f"<p>Failed: {e(rep.failed())}.<br>To fix: {e(rep.remedy())}.</p>"
 
 
 def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, int], *, rules_name: str,
@@ -244,7 +278,7 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
                 "Every free cell of the building in its room, one colour each; doors between rooms are "
                 "left out. A room no unit covers was seen through its door alone (world.json's rooms)."),
         '<h2 id="spread">Posterior spread</h2>',
-        spread_section(run),
+        spread_section(run) + posterior_marginals_section(doc),
         _figure(f("posterior"), "Sampled worlds (posterior.png)",
                 "Each sampled world drawn with very thin lines on the map (paper Fig. 7)."),
         _figure(f("posterior_cells"), "Per-cell probabilities (posterior_cells.png)",
@@ -252,8 +286,9 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
                 "each type."),
         '<h2 id="convergence">Convergence</h2>',
         f"<p>{verdict} — {rep.n_chains} chains × {rep.n_draws} draws; a label-invariant summary passes when "
-        f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (NaN fails).</p>",
-        convergence_table(rep),
+        f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (Vehtari et al. 2021; "
+        f"NaN fails).</p>",
+        failure_text(rep) + convergence_table(rep),
         f"<p>{e(note)}.</p>" if (note := rep.separation_note()) else "",
         mode_section(rep),
         '<h2 id="cpr">Cell prediction rate</h2>',
@@ -304,4 +339,4 @@ def write_report(path: str | os.PathLike, text: str) -> Path:
     return Path(path)
 
 
-__all__ = ["FILES", "report_html", "spread_section", "write_report", "units_table", "convergence_table", "data_uri"]
+__all__ = ["FILES", "report_html", "spread_section", "failure_text", "posterior_marginals_section", "write_report", "units_table", "convergence_table", "data_uri"]

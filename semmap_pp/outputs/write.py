@@ -26,9 +26,10 @@ from semmap_pp.outputs.report import FILES, report_html, write_report
 from semmap_pp.outputs.ros2 import write_run_bag
 from semmap_pp.outputs.types_layer import write_types_layer
 from semmap_pp.sampler.diagnostics import to_datatree, write_trace
+from semmap_pp.sampler.marginals import door_marginals, unit_marginals
 from semmap_pp.sampler.spread import accumulate
 from semmap_pp.semantic.regions import join_regions, passage_pairs, regions_image, write_regions_png
-from semmap_pp.semantic.world_json import world_dict, write_labels_png, write_world_json
+from semmap_pp.semantic.world_json import with_posterior, world_dict, write_labels_png, write_world_json
 
 #: Sampled worlds drawn in posterior.png and counted in posterior_cells.png (paper Fig. 7: 1000).
 N_SAMPLED_WORLDS = 1000
@@ -46,12 +47,25 @@ def diagnostics_text(run, rules_path) -> str:
     return text
 
 
-def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Path], dict]:
-    """world.json, labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
+def posterior_doc(doc: dict, run, worlds: list) -> dict:
+    """world.json's content with the posterior marginals of W*'s units and doors over the typed
+    sampled ``worlds`` (:mod:`semmap_pp.sampler.marginals`); ``doc`` itself without worlds."""
+    if not worlds:
+        return doc
+    sm = run.semantic
+    doors = dict(zip(sm.derived.doors, door_marginals(sm.frame, sm.derived.doors, worlds)))
+    return with_posterior(doc, sm, unit_marginals(sm.world, worlds), doors, worlds=len(worlds),
+                          source="the sample around W*" if getattr(run, "spread", None) is not None
+                          else "the search's draws")
+
+
+def write_core(out: Path, run, *, rules_name: str, rules_path, worlds=None) -> tuple[list[Path], dict]:
+    """world.json (with the posterior marginals over ``worlds``, the typed sampled worlds, when
+    given), labels.png, trace.nc, diagnostics.txt; returns the paths and the world.json content."""
 
     inputs, settings, sm = run.inputs, run.settings, run.semantic
-    doc = world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
-                     roi_name=inputs.roi_name)
+    doc = posterior_doc(world_dict(sm, rules=rules_name, model=inputs.model.path.name, seed=settings.seed,
+                                   roi_name=inputs.roi_name), run, worlds)
     written = [write_world_json(out / "world.json", doc), write_labels_png(out / "labels.png", sm.labels_image)]
     tree = to_datatree(run.summaries, sample_stats=run.sample_stats,
                        attrs={"map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed,
@@ -61,10 +75,17 @@ def write_core(out: Path, run, *, rules_name: str, rules_path) -> tuple[list[Pat
     spread_nc = out / "spread.nc"
     if getattr(run, "spread", None) is not None:
         sp = run.spread
-        written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs={
-            "map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
-            "chains": settings.chains, "tune": 0, "draws": sp.draws, "n_inner": sp.n_inner,
-            "start": "W*"}), spread_nc))
+        attrs = {"map": printable(inputs.grid.source), "rules": rules_name, "seed": settings.seed + 1,
+                 "chains": settings.chains, "tune": 0, "draws": sp.draws, "n_inner": sp.n_inner,
+                 "start": "W*"}
+        t = sp.tempering
+        if t.on:    # opt-in (--tempered): the ladder the cold chains were drawn under
+            attrs |= {"likelihood_exponent": t.ladder[0], "correlation_area": t.area,
+                      "rungs": len(t.ladder), "ladder": ", ".join(f"{b:.6g}" for b in t.ladder),
+                      "swaps": t.swaps, "other_chains_start": "dispersed" if t.dispersed else "W*",
+                      "temperatures": ", ".join(f"{v:.6g}" for v in t.temperatures)}
+        written.append(write_trace(to_datatree(sp.summaries, sample_stats=sp.sample_stats, attrs=attrs),
+                                   spread_nc))
     elif spread_nc.exists():      # an earlier run's, in a directory written again with --force
         spread_nc.unlink()
     atomic.write_text(out / "diagnostics.txt", diagnostics_text(run, rules_path))
@@ -135,17 +156,18 @@ class WstarFiles(NamedTuple):
     region_img: np.ndarray
 
 
-def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None) -> WstarFiles:
+def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
+                worlds=None) -> WstarFiles:
     """The files of W* (world.json, labels.png, trace.nc, spread.nc, diagnostics.txt and the plan
-    files of :func:`write_plan`) into ``out_dir``, created if missing. The first half of
-    :func:`write_all`: a caller that makes the sampled worlds only now (``semmap map``) has these
-    complete before it rebuilds the run's target for them."""
+    files of :func:`write_plan`) into ``out_dir``, created if missing; world.json with the
+    posterior marginals over ``worlds`` (the typed sampled worlds) when given. The first half of
+    :func:`write_all`."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
     sm = run.semantic
     written, doc = write_core(out, run, rules_name=rules_name,
-                              rules_path=rules_path if rules_path is not None else rules_name)
+                              rules_path=rules_path if rules_path is not None else rules_name, worlds=worlds)
 
     plan, pngs, regions, region_img = write_plan(out, sm, doc)
     written += plan
@@ -246,9 +268,9 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
     stays complete. The caller holds ``out_dir``'s lock (:func:`semmap_pp.run.outdir.lock_out_dir`):
     the temporaries this removes first (:func:`remove_stale_temps`) are then a dead run's.
     """
-    wstar = write_wstar(out_dir, run, rules_name=rules_name, rules_path=rules_path)
+    wstar = write_wstar(out_dir, run, rules_name=rules_name, rules_path=rules_path, worlds=worlds)
     return write_posterior(out_dir, run, worlds, wstar, rules_name=rules_name, other_files=other_files)
 
 
-__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core",
+__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core", "posterior_doc",
            "write_plan", "diagnostics_text"]

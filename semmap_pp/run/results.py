@@ -43,6 +43,36 @@ class RunSettings:
         return cls(**values)
 
 
+@dataclass(frozen=True)
+class Tempering:
+    """How the sample around W* was tempered (opt-in: ``semmap map --tempered``): the likelihood
+    exponents of each chain's rungs, the cold one first (``(1.0,)``: the full likelihood, no
+    replicas), the correlation area ``A`` the cold exponent ``1 / A`` came from, the swap proposals
+    per draw, and whether chains 2.. started at the search's dispersed starts instead of W*."""
+
+    ladder: tuple = (1.0,)
+    area: float = 1.0
+    swaps: int = 0
+    dispersed: bool = False
+    temperatures: tuple = (1.0,)    # per rung (the cold one 1): its kernels' temperature
+
+    @property
+    def on(self) -> bool:
+        return self.ladder != (1.0,)
+
+    def text(self) -> str:
+        """What the sample's chains were, for its one-line summary ("" when untempered)."""
+        if not self.on:
+            return ""
+        out = f"likelihood to the power 1/{self.area:.1f}"
+        if len(self.ladder) > 1:
+            out += (f", {len(self.ladder)} replicas per chain (exponents "
+                    + ", ".join(f"{b:.3g}" for b in self.ladder) + f"), {self.swaps} swap(s) per draw")
+            if any(t != 1.0 for t in self.temperatures):
+                out += " at temperatures " + ", ".join(f"{t:.3g}" for t in self.temperatures)
+        return out
+
+
 @dataclass
 class SpreadSample:
     """The sample around W* (the paper's Fig. 7): after the search, every chain started at W* and
@@ -63,13 +93,23 @@ class SpreadSample:
     kept: tuple = ()
     best_world: wm.World | None = None   # the best world its chains visited (tracked at every
                                          # kernel, W* included); reported, never taken as W*
+    tempering: Tempering = Tempering()   # opt-in (--tempered): the ladder, exponent and starts
 
     def text(self) -> str:
-        """One line: what was sampled, how fast, and whether the chains rose above W*."""
+        """One line: what was sampled, from where, how fast, and whether the chains rose above W*."""
         chains, n = self.kept
+        t = self.tempering
+        start = ("(chain 1 from W*, the others from the search's dispersed starts)" if t.dispersed
+                 else "from W*")
+        rungs = f" over {len(t.ladder)} rungs" if len(t.ladder) > 1 else ""
         text = (f"sample around W* (posterior.png, posterior_cells.png): {len(chains)} chain(s) x {n} "
-                f"draws x {self.n_inner} kernels from W*, {self.seconds:.1f} s "
-                f"({self.kernels_per_second:,.0f} kernels/s)")
+                f"draws x {self.n_inner} kernels {start}, {self.seconds:.1f} s "
+                f"({self.kernels_per_second:,.0f} kernels/s{rungs})")
+        if t.on:
+            text += "; " + t.text()
+            swaps = self.sample_stats.get("swap_accept")
+            if swaps is not None and np.isfinite(swaps).any():
+                text += f", swaps accepted {float(np.nanmean(swaps)):.3f} of the time"
         rise = self.best_logp - self.start_logp
         if math.isfinite(rise) and rise > 0.05:
             text += (f"; its chains reached log posterior {rise:+.1f} above W* (W* is kept: the "
@@ -152,8 +192,13 @@ def collect_draws(records, model: Model, *, draws_option: str = "--draws"):
     summaries = {"log_posterior": np.stack([records[c].stats["logp"][recorded[c]] for c in kept_chains])}
     for name in SUMMARIES[1:]:
         summaries[name] = np.stack([records[c].stats[name][recorded[c]] for c in kept_chains])
-    stat_names = [k for k in records[kept_chains[0]].stats
-                  if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")]
+    first = records[kept_chains[0]].stats
+    # beta and swap_accept only when the chains ran replicas or a tempered likelihood
+    tempered = any(np.any(np.asarray(records[c].stats.get("beta", [1.0])) != 1.0)
+                   or np.isfinite(np.asarray(records[c].stats.get("swap_accept", [np.nan]), float)).any()
+                   for c in kept_chains)
+    stat_names = [k for k in first if k.startswith("accept") or k in ("temperature", "knowledge", "best_logp")
+                  or (tempered and k in ("beta", "swap_accept"))]
     sample_stats = {k: np.stack([records[c].stats[k][recorded[c]] for c in kept_chains]).astype(float)
                     for k in stat_names}
     report = convergence(summaries, rhat_max=model.diagnostics.rhat_max, ess_min=model.diagnostics.ess_min,

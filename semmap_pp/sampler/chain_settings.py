@@ -28,6 +28,15 @@ class ChainSettings:
         Cell prediction rate of the tracker's current world, recorded per draw (NaN without it).
     resolution : float
         Metres per lattice cell, for the ``wall_length`` summary (total unit perimeter).
+    ladder : tuple of float
+        Replica exchange: the likelihood exponents of the chain's rungs, the cold one (the target
+        sampled and recorded) first (:mod:`semmap_pp.sampler.replicas`); ``(1.0,)``: one world,
+        the target as it is.
+    swaps : int
+        Swap proposals between neighbouring rungs after every draw's kernels.
+    temperatures : tuple of float, optional
+        One temperature per rung of ``ladder`` (the cold one 1): a rung's kernels sample its
+        target to the power ``1 / T``; None: every rung at 1.
     callback : callable(dict), optional
         Called after every draw with :func:`~semmap_pp.sampler.step.draw_info` of its stats, in the process that runs the
         chain (:func:`semmap_pp.sampler.sampling.sample_worlds` reports to the main process instead).
@@ -40,6 +49,9 @@ class ChainSettings:
     cpr_fn: object = None
     resolution: float = 1.0
     callback: object = None
+    ladder: tuple = (1.0,)
+    swaps: int = 1
+    temperatures: tuple | None = None
 
 
 @dataclass(frozen=True)

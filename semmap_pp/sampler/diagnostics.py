@@ -163,6 +163,8 @@ class ConvergenceReport:
     rhat_max: float
     ess_min: float
     within_mode: ModeReport | None = None
+    draws_option: str = "--draws"   # the option that lengthens these chains (for the remedy)
+    tempered: bool = False          # drawn with replica exchange already (for the remedy)
 
     def with_figures(self, figures: bool) -> "ConvergenceReport":
         """The same report, its texts saying whether the spread figures are drawn from its draws
@@ -241,11 +243,86 @@ class ConvergenceReport:
             "within_mode": self.within_mode.to_dict() if self.within_mode is not None else None,
         }
 
+    def failed(self) -> str:
+        """Which summaries failed, by which quantity: "" when every one passed.
+
+        >>> import numpy as np
+        >>> rng = np.random.default_rng(1)
+        >>> apart = rng.normal(size=(2, 40)); apart[1] += 8.0
+        >>> text = convergence({"log_posterior": apart, "n_units": rng.normal(size=(2, 40))},
+        ...                    rhat_max=1.01, ess_min=400).failed()
+        >>> [part.split(" on ")[0] for part in text.split("; ")]
+        ['R-hat > 1.01', 'bulk ESS < 400', 'tail ESS < 400']
+        >>> text.split("; ")[0].startswith("R-hat > 1.01 on log_posterior (") and "n_units" not in text.split("; ")[0]
+        True
+        """
+        parts = []
+        rhat = [q for q in self.quantities if not (math.isfinite(q.rhat) and q.rhat <= self.rhat_max)]
+        if rhat:
+            parts.append(f"R-hat > {self.rhat_max:g} on " + ", ".join(
+                f"{q.name} ({format_rhat(q.rhat)})" for q in rhat))
+        for kind in ("bulk", "tail"):
+            low = [(q.name, getattr(q, f"ess_{kind}")) for q in self.quantities]
+            low = [(n, v) for n, v in low if not (math.isfinite(v) and v >= self.ess_min)]
+            if low:
+                parts.append(f"{kind} ESS < {self.ess_min:g} on " + ", ".join(
+                    f"{n} ({v:.0f})" if math.isfinite(v) else f"{n} (NaN)" for n, v in low))
+        return "; ".join(parts)
+
+    def remedy(self) -> str:
+        """What would fix a failing verdict, from which quantity failed: "" when it passed.
+
+        Chains apart (R-hat, or chains in separate modes): more draws join them only slowly;
+        replica exchange is the tool built for that (a longer ladder, when it ran already). ESS
+        alone below the threshold: about ``ess_min / ESS`` times as many draws.
+
+        >>> import numpy as np
+        >>> rng = np.random.default_rng(2)
+        >>> text = convergence({"log_posterior": rng.normal(size=(2, 50))}, rhat_max=1.1, ess_min=400).remedy()
+        >>> text.startswith("about ") and "times as many draws (--draws " in text
+        True
+        """
+        if self.ok:
+            return ""
+        rhat_fail = any(not (math.isfinite(q.rhat) and q.rhat <= self.rhat_max) for q in self.quantities)
+        ess = [min(q.ess_bulk, q.ess_tail) for q in self.quantities]
+        low = min((v for v in ess if math.isfinite(v) and v > 0), default=math.nan)
+        more = ""
+        if math.isfinite(low) and low < self.ess_min:
+            factor = self.ess_min / low
+            more = (f"about {factor:,.0f} times as many draws ({self.draws_option} "
+                    f"{math.ceil(self.n_draws * factor)}) for ESS {self.ess_min:g}")
+        if all(_constant(np.asarray(q.chain_means)) and all(sd == 0 for sd in q.chain_sds)
+               for q in self.quantities):
+            return ("no summary moved in any chain: every draw is the chains' start world, and the "
+                    "kernels' proposals were all refused; more draws change nothing until the chains "
+                    "move (a sample that flattens the target: `semmap map --tempered`)")
+        if rhat_fail and (self.separated_chains() or any(q.rhat > 1.1 for q in self.quantities
+                                                         if math.isfinite(q.rhat))
+                          or any(math.isinf(q.rhat) for q in self.quantities)):
+            cure = ("a ladder reaching nearer the prior (more rungs: `--rungs N`, a smaller "
+                    "[sampler] spread_ladder_ratio) and more swaps (spread_swaps)" if self.tempered else
+                    "replica exchange between tempered replicas is the remedy built for this "
+                    "(`semmap map --tempered`, docs/sampler.md, \"Replica exchange\"; measured not to "
+                    "suffice yet on the bundled maps)")
+            return ("the chains disagree (R-hat): they sit in separate modes or have not left their "
+                    f"starts, which more draws mend only slowly; {cure}" + (f"; then {more}" if more else ""))
+        if more:
+            return more
+        return f"more draws ({self.draws_option})"
+
+    def verdict(self) -> str:
+        """The verdict's lines: "converged", or "NOT converged", what failed and what would fix it."""
+        if self.ok:
+            return "converged"
+        return f"NOT converged\nfailed: {self.failed()}\nto fix: {self.remedy()}"
+
     def to_text(self) -> str:
         lines = [f"chains: {self.n_chains}, draws per chain: {self.n_draws}; "
-                 f"pass when R-hat <= {self.rhat_max} and ESS >= {self.ess_min} (NaN fails)",
+                 f"pass when R-hat <= {self.rhat_max:g} and bulk and tail ESS >= {self.ess_min:g} "
+                 f"(Vehtari et al. 2021; NaN fails)",
                  *_table_lines(self.quantities)]
-        lines.append("converged" if self.ok else "NOT converged")
+        lines.append(self.verdict())
         note = self.separation_note()
         if note:
             lines.append(note)
@@ -345,7 +422,8 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
     if math.isfinite(rhat) and not (math.isfinite(ess_b) and math.isfinite(ess_t)):
         reasons.append("ESS is NaN")
     elif math.isfinite(ess_b) and min(ess_b, ess_t) < ess_min:
-        reasons.append(f"ESS {min(ess_b, ess_t):.0f} < {ess_min}")
+        which = [f"{k} ESS {v:.0f}" for k, v in (("bulk", ess_b), ("tail", ess_t)) if v < ess_min]
+        reasons.append(f"{' and '.join(which)} < {ess_min:g}")
     return QuantityDiagnostics(name, mean, sd, rhat, ess_b, ess_t, not reasons, "; ".join(reasons),
                                chain_means, chain_sds)
 
@@ -457,7 +535,7 @@ def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: fl
         raise ValueError(f"summaries differ in shape: {sorted(shapes)}")
     (n_chains, n_draws), = shapes
     qs = tuple(_diagnose_one(n, arrays[n], rhat_max, ess_min) for n in names)
-    report = ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min)
+    report = ConvergenceReport(qs, n_chains, n_draws, rhat_max, ess_min, draws_option=draws_option)
     chains = tuple(report.mode_chains())
     lp = arrays.get("log_posterior")
     first = max((warmup_draws(lp[c - 1]) for c in chains), default=0) if lp is not None else 0

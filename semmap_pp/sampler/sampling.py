@@ -163,7 +163,8 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
                   resolution: float = 1.0, knowledge_threshold: float | None = None,
                   progressbar: bool = False, mp_ctx=None, callback=None, stop=None,
                   budget: float | None = None, resume=None, schedule: tuple[int, int] | None = None,
-                  min_draws: int = 4) -> SampleResult:
+                  min_draws: int = 4, ladder: tuple = (1.0,), swaps: int = 1,
+                  temperatures: tuple | None = None) -> SampleResult:
     """Run ``chains`` chains of ``tune + draws`` PyMC draws, ``n_inner`` kernels each.
 
     Parameters
@@ -192,6 +193,12 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
         Chains that continue an earlier run (with ``schedule``, and ``starts`` their last worlds).
     schedule : (int, int), optional
         ``(burn-in, total draws)`` per chain, counted from each chain's first draw ever.
+    ladder : tuple of float
+        Replica exchange inside every chain (:mod:`semmap_pp.sampler.replicas`): the likelihood
+        exponents of its rungs, the cold one (recorded) first; each rung runs ``n_inner`` kernels
+        per draw, then ``swaps`` swaps are proposed. ``(1.0,)``: one world per chain, untempered.
+    temperatures : tuple of float, optional
+        A temperature per rung (the cold one 1), its kernels and swaps at it; None: all 1.
 
     Returns
     -------
@@ -209,7 +216,9 @@ def sample_worlds(target, data, starts, *, draws: int, tune: int = 0, chains: in
     limits = ChainLimits.of_budget(budget, cores, chains, stop=stop, schedule=schedule,
                                    resume=resume, min_draws=min_draws)
     chain = ChainSettings(mix=mix, n_inner=n_inner, anneal=anneal, cpr_fn=cpr_fn,
-                          resolution=resolution, knowledge_threshold=knowledge_threshold)
+                          resolution=resolution, knowledge_threshold=knowledge_threshold,
+                          ladder=tuple(ladder), swaps=swaps,
+                          temperatures=None if temperatures is None else tuple(temperatures))
     recorder = _Recorder(chains, callback, stop, min_draws, sequential=not (cores > 1 and chains > 1))
     with model, warnings.catch_warnings():
         # We want the MultiTrace with the burn-in kept (W* may be found while annealing).

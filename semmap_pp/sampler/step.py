@@ -41,6 +41,7 @@ from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.sampler.chain_settings import ChainLimits, ChainSettings
 from semmap_pp.sampler.kernels import KIND_NAMES, default_mix
 from semmap_pp.sampler.mcmc import mh_green
+from semmap_pp.sampler.replicas import Ladder, swap_round
 
 VAR_NAMES = ("rects", "active", "types")
 
@@ -140,7 +141,7 @@ def _scalar_stats() -> dict:
              "stopped": (np.int64, []), "n_tune": (np.int64, []), "total_draws": (np.int64, []),
              "wall_length": (np.float64, []), "knowledge": (np.int64, []),
              "accept": (np.float64, []), "temperature": (np.float64, []), "best_logp": (np.float64, []),
-             "seconds": (np.float64, [])}
+             "seconds": (np.float64, []), "beta": (np.float64, []), "swap_accept": (np.float64, [])}
     stats.update({f"accept_{k}": (np.float64, []) for k in KIND_NAMES})
     stats.update({f"n_{t}": (np.int64, []) for t in UNIT_TYPES})
     return stats
@@ -193,6 +194,8 @@ class WorldStep(BlockedStep):
         self.resolution = float(chain.resolution)
         self.knowledge_threshold = chain.knowledge_threshold
         self.callback = chain.callback
+        self.ladder = Ladder(chain.ladder, chain.temperatures)
+        self.swaps = int(chain.swaps)
         self.stop = limits.stop
         self.deadline = limits.deadline
         self.chain_seconds = limits.chain_seconds
@@ -267,18 +270,25 @@ class WorldStep(BlockedStep):
         if tr is not None and np.array_equal(tr.world.rects, world.rects) \
                 and np.array_equal(tr.world.active, world.active):
             return tr
-        tr = self.target.start(world)
+        cold = self.ladder.posts(self.target)[0]
+        tr = cold.start(world)
         if tr.logp == -math.inf:  # guard an impossible start: begin from the empty world instead
-            empty = self.target.start(wm.empty(world.capacity))
+            empty = cold.start(wm.empty(world.capacity))
             if empty.logp > -math.inf:
                 tr = empty
         self._tracker = tr
+        self.ladder.start(self.target, tr)
         self._remember(tr)
         return tr
 
+    def _full_logp(self, tr) -> float:
+        """``tr``'s log posterior under the untempered target (the cold rung's own when it is)."""
+        return self.ladder.full_logp(tr, self.target)
+
     def _remember(self, tr) -> None:
-        if tr.logp > self._best[0]:
-            self._best = (tr.logp, tr.world.rects.copy(), tr.world.active.copy())
+        logp = self._full_logp(tr)
+        if logp > self._best[0]:
+            self._best = (logp, tr.world.rects.copy(), tr.world.active.copy())
 
     def temperature(self) -> float:
         """Temperature of the current draw: geometric from ``anneal`` to 1 over the burn-in draws."""
@@ -317,6 +327,8 @@ class WorldStep(BlockedStep):
         if recording or tr.coverage() >= self.knowledge_threshold:
             self.target.knowledge_on = True
             tr.resync()
+            for hot in self.ladder.hot():
+                hot.resync()
             self._best = (-math.inf, None, None)  # W* is judged under the full target only
             self._remember(tr)
 
@@ -326,12 +338,33 @@ class WorldStep(BlockedStep):
             return self._emit(tr, math.nan, None, None, stopped=True)
         self._switch_knowledge(tr)
         temp = self.temperature()
-        rng, mix, data = self.rng, self.mix, self.data
-        k = len(mix)
+        k = len(self.mix)
         attempted, accepted = np.zeros(k, np.int64), np.zeros(k, np.int64)
+        t0 = time.perf_counter()
+        self._kernels(tr, temp, attempted, accepted, cold=True)
+        swapped = math.nan
+        if len(self.ladder) > 1:
+            heat = self.ladder.temperatures
+            for t_k, hot in zip(heat[1:], self.ladder.hot()):
+                self._kernels(hot, temp * t_k, np.zeros(k, np.int64), np.zeros(k, np.int64), cold=False)
+            tried, done = swap_round(self.rng, self.ladder.replicas, self.swaps,
+                                     heat if self.ladder.heated else None)
+            swapped = done / tried if tried else math.nan
+            if self.ladder.replicas[0] is not tr:
+                tr = self._tracker = self.ladder.replicas[0]
+                self._remember(tr)
+        self._draw += 1
+        return self._emit(tr, temp, attempted, accepted, stopped=False,
+                          seconds=time.perf_counter() - t0, swapped=swapped)
+
+    def _kernels(self, tr, temp, attempted, accepted, *, cold: bool) -> None:
+        """``n_inner`` kernels of the mix on one rung's tracker (the cold one keeps the best world)."""
+        rng, mix, data = self.rng, self.mix, self.data
+        # the best world is judged under the untempered target: a tempered cold rung checks it at
+        # every accepted move, the untempered one when its log posterior passes the best so far
+        every = self.ladder.exponents[0] != 1.0
         best = self._best[0]
         stop = self.stop if self._draw >= self.min_draws else None
-        t0 = time.perf_counter()
         for _ in range(self.n_inner):
             if stop is not None and stop():
                 break  # a partial draw is still a valid state of the chain
@@ -339,17 +372,15 @@ class WorldStep(BlockedStep):
             attempted[j] += 1
             if proposal is not None and mh_green(rng, tr, proposal, temp):
                 accepted[j] += 1
-                if tr.logp > best:
+                if cold and (every or tr.logp > best):
                     self._remember(tr)
                     best = tr.logp
-        self._draw += 1
-        return self._emit(tr, temp, attempted, accepted, stopped=False,
-                          seconds=time.perf_counter() - t0)
 
-    def _emit(self, tr, temp, attempted, accepted, *, stopped: bool, seconds: float = 0.0):
+    def _emit(self, tr, temp, attempted, accepted, *, stopped: bool, seconds: float = 0.0,
+              swapped: float = math.nan):
         world = tr.world
         n_done = max(int(attempted.sum()), 1) if attempted is not None else 1
-        stats = {"logp": float(tr.logp), "n_units": wm.n_units(world), "temperature": temp,
+        stats = {"logp": self._full_logp(tr), "n_units": wm.n_units(world), "temperature": temp,
                  "cpr": float(self.cpr_fn(tr)) if self.cpr_fn is not None else math.nan,
                  "wall_length": float(2 * np.sum((world.rects[:, 2] - world.rects[:, 0])
                                                  + (world.rects[:, 3] - world.rects[:, 1]))) * self.resolution,
@@ -359,7 +390,8 @@ class WorldStep(BlockedStep):
                  "draw_index": self._draw - (0 if stopped else 1),
                  "burn_in": int(not stopped and self._draw - 1 < self._n_tune), "stopped": int(stopped),
                  "n_tune": self._n_tune, "total_draws": -1 if self._total is None else self._total,
-                 "seconds": float(seconds)}
+                 "seconds": float(seconds), "beta": self.ladder.exponents[0],
+                 "swap_accept": float(swapped)}
         for kind in KIND_NAMES:
             stats[f"accept_{kind}"] = math.nan
         if attempted is not None:

@@ -22,6 +22,7 @@ from semmap_pp import __version__
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.states import seen_shares
+from semmap_pp.sampler.marginals import MATCH_IOU
 
 FORMAT = "semmap_pp.world/1"
 
@@ -68,12 +69,18 @@ def _seen(frame, rect) -> dict:
     return {"seen_share": round(inside, 4), "walls_seen_share": round(band, 4)}
 
 
+def ordered_openings(openings, ids) -> list:
+    """Doors or passages in world.json's order (by their units' ids, then lattice box): the
+    ``i``-th has id ``i + 1``."""
+    return sorted(openings, key=lambda o: (sorted((ids[o.p], ids[o.q])), o.box))
+
+
 def _openings(frame, openings, ids, res: float) -> list[dict]:
     """Doors or passages (:class:`semmap_pp.derive.doors.Door`) as world.json lists them: ``units``,
     ``center_px``, ``center_m``, ``width_m``, ``endpoints_px`` and ``id`` (1..n in order of their
     unit pair and lattice box)."""
     out = []
-    for door in sorted(openings, key=lambda o: (sorted((ids[o.p], ids[o.q])), o.box)):
+    for door in ordered_openings(openings, ids):
         r0, c0, r1, c1 = door.box
         rc, cc = _box_centre(door.box)
         if door.vertical:   # the opening runs along the rows
@@ -168,6 +175,30 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         **({"ids": sm.id_record} if sm.id_record is not None else {}),
         "generator": f"semmap_pp {__version__}",
     }
+
+
+def with_posterior(doc: dict, sm, units: dict, doors: dict, *, worlds: int, source: str) -> dict:
+    """``doc`` (world.json's content of ``sm``) with the posterior marginals over sampled worlds
+    (:mod:`semmap_pp.sampler.marginals`): each unit's ``posterior_exists`` and ``posterior_type``
+    (``units``: W* slot -> :class:`~semmap_pp.sampler.marginals.UnitMarginal`), each door's
+    ``posterior_exists`` (``doors``: :class:`~semmap_pp.derive.doors.Door` -> share of worlds), and
+    ``posterior_marginals`` saying how many worlds they count and where the worlds come from."""
+    out = dict(doc)
+    out_units = []
+    for u in doc["units"]:
+        m = units[sm.slot_of(u["id"])]
+        out_units.append(dict(u, posterior_exists=round(float(m.exists), 6),
+                              posterior_type=None if m.types is None else
+                              {t: round(float(p), 6) for t, p in zip(UNIT_TYPES, m.types)}))
+    out["units"] = out_units
+    order = ordered_openings(sm.derived.doors, sm.slot_ids)
+    out["doors"] = [dict(d, posterior_exists=round(float(doors[door]), 6)) for d, door in zip(doc["doors"], order)]
+    out["posterior_marginals"] = {
+        "worlds": int(worlds), "source": source,
+        "unit_exists": f"a sampled unit's lattice rectangle overlaps the unit's with IoU >= {MATCH_IOU:g}",
+        "unit_type": "the types of those matching units, over the worlds with one",
+        "door_exists": "a sampled door's lattice box meets the door's, grown by the wall band's thickness"}
+    return out
 
 
 def rooms_list(sm) -> list[dict]:

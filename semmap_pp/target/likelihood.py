@@ -39,6 +39,8 @@ True
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import weakref
 from dataclasses import dataclass
 
@@ -211,6 +213,21 @@ def _prepare(frame, model) -> LikelihoodData:
     return LikelihoodData(xcode=xcode, gain=gain_table(model.sensor), baseline=baseline,
                           log_psi=float(np.log(model.sensor.psi)), wall=frame.cells.wall,
                           n_free=int(counts[FREE]), xhist=xhist, xsum=prefix_sums(xcode))
+
+
+def tempered_data(data: LikelihoodData, beta: float) -> LikelihoodData:
+    """``data`` with the likelihood raised to the power ``beta``: every per-cell log term is a
+    gain, the baseline or ``γ log ψ``, so scaling those three scales ``log p(M|W)`` exactly by
+    ``beta`` (the lattice arrays are shared, not copied). ``beta = 1`` returns ``data`` itself."""
+    beta = float(beta)
+    if not (math.isfinite(beta) and beta > 0.0):
+        raise ValueError(f"a likelihood exponent must be a positive number, got {beta}")
+    if beta == 1.0:
+        return data
+    gain = data.gain * beta
+    gain.setflags(write=False)
+    return dataclasses.replace(data, gain=gain, baseline=data.baseline * beta,
+                               log_psi=data.log_psi * beta)
 
 
 def _add_unit(counts: np.ndarray, rect, corr: bool, wall: int, sign: int,

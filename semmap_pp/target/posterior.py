@@ -308,10 +308,8 @@ class Posterior:
 
     def enclosure(self, world: wm.World) -> float:
         """The enclosure term of the likelihood (:func:`~semmap_pp.target.likelihood.enclosure_loglik`)."""
-        sensor = self.model.sensor
         return float(enclosure_loglik(self.data.xsum, _ro(world.rects), _ro(world.active),
-                                      self.cells.wall, sensor.enclosure_min_share,
-                                      sensor.enclosure_cost))
+                                      self.cells.wall, self._fp[F_ENC_MIN], self._fp[F_ENC_COST]))
 
     def _logprior(self, typ: _Typing) -> float:
         w = typ.world
@@ -587,6 +585,19 @@ class Tracker(KnowledgeTracking):
         """Rebuild every cache from the current geometry (call after switching
         :attr:`Posterior.knowledge_on`: the provider, hence the types, changed)."""
         self.__init__(self.post, self.world)
+
+    def loglik_under(self, post: Posterior) -> float:
+        """The log-likelihood of the current world under ``post``, a tempered copy of this
+        tracker's target (:mod:`semmap_pp.target.tempering`: the same lattice, types and prior,
+        the likelihood raised to another power), from the tracker's tallies."""
+        return loglik_from_tallies(post.data, self.hist, self.gamma_total) + post.enclosure(self.world)
+
+    def retarget(self, post: Posterior) -> None:
+        """Make ``post`` (a tempered copy of this tracker's target) the tracker's target, keeping
+        the world, its types and every cache but the likelihood's float (a replica exchange)."""
+        self.post = post
+        self.loglik = self.loglik_under(post)
+        self.logp = self.loglik + self.logprior
 
     def accept(self, prop: ScoredProposal) -> None:
         """Commit a proposal (a rejected one is simply dropped)."""

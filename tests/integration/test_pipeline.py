@@ -261,9 +261,10 @@ def test_a_map_in_a_larger_unknown_canvas_gives_the_same_world_shifted():
 
 
 def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_changes_wstar():
-    """With spread_draws > 0, run_map samples again after the search: every chain starts at W*
-    (paper Fig. 7). W*, its log posterior and the search's draws are those of the run without the
-    sample; the spread figures' worlds come from the sample; a run stopped early has none."""
+    """With spread_draws > 0, run_map samples again after the search; with one rung (no replica
+    exchange) every chain starts at W* (paper Fig. 7). W*, its log posterior and the search's
+    draws are those of the run without the sample; the spread figures' worlds come from the
+    sample; a run stopped early has none."""
     from semmap_pp.run.spread import posterior_worlds
     from semmap_pp.run.inputs import Inputs
     from semmap_pp.run.pipeline import run_map
@@ -272,7 +273,8 @@ def test_the_sample_around_wstar_starts_there_draws_the_figures_and_never_change
     g = rooms_grid(door=True)
     f = build_frame(g, MODEL)
     roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
-    inputs = Inputs(g, MODEL, None, f, roi, "default")
+    one_rung = dataclasses.replace(MODEL, sampler=dataclasses.replace(MODEL.sampler, spread_rungs=1))
+    inputs = Inputs(g, one_rung, None, f, roi, "default")
     base = dict(seed=3, chains=2, cores=1, tune=2, draws=4, n_inner=10)
     plain = run_map(inputs, RunSettings.from_model(MODEL, **base, spread_draws=0), log=lambda m: None)
     logged = []

@@ -1,3 +1,6 @@
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 
@@ -302,3 +305,60 @@ def test_climb_needs_the_whole_trace_to_rise():
     assert dg.climb(np.concatenate([up, up])) == 0.0              # up, back down, up again
     assert dg.climb(np.repeat([0.0, 0.3, 0.6, 0.9], 10)) == 0.0   # less than CLIMB_MIN_NATS
     assert dg.climb(up[:7]) == 0.0 and dg.climb(np.r_[up, np.nan]) == 0.0
+
+
+def test_the_default_thresholds_are_vehtari_et_al_2021s():
+    from semmap_pp.model import load_model
+
+    d = load_model().diagnostics
+    assert (d.rhat_max, d.ess_min) == (1.01, 400)
+
+
+def test_a_failing_verdict_names_the_quantity_the_summaries_and_a_remedy():
+    """Chains apart on the log posterior only: R-hat fails there, not on n_units; every summary's
+    ESS is short of 400, split into bulk and tail; the remedy for chains apart is replica exchange
+    (with --tempered already on: a longer ladder)."""
+    rng = np.random.default_rng(5)
+    lp = rng.normal(size=(2, 200))
+    lp[1] += 6.0
+    rep = dg.convergence({"log_posterior": lp, "n_units": rng.normal(size=(2, 200))}, rhat_max=1.01, ess_min=400)
+    failed = rep.failed()
+    parts = dict(p.split(" on ", 1) for p in failed.split("; "))
+    assert "log_posterior" in parts["R-hat > 1.01"] and "n_units" not in parts["R-hat > 1.01"]
+    assert "log_posterior" in parts["bulk ESS < 400"]
+    lp_q = rep.quantities[0]
+    assert f"log_posterior ({dg.format_rhat(lp_q.rhat)})" in parts["R-hat > 1.01"]
+    assert f"log_posterior ({lp_q.ess_bulk:.0f})" in parts["bulk ESS < 400"]
+    assert "--tempered" in rep.remedy() and "--rungs" not in rep.remedy()
+    tempered = dataclasses.replace(rep, tempered=True)
+    assert "--rungs" in tempered.remedy() and "`semmap map --tempered`" not in tempered.remedy()
+    text = rep.to_text().splitlines()
+    i = text.index("NOT converged")
+    assert text[i + 1] == f"failed: {failed}" and text[i + 2] == f"to fix: {rep.remedy()}"
+    assert "bulk ESS" in lp_q.reason and "R-hat" in lp_q.reason
+
+
+def test_an_ess_short_verdict_asks_for_the_draws_that_ess_needs():
+    """Chains that agree (R-hat passes at 1.1) but with too few draws for ESS 400: the remedy is
+    more draws, about 400 / ESS times as many, with the option that lengthens these chains."""
+    rng = np.random.default_rng(6)
+    rep = dg.convergence({"log_posterior": rng.normal(size=(2, 60))}, rhat_max=1.1, ess_min=400,
+                         draws_option="--spread-draws")
+    assert not rep.ok and "R-hat" not in rep.failed()
+    q = rep.quantities[0]
+    low = min(q.ess_bulk, q.ess_tail)
+    n = math.ceil(60 * 400 / low)
+    assert rep.remedy() == f"about {400 / low:,.0f} times as many draws (--spread-draws {n}) for ESS 400"
+
+
+def test_a_passing_verdict_has_no_failure_or_remedy():
+    rng = np.random.default_rng(7)
+    rep = dg.convergence({"log_posterior": rng.normal(size=(4, 400))}, rhat_max=1.05, ess_min=100)
+    assert rep.ok and rep.failed() == "" and rep.remedy() == ""
+    assert "\nconverged" in rep.to_text() and "failed:" not in rep.to_text()
+
+
+def test_chains_that_never_moved_are_not_told_to_draw_more():
+    frozen = dg.convergence({"log_posterior": np.full((2, 8), -10.0), "n_units": np.full((2, 8), 3.0)},
+                            rhat_max=1.01, ess_min=400)
+    assert not frozen.ok and "no summary moved" in frozen.remedy() and "times as many draws" not in frozen.remedy()

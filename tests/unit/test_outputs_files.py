@@ -202,7 +202,16 @@ def test_write_all_writes_every_file_once(hostile_run):
     assert {"world.geojson", "graph.graphml", "regions.png", "types.pgm", "types.yaml", "overlay.png",
             "graph.png", "posterior.png", "posterior_cells.png", "report.html"} <= set(names)
     doc = world_dict(run.semantic, rules="<b>rules</b>.lp", model=MODEL.path.name, seed=4, roi_name="default")
-    assert (out / "world.json").read_text() == dumps(doc)     # world.json as before write_all existed
+    # world.json as world_dict makes it, with the posterior marginals over the sampled worlds added
+    written_doc = json.loads((out / "world.json").read_text())
+    assert written_doc["posterior_marginals"]["source"] == "the search's draws"
+    for u in written_doc["units"]:
+        assert 0.0 <= u.pop("posterior_exists") <= 1.0 and "posterior_type" in u
+        del u["posterior_type"]
+    for d in written_doc["doors"]:
+        assert 0.0 <= d.pop("posterior_exists") <= 1.0
+    del written_doc["posterior_marginals"]
+    assert dumps(written_doc) == dumps(doc)
     assert (out / "diagnostics.txt").read_text().startswith(f"map: /maps/{HOSTILE}\nrules: <b>rules</b>.lp\n")
 
 

@@ -1,0 +1,148 @@
+"""Posterior marginals of W*'s units and doors, counted over sampled worlds.
+
+The knowledge engine's type marginals (world.json's ``type_marginals``) are conditional: the
+types of W*'s units given W*'s geometry. These are the posterior's own, read off the sampled
+worlds (the sample around W*: :func:`semmap_pp.run.spread.posterior_worlds`), each world counted
+once per draw:
+
+* a unit of W* **exists** in a sampled world when some unit of that world covers the same place:
+  lattice rectangles with intersection over union at least :data:`MATCH_IOU` (0.5, the rule
+  ``--ids-from`` matches units by). Over 0.5 a world has at most one such unit unless its own
+  units overlap; the one of the largest IoU is the match (the lower slot on a tie);
+* its **type** distribution: the types of its matches, over the worlds that have one (so it is
+  conditional on existing; ``None`` when no world has a match);
+* a door of W* **is there** in a sampled world when one of that world's doors
+  (:func:`semmap_pp.derive.doors.find_openings` between its adjacent units) lies on the same
+  place: their lattice boxes intersect once W*'s door box is grown by the wall band's thickness
+  on every side (a wall moved by a band is the same door).
+
+Examples
+--------
+>>> import numpy as np
+>>> from semmap_pp import world as wm
+>>> wstar = wm.add(wm.add(wm.empty(4), 0, (0, 0, 10, 10), type_index=0), 1, (0, 10, 10, 20), type_index=1)
+>>> same = wstar
+>>> moved = wm.add(wm.empty(4), 2, (0, 0, 10, 8), type_index=1)     # unit 0 only, IoU 0.8, typed 1
+>>> gone = wm.add(wm.empty(4), 0, (0, 0, 10, 4), type_index=0)      # IoU 0.4 with unit 0: no match
+>>> m = unit_marginals(wstar, [same, moved, gone, same])
+>>> [round(m[s].exists, 3) for s in (0, 1)]
+[0.75, 0.5]
+>>> m[0].types, m[1].types
+((0.6666666666666666, 0.3333333333333333, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0))
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from semmap_pp import world as wm
+from semmap_pp.cells import UNIT_TYPES
+from semmap_pp.derive.adjacency import adjacency_matrix
+from semmap_pp.derive.doors import find_openings
+
+#: A sampled unit is a W* unit's match when their rectangles' intersection over union is at least this.
+MATCH_IOU = 0.5
+
+
+@dataclass(frozen=True)
+class UnitMarginal:
+    """One unit of W* over the sampled worlds: the share of worlds with a match (``exists``), the
+    type distribution of the matches (``types``, in :data:`~semmap_pp.cells.UNIT_TYPES` order;
+    ``None`` without any match) and the number of worlds counted (``n``)."""
+
+    exists: float
+    types: tuple | None
+    n: int
+
+
+def iou(a, b) -> float:
+    """Intersection over union of two half-open lattice rectangles ``(r0, c0, r1, c1)``.
+
+    >>> iou((0, 0, 10, 10), (0, 0, 10, 8)), iou((0, 0, 2, 2), (2, 2, 4, 4))
+    (0.8, 0.0)
+    """
+    r0, c0 = max(a[0], b[0]), max(a[1], b[1])
+    r1, c1 = min(a[2], b[2]), min(a[3], b[3])
+    inter = max(0, r1 - r0) * max(0, c1 - c0)
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return float(inter) / float(union) if union > 0 else 0.0
+
+
+def best_match(rect, world: wm.World) -> int | None:
+    """The slot of ``world``'s unit matching ``rect`` (largest IoU, at least :data:`MATCH_IOU`;
+    the lower slot on a tie), or None."""
+    best, slot = MATCH_IOU, None
+    for s in wm.active_slots(world):
+        v = iou(rect, world.rects[s])
+        if v >= best and (slot is None or v > best):
+            best, slot = v, int(s)
+    return slot
+
+
+def unit_marginals(wstar: wm.World, worlds) -> dict[int, UnitMarginal]:
+    """Per active slot of ``wstar``: its :class:`UnitMarginal` over the typed ``worlds``."""
+    worlds = list(worlds)
+    out = {}
+    for s in wm.active_slots(wstar):
+        rect = tuple(int(v) for v in wstar.rects[s])
+        counts = np.zeros(len(UNIT_TYPES), np.int64)
+        found = 0
+        for w in worlds:
+            m = best_match(rect, w)
+            if m is None:
+                continue
+            found += 1
+            t = int(w.types[m])
+            if 0 <= t < len(UNIT_TYPES):
+                counts[t] += 1
+        typed = int(counts.sum())
+        out[int(s)] = UnitMarginal(found / len(worlds) if worlds else float("nan"),
+                                   tuple(float(c) / typed for c in counts) if typed else None, len(worlds))
+    return out
+
+
+def world_doors(frame, world: wm.World) -> list:
+    """The doors of ``world`` between its adjacent units (:func:`~semmap_pp.derive.doors.find_openings`
+    on ``frame``'s door classes; passages left out)."""
+    c = frame.cells
+    slots = wm.active_slots(world)
+    rects = world.rects[slots]
+    adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
+    return find_openings(frame.door_classes, rects, adj, c, slots)[0]
+
+
+def door_there(box, doors, grow: int) -> bool:
+    """Whether one of ``doors`` has a box intersecting ``box`` grown by ``grow`` cells each side.
+
+    >>> from semmap_pp.derive.doors import Door
+    >>> d = [Door(0, 1, (10, 20, 11, 25), False, 5)]
+    >>> door_there((11, 20, 12, 25), d, 1), door_there((13, 20, 14, 25), d, 1)
+    (True, False)
+    """
+    r0, c0, r1, c1 = box[0] - grow, box[1] - grow, box[2] + grow, box[3] + grow
+    return any(max(r0, d.box[0]) < min(r1, d.box[2]) and max(c0, d.box[1]) < min(c1, d.box[3]) for d in doors)
+
+
+def door_marginals(frame, wstar_doors, worlds, doors_of=world_doors) -> list[float]:
+    """For each of ``wstar_doors`` (:class:`~semmap_pp.derive.doors.Door`), the share of ``worlds``
+    with a door at its place (:func:`door_there`, grown by ``frame.cells.wall``). A world repeated
+    in ``worlds`` has its doors found once (``doors_of(frame, world)``)."""
+    worlds = list(worlds)
+    if not worlds:
+        return [float("nan")] * len(wstar_doors)
+    found = np.zeros(len(wstar_doors), np.int64)
+    cache: dict[bytes, list] = {}
+    grow = int(frame.cells.wall)
+    for w in worlds:
+        key = w.rects.tobytes() + w.active.tobytes()
+        if key not in cache:
+            doors = doors_of(frame, w)
+            cache[key] = [door_there(d.box, doors, grow) for d in wstar_doors]
+        found += np.asarray(cache[key], np.int64)
+    return [float(v) / len(worlds) for v in found]
+
+
+__all__ = ["MATCH_IOU", "UnitMarginal", "iou", "best_match", "unit_marginals", "world_doors", "door_there",
+           "door_marginals"]
