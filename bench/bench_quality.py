@@ -176,6 +176,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--spread-best", action="store_true",
                         help="score the best world of the sample around W* ([sampler] spread_draws), "
                              "polished as W* is, instead of W* when it is higher (docs/sampler.md)")
+    parser.add_argument("--calibration", action="store_true",
+                        help="synthetic subsets: keep the sample around W* and score the posterior "
+                             "marginals of W*'s units, types and doors against the truth (reliability "
+                             "table, expected calibration error)")
     parser.add_argument("--quiet", action="store_true")
     parser.add_argument("--model", type=Path, default=None, help="model file (default models/default.toml)")
     parser.add_argument("--rules", type=Path, default=None, help="rule file (default rules/table3.lp)")
@@ -192,7 +196,7 @@ def _settings(model, args):
         v = getattr(args, key)
         if v is not None:
             over[key] = v
-    if not getattr(args, "spread_best", False):
+    if not (getattr(args, "spread_best", False) or getattr(args, "calibration", False)):
         over["spread_draws"] = 0    # W* is scored: the sample around it (the spread figures) is not needed
     return RunSettings.from_model(model, seed=args.seed, **over)
 
@@ -210,7 +214,7 @@ def _run_or_record(args, inputs, settings, rows: list, row: dict, label: str):
     """``_run``'s ``(run, clock)``; or, when the run fails, ``row`` with the error appended to
     ``rows``, the failure logged under ``label``, and None."""
     try:
-        return _run(inputs, settings, args.quiet)
+        return _run(inputs, settings, args.quiet, best=getattr(args, "spread_best", False))
     except MapFailed as exc:
         rows.append({**row, "error": str(exc)})
         _log(args, f"{label}: FAILED {exc}")
@@ -245,7 +249,7 @@ def time_to_best(run, clock) -> dict:
 SECONDS: list = [None]   # sampling budget in seconds per map (``--budget N``), set by :func:`run`
 
 
-def _run(inputs, settings, quiet):
+def _run(inputs, settings, quiet, best: bool = False):
     """``run_map`` and the per-draw clock ``[(seconds since the call, chain, best_logp)]``.
 
     The clock starts before ``run_map`` (start worlds included). A sampling failure is re-raised as
@@ -276,7 +280,7 @@ def _run(inputs, settings, quiet):
         except Exception as exc2:  # noqa: BLE001
             raise MapFailed(f"{type(exc2).__name__}: {exc2}") from exc2
         run.notes.insert(0, f"knowledge: off (engine failed: {type(exc).__name__}: {str(exc)[:120]})")
-    if settings.spread_draws > 0:    # --spread-best
+    if best and settings.spread_draws > 0:    # --spread-best
         run = spread_best(run)
     clock.append((time.perf_counter() - t0, None, run.semantic.log_posterior))
     return run, clock
@@ -669,12 +673,58 @@ def _recall_by_wing(truth: dict, matches: dict) -> dict:
     return {"unit_recall_by_wing": {w: round(k / n, 4) for w, (n, k) in sorted(out.items())}}
 
 
+def _calibration_claims(run, pred: dict, floor) -> dict:
+    """The posterior's claims about W* on a synthetic floor and whether the truth bears them out:
+    ``{"units": (p, y), "types": (p, y), "doors": (p, y)}``, lists of probabilities and outcomes.
+    A unit of W* exists with probability ``posterior_exists`` (right when it matches a true unit,
+    :func:`semmap_pp.evaluate.score_world`); a matched unit with a posterior type distribution is
+    of its most probable type with that type's probability (right when the true unit's type is
+    it); a door of W* exists with its ``posterior_exists`` (right when it matches a true door)."""
+    from semmap_pp.cells import UNIT_TYPES
+    from semmap_pp.evaluate import score_world
+    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, posterior_doc
+    from semmap_pp.run.spread import posterior_worlds
+    doc = posterior_doc(pred, run, posterior_worlds(run, N_SAMPLED_WORLDS))
+    if "posterior_marginals" not in doc:
+        return {}
+    sc = score_world(doc, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
+    true_type = {u["id"]: u["type"] for u in floor.truth["units"]}
+    out = {"units": ([], []), "types": ([], []), "doors": ([], [])}
+    for u in doc["units"]:
+        out["units"][0].append(u["posterior_exists"])
+        out["units"][1].append(u["id"] in sc.matches)
+        if u["id"] in sc.matches and u.get("posterior_type"):
+            t = max(UNIT_TYPES, key=lambda k: u["posterior_type"][k])
+            out["types"][0].append(u["posterior_type"][t])
+            out["types"][1].append(true_type[sc.matches[u["id"]]] == t)
+    for d, hit in zip(doc["doors"], sc.door_matches):
+        out["doors"][0].append(d["posterior_exists"])
+        out["doors"][1].append(hit)
+    return out
+
+
+def _calibration_summary(claims: list) -> dict:
+    """Each kind's claims pooled over the floors: their number, the ECE and the reliability table
+    (:func:`semmap_pp.evaluate.calibration.reliability`, ten bins; empty bins left out)."""
+    from semmap_pp.evaluate.calibration import reliability
+    out = {}
+    for kind in ("units", "types", "doors"):
+        p = [x for c in claims if c for x in c[kind][0]]
+        y = [x for c in claims if c for x in c[kind][1]]
+        t = reliability(p, y)
+        out[kind] = {"claims": t.n, "ece": _r4(t.ece), "mean_p": _r4(float(np.mean(p))) if p else None,
+                     "right": _r4(float(np.mean(y))) if y else None,
+                     "bins": [[b.lo, b.hi, b.n, round(b.confidence, 4), round(b.accuracy, 4)]
+                              for b in t.bins if b.n]}
+    return out
+
+
 def bench_synthetic(args, model, rules, floors=None) -> dict:
     """The synthetic subset; ``floors``: ``[(group, seed, generate_floor arguments)]`` instead of
     the one-wing floors of seeds ``first_floor ..`` (rows then carry their ``group``)."""
     from semmap_pp.evaluate import score_world
     from semmap_pp.semantic.world_json import world_dict
-    rows = []
+    rows, claims = [], []
     seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
     if floors is None:
         floors = [(None, s, {}) for s in range(args.first_floor, args.first_floor + args.floors)]
@@ -717,6 +767,8 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
                "routes": route_agreement(pred, floor.truth, sc.matches, floor.resolution),
                "seconds": round(time.perf_counter() - t0, 1), "knowledge": run.notes[0]}
         rows.append(row)
+        if getattr(args, "calibration", False):
+            claims.append(_calibration_claims(run, pred, floor))
         for k, v in seen_by_class(pred, floor.truth, sc.matches).items():
             seen.setdefault(k, []).extend(v)
         _save(args, f"synth-{seed}" if group is None else f"{group}-{seed}", sm)
@@ -753,6 +805,7 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
                        "walls_median": round(float(np.median([b for _, b in v])), 2)}
                    for k, v in sorted(seen.items())}
     return {"rows": rows, "means": means, "errors": errors, "door_errors": door_errors,
+            **({"calibration": _calibration_summary(claims)} if claims else {}),
             "routes": route_summary, "seen_shares": seen_shares,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}
@@ -952,7 +1005,7 @@ def bench_stability(args, model, rules) -> dict:
         for seed in dict.fromkeys(seeds):
             settings = dataclasses.replace(_settings(model, args), seed=seed)
             try:
-                run, clock = _run(inputs, settings, args.quiet)
+                run, clock = _run(inputs, settings, args.quiet, best=getattr(args, "spread_best", False))
             except MapFailed as exc:
                 _log(args, f"synth {f:3d} seed {seed}: FAILED {exc}")
                 break

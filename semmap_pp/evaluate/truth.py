@@ -127,6 +127,7 @@ class WorldScore(NamedTuple):
     match_iou: dict        # predicted unit id -> IoU with its match
     n_pred_units: int
     n_true_units: int
+    door_matches: tuple = ()   # per predicted door, in the prediction's order: matched a true door
 
 
 def _ratio(num: float, den: float) -> float:
@@ -309,7 +310,8 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
     adj_tp = _adjacency_hits(pred_adj, true_adj, to_true)
     true_doors = _doors(truth, truth_source)
     pred_doors = _doors(pred, pred_source)
-    door_tp = _door_hits(pred_doors, true_doors, to_true, resolution, door_tol_m)
+    door_hit = _door_hits(pred_doors, true_doors, to_true, resolution, door_tol_m)
+    door_tp = sum(door_hit)
 
     return WorldScore(
         unit_precision=unit_p, unit_recall=unit_r,
@@ -318,7 +320,7 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
         adjacency_precision=_ratio(adj_tp, len(pred_adj)), adjacency_recall=_ratio(adj_tp, len(true_adj)),
         door_precision=_ratio(door_tp, len(pred_doors)), door_recall=_ratio(door_tp, len(true_doors)),
         matches=to_true, match_iou=match_iou,
-        n_pred_units=len(pred_units), n_true_units=len(true_units),
+        n_pred_units=len(pred_units), n_true_units=len(true_units), door_matches=door_hit,
     )
 
 
@@ -357,9 +359,9 @@ def _adjacency_hits(pred_adj, true_adj: set, to_true: dict) -> int:
     return len(mapped & true_adj)
 
 
-def _door_hits(pred_doors, true_doors, to_true: dict, resolution: float, door_tol_m: float) -> int:
-    """How many predicted doors match a true door, one to one by distance: eligible pairs join
-    the matched unit pair and lie within ``max(true width, door_tol_m)`` metres."""
+def _door_hits(pred_doors, true_doors, to_true: dict, resolution: float, door_tol_m: float) -> tuple:
+    """For each predicted door whether it matches a true door, one to one by distance: eligible
+    pairs join the matched unit pair and lie within ``max(true width, door_tol_m)`` metres."""
     big = 1e12
     cost = np.full((len(pred_doors), len(true_doors)), big)
     for i, (units, centre, _) in enumerate(pred_doors):
@@ -372,8 +374,9 @@ def _door_hits(pred_doors, true_doors, to_true: dict, resolution: float, door_to
             dist_m = float(np.hypot(*(centre - t_centre))) * resolution
             if dist_m <= max(t_width or 0.0, door_tol_m):
                 cost[i, j] = dist_m
-    door_tp = 0
+    hit = [False] * len(pred_doors)
     if cost.size:
         rows, cols = linear_sum_assignment(cost)
-        door_tp = int((cost[rows, cols] < big).sum())
-    return door_tp
+        for i, j in zip(rows, cols):
+            hit[int(i)] = bool(cost[i, j] < big)
+    return tuple(hit)

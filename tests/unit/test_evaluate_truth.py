@@ -177,6 +177,20 @@ def test_doors_match_one_to_one():
     pred["doors"].append(copy.deepcopy(pred["doors"][0]))   # the same door predicted twice
     s = score_world(pred, truth, SHAPE, RES)
     assert s.door_recall == 1.0 and s.door_precision == pytest.approx(2 / 3)
+    assert s.door_matches.count(True) == 2 and s.door_matches[-1] in (True, False)
+    pred = as_prediction(truth)
+    pred["doors"][1]["center_px"] = [11, 2 + 32]                # the 1-3 door 1.6 m off: no match
+    assert score_world(pred, truth, SHAPE, RES).door_matches == (True, False)
+
+
+def test_door_matches_agree_with_door_precision_in_the_prediction_order():
+    truth = truth_world()
+    pred = as_prediction(truth)
+    pred["doors"] = pred["doors"][::-1]
+    pred["doors"][0]["center_px"] = [11, 2 + 32]                # now first: too far to match
+    s = score_world(pred, truth, SHAPE, RES)
+    assert s.door_matches == (False, True)
+    assert s.door_precision == pytest.approx(sum(s.door_matches) / len(s.door_matches))
 
 
 def test_empty_prediction():
