@@ -6,6 +6,7 @@
 * :mod:`~semmap_pp.evaluate.types` -- per-cell room / corridor accuracy against ipa place types.
 * :mod:`~semmap_pp.evaluate.truth` -- units, types, adjacency and doors against synthetic truth.
 * :mod:`~semmap_pp.evaluate.lshape` -- the same with the truth's L-shaped spaces cut either way.
+* :mod:`~semmap_pp.evaluate.calibration` -- reliability tables and the expected calibration error.
 * :mod:`~semmap_pp.evaluate.io` -- readers of the ground-truth and prediction files.
 
 Definitions and the choices behind them: docs/evaluation.md.
