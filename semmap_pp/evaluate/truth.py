@@ -311,14 +311,13 @@ def score_world(pred: Mapping, truth: Mapping, shape: tuple[int, int] | None = N
     true_doors = _doors(truth, truth_source)
     pred_doors = _doors(pred, pred_source)
     door_hit = _door_hits(pred_doors, true_doors, to_true, resolution, door_tol_m)
-    door_tp = sum(door_hit)
 
     return WorldScore(
         unit_precision=unit_p, unit_recall=unit_r,
         unit_f1=_f1(n_match, len(pred_units), len(true_units)),
         type_accuracy=_ratio(same_type, n_match),
         adjacency_precision=_ratio(adj_tp, len(pred_adj)), adjacency_recall=_ratio(adj_tp, len(true_adj)),
-        door_precision=_ratio(door_tp, len(pred_doors)), door_recall=_ratio(door_tp, len(true_doors)),
+        door_precision=_ratio(sum(door_hit), len(pred_doors)), door_recall=_ratio(sum(door_hit), len(true_doors)),
         matches=to_true, match_iou=match_iou,
         n_pred_units=len(pred_units), n_true_units=len(true_units), door_matches=door_hit,
     )
