@@ -674,54 +674,22 @@ def _recall_by_wing(truth: dict, matches: dict) -> dict:
 
 
 def _calibration_claims(run, pred: dict, floor) -> dict:
-    """The posterior's claims about W* on a synthetic floor and whether the truth bears them out:
-    ``{"units": (p, y), "types": (p, y), "doors": (p, y)}``, lists of probabilities and outcomes.
-    A unit of W* exists with probability ``posterior_exists`` (right when it matches a true unit,
-    :func:`semmap_pp.evaluate.score_world`); a matched unit with a posterior type distribution is
-    of its most probable type with that type's probability (right when the true unit's type is
-    it); a door of W* exists with its ``posterior_exists`` (right when it matches a true door)."""
-    from semmap_pp.cells import UNIT_TYPES
+    """The posterior's claims about W* on a synthetic floor and whether the truth bears them out
+    (:func:`semmap_pp.evaluate.calibration.posterior_claims`), from the sample around W* as
+    ``semmap map`` writes them into world.json."""
     from semmap_pp.evaluate import score_world
+    from semmap_pp.evaluate.calibration import posterior_claims
     from semmap_pp.outputs.write import N_SAMPLED_WORLDS, posterior_doc
     from semmap_pp.run.spread import posterior_worlds
     doc = posterior_doc(pred, run, posterior_worlds(run, N_SAMPLED_WORLDS))
-    if "posterior_marginals" not in doc:
-        return {}
     sc = score_world(doc, floor.truth, shape=floor.classes.shape, resolution=floor.resolution)
-    true_type = {u["id"]: u["type"] for u in floor.truth["units"]}
-    out = {"units": ([], []), "types": ([], []), "doors": ([], [])}
-    for u in doc["units"]:
-        out["units"][0].append(u["posterior_exists"])
-        out["units"][1].append(u["id"] in sc.matches)
-        if u["id"] in sc.matches and u.get("posterior_type"):
-            t = max(UNIT_TYPES, key=lambda k: u["posterior_type"][k])
-            out["types"][0].append(u["posterior_type"][t])
-            out["types"][1].append(true_type[sc.matches[u["id"]]] == t)
-    for d, hit in zip(doc["doors"], sc.door_matches):
-        out["doors"][0].append(d["posterior_exists"])
-        out["doors"][1].append(hit)
-    return out
-
-
-def _calibration_summary(claims: list) -> dict:
-    """Each kind's claims pooled over the floors: their number, the ECE and the reliability table
-    (:func:`semmap_pp.evaluate.calibration.reliability`, ten bins; empty bins left out)."""
-    from semmap_pp.evaluate.calibration import reliability
-    out = {}
-    for kind in ("units", "types", "doors"):
-        p = [x for c in claims if c for x in c[kind][0]]
-        y = [x for c in claims if c for x in c[kind][1]]
-        t = reliability(p, y)
-        out[kind] = {"claims": t.n, "ece": _r4(t.ece), "mean_p": _r4(float(np.mean(p))) if p else None,
-                     "right": _r4(float(np.mean(y))) if y else None,
-                     "bins": [[b.lo, b.hi, b.n, round(b.confidence, 4), round(b.accuracy, 4)]
-                              for b in t.bins if b.n]}
-    return out
+    return posterior_claims(doc, floor.truth, sc)
 
 
 def bench_synthetic(args, model, rules, floors=None) -> dict:
     """The synthetic subset; ``floors``: ``[(group, seed, generate_floor arguments)]`` instead of
     the one-wing floors of seeds ``first_floor ..`` (rows then carry their ``group``)."""
+    from semmap_pp.evaluate.calibration import calibration_summary
     from semmap_pp.evaluate import score_world
     from semmap_pp.semantic.world_json import world_dict
     rows, claims = [], []
@@ -805,7 +773,7 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
                        "walls_median": round(float(np.median([b for _, b in v])), 2)}
                    for k, v in sorted(seen.items())}
     return {"rows": rows, "means": means, "errors": errors, "door_errors": door_errors,
-            **({"calibration": _calibration_summary(claims)} if claims else {}),
+            **({"calibration": calibration_summary(claims)} if claims else {}),
             "routes": route_summary, "seen_shares": seen_shares,
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}

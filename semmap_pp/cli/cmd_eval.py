@@ -128,6 +128,7 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
 
     kind = kind or detect_kind(truth)
     world, labels = _read_run(run_dir)
+    calibration = {}
     scores: dict = {"units_predicted": len(world.get("units", [])),
                     "units_exterior": len(world.get("exterior", [])), "cpr": world.get("cpr")}
     if kind == "synthetic":
@@ -147,6 +148,9 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
                            "unit_f1_either_l": e.unit_f1, "type_accuracy_either_l": e.type_accuracy,
                            "door_precision_either_l": e.door_precision,
                            "door_recall_either_l": e.door_recall})
+        calibration = _calibration(world, t, s)
+        if calibration:
+            scores.update({f"ece_{k}": v["ece"] for k, v in calibration.items()})
         truth_labels = truth_json.parent / "truth_labels.png"
         if truth_labels.is_file():
             gt = read_label_image(truth_labels)
@@ -171,7 +175,18 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
     else:  # pragma: no cover - argparse restricts --kind
         raise MapError(truth, f"unknown truth kind {kind!r}")
     return {"run": str(run_dir), "truth": str(truth), "kind": kind, "protocol":
-            "published" if published else "restricted to ground-truth rooms", "scores": scores}
+            "published" if published else "restricted to ground-truth rooms", "scores": scores,
+            **({"calibration": calibration} if kind == "synthetic" and calibration else {})}
+
+
+def _calibration(world: dict, truth: dict, score) -> dict:
+    """The reliability of the run's posterior marginals against the synthetic truth
+    (:func:`semmap_pp.evaluate.calibration.calibration_summary`); ``{}`` when world.json has none
+    (a run that drew no worlds)."""
+    from semmap_pp.evaluate.calibration import calibration_summary, posterior_claims
+    if "posterior_marginals" not in world:
+        return {}
+    return calibration_summary([posterior_claims(world, truth, score)])
 
 
 def _clean(v):
@@ -193,6 +208,11 @@ def format_text(result: dict) -> str:
         else:
             text = f"{v:.4f}"
         lines.append(f"{k:<28}{text:>10}")
+    for kind, c in result.get("calibration", {}).items():
+        lines.append(f"reliability of the posterior marginals, {kind}: {c['claims']} claims"
+                     + (f", ECE {c['ece']:.4f}" if c["ece"] is not None else ""))
+        lines += [f"  p in [{lo:.1f}, {hi:.1f}{']' if hi == 1.0 else ')'}: {n:5d} claims, mean p {conf:.3f}, "
+                  f"right {acc:.3f}" for lo, hi, n, conf, acc in c["bins"]]
     return "\n".join(lines)
 
 

@@ -67,6 +67,35 @@ def test_the_truth_itself_scores_perfectly(floor, tmp_path, capsys):
     assert s["segmentation_precision"] == 1.0 and s["segmentation_recall"] == 1.0
 
 
+def test_the_posterior_marginals_reliability_against_the_truth(floor, tmp_path, capsys):
+    """The truth as a run whose posterior marginals are certain: every claim right, ECE 0. Give
+    one unit existence 0.6 and a wrong type 0.7 and one door 0.2: the bins and ECEs follow."""
+    t = json.loads((floor / "truth.json").read_text())
+    certain = {"room": 0.0, "corridor": 0.0, "hall": 0.0, "other": 0.0}
+    units = [{"id": u["id"], "type": u["type"], "vertices_px": u["corners_px"], "posterior_exists": 1.0,
+              "posterior_type": dict(certain, **{u["type"]: 1.0})} for u in t["units"]]
+    doors = [{"units": d["units"], "center_px": d["center_px"], "width_m": d["width_m"], "posterior_exists": 1.0}
+             for d in t["doors"]]
+    extra = dict(adjacency=t["adjacency"], doors=doors, posterior_marginals={"worlds": 10})
+    run = fake_run(tmp_path / "certain", units, read_label_image(floor / "truth_labels.png"), **extra)
+    doc = scores(capsys, run, "--truth", floor)
+    assert doc["scores"]["ece_units"] == 0.0 and doc["scores"]["ece_doors"] == 0.0
+    assert doc["calibration"]["units"]["claims"] == len(units)
+    wrong = "corridor" if units[0]["type"] != "corridor" else "room"
+    units[0]["posterior_exists"] = 0.6
+    units[0]["posterior_type"] = dict(certain, **{wrong: 0.7, units[0]["type"]: 0.3})
+    doors[0]["posterior_exists"] = 0.2
+    run = fake_run(tmp_path / "unsure", units, read_label_image(floor / "truth_labels.png"), **extra)
+    doc = scores(capsys, run, "--truth", floor)
+    n, k = len(units), len(doors)
+    assert doc["scores"]["ece_units"] == pytest.approx(round(0.4 / n, 4))        # right at p 0.6
+    assert doc["scores"]["ece_types"] == pytest.approx(round(0.7 / n, 4))        # wrong at p 0.7
+    assert doc["scores"]["ece_doors"] == pytest.approx(round(0.8 / k, 4))        # right at p 0.2
+    assert [0.6, 0.7, 1, 0.6, 1.0] in doc["calibration"]["units"]["bins"]
+    assert main(["eval", str(run), "--truth", str(floor)]) == 0
+    assert "reliability of the posterior marginals, doors" in capsys.readouterr().out
+
+
 def test_ipa_segmentation_of_labels_and_regions(tmp_path, capsys):
     gt = read_ipa_gt(IPA / "office_a_gt_segmentation.png")
     merged = np.where(gt > 0, 1, 0)                 # one segment for every room
