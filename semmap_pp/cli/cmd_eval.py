@@ -176,7 +176,7 @@ def evaluate_run(run_dir: Path, truth: Path, kind: str | None = None, *, publish
         raise MapError(truth, f"unknown truth kind {kind!r}")
     return {"run": str(run_dir), "truth": str(truth), "kind": kind, "protocol":
             "published" if published else "restricted to ground-truth rooms", "scores": scores,
-            **({"calibration": calibration} if kind == "synthetic" and calibration else {})}
+            **({"calibration": calibration} if calibration else {})}
 
 
 def _calibration(world: dict, truth: dict, score) -> dict:

@@ -380,6 +380,12 @@ def wide_opening(free: np.ndarray, rp, rq, wall: int, width: float) -> bool:
 _THROUGH_TYPES = frozenset({"corridor", "hall"})
 
 
+def _through_door_ids(sm) -> set:
+    """The unit ids of ``sm``'s units added over rooms seen through their door (``sm.through_door``
+    holds their slots)."""
+    return {sm.slot_ids[s] for s in sm.through_door if s in sm.slot_ids}
+
+
 def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     """Unit-id pairs one room joins, and the doors that stay doors between rooms.
 
@@ -392,7 +398,7 @@ def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     into the rooms along it. A unit added over a room seen through its door
     (``sm.through_door``) is a room of its own: it joins no other unit."""
     ids, rects, classes = sm.slot_ids, sm.world.rects, sm.frame.door_classes
-    alone = {ids[s] for s in sm.through_door if s in ids}
+    alone = _through_door_ids(sm)
     wall = sm.frame.cells.wall
     width = params.door_max_m / sm.frame.resolution
     free = None
@@ -437,7 +443,7 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     for uid, rid in region.items():
         units_of.setdefault(rid, []).append(uid)
     objs = ndi.find_objects(labels)
-    alone = {sm.slot_ids[s] for s in sm.through_door if s in sm.slot_ids}
+    alone = _through_door_ids(sm)
     rooms = []
     for k, rid, n in found:
         units = tuple(units_of.get(rid, ())) if rid else ()
