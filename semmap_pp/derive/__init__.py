@@ -25,10 +25,12 @@ import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.derive.adjacency import adjacency_matrix
+from semmap_pp.derive.crossing import cross_tile_openings
 from semmap_pp.derive.doors import Door, find_gap_passages, find_openings
 from semmap_pp.derive.exterior import find_exterior
 from semmap_pp.derive.states import Object, cell_states, find_objects
 from semmap_pp.derive.unexplored import Unexplored, find_unexplored
+from semmap_pp.lattice.tiles import rect_spans
 
 __all__ = ["Derived", "Door", "Exterior", "Object", "Unexplored", "derive_world"]
 
@@ -72,6 +74,11 @@ def derive_world(frame, world: wm.World) -> Derived:
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
     doors, passages = find_openings(frame.door_classes, rects, adj, c, slots)
+    if rect_spans(frame):      # a tiled lattice: what units of two tiles share, found on the image
+        pairs, d, p = cross_tile_openings(frame, rects, slots, frame.image_door_classes, c)
+        for i, j in pairs:
+            adj[i, j] = adj[j, i] = True
+        doors, passages = doors + d, passages + p
     gaps = find_gap_passages(frame.door_classes, rects, adj, c, slots)   # outputs only: no wall there
     objects = find_objects(frame.classes, rects, c.wall, c.object_max_extent, slots)
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)

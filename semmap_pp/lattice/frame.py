@@ -466,7 +466,8 @@ def lattice_orientation(classes: np.ndarray, params: LatticeParams, theta: float
 
 
 def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Model,
-                             origin=(0.0, 0.0, 0.0), theta: float | None = None) -> Frame:
+                             origin=(0.0, 0.0, 0.0), theta: float | None = None,
+                             crop_max_share: float = None) -> Frame:
     """Estimate θ0 (unless given) and resample ``classes`` onto the lattice.
 
     Parameters
@@ -481,7 +482,11 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
         Map origin, for metres.
     theta : float, optional
         Use this orientation instead of estimating one (radians).
+    crop_max_share : float, optional
+        Crop the lattice to the known cells when that keeps at most this share of its cells
+        (default :data:`CROP_MAX_SHARE`; 1.0 crops whenever there is a margin to cut).
     """
+    share = CROP_MAX_SHARE if crop_max_share is None else float(crop_max_share)
     classes = np.asarray(classes, dtype=np.uint8)
     theta = lattice_orientation(classes, model.lattice, theta)
     h, w = classes.shape
@@ -489,7 +494,7 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
     origin = tuple(float(v) for v in origin)
     window = known_window(classes, int(math.ceil(model.lattice.crop_margin_m / resolution - 1e-9)))
     crop = None
-    if window is not None and (window[2] - window[0]) * (window[3] - window[1]) > CROP_MAX_SHARE * h * w:
+    if window is not None and (window[2] - window[0]) * (window[3] - window[1]) > share * h * w:
         window = None   # too little to leave out (CROP_MAX_SHARE)
     if theta == 0.0:
         r0, c0, r1, c1 = window if window is not None else (0, 0, h, w)
@@ -510,7 +515,7 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
                                             np.array([r0 - 0.5, r0 - 0.5, r1 - 0.5, r1 - 0.5]))
             i0, i1 = max(int(math.floor(rr.min())), 0), min(int(math.ceil(rr.max())) + 1, hl)
             j0, j1 = max(int(math.floor(cc.min())), 0), min(int(math.ceil(cc.max())) + 1, wl)
-            if (i1 - i0) * (j1 - j0) <= CROP_MAX_SHARE * hl * wl:
+            if (i1 - i0) * (j1 - j0) <= share * hl * wl:
                 crop = (i0, j0, hl, wl)
             else:
                 i0, j0, i1, j1 = 0, 0, hl, wl

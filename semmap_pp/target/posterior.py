@@ -41,8 +41,9 @@ from semmap_pp.target.geometry_evidence import (COLIKE, GEOMETRY_TYPE, FixedProv
 from semmap_pp.target.likelihood import (covered_free, enclosure_loglik, full_tallies,
                                   loglik_from_tallies, prepare, tallies_loglik, world_delta)
 from semmap_pp.model import SIZE_MEASURES
-from semmap_pp.target.prior import _all_valid, _sale_pairs, all_valid, log_p_n_table, log_p_rect_const, \
-    log_slots, sale_log_factor_slots
+from semmap_pp.lattice.tiles import rect_spans
+from semmap_pp.target.prior import _all_valid, _sale_pairs, all_valid, flat_spans, log_p_n_table, \
+    log_p_rect_const, log_slots, sale_log_factor_slots
 from semmap_pp.target.tracker_knowledge import KnowledgeTracking
 
 CORRIDOR = UNIT_TYPES.index("corridor")
@@ -87,7 +88,9 @@ class Posterior:
         self.data = prepare(frame, model)
         self.fixed = FixedProvider(model.knowledge.fixed_sale)
         self.knowledge_on = False
-        self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side)
+        self.spans = rect_spans(frame)
+        self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side,
+                                         self.spans)
         self._prior_n: dict[int, np.ndarray] = {}
         self._door_cache: dict = {}
         self._typing_cache: OrderedDict = OrderedDict()   # (provider, evidence key, K) -> arrays
@@ -100,7 +103,8 @@ class Posterior:
         self._gain_max = _ro(np.concatenate([np.maximum(g[0], g[1])] * 2))
         self._ip = np.array([CORRIDOR, c.wall, c.adjacency_dilation, frame.shape[0], frame.shape[1],
                              c.min_side, c.max_side,
-                             SIZE_MEASURES.index(e.size_measure)], np.int64)
+                             SIZE_MEASURES.index(e.size_measure)] + list(flat_spans(self.spans)),
+                            np.int64)
         self._fp = np.array([c.resolution, e.hall_min_size, e.corridor_min_ratio, p.sale_threshold,
                              1.0 / (2.0 * p.sale_sigma_m ** 2), self.data.baseline,
                              self.data.log_psi, model.sensor.enclosure_min_share,
@@ -315,7 +319,7 @@ class Posterior:
         w = typ.world
         n, K = int(np.count_nonzero(w.active)), w.capacity
         c = self.cells
-        if not all_valid(w.rects, w.active, self.frame.shape, c.min_side, c.max_side):
+        if not all_valid(w.rects, w.active, self.frame.shape, c.min_side, c.max_side, self.spans):
             return -math.inf
         if typ.sale is None:
             sale = sale_log_factor_slots(w.rects, w.active, typ.adj, self.model.prior,
@@ -347,7 +351,8 @@ class Posterior:
 # ints: corridor type, wall, adjacency dilation, lattice height, width, min side, max side, size
 # measure; floats: resolution, hall_min_size, corridor_min_ratio, sale threshold, 1/(2 σ²),
 # likelihood baseline, log ψ, enclosure min share and cost.
-I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE = range(8)
+I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE, I_SPANS = range(9)   # I_SPANS: from there
+# on, a tiled lattice's flat tile spans (prior.flat_spans; none on a lattice of one direction)
 F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI, F_ENC_MIN, F_ENC_COST = range(9)
 
 
@@ -397,7 +402,7 @@ def _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, 
     loglik = tallies_loglik(hist, gain, fp[F_BASE], fp[F_LOGPSI], gamma_total) + \
         enclosure_loglik(xsum, new_rects, new_active, ip[I_WALL], fp[F_ENC_MIN], fp[F_ENC_COST])
     logprior = -np.inf
-    if _all_valid(new_rects, new_active, ip[I_H], ip[I_W], ip[I_LO], ip[I_HI]):
+    if _all_valid(new_rects, new_active, ip[I_H], ip[I_W], ip[I_LO], ip[I_HI], ip[I_SPANS:]):
         logprior = prior_n[n] + _sale_pairs(new_rects, new_active, adj, sale, new_types, table,
                                             use_table, fp[F_THRESH], fp[F_RES], fp[F_INV2S2])
     return loglik, logprior, gamma_total

@@ -38,25 +38,37 @@ def n_rects(length: int, min_side: int, max_side: int) -> int:
     return k * (int(length) + 1) - (a + b) * k // 2
 
 
-def log_p_rect_const(shape, min_side: int, max_side: int) -> float:
-    """``log p_rect`` of any valid rectangle on a lattice of ``shape`` (uniform)."""
-    total = n_rects(shape[0], min_side, max_side) * n_rects(shape[1], min_side, max_side)
+def log_p_rect_const(shape, min_side: int, max_side: int, spans=()) -> float:
+    """``log p_rect`` of any valid rectangle on a lattice of ``shape`` (uniform); with ``spans``
+    (``(c0, c1)`` column ranges, a tiled lattice's tiles: :mod:`semmap_pp.lattice.tiles`) the
+    support holds only the rectangles whose columns lie within one of them."""
+    widths = [c1 - c0 for c0, c1 in spans] if len(spans) else [shape[1]]
+    total = n_rects(shape[0], min_side, max_side) * sum(n_rects(w, min_side, max_side) for w in widths)
     return -math.log(total) if total > 0 else -math.inf
 
 
-def rects_valid(rects: np.ndarray, shape, min_side: int, max_side: int) -> np.ndarray:
-    """(n,) bool: each rectangle lies inside ``shape`` with both sides in [min_side, max_side]."""
+def _in_spans(c0: np.ndarray, c1: np.ndarray, spans) -> np.ndarray:
+    """Whether columns ``[c0, c1)`` lie within one of ``spans`` (always, when there are none)."""
+    if not len(spans):
+        return np.ones(np.shape(c0), bool)
+    return np.any([(c0 >= a) & (c1 <= b) for a, b in spans], axis=0)
+
+
+def rects_valid(rects: np.ndarray, shape, min_side: int, max_side: int, spans=()) -> np.ndarray:
+    """(n,) bool: each rectangle lies inside ``shape`` (and one of ``spans``, if any: see
+    :func:`log_p_rect_const`) with both sides in [min_side, max_side]."""
     r = np.asarray(rects).reshape(-1, 4)
     h, w = r[:, 2] - r[:, 0], r[:, 3] - r[:, 1]
     return ((r[:, 0] >= 0) & (r[:, 1] >= 0) & (r[:, 2] <= shape[0]) & (r[:, 3] <= shape[1])
-            & (h >= min_side) & (h <= max_side) & (w >= min_side) & (w <= max_side))
+            & (h >= min_side) & (h <= max_side) & (w >= min_side) & (w <= max_side)
+            & _in_spans(r[:, 1], r[:, 3], spans))
 
 
-def rect_faults(rect, shape, min_side: int, max_side: int) -> frozenset:
+def rect_faults(rect, shape, min_side: int, max_side: int, spans=()) -> frozenset:
     """Why one rectangle ``(r0, c0, r1, c1)`` is outside the prior's support, for a message: the
-    set of ``"small"`` (a side below ``min_side``), ``"large"`` (a side above ``max_side``) and
-    ``"outside"`` (beyond the lattice ``shape``) that apply; empty exactly when
-    :func:`rects_valid` holds (tested).
+    set of ``"small"`` (a side below ``min_side``), ``"large"`` (a side above ``max_side``),
+    ``"outside"`` (beyond the lattice ``shape``) and ``"straddles"`` (across two of ``spans``, a
+    tiled lattice's tiles) that apply; empty exactly when :func:`rects_valid` holds (tested).
 
     >>> sorted(rect_faults((-1, 0, 10, 30), (100, 100), 20, 80)), rect_faults((0, 0, 30, 30), (100, 100), 20, 80)
     (['outside', 'small'], frozenset())
@@ -69,14 +81,16 @@ def rect_faults(rect, shape, min_side: int, max_side: int) -> frozenset:
         out.add("large")
     if r0 < 0 or c0 < 0 or r1 > shape[0] or c1 > shape[1]:
         out.add("outside")
+    elif not _in_spans(np.array(c0), np.array(c1), spans):
+        out.add("straddles")
     return frozenset(out)
 
 
-def log_p_rect(rect, shape, min_side: int, max_side: int) -> float:
+def log_p_rect(rect, shape, min_side: int, max_side: int, spans=()) -> float:
     """``log p_rect`` of one rectangle (``-inf`` outside the support)."""
-    if not rects_valid(np.asarray(rect).reshape(1, 4), shape, min_side, max_side)[0]:
+    if not rects_valid(np.asarray(rect).reshape(1, 4), shape, min_side, max_side, spans)[0]:
         return -math.inf
-    return log_p_rect_const(shape, min_side, max_side)
+    return log_p_rect_const(shape, min_side, max_side, spans)
 
 
 def log_p_n_table(capacity: int, params) -> np.ndarray:
@@ -200,7 +214,8 @@ def sale_log_factor_slots(rects, active, adj, params, resolution, sale=None, typ
 
 
 @numba.njit(cache=True, nogil=True)
-def _all_valid(rects, active, h, w, lo, hi):  # pragma: no cover - compiled
+def _all_valid(rects, active, h, w, lo, hi, spans):  # pragma: no cover - compiled
+    """``spans``: the flat ``c0, c1, c0, c1, ...`` of :func:`rects_valid`'s spans (empty: none)."""
     for s in range(rects.shape[0]):
         if not active[s]:
             continue
@@ -208,10 +223,23 @@ def _all_valid(rects, active, h, w, lo, hi):  # pragma: no cover - compiled
         a, b = r[2] - r[0], r[3] - r[1]
         if r[0] < 0 or r[1] < 0 or r[2] > h or r[3] > w or a < lo or a > hi or b < lo or b > hi:
             return False
+        if spans.shape[0] > 0:
+            inside = False
+            for k in range(0, spans.shape[0] - 1, 2):
+                if r[1] >= spans[k] and r[3] <= spans[k + 1]:
+                    inside = True
+            if not inside:
+                return False
     return True
 
 
-def all_valid(rects, active, shape, min_side: int, max_side: int) -> bool:
+def flat_spans(spans) -> np.ndarray:
+    """``spans`` as the flat int64 array :func:`_all_valid` reads."""
+    return np.asarray([v for span in spans for v in span], np.int64).reshape(-1)
+
+
+def all_valid(rects, active, shape, min_side: int, max_side: int, spans=()) -> bool:
     """Every active slot satisfies :func:`rects_valid` (compiled, for the sampler's hot path)."""
     return bool(_all_valid(np.asarray(rects), np.asarray(active, np.bool_),
-                           int(shape[0]), int(shape[1]), int(min_side), int(max_side)))
+                           int(shape[0]), int(shape[1]), int(min_side), int(max_side),
+                           flat_spans(spans)))
