@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from semmap_pp.cells import UNKNOWN
-from semmap_pp.lattice.frame import Frame, build_frame_from_classes
+from semmap_pp.lattice.frame import Frame, build_frame_from_classes, doorway_classes
 from semmap_pp.model import Model
 
 
@@ -61,11 +61,14 @@ class TiledFrame(Frame):
         The composite lattice column of each tile's column 0.
     zones : (H, W) uint8
         The zone (tile index) of every image pixel.
+    image_classes : (H, W) uint8
+        The input image's classes.
     """
 
     tiles: tuple = ()
     cols: tuple = ()
     zones: np.ndarray = field(default=None, repr=False)
+    image_classes: np.ndarray = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ tiles
     @property
@@ -96,10 +99,10 @@ class TiledFrame(Frame):
 
     @functools.cached_property
     def image_door_classes(self) -> np.ndarray:
-        """The lattice's :attr:`door_classes` in the image (each pixel from its zone's tile;
-        UNKNOWN where no tile cell lies): the doorways' classes that openings between units of
-        two tiles are read on (:mod:`semmap_pp.derive.crossing`)."""
-        return self.to_image(self.door_classes, fill=UNKNOWN)
+        """The input image's classes with specks made free (:func:`doorway_classes`, as the
+        lattice's :attr:`door_classes`): what openings between units of two tiles are read on
+        (:mod:`semmap_pp.derive.crossing`)."""
+        return doorway_classes(self.image_classes, self.cells.door_speck)
 
     def _zone_at(self, x_px, y_px) -> np.ndarray:
         h, w = self.image_shape
@@ -231,11 +234,12 @@ def build_tiled_frame(classes: np.ndarray, resolution: float, model: Model, thet
         outside[:t.shape[0], c0:c0 + t.shape[1]] = t.outside
     lat.setflags(write=False)
     outside.setflags(write=False)
-    zones = zones.copy()
+    zones, classes = zones.copy(), classes.copy()
     zones.setflags(write=False)
+    classes.setflags(write=False)
     first = tiles[0]
     return TiledFrame(thetas[0], lat, outside, first.image_shape, first.resolution, first.cells,
-                      first.origin, None, tuple(tiles), tuple(cols), zones)
+                      first.origin, None, tuple(tiles), tuple(cols), zones, classes)
 
 
 def unit_theta(frame, rect) -> float:
