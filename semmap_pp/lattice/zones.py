@@ -94,11 +94,11 @@ def building_zones(classes: np.ndarray, resolution: float, params: LatticeParams
     while len(thetas) > 1:
         labels = zone_labels(classes, rows, cols, local, thetas, resolution, params)
         shares = np.bincount(labels[occupied], minlength=len(thetas)) / n
-        small = [k for k in range(1, len(thetas)) if shares[k] < params.zone_min_share]
-        if not small:
+        weakest = 1 + int(np.argmin(shares[1:]))
+        if shares[weakest] >= params.zone_min_share:
             labels.setflags(write=False)
             return Zones(tuple(thetas), labels, tuple(float(s) for s in shares))
-        thetas = [t for k, t in enumerate(thetas) if k not in small]
+        del thetas[weakest]   # its walls lie scattered in the others' zones: not a zone of its own
     return one_zone(classes.shape, float(theta0))
 
 
@@ -141,8 +141,8 @@ def wall_directions(occupied: np.ndarray, resolution: float, params: LatticePara
         out_r.append(rr[keep] + b0)
         out_c.append(cc[keep] + c0)
         out_a.append(_quarter(np.arctan2(zi[keep], zr[keep]).astype(np.float64) / 4.0))
-    cat = lambda parts, dt: np.concatenate(parts).astype(dt) if parts else np.zeros(0, dt)
-    return cat(out_r, np.intp), cat(out_c, np.intp), cat(out_a, np.float64)
+    return (np.concatenate(out_r).astype(np.intp), np.concatenate(out_c).astype(np.intp),
+            np.concatenate(out_a))
 
 
 def _quarter(a):
@@ -226,41 +226,39 @@ def _refined(x, y, centre: float, half: float, params: LatticeParams) -> float:
 
 def zone_labels(classes: np.ndarray, rows, cols, local, thetas, resolution: float,
                 params: LatticeParams) -> np.ndarray:
-    """(H, W) uint8: the zone of every pixel, given the direction ``vote`` (index into the ``k``
-    directions, -1 none) of the occupied cells ``rows, cols``.
+    """(H, W) uint8: the zone (index into ``thetas``) of every pixel, given the local wall angle
+    ``local`` of the occupied cells ``rows, cols`` (:func:`wall_directions`).
 
-    The free space is cut at its narrowings into regions: the free cells farther than
-    ``zone_door_m / 2`` from every other cell are seeds, each 8-connected component one region,
-    and every cell belongs to the region of its nearest seed. A region with at least
-    ``zone_min_votes_m`` of voting wall cells (those whose nearest seed is its own) takes the
-    direction most of them vote for; every other cell takes the zone of the nearest free cell of
-    a decided region. Worked inside the box of the known cells; a pixel outside it takes the zone
-    of the box's nearest pixel.
+    The free space is cut at its narrowings into regions (:func:`free_regions`). Each wall cell
+    votes for the direction nearest its local angle (within ``off_axis_min_deg``), when it lies
+    in a run of ``zone_min_votes_m`` of cells voting alike (a wall, not a speck of clutter), for
+    the region of its nearest seed. A direction is present in a region with at least
+    ``zone_min_votes_m`` of votes and ``zone_split_share`` of the votes of the region's strongest
+    direction. A region with one direction present takes it; a region with several (a corridor
+    bent at a wing's joint, a hall open to a link) gives each free cell the direction of its
+    nearest voting wall cell, when that direction is present there. Every other pixel takes the
+    zone of the nearest free cell of a decided region. Worked inside the box of the known cells;
+    a pixel outside it takes the zone of the box's nearest pixel.
     """
     h, w = classes.shape
     r0, c0, r1, c1 = mask_box(classes != UNKNOWN)
     free = classes[r0:r1, c0:c1] == FREE
-    seeds = ndimage.distance_transform_edt(free) > params.zone_door_m / 2 / resolution
-    seed_labels, n = ndimage.label(seeds, structure=np.ones((3, 3), bool))
+    region, n = free_regions(free, params.zone_door_m / 2 / resolution)
     labels = np.zeros((h, w), np.uint8)
     if n == 0:
         return labels
-    near = ndimage.distance_transform_edt(~seeds, return_distances=False, return_indices=True)
-    region = seed_labels[near[0], near[1]]
-    del near, seed_labels, seeds
     k = len(thetas)
     rows, cols = rows - r0, cols - c0
-    own = region[rows, cols]
     vote = nearest_direction(local, thetas, math.radians(params.off_axis_min_deg))
     need = params.zone_min_votes_m / resolution
-    ok = vote >= 0
-    ok &= _long_runs(rows, cols, vote, k, free.shape, need)
-    counts = np.bincount(own[ok] * k + vote[ok], minlength=(n + 1) * k).reshape(n + 1, k)
-    present = (counts >= need) & (counts >= params.zone_split_share * counts.sum(axis=1, keepdims=True))
+    ok = (vote >= 0) & _long_runs(rows, cols, vote, k, free.shape, need)
+    rows, cols, vote = rows[ok], cols[ok], vote[ok]
+    own = region[rows, cols]
+    counts = np.bincount(own * k + vote, minlength=(n + 1) * k).reshape(n + 1, k)
+    present = (counts >= need) & (counts >= params.zone_split_share * counts.max(axis=1, keepdims=True))
     present[0] = False
-    zone_of = np.where(present.any(axis=1), counts.argmax(axis=1), -1)
-    rows, cols, vote, own = rows[ok], cols[ok], vote[ok], own[ok]
-    zone = np.where(free, zone_of[region], -1)
+    zone_of = np.where(present.any(axis=1), counts.argmax(axis=1), -1).astype(np.int16)
+    zone = np.where(free, zone_of[region], np.int16(-1))
     mixed = present.sum(axis=1) > 1
     if mixed.any():
         _split_mixed(zone, region, mixed, present, (rows, cols, vote, own), free)
@@ -276,28 +274,44 @@ def zone_labels(classes: np.ndarray, rows, cols, local, thetas, resolution: floa
     return zone[ri[:, None], ci[None, :]]
 
 
+def free_regions(free: np.ndarray, radius: float) -> tuple[np.ndarray, int]:
+    """``(region, n)``: the free space cut at its narrowings. The free cells farther than
+    ``radius`` cells from every other cell are seeds (a doorway narrower than ``2 radius`` holds
+    none), each 8-connected component of them a region ``1..n``, and every cell (free or not) in
+    the region of its nearest seed; ``n == 0`` (and ``region`` None) when there is no seed.
+
+    >>> f = np.zeros((9, 21), bool); f[1:8, 1:9] = f[1:8, 12:20] = f[4, 9:12] = True
+    >>> region, n = free_regions(f, 1.5)
+    >>> n, region[4, [2, 18, 9, 11]].tolist()
+    (2, [1, 2, 1, 2])
+    """
+    seeds = ndimage.distance_transform_edt(free) > radius
+    seed_labels, n = ndimage.label(seeds, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return None, 0
+    near = ndimage.distance_transform_edt(~seeds, return_distances=False, return_indices=True)
+    return seed_labels[near[0], near[1]], n
+
+
 def _split_mixed(zone, region, mixed, present, votes, free) -> None:
-    """In place: the free cells of a region whose walls vote for two directions or more (each
-    with enough votes, ``present``) take the direction of their nearest voting wall cell of that
-    region (a corridor bent at a wing's joint, a hall open to a link), when that direction is
-    present there."""
+    """In place: the free cells of the ``mixed`` regions take the direction of their nearest
+    voting wall cell of a mixed region (``votes``: its row, column, direction and region), when
+    that direction is present in their region (:func:`zone_labels`)."""
     rows, cols, vote, own = votes
-    keep = mixed[own] & present[own, vote]
-    r0, c0, r1, c1 = mask_box(mixed[region] & free)
-    feat = np.ones((r1 - r0, c1 - c0), bool)
-    inside = keep & (rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1)
-    feat[rows[inside] - r0, cols[inside] - c0] = False
-    if feat.all():
+    r0, c0, r1, c1 = mask_box(mixed[region])       # the mixed regions with their walls
+    keep = mixed[own] & present[own, vote] & (rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1)
+    if not keep.any():
         return
+    feat = np.ones((r1 - r0, c1 - c0), bool)
+    feat[rows[keep] - r0, cols[keep] - c0] = False
+    lab = np.zeros(feat.shape, np.int16)
+    lab[rows[keep] - r0, cols[keep] - c0] = vote[keep]
     near = ndimage.distance_transform_edt(feat, return_distances=False, return_indices=True)
-    lab = np.full(feat.shape, -1, np.int64)
-    lab[rows[inside] - r0, cols[inside] - c0] = vote[inside]
     got = lab[near[0], near[1]]
     del near
     reg = region[r0:r1, c0:c1]
-    part = zone[r0:r1, c0:c1]
-    take = mixed[reg] & free[r0:r1, c0:c1] & present[reg, np.maximum(got, 0)] & (got >= 0)
-    part[take] = got[take]
+    take = mixed[reg] & free[r0:r1, c0:c1] & present[reg, got]
+    zone[r0:r1, c0:c1][take] = got[take]
 
 
 def _long_runs(rows, cols, vote, k, shape, need):
