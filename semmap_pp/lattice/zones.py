@@ -44,6 +44,9 @@ from semmap_pp.lattice.frame import BAND_ROWS, _best, projection_sharpness
 from semmap_pp.model import LatticeParams
 
 QUARTER = math.pi / 2
+#: the labels are uint8: at most this many zones (a model file with a tiny ``zone_min_share`` and
+#: ``off_axis_min_deg`` could ask for more directions)
+MAX_ZONES = 256
 
 
 @dataclass(frozen=True)
@@ -176,7 +179,7 @@ def directions(rows, cols, local, n_occupied: int, theta0: float, params: Lattic
     thetas = [theta0]
     left = np.ones(local.shape, bool)
     need = params.zone_min_share * n_occupied
-    while True:
+    while len(thetas) < MAX_ZONES:
         left &= np.min([_gap(local, t) for t in thetas], axis=0) > tol
         if np.count_nonzero(left) < need:
             return thetas
@@ -194,6 +197,7 @@ def directions(rows, cols, local, n_occupied: int, theta0: float, params: Lattic
             thetas.append(theta)
         else:
             left &= ~near   # no direction of its own: clutter, or the tail of one found
+    return thetas
 
 
 def _centred(x, y) -> tuple[np.ndarray, np.ndarray]:
