@@ -72,7 +72,8 @@ class LatticeParams:
     # building directions and zones (lattice.zones.building_zones): a further direction is a zone
     # when it holds zone_min_share of the occupied cells (0: one zone, whatever the map); local wall
     # directions from the structure tensor over zone_wall_scale_m where at least zone_min_coherence;
-    # free space cut at narrowings below zone_door_m; a region needs zone_min_votes_m of voting walls
+    # free space cut at narrowings below zone_door_m; a region needs zone_min_votes_m of voting
+    # walls, and is shared between directions when a second one has zone_split_share of the first's
     zone_min_share: float = 0.0
     zone_wall_scale_m: float = 0.25
     zone_min_coherence: float = 0.5
