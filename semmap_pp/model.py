@@ -69,6 +69,17 @@ class LatticeParams:
     off_axis_min_deg: float = 5.0
     off_axis_min_gain: float = 1.5
     off_axis_note_share: float = 0.0
+    # building directions and zones (lattice.zones.building_zones): a further direction is a zone
+    # when it holds zone_min_share of the occupied cells (0: one zone, whatever the map); local wall
+    # directions from the structure tensor over zone_wall_scale_m where at least zone_min_coherence;
+    # free space cut at narrowings below zone_door_m; a region needs zone_min_votes_m of voting
+    # walls, and is shared between directions when a second one has zone_split_share of the first's
+    zone_min_share: float = 0.0
+    zone_wall_scale_m: float = 0.25
+    zone_min_coherence: float = 0.5
+    zone_door_m: float = 1.0
+    zone_min_votes_m: float = 1.0
+    zone_split_share: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -559,7 +570,14 @@ def _lattice(r: _Reader) -> LatticeParams:
         off_axis_block_m=r.optional("lattice.off_axis_block_m", 8.0, r.number, positive=True, hi=1000.0),
         off_axis_min_deg=r.optional("lattice.off_axis_min_deg", 5.0, r.number, positive=True, hi=45.0),
         off_axis_min_gain=r.optional("lattice.off_axis_min_gain", 1.5, r.number, lo=1.0, hi=1000.0),
-        off_axis_note_share=r.optional("lattice.off_axis_note_share", 0.0, r.number, lo=0.0, hi=1.0))
+        off_axis_note_share=r.optional("lattice.off_axis_note_share", 0.0, r.number, lo=0.0, hi=1.0),
+        # optional: a model file without them keeps one zone (lattice.zones)
+        zone_min_share=r.optional("lattice.zone_min_share", 0.0, r.number, lo=0.0, hi=1.0),
+        zone_wall_scale_m=r.optional("lattice.zone_wall_scale_m", 0.25, r.number, positive=True, hi=100.0),
+        zone_min_coherence=r.optional("lattice.zone_min_coherence", 0.5, r.number, lo=0.0, hi=1.0),
+        zone_door_m=r.optional("lattice.zone_door_m", 1.0, r.number, positive=True, hi=100.0),
+        zone_min_votes_m=r.optional("lattice.zone_min_votes_m", 1.0, r.number, lo=0.0, hi=1000.0),
+        zone_split_share=r.optional("lattice.zone_split_share", 0.25, r.number, lo=0.0, hi=1.0))
     return lattice
 
 

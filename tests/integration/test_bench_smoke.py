@@ -43,7 +43,7 @@ def bench(capsys, monkeypatch, *argv) -> dict:
 
 
 def test_every_benchmark_is_tested():
-    assert NAMES == ["batch", "knowledge", "large", "learn", "likelihood", "quality", "sampler"]
+    assert NAMES == ["batch", "knowledge", "large", "learn", "likelihood", "quality", "sampler", "zones"]
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -80,6 +80,12 @@ def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
         assert 0 < row["rooms_precision"] <= 1 and 0 < row["rooms_recall"] <= 1 and row["rooms_outside"] >= 0
     elif name == "sampler":
         assert result["knowledge_pymc_kernels"] == 10 and result["knowledge_tracker_error"] < 1e-9
+    elif name == "zones":
+        (wings,) = result["wings"]
+        assert wings["kind"] == "30" and wings["directions_found"] == wings["directions"] == 2
+        assert wings["correct"] > 0.95 and result["one_direction"] == {"maps": 1, "one_zone": 1}
+        (pentagon,) = result["drawn"]
+        assert len(pentagon["zones_deg"]) == 5 and result["composite"]["side"] == 600
 
 
 @pytest.mark.parametrize("seed,units", [(0, 20), (3, 30)])

@@ -138,6 +138,12 @@ def test_model_files_without_colike_scope_take_each_units_own_class(tmp_path):
     ("off_axis_min_deg = 50", "lattice.off_axis_min_deg: must be <= 45.0, got 50.0"),
     ("off_axis_min_gain = 0.5", "lattice.off_axis_min_gain: must be >= 1.0, got 0.5"),
     ('off_axis_note_share = "some"', "lattice.off_axis_note_share: expected a number, got str"),
+    ("zone_min_share = 1.5", "lattice.zone_min_share: must be <= 1.0, got 1.5"),
+    ("zone_wall_scale_m = 0", "lattice.zone_wall_scale_m: must be > 0, got 0.0"),
+    ("zone_min_coherence = -0.1", "lattice.zone_min_coherence: must be >= 0.0, got -0.1"),
+    ("zone_door_m = 0", "lattice.zone_door_m: must be > 0, got 0.0"),
+    ("zone_min_votes_m = -1", "lattice.zone_min_votes_m: must be >= 0.0, got -1.0"),
+    ("zone_split_share = 2", "lattice.zone_split_share: must be <= 1.0, got 2.0"),
 ])
 def test_a_bad_value_of_an_optional_key_is_one_line_naming_file_and_key(tmp_path, line, message):
     """The default model with one line replaced ([outside], [evidence] colike keys)."""
@@ -161,6 +167,14 @@ def test_model_files_without_the_off_axis_keys_get_no_note_about_walls_at_anothe
     m = without_lines(tmp_path, keys, n=4)
     assert [getattr(m.lattice, k) for k in keys] == [8.0, 5.0, 1.5, 0.0]
     assert load_model().lattice.off_axis_note_share == 0.1
+
+
+def test_model_files_without_the_zone_keys_keep_one_zone(tmp_path):
+    keys = ("zone_min_share", "zone_wall_scale_m", "zone_min_coherence", "zone_door_m", "zone_min_votes_m",
+            "zone_split_share")
+    m = without_lines(tmp_path, keys, n=6)
+    assert [getattr(m.lattice, k) for k in keys] == [0.0, 0.25, 0.5, 1.0, 1.0, 0.25]
+    assert [getattr(load_model().lattice, k) for k in keys] == [0.07, 0.25, 0.5, 1.0, 1.0, 0.25]
 
 
 def test_door_specks_are_an_area_of_at_least_one_cell(tmp_path):
