@@ -203,9 +203,9 @@ def _settings(model, args):
 
 def _inputs_from_grid(grid, model, rules):
     from semmap_pp.evaluate import closing_radius_cells, default_roi
-    from semmap_pp.lattice.frame import build_frame
+    from semmap_pp.lattice.tiles import building_frame
     from semmap_pp.run.inputs import Inputs
-    frame = build_frame(grid, model)
+    frame = building_frame(grid, model)
     roi = default_roi(grid.classes, closing_radius_cells(model.evaluate.roi_closing_m, grid.resolution))
     return Inputs(grid, model, rules, frame, roi, "default")
 

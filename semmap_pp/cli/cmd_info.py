@@ -95,9 +95,15 @@ def format_text(facts: dict) -> str:
         share = (r1 - r0) * (c1 - c0) / max(facts["width"] * facts["height"], 1)
         lines.append(f"known part  {c1 - c0} x {r1 - r0} cells from column {c0}, row {r0} "
                      f"({100.0 * share:.1f} % of the image)")
-    if "orientation_deg" in facts:
+    if len(facts.get("orientations_deg", ())) > 1:
+        shares = ", ".join(f"{a:.1f} deg ({100.0 * w:.0f} %)"
+                           for a, w in zip(facts["orientations_deg"], facts["direction_shares"]))
+        lines.append(f"directions  {shares} of the occupied cells: a lattice each, every unit's walls "
+                     f"run along or across its own")
+    elif "orientation_deg" in facts:
         lines.append(f"orientation {facts['orientation_deg']:.1f} deg (the lattice's: every unit's walls "
                      f"run along it or across it)")
+    if "orientation_deg" in facts and len(facts.get("orientations_deg", ())) <= 1:
         off = facts["off_axis"]
         if off["share"] > 0:
             x0, y0, x1, y1 = off["box_px"]
@@ -115,15 +121,21 @@ def format_text(facts: dict) -> str:
 
 
 def orientation(grid: OccupancyGrid, model) -> dict:
-    """θ0 of the lattice ``semmap map`` would build (degrees) and the walls at another angle
+    """θ0 of the lattice ``semmap map`` would build (degrees), the building's directions and their
+    shares of the occupied cells (:func:`semmap_pp.lattice.zones.building_zones`: a lattice each
+    when there are several) and the walls at another angle
     (:func:`semmap_pp.lattice.frame.off_axis_walls`; ``note``: whether the run would say so)."""
     from semmap_pp.lattice.frame import lattice_orientation, off_axis_noted, off_axis_walls
+    from semmap_pp.lattice.zones import building_zones
 
     params = model.lattice
     theta = lattice_orientation(grid.classes, params)
     off = off_axis_walls(grid.classes, theta, grid.resolution, params)
     share = float(off.share)
+    zones = building_zones(grid.classes, grid.resolution, params, theta)
     return {"orientation_deg": math.degrees(theta),
+            "orientations_deg": [math.degrees(t) for t in zones.thetas],
+            "direction_shares": [float(w) for w in zones.shares],
             "off_axis": {"share": share, "angle_deg": None if off.blocks == 0 else off.angle_deg,
                          "box_px": None if off.box_px is None else list(off.box_px),
                          "note": off_axis_noted(share, params)}}

@@ -37,7 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from semmap_pp.cells import UNKNOWN
-from semmap_pp.lattice.frame import Frame, build_frame_from_classes, doorway_classes
+from semmap_pp.lattice.frame import Frame, build_frame, build_frame_from_classes, doorway_classes
+from semmap_pp.lattice.zones import building_zones
 from semmap_pp.model import Model
 
 
@@ -254,5 +255,23 @@ def rect_spans(frame) -> tuple[tuple[int, int], ...]:
     return frame.spans if isinstance(frame, TiledFrame) else ()
 
 
-def orientation_deg(theta: float) -> float:
-    return round(math.degrees(theta), 4)
+def building_frame(grid, model: Model) -> Frame:
+    """The lattice of an :class:`~semmap_pp.grid.OccupancyGrid`: the building's directions and
+    zones (:func:`~semmap_pp.lattice.zones.building_zones`) from the walls, then one lattice at
+    θ0 (:func:`~semmap_pp.lattice.frame.build_frame`) when there is one direction, a
+    :class:`TiledFrame` of one tile per direction when there are more."""
+    frame = build_frame(grid, model)
+    zones = building_zones(grid.classes, grid.resolution, model.lattice, frame.theta)
+    if len(zones.thetas) == 1:
+        return frame
+    return build_tiled_frame(grid.classes, grid.resolution, model, zones.thetas, zones.labels,
+                             grid.origin)
+
+
+def directions_text(frame) -> str:
+    """``"orientation 12.0 deg"``, or ``"orientations 0.0, 30.1 deg (a lattice each)"`` for a
+    building of several directions, for logs."""
+    if not rect_spans(frame):
+        return f"orientation {math.degrees(frame.theta):.1f} deg"
+    return ("orientations " + ", ".join(f"{math.degrees(t.theta):.1f}" for t in frame.tiles)
+            + " deg (a lattice each)")

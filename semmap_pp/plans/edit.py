@@ -38,6 +38,7 @@ import numpy as np
 from semmap_pp.errors import SemmapError
 from semmap_pp.plans.places import unit_key
 from semmap_pp.sampler.kernels.split_merge import pieces
+from semmap_pp.lattice.tiles import rect_spans
 from semmap_pp.target.prior import rect_faults
 
 #: The edits and the number of arguments each takes (``None``: one id or more).
@@ -100,10 +101,14 @@ def to_image(frame, x: float, y: float, *, pixels: bool = False) -> tuple[float,
     return float(x), float(y)
 
 
-def to_lattice(frame, x: float, y: float, *, pixels: bool = False) -> Point:
-    """The lattice coordinate of a map-frame point (metres), or of an image point (pixels)."""
+def to_lattice(frame, x: float, y: float, *, pixels: bool = False, tile: int | None = None) -> Point:
+    """The lattice coordinate of a map-frame point (metres), or of an image point (pixels); on a
+    lattice of several directions, on tile ``tile``'s (default: the tile of the point's zone)."""
     x, y = to_image(frame, x, y, pixels=pixels)
-    r, c = frame.image_to_lattice(x - 0.5, y - 0.5)
+    if tile is not None and rect_spans(frame):
+        r, c = frame.tile_image_to_lattice(tile, x - 0.5, y - 0.5)
+    else:
+        r, c = frame.image_to_lattice(x - 0.5, y - 0.5)
     return Point(float(r), float(c))
 
 
@@ -216,21 +221,24 @@ class _Editor:
             self.fail(edit, f"no unit {text} in this world (its units: {listed or 'none'})")
         return k
 
-    def point(self, edit: Edit, x: str, y: str) -> Point:
+    def point(self, edit: Edit, x: str, y: str, rect=None) -> Point:
+        """The lattice point of ``x y``: on the tile of ``rect`` when given (a wall or a cut of
+        that unit), on a lattice of several directions."""
         frame, pixels = self.frame, self.pixels
         px, py = to_image(frame, _number(x), _number(y), pixels=pixels)
         h, w = frame.image_shape
         if not (0 <= px <= w and 0 <= py <= h):
             self.fail(edit, f"the point {x} {y} lies outside the map ({w} x {h} pixels"
                             f"{'' if pixels else '; points are map-frame metres, --pixels for pixels'})")
-        return to_lattice(frame, px, py, pixels=True)
+        tile = frame.tile_of_rect(rect) if rect is not None and rect_spans(frame) else None
+        return to_lattice(frame, px, py, pixels=True, tile=tile)
 
     def check(self, edit: Edit, rect, what: str = "the result") -> tuple:
         frame, c = self.frame, self.frame.cells
         r0, c0, r1, c1 = (int(v) for v in rect)
         sides = (r1 - r0, c1 - c0)
         res = frame.resolution
-        faults = rect_faults((r0, c0, r1, c1), frame.shape, c.min_side, c.max_side)
+        faults = rect_faults((r0, c0, r1, c1), frame.shape, c.min_side, c.max_side, rect_spans(frame))
         if "small" in faults:
             self.fail(edit, f"{what} would be {sides[0] * res:.2f} x {sides[1] * res:.2f} m; a unit's sides "
                             f"are at least {c.min_side * res:.2f} m, walls included ([world] min_unit_side_m)")
@@ -239,6 +247,9 @@ class _Editor:
                             f"are at most {c.max_side * res:.2f} m ([world] max_unit_side_m)")
         if "outside" in faults:
             self.fail(edit, f"{what} would reach beyond the map's lattice")
+        if "straddles" in faults:
+            self.fail(edit, f"{what} would lie across two of the building's directions (zones of the "
+                            f"lattice at different angles): a unit lies in one")
         return (r0, c0, r1, c1)
 
     def remove(self, k: str, edit: Edit) -> None:
@@ -269,18 +280,21 @@ class _Editor:
             self.cut(edit)
         elif edit.kind == "wall":
             k = self.unit(edit, a[0])
-            current[k] = self.check(edit, _wall(current[k], self.point(edit, *a[1:3]), wall))
+            current[k] = self.check(edit, _wall(current[k], self.point(edit, *a[1:3], current[k]), wall))
             self.changed.add(k)
         else:   # add
-            self.new.append(self.check(edit, _box(self.point(edit, *a[0:2]), self.point(edit, *a[2:4]),
-                                                  wall), "the new unit"))
+            first = self.point(edit, *a[0:2])      # the second corner on the first one's lattice
+            home = (int(first.row), int(first.col), int(first.row) + 1, int(first.col) + 1)
+            self.new.append(self.check(edit, _box(first, self.point(edit, *a[2:4], home), wall),
+                                       "the new unit"))
 
     def cut(self, edit: Edit) -> None:
         """A unit cut in two along a new wall through two points."""
         a, wall = edit.args, self.frame.cells.wall
         k = self.unit(edit, a[0])
         rect = self.current[k]
-        axis, s, (first, second) = _cut(rect, self.point(edit, *a[1:3]), self.point(edit, *a[3:5]), wall)
+        axis, s, (first, second) = _cut(rect, self.point(edit, *a[1:3], rect), self.point(edit, *a[3:5], rect),
+                                        wall)
         if not rect[axis] < s - wall < s < rect[axis + 2]:
             self.fail(edit, f"the line does not cross unit {a[0]} (it runs along the "
                             f"{'rows' if axis == 0 else 'columns'} of the lattice; give two points on the "

@@ -39,6 +39,7 @@ from semmap_pp.evaluate.io import read_json
 from semmap_pp.model import MAX_K
 from semmap_pp.semantic.ids import MAX_ID
 from semmap_pp.semantic.world_json import FORMAT
+from semmap_pp.lattice.tiles import rect_spans
 from semmap_pp.target.prior import rect_faults
 
 #: Corners farther than this (pixels) from their lattice rectangle's are not of this lattice.
@@ -277,11 +278,15 @@ def read_world_units(path: str | os.PathLike, frame, grid) -> list[tuple[str, tu
                                     f"{_brief(m.get('orientation_deg', '?'))}): was it written for this "
                                     f"map and model?")
         r0, c0, r1, c1 = rect
-        faults = rect_faults(rect, frame.shape, c.min_side, c.max_side)
+        faults = rect_faults(rect, frame.shape, c.min_side, c.max_side, rect_spans(frame))
         if "outside" in faults:
             raise SemmapError(path, f"{name} reaches beyond the map's lattice ({frame.shape[0]} x "
                                     f"{frame.shape[1]} cells; the unit spans rows {r0}..{r1}, columns "
                                     f"{c0}..{c1})")
+        if "straddles" in faults:
+            raise SemmapError(path, f"{name} lies across two of the building's directions (zones of "
+                                    f"the lattice at different angles): was it written for this map "
+                                    f"and model?")
         if faults:
             raise SemmapError(path, f"{name} is {r1 - r0} x {c1 - c0} cells; the model allows sides of "
                                     f"{c.min_side} to {c.max_side} cells ([world] min_unit_side_m, "

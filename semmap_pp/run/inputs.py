@@ -13,7 +13,8 @@ from semmap_pp.evaluate import closing_radius_cells, default_roi, load_roi
 from semmap_pp.grid import MAX_CELLS, OccupancyGrid, load_map
 from semmap_pp.grid.outside import clear_outside
 from semmap_pp.knowledge import load_rules
-from semmap_pp.lattice.frame import Frame, build_frame, off_axis_note
+from semmap_pp.lattice.frame import Frame, off_axis_note
+from semmap_pp.lattice.tiles import building_frame, rect_spans
 from semmap_pp.model import Model, load_model
 from semmap_pp.resources import DEFAULT_RULES
 
@@ -40,8 +41,8 @@ def load_inputs(map_path, *, model_path=None, rules_path=DEFAULT_RULES, roi_path
     grid, outside_note = clear_outside(grid, model.outside)
     rules = load_rules(rules_path) if rules_path is not None else None
     check_model_for_map(grid, model, (map_options or {}).get("max_cells") or MAX_CELLS)
-    frame = build_frame(grid, model)
-    off_axis = off_axis_note(grid.classes, frame, model.lattice)
+    frame = building_frame(grid, model)
+    off_axis = None if rect_spans(frame) else off_axis_note(grid.classes, frame, model.lattice)
     if off_axis:   # world.json's map notes too, as the outside's
         grid = replace(grid, notes=tuple(grid.notes) + (off_axis,))
     if roi_path is not None:

@@ -17,12 +17,12 @@ Rules are read once, at the start: a rule file edited while a run is going does 
 from __future__ import annotations
 
 import functools
-import math
 import time
 
 import numpy as np
 
 from semmap_pp import world as wm
+from semmap_pp.lattice.tiles import directions_text, rect_spans
 from semmap_pp.run.inputs import Inputs
 from semmap_pp.run.lattice_cpr import LatticeCPR
 from semmap_pp.run.memory import trim_heap
@@ -57,7 +57,8 @@ def start_worlds(inputs: Inputs, chains: int, rng: np.random.Generator, base: wm
     c = inputs.frame.cells
     worlds = [clean]
     for _ in range(1, chains):
-        worlds.append(dispersed_world(rng, clean, inputs.frame.shape, min_side=c.min_side))
+        worlds.append(dispersed_world(rng, clean, inputs.frame.shape, min_side=c.min_side,
+                                      spans=rect_spans(inputs.frame)))
     return worlds
 
 
@@ -94,7 +95,7 @@ def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, b
     is the run's kernel data, which the start worlds' ascent reuses."""
     frame = inputs.frame
     head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
-            f"orientation {math.degrees(frame.theta):.1f} deg")
+            f"{directions_text(frame)}")
     if resume is None:
         rng = np.random.default_rng(settings.seed)
         if starts is None:   # minutes on a large map: say so before, and how long after

@@ -170,11 +170,12 @@ def start_world(classes: np.ndarray, capacity: int, *, min_side: int, wall_cells
 
 
 def dispersed_world(rng: np.random.Generator, base: wm.World, shape: tuple[int, int], *,
-                    min_side: int, drop: float = 0.3, jitter: int = 4) -> wm.World:
+                    min_side: int, drop: float = 0.3, jitter: int = 4, spans=()) -> wm.World:
     """A random variant of ``base``: each unit dropped with probability ``drop`` or its edges jittered.
 
     Used to start chains 2..C in different places. The result is a valid world (rectangles inside
-    ``shape`` with sides of at least ``min_side``); units land in random free slots.
+    ``shape`` with sides of at least ``min_side``, and inside the tile of ``spans`` the unit was
+    in, on a tiled lattice); units land in random free slots.
     """
     H, W = shape
     out = wm.empty(base.capacity)
@@ -187,7 +188,8 @@ def dispersed_world(rng: np.random.Generator, base: wm.World, shape: tuple[int, 
         d = rng.integers(-jitter, jitter + 1, size=4)
         r0, c0 = max(0, r0 + d[0]), max(0, c0 + d[1])
         r1, c1 = min(H, r1 + d[2]), min(W, c1 + d[3])
-        if r1 - r0 < min_side or c1 - c0 < min_side:
+        home = [(a, b) for a, b in spans if a <= base.rects[s][1] < b]
+        if r1 - r0 < min_side or c1 - c0 < min_side or (home and not home[0][0] <= c0 < c1 <= home[0][1]):
             r0, c0, r1, c1 = (int(v) for v in base.rects[s])
         out = wm.add(out, int(slots[i]), (r0, c0, r1, c1))
         i += 1

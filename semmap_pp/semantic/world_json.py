@@ -22,6 +22,7 @@ from semmap_pp import __version__
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.states import seen_shares
+from semmap_pp.lattice.tiles import rect_spans, unit_theta
 from semmap_pp.sampler.marginals import MATCH_IOU
 
 FORMAT = "semmap_pp.world/1"
@@ -60,6 +61,15 @@ def _rect_geometry(frame, rect, res: float) -> dict:
     return {"vertices_px": [_r(v, 3) for v in vpx], "vertices_m": [_r(v, 4) for v in vm],
             "center_m": _r(vm.mean(axis=0), 4),
             "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)], reverse=True)}
+
+
+def _orientations(frame) -> dict:
+    """world.json's ``orientation_deg`` of the map, and ``orientations_deg`` for a building of
+    several directions."""
+    out = {"orientation_deg": round(math.degrees(frame.theta), 4)}
+    if rect_spans(frame):
+        out["orientations_deg"] = [round(math.degrees(t.theta), 4) for t in frame.tiles]
+    return out
 
 
 def _seen(frame, rect) -> dict:
@@ -139,6 +149,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
             "type": UNIT_TYPES[int(world.types[s])],
             "type_marginals": {t: round(float(marg[k]), 6) for k, t in enumerate(UNIT_TYPES)},
             **_rect_geometry(frame, world.rects[s], res),
+            "orientation_deg": round(math.degrees(unit_theta(frame, world.rects[s])), 4),
             **_seen(frame, world.rects[s]),
             "seen_through_door": s in sm.through_door,
             "doors": [o["id"] for o in doors if uid in o["units"]],
@@ -154,7 +165,7 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
         "format": FORMAT,
         "map": {"image": image, "yaml": yaml_name, "width": int(grid.width), "height": int(grid.height),
                 "resolution": res, "origin": [float(v) for v in grid.origin],
-                "orientation_deg": round(math.degrees(frame.theta), 4),
+                **_orientations(frame),
                 "frame_id": grid.frame_id, "stamp_ns": int(grid.stamp_ns),
                 **({"topic": grid.topic} if grid.topic is not None else {}),
                 "notes": list(grid.notes)},

@@ -27,7 +27,7 @@ import numpy as np
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.errors import MapError, SemmapError
 from semmap_pp.evaluate.io import grey, read_image
-from semmap_pp.lattice.frame import build_frame
+from semmap_pp.lattice.tiles import building_frame
 from semmap_pp.grid import OccupancyGrid
 from semmap_pp.knowledge.evidence import evidence_to_facts
 from semmap_pp.model import load_model
@@ -157,7 +157,7 @@ def synthetic_example(seed: int, model=None) -> str:
     floor = generate_floor(int(seed))
     grid = OccupancyGrid(floor.classes, np.zeros(floor.classes.shape, np.float32),
                          floor.resolution, source=Path(f"synth-{seed}"))
-    frame = build_frame(grid, model)
+    frame = building_frame(grid, model)
     seen = [u for u in floor.truth["units"] if u.get("explored", True)]
     rects = [frame.rect_from_vertices_px(u["corners_px"])[0] for u in seen]
     world = pack_world(rects, model.prior.k_max)

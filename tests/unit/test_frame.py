@@ -206,12 +206,24 @@ def test_the_note_names_the_share_and_both_angles_and_can_be_switched_off(square
 
 
 def test_the_run_gets_the_note_and_world_json_s_map_notes_too(tmp_path, square_wing):
+    """Two floors at 30 degrees from each other: a lattice each, and no note; with the zones off
+    (``zone_min_share = 0``), one lattice and the note, in world.json's map notes too."""
     from semmap_pp.grid import write_map
+    from semmap_pp.lattice.tiles import rect_spans
+    from semmap_pp.model import DEFAULT_MODEL
     from semmap_pp.run.inputs import load_inputs
     from semmap_pp.synth import generate_floor
     both = _side_by_side(square_wing, generate_floor(5, units=8, rotation_deg=30.0).classes)
     image = np.where(both == FREE, 254, np.where(both == OCCUPIED, 0, 205)).astype(np.uint8)
-    inputs = load_inputs(write_map(tmp_path / "wings.yaml", image, 0.05))
+    wings = write_map(tmp_path / "wings.yaml", image, 0.05)
+    tiled = load_inputs(wings)
+    assert len(rect_spans(tiled.frame)) == 2 and not [n for n in tiled.notes if "another angle" in n]
+    model = tmp_path / "no_zones.toml"
+    text = DEFAULT_MODEL.read_text()
+    assert "zone_min_share = 0.07\n" in text
+    model.write_text(text.replace("zone_min_share = 0.07\n", "zone_min_share = 0.0\n"))
+    inputs = load_inputs(wings, model_path=model)
+    assert not rect_spans(inputs.frame)
     notes = [n for n in inputs.notes if "another angle" in n]
     assert len(notes) == 1 and notes[0] in inputs.grid.notes      # world.json's map.notes are grid.notes
     one = write_map(tmp_path / "one.yaml", np.where(square_wing == FREE, 254, np.where(
