@@ -308,7 +308,9 @@ def _run_summary(run, doc: dict, rules_name: str) -> str:
     inputs, s, grid = run.inputs, run.settings, run.inputs.grid
     return _kv([
         ("map", grid.source), ("image", f"{grid.width} × {grid.height} cells at {grid.resolution} m/cell"),
-        ("building orientation", f"{doc['map']['orientation_deg']:.1f}°"),
+        ("building orientation", ", ".join(f"{a:.1f}°" for a in doc["map"].get(
+            "orientations_deg", [doc["map"]["orientation_deg"]])) + (
+            " (a lattice each)" if "orientations_deg" in doc["map"] else "")),
         ("rules", rules_name), ("model", inputs.model.path.name), ("seed", s.seed),
         ("chains", f"{s.chains} on {s.cores} core(s)"),
         ("draws", f"{s.tune} burn-in + {s.draws} recorded per chain, {s.n_inner} kernels per draw"),
