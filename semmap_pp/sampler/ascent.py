@@ -144,7 +144,8 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     where the three strongest peaks can be three neighbouring lines of one wall (lab_d_furnitures: the
     room over the corridor is cut at its wall, and the corridor's pieces are joined by open
     passages). The start ascent keeps the peaks: wide cuts there, where the double cuts try every
-    pair of them, made it up to 13 times as slow (CHANGELOG.md)."""
+    pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
+    evidence")."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
                         double_cuts=False, births=False, wide_cuts=True)
 
