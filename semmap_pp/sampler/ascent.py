@@ -15,7 +15,7 @@ unit between them (:meth:`_Ascent.bridges`); in W*'s polish also two more, recut
 pair the other way (:meth:`_Ascent.recuts`) and moving every edge on one wall together
 (:meth:`_Ascent.shared_wall_moves`), and two fewer: the start ascent cuts a unit twice at once when
 no single cut helps (a room inside an L of walls) and adds units over uncovered free space (births),
-W*'s polish cuts once and adds none (:func:`polish`).
+W*'s polish cuts once, all along a plateau of line evidence, and adds none (:func:`polish`).
 
 After sampling, the same ascent under the full target (knowledge on) polishes W*, the best sampled
 world: a short chain at T = 1 leaves it a few wall moves or one merge short of the nearest local
@@ -51,12 +51,13 @@ class _Ascent(JoinMoves, CutMoves):
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
                  merges: bool = True, recuts: bool = False, shared_walls: bool = False,
-                 double_cuts: bool = True) -> wm.World:
+                 double_cuts: bool = True, wide_cuts: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
     L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
     (:meth:`_Ascent.shared_wall_moves`), ``double_cuts=False`` the second cut of a piece when no
-    single cut helps (:meth:`_Ascent.splits`); W*'s polish is :func:`polish`.
+    single cut helps, ``wide_cuts=True`` cuts all along a plateau of line evidence
+    (:meth:`_Ascent.splits`); W*'s polish is :func:`polish`.
 
     Parameters
     ----------
@@ -95,7 +96,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             changed |= asc.bridges()
         if recuts:
             changed |= asc.recuts()
-        changed |= asc.splits(double_cuts)
+        changed |= asc.splits(double_cuts, wide_cuts)
         if births:
             changed |= asc.births()
         return changed
@@ -136,9 +137,17 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     rule file off the fast path, the second cuts took two thirds of its time on cartesium and the
     births a third on aces. Without the double cuts no W* of the 30 synthetic floors, the ipa
     types plans, cartesium, aces or freiburg-079 changed (CHANGELOG.md, quality change 35);
-    without the births too, no W* measured changed at all (quality change 36)."""
+    without the births too, no W* measured changed at all (quality change 36).
+
+    Its single cuts are wide (:func:`~semmap_pp.sampler.ascent_cuts._wall_runs`): a plateau of
+    line evidence (a cupboard against a wall) is tried all along and a few steps past its ends,
+    where the three strongest peaks can be three neighbouring lines of one wall (lab_d_furnitures: the
+    room over the corridor is cut at its wall, and the corridor's pieces are joined by open
+    passages). The start ascent keeps the peaks: wide cuts there, where the double cuts try every
+    pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
+    evidence")."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
-                        double_cuts=False, births=False)
+                        double_cuts=False, births=False, wide_cuts=True)
 
 
 def add_units(posterior, world: wm.World, data, boxes) -> tuple[wm.World, list[int]]:

@@ -10,12 +10,47 @@ from semmap_pp.sampler.ascent_walls import WallMoves, _line_peaks
 from semmap_pp.sampler.kernels.common import band_weights, line_cum
 
 
+def _wall_runs(w: np.ndarray, lo: int, k: int, local: int) -> list[int]:
+    """Positions (``lo`` + index) at the ``k`` strongest peaks of ``w``, a run of equal values
+    counting as one peak: a peak of one position as it is, a longer run (a plateau) with every
+    position on it and ``local`` steps past either end.
+
+    The band weights of :func:`~semmap_pp.sampler.kernels.common.band_weights` saturate where
+    several lines in a row are wall or door cells over the whole span (a cupboard against a wall,
+    its gaps to the side walls of door width): each position of such a plateau is a peak of
+    :func:`~semmap_pp.sampler.ascent_walls._line_peaks`, so its three strongest peaks were three
+    neighbouring lines of one wall, and the line evidence cannot tell where on the plateau the
+    wall is. The target does, as a wall move's local steps let it do for one wall.
+
+    >>> _wall_runs(np.array([0.1, 1.0, 1.0, 1.0, 0.1, 0.1, 0.6, 0.1, 0.4, 0.1]), 100, 2, 1)
+    [100, 101, 102, 103, 104, 106]
+    """
+    if w.size == 0:
+        return []
+    n = w.size
+    starts = np.flatnonzero(np.concatenate([[True], w[1:] != w[:-1]]))
+    ends = np.concatenate([starts[1:], [n]]) - 1
+    vals = w[starts]
+    left = np.concatenate([[-np.inf], vals[:-1]])
+    right = np.concatenate([vals[1:], [-np.inf]])
+    idx = np.flatnonzero((vals >= left) & (vals >= right) & (vals > w.min()))
+    out = set()
+    for i in idx[np.argsort(-vals[idx], kind="stable")][:k].tolist():
+        a, b = int(starts[i]), int(ends[i])
+        if b > a:
+            a, b = max(a - local, 0), min(b + local, n - 1)
+        out.update(range(a, b + 1))
+    return sorted(v + lo for v in out)
+
+
 class CutMoves(WallMoves):
     """Splits of a unit at its strongest wall lines and births of units over free space."""
 
-    def cuts(self, rect) -> list[tuple[list, list]]:
+    def cuts(self, rect, wide: bool = False) -> list[tuple[list, list]]:
         """The two pieces of ``rect`` cut at each of its three strongest interior wall lines per
-        axis (the pieces share the wall band)."""
+        axis (the pieces share the wall band); ``wide``: at the three strongest runs of lines
+        instead, a plateau of equal line evidence tried all along and ``local`` steps past its
+        ends (:func:`_wall_runs`)."""
         d = self.data
         m, t, g = d.min_side, d.wall_cells, d.wall_share
         rect = [int(v) for v in rect]
@@ -26,17 +61,17 @@ class CutMoves(WallMoves):
                 continue
             w = band_weights(line_cum(d, axis), lo, hi, -t, t - g, rect[1 - axis], rect[3 - axis],
                              d.settings.line_floor)
-            for cut in _line_peaks(w, lo, 3):
+            for cut in (_wall_runs(w, lo, 3, self.local) if wide else _line_peaks(w, lo, 3)):
                 a, b = list(rect), list(rect)
                 a[axis + 2], b[axis] = cut, cut - g
                 out.append((a, b))
         return out
 
-    def splits(self, double: bool = True) -> bool:
+    def splits(self, double: bool = True, wide: bool = False) -> bool:
         """Split a unit at its strongest interior wall line when that helps (pieces share the
         wall); when no single cut helps and ``double``, cut one of the two pieces again (a room
         inside an L of walls needs both cuts: each alone leaves a wall-less band across open
-        floor)."""
+        floor). ``wide``: the single cuts at the strongest runs of lines (:meth:`cuts`)."""
         changed = False
         for s in self.units():
             free = self.free(2)
@@ -44,7 +79,7 @@ class CutMoves(WallMoves):
                 break
             f = int(free[0])
             singles = [wm.add(wm.replace(self.world, s, a), f, b)
-                       for a, b in self.cuts(self.world.rects[s])]
+                       for a, b in self.cuts(self.world.rects[s], wide)]
             if singles and self.best_of(singles, (s, f)):
                 changed = True
                 self.wall_moves(s)

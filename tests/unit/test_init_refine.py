@@ -662,3 +662,40 @@ def test_w_stars_polish_leaves_the_births_to_the_start_ascent(monkeypatch):
     polished = ascent.polish(post, left_only, data, rounds=1)
     assert not tried
     assert post.evaluate(polished).total >= post.evaluate(left_only).total
+
+
+def room_over_corridor(width: int = 100) -> np.ndarray:
+    """A room (rows 10..90) over a corridor (rows 92..124), ``width`` cells wide, the 2-cell wall
+    between them with two doors, and a cupboard 30 cells wide and 12 deep against the wall's room
+    side in the middle: its gaps to the side walls are of door width, so every line across the
+    cupboard and the wall is wall or door cells over the whole span (a plateau of line evidence)."""
+    m = np.full((140, width + 20), OCCUPIED, np.uint8)
+    m[10:90, 10:10 + width] = FREE
+    m[92:124, 10:10 + width] = FREE
+    m[90:92, 16:32] = FREE
+    m[90:92, width - 12:width + 4] = FREE
+    c0 = 10 + (width - 30) // 2
+    m[78:90, c0:c0 + 30] = OCCUPIED
+    return m
+
+
+def test_w_stars_polish_cuts_all_along_a_plateau_of_line_evidence():
+    """One unit over a room and the corridor below it, their wall behind a cupboard: the three
+    strongest line peaks are neighbouring lines at the cupboard's top, where no cut helps, so the
+    narrow cuts leave the unit whole; W*'s polish tries every line of the plateau and a few past
+    it (ascent_cuts._wall_runs) and cuts the unit at the wall (lab_d_furnitures' room over its
+    corridor)."""
+    from semmap_pp.sampler.ascent import _Ascent, polish
+
+    post, data = knowledge_free(room_over_corridor())
+    start = wm.add(wm.empty(8), 0, (8, 8, 126, 112))
+    before = post.evaluate(start).total
+    narrow = [a[2] for a, b in _Ascent(post, start, data).cuts(start.rects[0]) if a[3] == 112]
+    assert narrow == [80, 81, 82]                  # three lines of one plateau, the cupboard's top
+    assert wm.n_units(refine_world(post, start, data, rounds=1, births=False,
+                                   double_cuts=False)) == 1
+    out = polish(post, start, data, rounds=1)
+    rects = sorted(tuple(int(v) for v in out.rects[s]) for s in wm.active_slots(out))
+    assert len(rects) == 2
+    assert abs(rects[0][2] - 92) <= 2 and abs(rects[1][0] - 90) <= 2   # cut at the wall (rows 90..92)
+    assert post.evaluate(out).total > before + 100
