@@ -138,7 +138,7 @@ def orientation(grid: OccupancyGrid, model) -> dict:
             "direction_shares": [float(w) for w in zones.shares],
             "off_axis": {"share": share, "angle_deg": None if off.blocks == 0 else off.angle_deg,
                          "box_px": None if off.box_px is None else list(off.box_px),
-                         "note": off_axis_noted(share, params)}}
+                         "note": off_axis_noted(share, params) and len(zones.thetas) == 1}}
 
 
 def run(args: argparse.Namespace) -> int:

@@ -66,6 +66,15 @@ class Derived(NamedTuple):
     gap_passages: list = []
 
 
+def _tile_groups(frame, rects: np.ndarray) -> list[np.ndarray]:
+    """The indices of ``rects`` by tile on a lattice of several directions (their hulls and
+    outlines are each tile's own: the tiles' lattice coordinates are not one plane), else all."""
+    if not rect_spans(frame):
+        return [np.arange(len(rects))]
+    tiles = np.array([frame.tile_of_rect(r) for r in rects], dtype=np.intp)
+    return [np.flatnonzero(tiles == k) for k in np.unique(tiles)]
+
+
 def derive_world(frame, world: wm.World) -> Derived:
     """Cell states, doors, objects, adjacency, unexplored areas and exterior units of ``world`` on
     ``frame``."""
@@ -83,10 +92,13 @@ def derive_world(frame, world: wm.World) -> Derived:
     objects = find_objects(frame.classes, rects, c.wall, c.object_max_extent, slots)
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
-    ext = find_exterior(frame.classes, rects, c.wall, c.exterior_max_share, c.exterior_seen_min,
-                        across=c.adjacency_dilation, fan_seen_max=c.exterior_fan_seen_max,
-                        outline_gap=c.exterior_outline_gap,
-                        object_extent=c.object_max_extent)
+    ext = np.zeros(len(rects), bool)
+    for group in _tile_groups(frame, rects):   # a footprint's hulls are drawn on one lattice
+        ext[group] = find_exterior(frame.classes, rects[group], c.wall, c.exterior_max_share,
+                                   c.exterior_seen_min, across=c.adjacency_dilation,
+                                   fan_seen_max=c.exterior_fan_seen_max,
+                                   outline_gap=c.exterior_outline_gap,
+                                   object_extent=c.object_max_extent)
     inside = {int(s) for s in slots[~ext]}
     exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))
                 for i in np.flatnonzero(ext)]

@@ -54,11 +54,14 @@ def rect_corners_m(frame, rect) -> np.ndarray:
 
 
 def _rect_geometry(frame, rect, res: float) -> dict:
-    """``vertices_px``, ``vertices_m``, ``center_m`` and ``size_m`` of a unit's lattice rectangle."""
+    """``vertices_px``, ``orientation_deg``, ``vertices_m``, ``center_m`` and ``size_m`` of a
+    unit's lattice rectangle."""
     r0, c0, r1, c1 = (int(v) for v in rect)
     vpx = frame.rect_vertices_px(rect)
     vm = rect_corners_m(frame, rect)
-    return {"vertices_px": [_r(v, 3) for v in vpx], "vertices_m": [_r(v, 4) for v in vm],
+    return {"vertices_px": [_r(v, 3) for v in vpx],
+            "orientation_deg": round(math.degrees(unit_theta(frame, rect)), 4),
+            "vertices_m": [_r(v, 4) for v in vm],
             "center_m": _r(vm.mean(axis=0), 4),
             "size_m": sorted([round((r1 - r0) * res, 4), round((c1 - c0) * res, 4)], reverse=True)}
 
@@ -149,7 +152,6 @@ def world_dict(sm, *, rules: str | None = None, model: str | None = None, seed: 
             "type": UNIT_TYPES[int(world.types[s])],
             "type_marginals": {t: round(float(marg[k]), 6) for k, t in enumerate(UNIT_TYPES)},
             **_rect_geometry(frame, world.rects[s], res),
-            "orientation_deg": round(math.degrees(unit_theta(frame, world.rects[s])), 4),
             **_seen(frame, world.rects[s]),
             "seen_through_door": s in sm.through_door,
             "doors": [o["id"] for o in doors if uid in o["units"]],

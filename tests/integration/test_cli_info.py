@@ -157,8 +157,9 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
 
 
 def test_orientation_gives_the_lattices_theta_and_the_walls_at_another_angle(tmp_path, capsys):
-    """`--orientation`: θ0 as `semmap map` finds it (cartesium −24.0°, nothing off axis), and a
-    wing at another angle with its share, angle and pixels, as the run's note gives them."""
+    """`--orientation`: θ0 as `semmap map` finds it (cartesium −24.0°, nothing off axis), and for
+    a wing at another angle the building's two directions (a lattice each, no note), with the
+    off-axis walls' share, angle and pixels in the JSON."""
     from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
     from semmap_pp.synth import generate_floor
 
@@ -175,14 +176,19 @@ def test_orientation_gives_the_lattices_theta_and_the_walls_at_another_angle(tmp
     assert main(["info", str(path), "--orientation", "--json"]) == 0
     facts = json.loads(capsys.readouterr().out)
     off = facts["off_axis"]
-    assert abs(facts["orientation_deg"]) < 0.5 and off["share"] > 0.25 and off["note"]
+    assert abs(facts["orientation_deg"]) < 0.5 and off["share"] > 0.25
     assert abs(off["angle_deg"] + 30.0) < 1.0 and off["box_px"][0] >= a.shape[1] - 160
+    # two directions, a lattice each: the run makes no note of the wing
+    assert facts["orientations_deg"] == pytest.approx([facts["orientation_deg"], -30.0], abs=1.0)
+    assert not off["note"] and len(facts["direction_shares"]) == 2
     assert main(["info", str(path), "--orientation"]) == 0
-    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("off axis"))
-    x0, y0, x1, y1 = off["box_px"]
-    assert line == (f"off axis    {100 * off['share']:.0f} % of the occupied cells run at about -30 deg, "
-                    f"within pixels x {x0}-{x1}, y {y0}-{y1} (a note in `semmap map`: `semmap crop` cuts "
-                    f"such a wing out)")
+    lines = capsys.readouterr().out.splitlines()
+    line = next(ln for ln in lines if ln.startswith("directions"))
+    a0, a1 = facts["orientations_deg"]
+    w0, w1 = facts["direction_shares"]
+    assert line == (f"directions  {a0:.1f} deg ({100 * w0:.0f} %), {a1:.1f} deg ({100 * w1:.0f} %) of the "
+                    f"occupied cells: a lattice each, every unit's walls run along or across its own")
+    assert not [ln for ln in lines if ln.startswith("off axis")]
     assert "orientation_deg" not in json.loads(_info_json(path, capsys))      # only when asked
 
 

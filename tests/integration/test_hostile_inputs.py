@@ -368,7 +368,7 @@ def test_out_of_memory_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
     def no_memory(*args, **kwargs):
         raise MemoryError()
 
-    monkeypatch.setattr(semmap_pp.run.inputs, "build_frame", no_memory)
+    monkeypatch.setattr(semmap_pp.run.inputs, "building_frame", no_memory)
     code, stdout, stderr = run_map([good_map(tmp_path)], tmp_path / "out", capsys)
     assert code == 2 and stdout == ""
     assert stderr.splitlines() == [stderr.strip()] and stderr.startswith("semmap: error: out of memory")
