@@ -75,6 +75,14 @@ def not_utf8(argv) -> str | None:
     return None
 
 
+def quiet_finalizers() -> None:
+    """After Ctrl-C, keep objects torn down half built from printing at their collection: an
+    interrupt inside a library's constructor (a clingo AST node) leaves an object whose
+    ``__del__`` fails, and Python prints that failure's traceback as an "Exception ignored"
+    message. The run has said in one line that it was interrupted; nothing else is printed."""
+    sys.unraisablehook = lambda unraisable: None
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     bad = not_utf8(argv)
@@ -91,6 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"semmap: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        quiet_finalizers()
         print("semmap: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:

@@ -19,6 +19,7 @@ import signal
 import sys
 from pathlib import Path
 
+from semmap_pp.cli import quiet_finalizers
 from semmap_pp.cli.argtypes import seed as seed_type
 from semmap_pp.cli.argtypes import non_negative_int as _non_negative_int
 from semmap_pp.cli.argtypes import positive_int as _positive_int
@@ -389,5 +390,6 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
         written += write_posterior(out, run, worlds, wstar, rules_name=rules.name, other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
+        quiet_finalizers()
         return written, True
     return written, False

@@ -20,3 +20,25 @@ def test_errors_are_one_line_and_survive_pickling(err):
 def test_position_format():
     assert str(RuleError("r.lp", "x", 3, 7)) == "r.lp:3:7: x"
     assert str(MapError("m.pgm", "y")) == "m.pgm: y"
+
+
+def test_after_ctrl_c_a_half_built_objects_finalizer_prints_nothing(capfd, monkeypatch):
+    """An interrupt inside a library's constructor (a clingo AST node) leaves an object whose
+    ``__del__`` fails at its collection; after ``quiet_finalizers`` Python prints no traceback."""
+    import gc
+    import sys
+
+    from semmap_pp.cli import quiet_finalizers
+
+    class HalfBuilt:
+        def __del__(self):
+            raise AttributeError("no attribute: _rep")
+
+    monkeypatch.setattr(sys, "unraisablehook", sys.__unraisablehook__)
+    HalfBuilt()
+    gc.collect()
+    assert "Traceback" in capfd.readouterr().err          # what Ctrl-C printed before
+    quiet_finalizers()
+    HalfBuilt()
+    gc.collect()
+    assert capfd.readouterr().err == ""
