@@ -90,23 +90,28 @@ def estimate_orientation(classes: np.ndarray, params: LatticeParams) -> float:
     return _orientation_of_points(x, y, params) if x.size >= 2 else 0.0
 
 
-def _occupied_points(classes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(x, y)`` of the occupied cells, centred on their integer mean: at theta = 0 every cell sits
-    on a bin centre (no interpolation spread)."""
-    y, x = np.nonzero(np.asarray(classes) == OCCUPIED)
+def centred(x, y) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` as float64, centred on their integer mean: at theta = 0 every cell sits on a bin
+    centre (no interpolation spread)."""
+    x, y = np.asarray(x), np.asarray(y)
     if x.size == 0:
         return x.astype(np.float64), y.astype(np.float64)
     return ((x - round(float(x.mean()))).astype(np.float64),
             (y - round(float(y.mean()))).astype(np.float64))
 
 
-def _orientation_of_points(x: np.ndarray, y: np.ndarray, params: LatticeParams) -> float:
-    """:func:`estimate_orientation` of the centred points ``(x, y)`` (at least two)."""
-    period = math.pi / 2
-    step = math.radians(params.angle_bin_deg)
-    coarse = -period / 2 + step * np.arange(int(math.ceil(period / step)))
+def _occupied_points(classes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` of the occupied cells, :func:`centred`."""
+    y, x = np.nonzero(np.asarray(classes) == OCCUPIED)
+    return centred(x, y)
+
+
+def sharpest_angle(x: np.ndarray, y: np.ndarray, coarse: np.ndarray, params: LatticeParams) -> float:
+    """The angle (radians, not wrapped) that stacks the centred points ``(x, y)`` sharpest, from
+    the coarse angles ``coarse`` (2-cell bins): tenth steps over ``refine_window_deg`` around the
+    best of them (1-cell bins), then a parabola through the best three."""
     i, _ = _best(x, y, coarse, 2.0)
-    fine_step = step / 10.0
+    fine_step = math.radians(params.angle_bin_deg) / 10.0
     half = int(math.ceil(math.radians(params.refine_window_deg) / fine_step))
     fine = coarse[i] + fine_step * np.arange(-half, half + 1)
     j, scores = _best(x, y, fine, 1.0)
@@ -116,7 +121,15 @@ def _orientation_of_points(x: np.ndarray, y: np.ndarray, params: LatticeParams) 
         den = a - 2 * b + c
         if den < 0:
             theta += 0.5 * fine_step * (a - c) / den
-    theta = math.remainder(theta, period)  # into [-45°, 45°]
+    return theta
+
+
+def _orientation_of_points(x: np.ndarray, y: np.ndarray, params: LatticeParams) -> float:
+    """:func:`estimate_orientation` of the centred points ``(x, y)`` (at least two)."""
+    period = math.pi / 2
+    step = math.radians(params.angle_bin_deg)
+    coarse = -period / 2 + step * np.arange(int(math.ceil(period / step)))
+    theta = math.remainder(sharpest_angle(x, y, coarse, params), period)  # into [-45°, 45°]
     if theta <= -period / 2:
         theta += period
     return float(theta)
@@ -367,18 +380,24 @@ class Frame:
             return a.copy()
         return self.box_to_image(a, (0, 0) + a.shape[:2], fill)
 
+    def _box_args(self, box_array, box, window):
+        """``(array, (r0, c0, r1, c1), (y0, y1, x0, x1))`` of :meth:`box_to_image`'s arguments, the
+        array checked against the box, the window defaulting to the whole image."""
+        a = np.asarray(box_array)
+        r0, c0, r1, c1 = (int(v) for v in box)
+        if a.shape[:2] != (r1 - r0, c1 - c0):
+            raise ValueError(f"expected an array of the box's shape {(r1 - r0, c1 - c0)}, got {a.shape}")
+        h, w = self.image_shape
+        return a, (r0, c0, r1, c1), ((0, h, 0, w) if window is None else tuple(int(v) for v in window))
+
     def box_to_image(self, box_array: np.ndarray, box, fill=0, window=None, step: int = 1) -> np.ndarray:
         """:meth:`to_image` of an array that covers the lattice box ``(r0, c0, r1, c1)`` only:
         image pixels whose centre falls outside the box take ``fill`` (the same image as
         :meth:`to_image` of a lattice array holding ``fill`` outside the box, without one).
         ``window`` ``(y0, y1, x0, x1)`` and ``step``: only the pixels ``[y0:y1:step, x0:x1:step]``
         of that image (default: all of it)."""
-        a = np.asarray(box_array)
-        r0, c0, r1, c1 = (int(v) for v in box)
-        if a.shape[:2] != (r1 - r0, c1 - c0):
-            raise ValueError(f"expected an array of the box's shape {(r1 - r0, c1 - c0)}, got {a.shape}")
+        a, (r0, c0, r1, c1), (y0, y1, x0, x1) = self._box_args(box_array, box, window)
         h, w = self.image_shape
-        y0, y1, x0, x1 = (0, h, 0, w) if window is None else (int(v) for v in window)
         ys, xs = np.arange(y0, y1, step), np.arange(x0, x1, step)
         if self.theta == 0.0:
             i0, j0 = self.crop[:2] if self.crop is not None else (0, 0)

@@ -30,6 +30,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -77,16 +78,20 @@ class TiledFrame(Frame):
         """``(c0, c1)``: the composite lattice columns of each tile (c1 exclusive)."""
         return tuple((c, c + t.shape[1]) for t, c in zip(self.tiles, self.cols))
 
-    def _tile_of_cols(self, cols) -> np.ndarray:
+    @functools.cached_property
+    def _splits(self) -> np.ndarray:
+        """The middle columns of the gaps between tiles."""
+        return np.asarray([(self.cols[k - 1] + self.tiles[k - 1].shape[1] + self.cols[k]) / 2.0
+                           for k in range(1, len(self.tiles))], np.float64)
+
+    def tile_of_cols(self, cols) -> np.ndarray:
         """The tile of fractional lattice columns: a column of the gap between two tiles goes to
         the nearer one."""
-        splits = [(self.cols[k - 1] + self.tiles[k - 1].shape[1] + self.cols[k]) / 2.0
-                  for k in range(1, len(self.tiles))]
-        return np.searchsorted(np.asarray(splits, np.float64), np.asarray(cols, np.float64), side="right")
+        return np.searchsorted(self._splits, np.asarray(cols, np.float64), side="right")
 
     def tile_of_rect(self, rect) -> int:
         """The tile that holds a lattice rectangle (that of its first column)."""
-        return int(self._tile_of_cols(float(rect[1])))
+        return int(self.tile_of_cols(float(rect[1])))
 
     def unit_theta(self, rect) -> float:
         """The orientation (radians) of a unit on this lattice: its tile's."""
@@ -115,7 +120,7 @@ class TiledFrame(Frame):
     def lattice_to_image(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
         rows, cols = np.broadcast_arrays(np.asarray(rows, np.float64), np.asarray(cols, np.float64))
         x, y = np.empty(rows.shape), np.empty(rows.shape)
-        k = self._tile_of_cols(cols)
+        k = self.tile_of_cols(cols)
         for i, (t, c) in enumerate(zip(self.tiles, self.cols)):
             m = k == i
             if m.any():
@@ -150,12 +155,7 @@ class TiledFrame(Frame):
 
     def box_to_image(self, box_array: np.ndarray, box, fill=0, window=None, step: int = 1) -> np.ndarray:
         """:meth:`Frame.box_to_image`: each pixel shows its own zone's tile."""
-        a = np.asarray(box_array)
-        r0, c0, r1, c1 = (int(v) for v in box)
-        if a.shape[:2] != (r1 - r0, c1 - c0):
-            raise ValueError(f"expected an array of the box's shape {(r1 - r0, c1 - c0)}, got {a.shape}")
-        h, w = self.image_shape
-        y0, y1, x0, x1 = (0, h, 0, w) if window is None else (int(v) for v in window)
+        a, (r0, c0, r1, c1), (y0, y1, x0, x1) = self._box_args(box_array, box, window)
         zone = self.zones[y0:y1:step, x0:x1:step]
         out = np.full(zone.shape + a.shape[2:], fill, dtype=a.dtype)
         for k, (t, c) in enumerate(zip(self.tiles, self.cols)):
@@ -206,7 +206,7 @@ def _tile(classes: np.ndarray, zones: np.ndarray, k: int, theta: float, resoluti
         theirs[ok] = ~mine[yi[ok], xi[ok]]
         outside[b0:b1] |= theirs
     outside.setflags(write=False)
-    return Frame(t.theta, t.classes, outside, t.image_shape, t.resolution, t.cells, t.origin, t.crop)
+    return dataclasses.replace(t, outside=outside)
 
 
 def build_tiled_frame(classes: np.ndarray, resolution: float, model: Model, thetas, zones,

@@ -40,7 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, mask_box
-from semmap_pp.lattice.frame import BAND_ROWS, _best, projection_sharpness
+from semmap_pp.lattice.frame import BAND_ROWS, centred, projection_sharpness, sharpest_angle
 from semmap_pp.model import LatticeParams
 
 QUARTER = math.pi / 2
@@ -189,7 +189,7 @@ def directions(rows, cols, local, n_occupied: int, theta0: float, params: Lattic
         near = left & (_gap(local, centre) <= tol)
         if np.count_nonzero(near) < need:
             return thetas
-        x, y = _centred(cols[near], rows[near])
+        x, y = centred(cols[near], rows[near])
         theta = _refined(x, y, centre, tol, params)
         nearest = min(thetas, key=lambda t: float(_gap(theta, t)))
         if float(_gap(theta, nearest)) > tol and projection_sharpness(x, y, theta) >= \
@@ -200,32 +200,13 @@ def directions(rows, cols, local, n_occupied: int, theta0: float, params: Lattic
     return thetas
 
 
-def _centred(x, y) -> tuple[np.ndarray, np.ndarray]:
-    """``(x, y)`` as float, centred on their integer mean (at angle 0 every cell on a bin centre)."""
-    x, y = np.asarray(x), np.asarray(y)
-    return ((x - round(float(x.mean()))).astype(np.float64), (y - round(float(y.mean()))).astype(np.float64))
-
-
 def _refined(x, y, centre: float, half: float, params: LatticeParams) -> float:
     """The angle within ``half`` of ``centre`` (radians) that stacks the points ``(x, y)`` sharpest:
-    the scans of :func:`~semmap_pp.lattice.frame.estimate_orientation` (steps of ``angle_bin_deg``
-    with 2-cell bins, tenth steps over ``refine_window_deg`` with 1-cell bins, a parabola through
-    the best three), the coarse one over ``centre ± half`` only."""
+    the scans of :func:`~semmap_pp.lattice.frame.estimate_orientation`
+    (:func:`~semmap_pp.lattice.frame.sharpest_angle`), the coarse one over ``centre ± half`` only."""
     step = math.radians(params.angle_bin_deg)
     n = int(math.ceil(half / step))
-    coarse = centre + step * np.arange(-n, n + 1)
-    i, _ = _best(x, y, coarse, 2.0)
-    fine_step = step / 10.0
-    m = int(math.ceil(math.radians(params.refine_window_deg) / fine_step))
-    fine = coarse[i] + fine_step * np.arange(-m, m + 1)
-    j, scores = _best(x, y, fine, 1.0)
-    theta = float(fine[j])
-    if 0 < j < len(fine) - 1:
-        a, b, c = scores[j - 1], scores[j], scores[j + 1]
-        den = a - 2 * b + c
-        if den < 0:
-            theta += 0.5 * fine_step * (a - c) / den
-    return float(_quarter(theta))
+    return float(_quarter(sharpest_angle(x, y, centre + step * np.arange(-n, n + 1), params)))
 
 
 def zone_labels(classes: np.ndarray, rows, cols, local, thetas, resolution: float,

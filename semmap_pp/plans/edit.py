@@ -222,8 +222,8 @@ class _Editor:
         return k
 
     def point(self, edit: Edit, x: str, y: str, rect=None) -> Point:
-        """The lattice point of ``x y``: on the tile of ``rect`` when given (a wall or a cut of
-        that unit), on a lattice of several directions."""
+        """The lattice point of ``x y``; on a lattice of several directions, on the tile of
+        ``rect`` when given (a wall or a cut of that unit, or the first corner of a new one)."""
         frame, pixels = self.frame, self.pixels
         px, py = to_image(frame, _number(x), _number(y), pixels=pixels)
         h, w = frame.image_shape
@@ -284,7 +284,7 @@ class _Editor:
             self.changed.add(k)
         else:   # add
             first = self.point(edit, *a[0:2])      # the second corner on the first one's lattice
-            home = (int(first.row), int(first.col), int(first.row) + 1, int(first.col) + 1)
+            home = (first.row, first.col, first.row, first.col)
             self.new.append(self.check(edit, _box(first, self.point(edit, *a[2:4], home), wall),
                                        "the new unit"))
 
