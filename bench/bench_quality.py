@@ -54,7 +54,7 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   published output (``rose2.png``) and regions.png cut to the map's free cells; per map and as means.
 * **partial**: two partial explorations of each real-gt floor (``bench/partial_maps.py``: the robot
   drove through the corridors and 30 % or 60 % of the rooms and saw the others only through their
-  doors), rooms.png scored by the ROSE2 protocol on the free cells the partial map holds. ROSE2's
+  doors), rooms.png scored by the ROSE2 protocol on the cells the partial map saw. ROSE2's
   output exists for the full floors only.
 * **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
   corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
@@ -1177,7 +1177,7 @@ def bench_partial(args, model, rules) -> dict:
                 _log(args, f"partial {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f}; "
                            f"{row['rooms']} rooms ({row['rooms_seen_through_door']} seen through their door)")
     return {"rows": rows, "means": {k: _mean(rows, k) for k in ("precision", "recall", "run_s")},
-            "protocol": "ROSE2 on the partial map's free cells: truth rooms = regions > 200 cells"}
+            "protocol": "ROSE2 on the cells the partial map saw: truth rooms = regions > 200 cells"}
 
 
 WINGS = ROOT / "tests" / "data" / "wings"

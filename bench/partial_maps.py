@@ -7,7 +7,9 @@ it drove through (at least 0.3 m from a wall) it casts 720 rays of 8 m over the 
 a ray stops at the first occupied cell or at a cell the full map never saw. The partial map keeps
 the cells a ray reached, with their grey values, and is unknown elsewhere: rooms the robot passed
 are seen only through their doors, as fans of rays. The truth is the floor's hand-drawn truth on
-the free cells the partial map holds (the ROSE2 protocol then drops rooms of 200 cells or fewer).
+the cells the partial map saw (the truth is drawn on the floor: on a map saved with graded values
+it holds cells lighter than the unknown grey that the YAML's thresholds call unknown); the ROSE2
+protocol then drops rooms of 200 cells or fewer.
 
 The same folder, ``explored`` and ``seed`` always give the same map.
 """
@@ -88,7 +90,7 @@ def explore(folder: Path, explored: float, seed: int, truth: np.ndarray):
     seen = _cast(occupied | unseen, poses, 720, 8.0 / res)
     part = np.full(img.shape, 205, np.uint8)
     part[seen] = img[seen]
-    return part, dict(meta, image="map.png"), np.where(seen & free, truth, 0)
+    return part, dict(meta, image="map.png"), np.where(seen, truth, 0)
 
 
 def write(folder: Path, out: Path, explored: float, seed: int, truth: np.ndarray) -> np.ndarray:

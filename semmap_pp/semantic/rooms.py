@@ -2,7 +2,8 @@
 
 The units of W* are the abstract model (the paper's rectangles); a *room* is what a person, or a
 room segmenter such as ipa_room_segmentation or ROSE2, draws on the map's free cells. Rooms are
-made from W* in three steps, all on the input image's cells:
+made from W* in three steps, all on the input image's cells of floor (:func:`floor_cells`: the
+free cells, and on a map saved with graded values the cells seen free a few times):
 
 1. **Seeds.** Every free cell inside a unit's interior (its rectangle less the wall band) takes
    the unit's region (:mod:`semmap_pp.semantic.regions`: units joined by an open wall are one
@@ -35,7 +36,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
-from semmap_pp.cells import FREE, OCCUPIED
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
@@ -420,6 +421,39 @@ def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     return sorted(set(pairs)), doors
 
 
+def floor_cells(grid, params: RoomParams = RoomParams()) -> np.ndarray:
+    """(H, W) bool: the cells rooms.png labels, the cells the robot saw free.
+
+    The free cells, and the cells the map's thresholds call unknown whose occupancy lies nearer to
+    the free cells' (their median) than to the map's own unknown value (the occupancy most unknown
+    cells hold), unless they lie within ``wall_blur_m`` of an occupied cell. A map saved with
+    graded values holds cells seen free a few times, lighter than its unknown grey but above
+    ``free_thresh``: room segmenters and hand-drawn room truth count them as floor. The grey
+    cells along a wall are its blur, not floor. A trinary map (only free, unknown and occupied
+    values) has no such cells.
+
+    >>> from semmap_pp.grid.occupancy import OccupancyGrid
+    >>> g = OccupancyGrid(np.array([[0, 1, 1, 1, 1, 1, 2]], np.uint8),
+    ...                   np.array([[0.0, 0.05, 0.2, 0.2, 0.2, 0.05, 1.0]]), 0.05)
+    >>> floor_cells(g).astype(int).tolist()     # 0.05: nearer to free (0) than to unknown (0.2)
+    [[1, 1, 0, 0, 0, 0, 0]]
+    """
+    classes, occ = grid.classes, grid.occupancy
+    free = classes == FREE
+    unknown = (classes == UNKNOWN) & np.isfinite(occ)
+    if not (free.any() and unknown.any()):
+        return free
+    values, counts = np.unique(occ[unknown], return_counts=True)
+    p_unknown, p_free = float(values[counts.argmax()]), float(np.median(occ[free]))
+    if p_unknown <= p_free:
+        return free
+    seen = unknown & (occ < (p_unknown + p_free) / 2)
+    blur = int(round(params.wall_blur_m / grid.resolution))
+    if blur > 0 and seen.any():
+        seen &= ~ndi.binary_dilation(classes == OCCUPIED, _EIGHT, iterations=blur)
+    return free | seen
+
+
 def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     """rooms.png's rooms of a :class:`~semmap_pp.semantic.semantic_map.SemanticMap` (module docstring)."""
     pairs, doors = room_joins(sm, params)
@@ -437,7 +471,7 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     seeds = sm.frame.to_image(seeds_lat, fill=0)
     door_img = sm.frame.to_image(door_lat, fill=False)
     classes = sm.grid.classes
-    labels, found = room_labels(classes == FREE, seeds, door_img, sm.grid.resolution, params,
+    labels, found = room_labels(floor_cells(sm.grid, params), seeds, door_img, sm.grid.resolution, params,
                                 occupied=classes == OCCUPIED)
     units_of: dict[int, list[int]] = {}
     for uid, rid in region.items():

@@ -17,7 +17,7 @@ from semmap_pp.errors import ModelError
 from semmap_pp.evaluate import (colour_room_labels, colour_segment_labels, protocol_scores,
                                 read_segmentation, read_segmentation_truth)
 from semmap_pp.model import RoomParams, load_model
-from semmap_pp.semantic.rooms import geodesic_flood, room_labels, seen_share
+from semmap_pp.semantic.rooms import floor_cells, geodesic_flood, room_labels, seen_share
 
 ROOT = Path(__file__).resolve().parents[2]
 REAL_GT = ROOT / "bench" / "data" / "real-gt"
@@ -248,6 +248,54 @@ def test_seen_share_equals_the_hull_of_every_cells_corners(seed):
     assert seen_share(mask) == pytest.approx(expected, abs=1e-12)
 
 
+# --- the floor: the cells rooms.png labels -----------------------------------------------------
+
+def graded_room():
+    """A room of free cells (p 0.004) in a map whose unknown grey is p 0.196, walls p 1 around
+    it; inside, a patch seen free only a few times (p 0.06), a patch nearer the grey (p 0.15),
+    and lighter cells along the wall (its blur)."""
+    from semmap_pp.cells import OCCUPIED, UNKNOWN
+    from semmap_pp.grid.occupancy import OccupancyGrid
+    classes = np.full((30, 40), UNKNOWN, np.uint8)
+    occ = np.full((30, 40), 0.196, np.float32)
+    classes[5:25, 5:35], occ[5:25, 5:35] = OCCUPIED, 1.0
+    classes[6:24, 6:34], occ[6:24, 6:34] = FREE, 0.004
+    classes[10:14, 10:16], occ[10:14, 10:16] = UNKNOWN, 0.06       # seen free a few times
+    classes[16:20, 10:16], occ[16:20, 10:16] = UNKNOWN, 0.15       # nearer the unknown grey
+    classes[6:24, 6], occ[6:24, 6] = UNKNOWN, 0.06                 # the west wall's blur
+    occ[0, 0] = np.nan                                             # unknown by the image itself
+    return OccupancyGrid(classes, occ, 0.05)
+
+
+def test_the_floor_holds_cells_seen_free_but_not_the_grey_nor_a_walls_blur():
+    g = graded_room()
+    floor = floor_cells(g, RoomParams(wall_blur_m=0.05))
+    assert floor[10:14, 10:16].all()                       # nearer to free than to the grey
+    assert not floor[16:20, 10:16].any()                   # nearer to the grey
+    assert not floor[7:23, 6].any()                        # within a cell of the wall
+    assert (floor == ((g.classes == FREE) | (np.arange(40)[None] >= 10) & (np.arange(40)[None] < 16)
+                      & (np.arange(30)[:, None] >= 10) & (np.arange(30)[:, None] < 14))).all()
+    # without a blur margin the wall's light cells are floor too
+    assert floor_cells(g, RoomParams(wall_blur_m=0.0))[7:23, 6].all()
+
+
+def test_a_trinary_map_s_floor_is_its_free_cells():
+    from semmap_pp.grid import load_map
+    g = load_map(INTEL)
+    assert (floor_cells(g, load_model().rooms) == (g.classes == FREE)).all()
+
+
+def test_the_cells_seen_free_of_a_graded_slam_map_are_in_its_hand_drawn_rooms():
+    """g4s_y2 is saved with graded values: cells lighter than its unknown grey (205) but above
+    its free_thresh. The hand-drawn truth counts most of them as floor."""
+    from semmap_pp.grid import load_map
+    g = load_map(REAL_GT / "g4s_y2" / "map.yaml")
+    added = floor_cells(g, load_model().rooms) & (g.classes != FREE)
+    gt = read_segmentation_truth(REAL_GT / "g4s_y2" / "gt.png", "rose2")
+    assert added.sum() > 0.02 * (gt > 0).sum()
+    assert (gt[added] > 0).mean() > 0.9
+
+
 def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
     text = (ROOT / "models" / "default.toml").read_text()
     assert load_model().rooms == RoomParams(**{k: getattr(load_model().rooms, k)
@@ -326,7 +374,7 @@ def test_a_run_writes_rooms_png_and_world_json_rooms_that_agree(run_dir):
     assert len(owned) == len(set(owned))                    # a unit grows one room at most
 
 
-def test_rooms_cover_only_free_cells(run_dir):
+def test_rooms_cover_only_free_cells_on_a_trinary_map(run_dir):
     from semmap_pp.cells import FREE
     from semmap_pp.grid import load_map
     rooms = np.asarray(Image.open(run_dir / "rooms.png"))
