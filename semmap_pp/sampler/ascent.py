@@ -51,13 +51,14 @@ class _Ascent(JoinMoves, CutMoves):
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
                  merges: bool = True, recuts: bool = False, shared_walls: bool = False,
-                 double_cuts: bool = True, wide_cuts: bool = False) -> wm.World:
+                 double_cuts: bool = True, wide_cuts: bool = False, jogs: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
     L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
     (:meth:`_Ascent.shared_wall_moves`), ``double_cuts=False`` the second cut of a piece when no
     single cut helps, ``wide_cuts=True`` cuts all along a plateau of line evidence
-    (:meth:`_Ascent.splits`); W*'s polish is :func:`polish`.
+    (:meth:`_Ascent.splits`), ``jogs=True`` the jogs last (:meth:`_Ascent.jogs`), each followed
+    by the joining moves; W*'s polish is :func:`polish`.
 
     Parameters
     ----------
@@ -65,8 +66,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         The target to climb: the knowledge-free one (``knowledge_on = False``) for a start world,
         the full one for W*'s polish.
     world : World
-        The start (e.g. :func:`semmap_pp.sampler.start_worlds.start_world`, or W*); must have a finite log
-        posterior.
+        The start (e.g. :func:`~semmap_pp.sampler.start_worlds.start_world`, or W*).
     data : KernelData
         The kernels' data of the same lattice (line evidence, birth table).
     rounds : int
@@ -74,15 +74,12 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         changes); with ``shared_walls`` also the bound on the passes of whole-wall moves, and on
         how often the phases alternate: after whole walls moved, the moves that join or drop
         units (removals, wall moves, merges, bridges) run again, since a moved wall may open a
-        merge (synthetic floor 27's corridor in two pieces, joined for +287.6 nats); splits,
-        recuts and births do not (with them aces' south corridor came out in three pieces;
-        CHANGELOG.md, quality change 33).
+        merge; splits, recuts and births do not (CHANGELOG.md, quality change 33).
 
     Returns
     -------
     World
-        A world whose log posterior is at least that of ``world`` (types left undecided).
-    """
+        A world whose log posterior is at least that of ``world`` (types left undecided)."""
     asc = _Ascent(posterior, world, data)
     if not np.isfinite(asc.tr.logp):
         return world
@@ -124,6 +121,10 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
             asc.all_wall_moves(asc.near(moved))   # the walls the moved ones may have unblocked
         if not walls_moved:   # else the joining moves again: a moved wall may open a merge
             break
+    for _ in range(rounds if jogs else 0):   # last: only where the moves above left a wall jogging
+        if not asc.jogs():
+            break
+        join_round()
     out = asc.untyped()
     if out.capacity > world.capacity and wm.n_units(out) <= world.capacity:
         out = wm.fit(out, world.capacity)   # grown on the way but fits again: the caller's slots
@@ -147,7 +148,7 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
     evidence")."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
-                        double_cuts=False, births=False, wide_cuts=True)
+                        double_cuts=False, births=False, wide_cuts=True, jogs=True)
 
 
 def add_units(posterior, world: wm.World, data, boxes) -> tuple[wm.World, list[int]]:

@@ -1,5 +1,6 @@
 """The ascent's moves that cut and add units (:mod:`semmap_pp.sampler.ascent`): splits at wall
-lines and births over uncovered free space."""
+lines, jogs (a unit cut where a neighbour's wall lies inside it, the wall moved with the
+neighbour's) and births over uncovered free space."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.sampler.ascent_walls import WallMoves, _line_peaks
 from semmap_pp.sampler.kernels.common import band_weights, line_cum
+from semmap_pp.sampler.kernels.shrink_dilate import wall_range
 
 
 def _wall_runs(w: np.ndarray, lo: int, k: int, local: int) -> list[int]:
@@ -96,6 +98,79 @@ class CutMoves(WallMoves):
                 for slot in (s, f, f2):
                     self.wall_moves(slot)
         return changed
+
+    def jogs(self) -> bool:
+        """Where a wall jogs: the piece of a unit facing one neighbour cut off, and its wall moved
+        into the unit together with the neighbour's facing wall, when that helps.
+
+        A corridor along a row of offices whose walls to it do not all lie on one line (two
+        offices deeper than the others) is one rectangle only if it reaches into the deeper
+        offices; their walls then lie inside it, and its border with them, on open floor, reads
+        as a passage. No single move mends it: a cut alone adds a unit, a wall of the corridor
+        moved alone opens a gap, the office's moved alone overlaps the corridor. Each unit ``s``
+        and each neighbour ``v`` whose facing edge lies on a side of ``s`` (within two wall
+        bands) over part of its span: ``s`` is cut where ``v``'s span begins and ends (the pieces
+        share their wall bands, as a split's), and the middle piece's side and ``v``'s facing
+        edge move together into ``s``, to the positions :meth:`positions` gives; the best is
+        kept when it raises log p, and its pieces' walls then move to their best positions."""
+        changed = False
+        for s in self.units():
+            for side in range(4):
+                if self.world.active[s]:
+                    changed |= self._jog(s, side)
+        return changed
+
+    def _jog(self, s: int, side: int) -> bool:
+        """:meth:`jogs` for the side ``side`` of unit ``s``: the best jog over its neighbours."""
+        d = self.data
+        m, g, tol = int(d.min_side), int(d.wall_share), 2 * int(d.wall_cells)
+        along, opp = 1 - side % 2, (side + 2) % 4
+        worlds, changed, free = [], set(), self.free(2)
+        rects, act = self.world.rects, self.world.active
+        rect = [int(v) for v in rects[s]]
+        lo, hi = rect[along], rect[along + 2]
+        for v in np.flatnonzero(act).tolist():
+            if v == s or abs(int(rects[v][opp]) - rect[side]) > tol:
+                continue
+            a, b = max(int(rects[v][along]), lo), min(int(rects[v][along + 2]), hi)
+            cut_a, cut_b = a - lo >= m, hi - b >= m      # a piece of s before / after v's span
+            if b - a < m or not (cut_a or cut_b):
+                continue
+            pieces = ([(lo, a + g)] if cut_a else []) + [(a if cut_a else lo, b if cut_b else hi)] \
+                + ([(b - g, hi)] if cut_b else [])
+            mid = 1 if cut_a else 0
+            slots = [s] + [int(f) for f in free[:len(pieces) - 1]]
+            base = self.world
+            for slot, (p0, p1) in zip(slots, pieces):
+                r = list(rect)
+                r[along], r[along + 2] = p0, p1
+                base = wm.replace(base, slot, r) if slot == s else wm.add(base, slot, r)
+            middle = [int(x) for x in base.rects[slots[mid]]]
+            for c in self.inward_peaks(middle, side):
+                shift = c - middle[side]
+                new = np.array(base.rects)
+                new[slots[mid], side] += shift
+                new[v, opp] += shift
+                worlds.append(wm.make(new, base.active, base.types))
+            changed.update((*slots, v))
+        if not worlds or not self.best_of(worlds, tuple(sorted(changed))):
+            return False
+        for slot in sorted(changed):
+            if self.world.active[slot]:
+                self.wall_moves(slot)
+        return True
+
+    def inward_peaks(self, rect, side: int) -> list:
+        """The strongest line-evidence peaks for wall ``side`` of ``rect`` inside it, beyond a
+        wall move's local steps (:attr:`local`): where a wall of ``rect`` could jog to. The
+        peaks over the whole range of the wall (:meth:`positions`) are often the lines of the
+        walls beyond the unit, stronger than a wall with a door inside it."""
+        _, lo, hi, w = wall_range(rect, side, self.data)
+        x = int(rect[side])
+        a, b = (max(lo, x + self.local + 1), hi) if side < 2 else (lo, min(hi, x - self.local - 1))
+        if b < a:
+            return []
+        return _line_peaks(w[a - lo:b - lo + 1], a, self.peaks)
 
     def births(self, covered_frac: float = 0.5) -> bool:
         """Add birth-table boxes over free space that no unit covers, each polished, when that helps."""

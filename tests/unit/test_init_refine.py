@@ -699,3 +699,47 @@ def test_w_stars_polish_cuts_all_along_a_plateau_of_line_evidence():
     assert len(rects) == 2
     assert abs(rects[0][2] - 92) <= 2 and abs(rects[1][0] - 90) <= 2   # cut at the wall (rows 90..92)
     assert post.evaluate(out).total > before + 100
+
+
+
+def offices_with_a_deeper_one() -> np.ndarray:
+    """Three offices over a corridor, 2-cell walls, a door each: the outer two 150 cells wide
+    (rows 10..70), the middle one 80 wide and deeper (rows 10..84, its wall to the corridor at
+    rows 84..86), so the corridor's wall jogs down under it and back up."""
+    m = np.full((154, 406), OCCUPIED, np.uint8)
+    m[10:70, 10:160] = FREE
+    m[10:84, 162:242] = FREE                    # the deeper office
+    m[10:70, 244:394] = FREE
+    m[72:134, 10:160] = FREE                    # the corridor under the first office ...
+    m[86:134, 160:244] = FREE                   # ... under the deeper one ...
+    m[72:134, 244:394] = FREE                   # ... and under the third
+    m[70:72, 30:46] = FREE                      # the doors
+    m[84:86, 202:218] = FREE
+    m[70:72, 264:280] = FREE
+    return m
+
+
+def test_w_stars_polish_cuts_a_corridor_where_its_wall_jogs_and_moves_the_wall_with_the_office():
+    """The corridor as one rectangle reaches into the deeper office, whose unit stops at the
+    other offices' line: the office's wall lies inside the corridor, and their border, on open
+    floor, reads as a passage. No single move mends it, nor does moving the whole wall; a jog
+    (ascent_cuts.jogs) cuts the corridor's piece under the office off and moves its wall and
+    the office's together."""
+    from semmap_pp.sampler.ascent import polish
+
+    post, data = knowledge_free(offices_with_a_deeper_one())
+    start = wm.empty(12)
+    for slot, rect in enumerate([(8, 8, 72, 162), (8, 160, 72, 244), (8, 242, 72, 396),
+                                 (70, 8, 136, 396)]):
+        start = wm.add(start, slot, rect)
+
+    def rects(world):
+        return sorted(tuple(int(v) for v in world.rects[s]) for s in wm.active_slots(world))
+
+    kept = refine_world(post, start, data, rounds=2, recuts=True, shared_walls=True,
+                        double_cuts=False, births=False, wide_cuts=True, jogs=False)
+    assert rects(kept) == rects(start)                  # nothing else moves the office's wall
+    out = polish(post, start, data, rounds=2)
+    assert rects(out) == [(8, 8, 72, 162), (8, 160, 86, 244), (8, 242, 72, 396),
+                          (70, 8, 136, 162), (70, 242, 136, 396), (84, 160, 136, 244)]
+    assert post.evaluate(out).total > post.evaluate(start).total + 100
