@@ -26,17 +26,24 @@ to ``--of`` (ROSE2's ``rose2.png``) is read as one segment per colour.
 Any other PNG is read as place types when it holds nothing but the ipa type grey levels (0, 77,
 115, 179, 255), else as a segmentation when it has white (room) cells. Prints a table, or one JSON object with ``--json``. docs/evaluation.md
 defines every score.
+
+Against a synthetic truth, ``--figure PNG`` also writes the reliability diagram of the run's
+posterior marginals (:func:`semmap_pp.outputs.figures.reliability_png`) and ``--report`` adds it,
+with the reliability table, to DIR/report.html as its calibration section
+(:func:`semmap_pp.outputs.report.with_calibration`); both written atomically, before anything is
+printed, and their paths printed after the table.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from semmap_pp.errors import MapError
+from semmap_pp.errors import MapError, OutputError
 
 KINDS = ("synthetic", "ipa-segmentation", "ipa-types")
 SEGMENTATION_FORMATS = ("rose2", "ipa")      # semmap_pp.evaluate.io.SEGMENTATION_FORMATS
@@ -61,6 +68,12 @@ def register(subparsers) -> None:
     p.add_argument("--published", action="store_true",
                    help="segmentation: the published ipa protocol (segments taken whole, not cut to the rooms)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--figure", type=Path, metavar="PNG", default=None,
+                   help="with a synthetic truth: also write the reliability diagram of the run's posterior "
+                        "marginals to this PNG file")
+    p.add_argument("--report", action="store_true",
+                   help="with a synthetic truth: add the calibration section (the reliability diagram and "
+                        "table) to DIR/report.html, rewritten atomically (replacing an earlier one)")
     p.set_defaults(func=run)
 
 
@@ -245,16 +258,95 @@ def evaluate_segmentation(run_dir: Path, truth: Path, fmt: str = "rose2", of: Pa
             "segmentation": str(pred_path), "protocol": "published", "scores": _seg("", s)}
 
 
+def _check_figure(path: Path) -> None:
+    """Refuse a ``--figure`` path that names a folder or lies under a file, in one line."""
+    if path.is_dir() or str(path).endswith(("/", "\\")):
+        raise OutputError(path, "is a directory; --figure names the PNG file to write")
+    above = path.absolute().parent
+    while not above.exists() and above.parent != above:
+        above = above.parent
+    if not above.is_dir():
+        raise OutputError(path, f"cannot be written: {above} is a file, not a folder")
+
+
+def _calibration_of(result: dict, where: Path) -> dict:
+    """The run's reliability tables, or the one-line error saying why there are none."""
+    if result["kind"] != "synthetic":
+        raise OutputError(where, f"the reliability diagram needs a synthetic truth (a `semmap synth` folder); "
+                                 f"{result['truth']} is {result['kind']}")
+    if not result.get("calibration"):
+        raise OutputError(where, f"{result['run']}/world.json holds no posterior marginals (a run that drew "
+                                 "no worlds): no reliability diagram")
+    return result["calibration"]
+
+
+def report_with(run_dir: Path, section: str) -> tuple[Path, str]:
+    """DIR/report.html and its text with ``section`` as its calibration section
+    (:func:`semmap_pp.outputs.report.with_calibration`), or the one-line error why not."""
+    from semmap_pp.outputs.report import with_calibration
+
+    path = run_dir / "report.html"
+    if not path.is_file():
+        raise OutputError(path, "missing (`semmap map` writes it last; `semmap edit` writes none)")
+    try:
+        page = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise OutputError(path, f"cannot read it: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        return path, with_calibration(page, section)
+    except ValueError as exc:
+        raise OutputError(path, str(exc)) from None
+
+
+def write_calibration(result: dict, figure: Path | None, report: bool) -> list[Path]:
+    """``--figure`` and ``--report``: the reliability diagram of ``result`` (:func:`evaluate_run`'s)
+    written to ``figure`` and into the run's report.html (under the run folder's lock: a
+    `semmap map` writing into it is refused, as a second run is); the paths written. The report
+    is read and checked before anything is written."""
+    from semmap_pp import atomic
+    from semmap_pp.outputs.figures import reliability_png
+    from semmap_pp.outputs.report import calibration_section
+    from semmap_pp.run.outdir import lock_out_dir
+
+    run_dir = Path(result["run"])
+    calibration = _calibration_of(result, figure if figure is not None else run_dir / "report.html")
+    if figure is not None:
+        _check_figure(figure)
+    png = reliability_png(calibration, f"Reliability of the posterior marginals of {result['run']} "
+                                       f"against {result['truth']}")
+    written = []
+    with contextlib.ExitStack() as held:
+        if report:
+            held.enter_context(lock_out_dir(run_dir))
+            path, page = report_with(run_dir, calibration_section(calibration, png, run=result["run"],
+                                                                  truth=result["truth"]))
+        if figure is not None:
+            atomic.write_bytes(figure, png)
+            written.append(figure)
+        if report:
+            atomic.write_text(path, page)
+            written.append(path)
+    return written
+
+
 def run(args) -> int:
     if args.segmentation is not None:
+        if args.figure is not None or args.report:
+            raise OutputError(args.figure or args.dir / "report.html", "--figure and --report go with --truth")
         result = evaluate_segmentation(args.dir, args.segmentation, args.format, args.of)
     else:
         if args.of is not None:
             raise MapError(args.of, "--of goes with --segmentation")
+        if args.figure is not None:
+            _check_figure(args.figure)         # before the scoring: a wrong path costs nothing
         result = evaluate_run(args.dir, args.truth, args.kind, published=args.published)
+    # written first: a figure or report that cannot be written prints nothing
+    written = write_calibration(result, args.figure, args.report) if args.figure is not None or args.report else []
     if args.json:
         result = dict(result, scores={k: _clean(v) for k, v in result["scores"].items()})
         print(json.dumps(result))
     else:
         print(format_text(result))
+        for path in written:
+            print(path)
     return 0

@@ -26,9 +26,11 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 from scipy import ndimage  # noqa: E402
 
 from semmap_pp.cells import FREE, OCCUPIED, TYPE_LETTER, UNIT_TYPES, UNKNOWN, W_OBJECT, W_WALL  # noqa: E402
+from semmap_pp.errors import printable  # noqa: E402
 
 # Colours of the paper's Fig. 5 (classified map: black occupied, gray unknown, white free).
 RGB = {"free": (255, 255, 255), "unknown": (160, 160, 160), "occupied": (0, 0, 0),
@@ -529,3 +531,80 @@ def diff_png(diff) -> bytes:
     _legend(fig, handles, ncol=4)
     fig.suptitle(f"{diff.old.path} -> {diff.new.path}  (old dashed, new solid)", fontsize=9)
     return png(fig)
+
+
+#: The reliability diagram (``semmap eval --figure``, report.html's calibration section): each kind
+#: of claim's colour (:data:`semmap_pp.evaluate.calibration.KINDS`).
+RELIABILITY_COLOUR = {"units": "#1f5fd6", "types": "#1a9a3a", "doors": "#e67e00"}
+
+
+def _plain(text: str) -> str:
+    """``text`` (a path, say) as matplotlib shows it literally: ``$`` would start mathtext."""
+    return printable(text).replace("$", r"\$")
+
+
+def _reliability_panel(top, bottom, kind: str, c: dict) -> None:
+    """One kind's column of :func:`reliability_figure`: the fraction right against the mean
+    probability per bin over the diagonal (``top``; the line's gid ``"reliability"``, its markers'
+    area grows with the bin's claims, gid ``"claims"``), the claims per bin as bars (``bottom``)."""
+    colour = RELIABILITY_COLOUR.get(kind, "black")
+    top.plot([0, 1], [0, 1], ls="--", color="#9a9a9a", lw=1.0)
+    bins = np.array(c["bins"], dtype=float).reshape(-1, 5)
+    lo, hi, n, conf, acc = bins.T
+    if n.size:
+        top.vlines(conf, conf, acc, color=colour, alpha=0.35, lw=3)
+        top.plot(conf, acc, "-", color=colour, lw=1.4, gid="reliability")
+        top.scatter(conf, acc, s=25 + 275 * n / n.max(), color=colour, edgecolors="black", linewidths=0.5,
+                    zorder=3, gid="claims", clip_on=False)
+        bottom.bar(lo, n, width=hi - lo, align="edge", color=colour, alpha=0.7, edgecolor="white", gid="bins")
+        title = f"{kind}: {c['claims']} claims, ECE {c['ece']:.4f}"
+    else:
+        top.text(0.5, 0.5, "no claims", ha="center", va="center", fontsize=11, color="#666666")
+        title = f"{kind}: no claims"
+    top.set_gid(kind)
+    top.set_title(title, fontsize=10)
+    top.set_xlim(-0.02, 1.02)
+    top.set_ylim(-0.02, 1.02)
+    top.set_ylabel("fraction right", fontsize=9)
+    top.tick_params(labelbottom=False, labelsize=8)
+    top.grid(alpha=0.3)
+    bottom.set_xlabel("probability of the claim", fontsize=9)
+    bottom.set_ylabel("claims", fontsize=9)
+    bottom.tick_params(labelsize=8)
+    bottom.yaxis.set_major_locator(MaxNLocator(nbins=3, integer=True))
+
+
+def reliability_figure(calibration: dict, title: str = "") -> Figure:
+    """The reliability diagram of posterior marginals scored against a truth: one column per kind
+    of claim of ``calibration``
+    (:func:`semmap_pp.evaluate.calibration.calibration_summary`, ``{kind: {"claims", "ece", "bins":
+    [[lo, hi, n, confidence, accuracy]]}}``): above, each bin's fraction right against its mean
+    probability on the diagonal of calibrated claims, a marker's area growing with the bin's claims;
+    below, the claims per bin; the ECE in each column's title. The figure is returned (its axes
+    carry the gid of their kind) for a test to read what it plots; :func:`reliability_png` draws it."""
+    kinds = list(calibration)
+    fig = Figure(figsize=(4.2 * max(len(kinds), 1), 5.4 + (0.3 if title else 0.0)), dpi=DPI)
+    grid = fig.add_gridspec(2, max(len(kinds), 1), height_ratios=(3, 1), hspace=0.08, wspace=0.28)
+    for i, kind in enumerate(kinds):
+        top = fig.add_subplot(grid[0, i])
+        _reliability_panel(top, fig.add_subplot(grid[1, i], sharex=top), kind, calibration[kind])
+    if kinds:
+        handles = [Line2D([], [], ls="--", color="#9a9a9a", lw=1.0, label="calibrated: right a fraction p"),
+                   Line2D([], [], color="black", lw=1.4, marker="o", ms=7, mfc="#9a9a9a",
+                          label="fraction right per bin (marker area: its claims)"),
+                   Line2D([], [], color="#9a9a9a", alpha=0.6, lw=3,
+                          label="gap to the diagonal (the ECE: its mean weighted by the claims)")]
+        _legend(fig, handles)
+    if title:
+        fig.suptitle(_plain(title), fontsize=10)
+    top_in = 0.6 if title else 0.35
+    fig.subplots_adjust(0.06, 1.0 / fig.get_figheight(), 0.98, 1 - top_in / fig.get_figheight())
+    return fig
+
+
+def reliability_png(calibration: dict, title: str = "") -> bytes:
+    """:func:`reliability_figure` as PNG bytes (``semmap eval --figure``, report.html)."""
+    return png(reliability_figure(calibration, title))
+
+
+__all__ += ["RELIABILITY_COLOUR", "reliability_figure", "reliability_png"]

@@ -214,6 +214,61 @@ def posterior_marginals_section(doc: dict) -> str:
             f"independent worlds as the ESS above says.</p>" + units + doors)
 
 
+#: Where report.html holds its calibration section (``semmap eval DIR --truth T --report``): between
+#: these two comments, which :func:`report_html` writes empty, before the convergence section.
+CALIBRATION_BEGIN, CALIBRATION_END = "<!-- calibration -->", "<!-- /calibration -->"
+CONVERGENCE_HEADING = '<h2 id="convergence">'
+
+
+def calibration_section(calibration: dict, png: bytes, *, run: str, truth: str) -> str:
+    """report.html's calibration section: the reliability diagram (``png``,
+    :func:`semmap_pp.outputs.figures.reliability_png`) and the reliability table of the run's
+    posterior marginals against ``truth`` (``calibration``:
+    :func:`semmap_pp.evaluate.calibration.calibration_summary`)."""
+    rows = []
+    for kind, c in calibration.items():
+        rows += [[_td(kind), _td(f"[{lo:.1f}, {hi:.1f}{']' if hi == 1.0 else ')'}"), _td(n, True),
+                  _td(f"{conf:.3f}", True), _td(f"{acc:.3f}", True), _td(f"{acc - conf:+.3f}", True)]
+                 for lo, hi, n, conf, acc in c["bins"]]
+    kinds = _table(["claim", "claims", "mean p", "right", "ECE"],
+                   [[_td(kind), _td(c["claims"], True), _td(_num(c["mean_p"], ".3f"), True),
+                     _td(_num(c["right"], ".3f"), True), _td(_num(c["ece"], ".4f"), True)]
+                    for kind, c in calibration.items()])
+    return (f'<h2 id="calibration">Calibration against the truth</h2><p>The posterior marginals of '
+            f"W*'s units and doors (Posterior spread) scored against the truth <code>{e(truth)}</code> "
+            f"by <code>semmap eval {e(run)} --truth {e(truth)} --report</code>. A claim made with "
+            "probability p should be right a fraction p of the time: <i>units</i>, a unit of W* exists "
+            "(right when it matches a true unit); <i>types</i>, a matched unit is of its most probable "
+            "posterior type; <i>doors</i>, a door of W* is there (right when it matches a true door). "
+            "The claims are put in ten bins of p; the expected calibration error (ECE) is the mean over "
+            "the bins, weighted by their claims, of |right − mean p| (docs/evaluation.md).</p>"
+            + kinds + _figure(png, "Reliability diagram", "Per kind of claim, each bin's fraction right "
+                              "against its mean probability (marker area: its claims) over the diagonal of "
+                              "calibrated claims; below, the claims per bin; the ECE in each title.")
+            + "<h3>Reliability table</h3>"
+            + _table(["claim", "p in", "claims", "mean p", "right", "right − mean p"], rows))
+
+
+def with_calibration(page: str, section: str) -> str:
+    """report.html's text ``page`` with ``section`` (:func:`calibration_section`) as its calibration
+    section: in place of an earlier one, else in the empty place :func:`report_html` leaves, else
+    (a page written without that place) before the convergence section; and a link to it in the
+    page's navigation. ValueError when ``page`` has no convergence section (not a report of
+    ``semmap map``)."""
+    block = f"{CALIBRATION_BEGIN}\n{section}\n{CALIBRATION_END}"
+    i = page.find(CALIBRATION_BEGIN)
+    j = page.find(CALIBRATION_END, i) if i >= 0 else -1
+    if j >= 0:
+        page = page[:i] + block + page[j + len(CALIBRATION_END):]
+    elif (k := page.find(CONVERGENCE_HEADING)) >= 0:
+        page = page[:k] + block + "\n" + page[k:]
+    else:
+        raise ValueError("no convergence section: not a report.html of `semmap map`")
+    if 'href="#calibration"' not in page:
+        page = page.replace('<a href="#convergence">', '<a href="#calibration">Calibration</a><a href="#convergence">', 1)
+    return page
+
+
 def failure_text(rep) -> str:
     """A failing verdict's paragraph: which summaries failed by which quantity, and what would fix
     it (:meth:`~semmap_pp.sampler.diagnostics.ConvergenceReport.failed`, ``remedy``); "" if it passed."""
@@ -284,7 +339,8 @@ def report_html(run, doc: dict, figures: dict[str, bytes], regions: dict[int, in
         _figure(f("posterior_cells"), "Per-cell probabilities (posterior_cells.png)",
                 "Probability over the sampled worlds that a cell is wall, and that it belongs to a unit of "
                 "each type."),
-        '<h2 id="convergence">Convergence</h2>',
+        CALIBRATION_BEGIN + CALIBRATION_END,
+        CONVERGENCE_HEADING + "Convergence</h2>",
         f"<p>{verdict} — {rep.n_chains} chains × {rep.n_draws} draws; a label-invariant summary passes when "
         f"R-hat ≤ {e(rep.rhat_max)} and bulk and tail ESS ≥ {e(rep.ess_min)} (Vehtari et al. 2021; "
         f"NaN fails).</p>",
@@ -341,4 +397,4 @@ def write_report(path: str | os.PathLike, text: str) -> Path:
     return Path(path)
 
 
-__all__ = ["FILES", "report_html", "spread_section", "failure_text", "posterior_marginals_section", "write_report", "units_table", "convergence_table", "data_uri"]
+__all__ = ["FILES", "report_html", "calibration_section", "with_calibration", "spread_section", "failure_text", "posterior_marginals_section", "write_report", "units_table", "convergence_table", "data_uri"]

@@ -96,6 +96,105 @@ def test_the_posterior_marginals_reliability_against_the_truth(floor, tmp_path, 
     assert "reliability of the posterior marginals, doors" in capsys.readouterr().out
 
 
+def unsure_run(floor, path):
+    """The truth as a run with posterior marginals, one unit's existence 0.6 and wrong type 0.7 and
+    one door's 0.2 (as above), and a report.html with its convergence section."""
+    t = json.loads((floor / "truth.json").read_text())
+    certain = {"room": 0.0, "corridor": 0.0, "hall": 0.0, "other": 0.0}
+    units = [{"id": u["id"], "type": u["type"], "vertices_px": u["corners_px"], "posterior_exists": 1.0,
+              "posterior_type": dict(certain, **{u["type"]: 1.0})} for u in t["units"]]
+    units[0]["posterior_exists"] = 0.6
+    units[0]["posterior_type"] = dict(certain, **{"corridor" if units[0]["type"] != "corridor" else "room": 0.7,
+                                                  units[0]["type"]: 0.3})
+    doors = [{"units": d["units"], "center_px": d["center_px"], "width_m": d["width_m"], "posterior_exists": 1.0}
+             for d in t["doors"]]
+    doors[0]["posterior_exists"] = 0.2
+    run = fake_run(path, units, read_label_image(floor / "truth_labels.png"), adjacency=t["adjacency"],
+                   doors=doors, posterior_marginals={"worlds": 10})
+    (run / "report.html").write_text(REPORT)
+    return run
+
+
+REPORT = ('<!DOCTYPE html><html><body><nav><a href="#spread">Posterior spread</a><a href="#convergence">'
+          'Convergence</a></nav><h2 id="spread">Posterior spread</h2>\n<!-- calibration --><!-- /calibration -->'
+          '\n<h2 id="convergence">Convergence</h2></body></html>')
+
+
+def test_the_reliability_diagram_is_the_table_as_a_png(floor, tmp_path, capsys):
+    """--figure writes the reliability diagram of exactly the table --json gives, after the table's
+    text the path; with --json nothing but the JSON."""
+    from semmap_pp.outputs.figures import reliability_png
+
+    run = unsure_run(floor, tmp_path / "unsure")
+    fig = tmp_path / "figs" / "reliability.png"              # a folder that does not exist yet
+    doc = scores(capsys, run, "--truth", floor, "--figure", fig)
+    title = f"Reliability of the posterior marginals of {run} against {floor}"
+    assert fig.read_bytes() == reliability_png(doc["calibration"], title)
+    assert doc["calibration"]["units"]["bins"][0] == [0.6, 0.7, 1, 0.6, 1.0]
+    assert main(["eval", str(run), "--truth", str(floor), "--figure", str(fig)]) == 0
+    out = capsys.readouterr().out.rstrip().splitlines()
+    assert out[-1] == str(fig) and out[-2].startswith("  p in [0.9, 1.0]")
+    assert sorted(p.name for p in fig.parent.iterdir()) == ["reliability.png"]      # no temporary left
+
+
+def test_the_report_gains_the_calibration_section_once(floor, tmp_path, capsys):
+    run = unsure_run(floor, tmp_path / "unsure")
+    for _ in range(2):
+        assert main(["eval", str(run), "--truth", str(floor), "--report"]) == 0
+        assert capsys.readouterr().out.rstrip().endswith(str(run / "report.html"))
+    page = (run / "report.html").read_text()
+    assert page.count('id="calibration"') == 1 and page.count('href="#calibration"') == 1
+    assert page.index('id="spread"') < page.index('id="calibration"') < page.index('id="convergence"')
+    assert page.count("data:image/png;base64,") == 1
+    assert '<td>units</td><td>[0.6, 0.7)</td><td class="num">1</td><td class="num">0.600</td>' in page
+    assert sorted(p.name for p in run.iterdir()) == ["labels.png", "report.html", "world.json"]  # lock gone
+
+
+def one_line_error(capsys, *args):
+    assert main(["eval", *map(str, args)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("semmap: error: ") and err.count("\n") == 1, err
+    return err
+
+
+def test_the_diagram_refuses_bad_paths_and_truths_in_one_line(floor, tmp_path, capsys):
+    run = unsure_run(floor, tmp_path / "unsure")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert "is a directory" in one_line_error(capsys, run, "--truth", floor, "--figure", tmp_path)
+    assert "is a file, not a folder" in one_line_error(capsys, run, "--truth", floor, "--figure",
+                                                       run / "world.json" / "d.png")
+    assert "go with --truth" in one_line_error(capsys, run, "--segmentation", floor / "truth_labels.png",
+                                               "--figure", tmp_path / "a.png")
+    t = read_ipa_types(IPA / "training_Fr52.png")
+    ipa = fake_run(tmp_path / "ipa", [{"id": 1, "type": "room"}], np.where(t == TRUTH_ROOM, 1, 0))
+    assert "needs a synthetic truth" in one_line_error(capsys, ipa, "--truth", IPA / "training_Fr52.png",
+                                                       "--figure", tmp_path / "b.png")
+    drew_none = shutil.copytree(run, tmp_path / "none")
+    doc = json.loads((drew_none / "world.json").read_text())
+    del doc["posterior_marginals"]
+    (drew_none / "world.json").write_text(json.dumps(doc))
+    assert "holds no posterior marginals" in one_line_error(capsys, drew_none, "--truth", floor,
+                                                            "--figure", tmp_path / "c.png", "--report")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before + ["ipa", "none"])   # nothing written
+
+
+def test_a_report_that_cannot_take_the_section_is_left_as_it_was(floor, tmp_path, capsys):
+    from semmap_pp.run.outdir import lock_out_dir
+
+    run = unsure_run(floor, tmp_path / "unsure")
+    fig = tmp_path / "r.png"
+    (run / "report.html").write_text("<html>not ours</html>")
+    err = one_line_error(capsys, run, "--truth", floor, "--report", "--figure", fig)
+    assert "not a report.html of `semmap map`" in err
+    assert (run / "report.html").read_text() == "<html>not ours</html>" and not fig.exists()
+    (run / "report.html").unlink()
+    assert "report.html: missing" in one_line_error(capsys, run, "--truth", floor, "--report")
+    (run / "report.html").write_text(REPORT)
+    with lock_out_dir(run):                                    # a `semmap map` writing into the folder
+        assert "in use by another semmap run" in one_line_error(capsys, run, "--truth", floor, "--report")
+    assert (run / "report.html").read_text() == REPORT and not fig.exists()
+
+
 def test_ipa_segmentation_of_labels_and_regions(tmp_path, capsys):
     gt = read_ipa_gt(IPA / "office_a_gt_segmentation.png")
     merged = np.where(gt > 0, 1, 0)                 # one segment for every room

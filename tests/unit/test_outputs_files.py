@@ -309,6 +309,21 @@ def test_report_is_self_contained_and_escapes_inputs(hostile_run):
     assert "<th>passages to units</th>" in text and "<th>passages</th>" in text
 
 
+def test_report_keeps_a_place_for_the_calibration_section(hostile_run):
+    """`semmap eval --report` fills the empty place report.html leaves between the posterior spread
+    and the convergence section, and links it from the navigation."""
+    from semmap_pp.outputs.report import CALIBRATION_BEGIN, CALIBRATION_END, with_calibration
+
+    out, _, _ = hostile_run
+    page = (out / "report.html").read_text()
+    place = page.index(CALIBRATION_BEGIN + CALIBRATION_END)
+    assert page.index('id="spread"') < place < page.index('id="convergence"') and 'id="calibration"' not in page
+    filled = with_calibration(page, '<h2 id="calibration">x</h2>')
+    assert filled.replace(f"{CALIBRATION_BEGIN}\n<h2 id=\"calibration\">x</h2>\n{CALIBRATION_END}",
+                          CALIBRATION_BEGIN + CALIBRATION_END).replace(
+        '<a href="#calibration">Calibration</a>', "") == page
+
+
 def test_report_and_diagnostics_name_chains_in_separate_modes(floor, hostile_run, tmp_path):
     """A second chain 1000 nats below the first: report.html and diagnostics.txt say so in one
     line; the hostile run's chains (the same normal draws) get no such line."""
