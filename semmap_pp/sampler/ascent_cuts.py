@@ -110,8 +110,10 @@ class CutMoves(WallMoves):
         moved alone opens a gap, the office's moved alone overlaps the corridor. Each unit ``s``
         and each neighbour ``v`` whose facing edge lies on a side of ``s`` (within two wall
         bands) over part of its span: ``s`` is cut where ``v``'s span begins and ends (the pieces
-        share their wall bands, as a split's), and the middle piece's side and ``v``'s facing
-        edge move together into ``s``, to the positions :meth:`positions` gives; the best is
+        share their wall bands, as a split's), unless a wall line stands on their border
+        (:meth:`~semmap_pp.sampler.ascent_joins.JoinMoves.boundary_lines` at least
+        ``trim_line_min``), and the middle piece's side and ``v``'s facing edge move together
+        into ``s``, to the positions :meth:`positions` gives; the best is
         kept when it raises log p, and its pieces' walls then move to their best positions."""
         changed = False
         for s in self.units():
@@ -134,8 +136,9 @@ class CutMoves(WallMoves):
                 continue
             a, b = max(int(rects[v][along]), lo), min(int(rects[v][along + 2]), hi)
             cut_a, cut_b = a - lo >= m, hi - b >= m      # a piece of s before / after v's span
-            if b - a < m or not (cut_a or cut_b):
-                continue
+            if b - a < m or not (cut_a or cut_b) or \
+                    self.boundary_lines(rect, [int(x) for x in rects[v]]) >= self.trim_line_min:
+                continue                                 # (a wall line stands on their border)
             pieces = ([(lo, a + g)] if cut_a else []) + [(a if cut_a else lo, b if cut_b else hi)] \
                 + ([(b - g, hi)] if cut_b else [])
             mid = 1 if cut_a else 0
