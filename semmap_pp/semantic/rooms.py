@@ -391,8 +391,10 @@ def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     """Unit-id pairs one room joins, and the doors that stay doors between rooms.
 
     Units joined by a passage (:func:`~semmap_pp.semantic.regions.passage_pairs`) are one room; so
-    are two units whose door takes at least ``open_share_min`` of the wall they share: an opening
-    that wide is the open side of one room that W* cut in two, not a door in a wall. So are two
+    are two units whose door takes at least ``open_share_min`` of the wall they share, unless one
+    of them is a corridor or a hall and the other a room: an opening that wide is the open side
+    of one space that W* cut in two, not a door in a wall, but a room open to the corridor along
+    it is a room of its own. So are two
     units, neither a corridor nor a hall, whose floor meets through a gap wider than a double door
     (``door_max_m``, :func:`wide_opening`): the open side of a room that a partition, a stub of
     wall or a row of cupboards half divides. A corridor's or a hall's openings, however wide, lead
@@ -409,8 +411,11 @@ def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
         if alone & set(pair):
             decided[pair] = False
         if pair not in decided:
-            joined = opening_share(classes, rects[d.p], rects[d.q], wall) >= params.open_share_min
-            if not joined and not _THROUGH_TYPES & {sm.type_of(pair[0]), sm.type_of(pair[1])}:
+            kinds = {sm.type_of(pair[0]), sm.type_of(pair[1])}
+            through = bool(_THROUGH_TYPES & kinds)            # a corridor or a hall
+            joined = (not through or "room" not in kinds) and \
+                opening_share(classes, rects[d.p], rects[d.q], wall) >= params.open_share_min
+            if not joined and not through:
                 free = classes == FREE if free is None else free
                 joined = wide_opening(free, rects[d.p], rects[d.q], wall, width)
             decided[pair] = joined

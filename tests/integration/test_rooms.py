@@ -608,3 +608,19 @@ def test_semmap_edit_keeps_the_flag_of_an_unedited_unit_over_a_room_seen_through
     edited = json.loads((tmp_path / "e" / "world.json").read_text())
     assert [u["seen_through_door"] for u in edited["units"]] == [True]
     assert [r["seen_through_door"] for r in edited["rooms"] if r["units"]] == [True]
+
+
+@pytest.mark.parametrize("types, one_room", [
+    (("room", "room"), True), (("room", "other"), True), (("corridor", "corridor"), True),
+    (("corridor", "hall"), True), (("corridor", "other"), True),
+    (("corridor", "room"), False), (("room", "hall"), False)])
+def test_a_door_taking_most_of_a_wall_joins_two_units_but_never_a_corridor_and_a_room(types, one_room):
+    """The wall stops 36 cells short of the bottom: the door takes 36 of its 40 lines, the open
+    side of one space W* cut in two; but a room open to the corridor along it is a room."""
+    from semmap_pp.semantic.rooms import opening_share, room_joins
+    classes, rp, rq = two_units_with_a_partition(36)
+    params = RoomParams(open_share_min=0.6, door_max_m=100.0)     # no gap is wide: the share decides
+    assert opening_share(classes, rp, rq, 2) >= 0.6
+    pairs, doors = room_joins(_FakeMap(classes, rp, rq, types), params)
+    assert (pairs == [(1, 2)]) is one_room
+    assert len(doors) == (0 if one_room else 1)
