@@ -40,7 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, mask_box
-from semmap_pp.lattice.frame import BAND_ROWS, centred, projection_sharpness, sharpest_angle
+from semmap_pp.lattice.frame import BAND_ROWS, soft_hist, centred, projection_sharpness, sharpest_angle
 from semmap_pp.model import LatticeParams
 
 QUARTER = math.pi / 2
@@ -89,20 +89,52 @@ def building_zones(classes: np.ndarray, resolution: float, params: LatticeParams
     if classes.ndim != 2:
         raise ValueError(f"expected a 2-D class image, got shape {classes.shape}")
     occupied = classes == OCCUPIED
-    n = int(np.count_nonzero(occupied))
-    if params.zone_min_share <= 0 or n == 0:
+    if params.zone_min_share <= 0 or not occupied.any():
+        return one_zone(classes.shape, float(theta0))
+    faces = occupied & ndimage.binary_dilation(classes == FREE, structure=np.ones((3, 3), bool))
+    n = int(np.count_nonzero(faces))
+    if n == 0:
         return one_zone(classes.shape, float(theta0))
     rows, cols, local = wall_directions(occupied, resolution, params)
-    thetas = directions(rows, cols, local, n, float(theta0), params)
+    thetas = directions(rows, cols, local, classes.shape, float(theta0), resolution, params)
+    face = faces[rows, cols]
     while len(thetas) > 1:
         labels = zone_labels(classes, rows, cols, local, thetas, resolution, params)
-        shares = np.bincount(labels[occupied], minlength=len(thetas)) / n
-        weakest = 1 + int(np.argmin(shares[1:]))
-        if shares[weakest] >= params.zone_min_share:
+        shares = np.bincount(labels[faces], minlength=len(thetas)) / n
+        weak = [d for d in range(1, len(thetas)) if shares[d] < params.zone_min_share
+                or not _both_axes(rows, cols, local, face, labels, thetas, d, resolution, params)]
+        if not weak:
             labels.setflags(write=False)
             return Zones(tuple(thetas), labels, tuple(float(s) for s in shares))
-        del thetas[weakest]   # its walls lie scattered in the others' zones: not a zone of its own
+        del thetas[min(weak, key=lambda d: shares[d])]   # no part of the building of its own
     return one_zone(classes.shape, float(theta0))
+
+
+def _both_axes(rows, cols, local, face, labels, thetas, d: int, resolution: float, params: LatticeParams) -> bool:
+    """Whether the walls of zone ``d`` that vote for its direction run along both of its axes: the
+    wall faces (``face``, of the cells ``rows, cols``) of one run of such cells (8-connected)
+    reach ``zone_min_votes_m`` along ``thetas[d]``, those of one run along the axis at right
+    angles. One straight wall at an angle (a wall across a corner, clutter beside it) is no part
+    of a building built along that angle; a wing's rooms have both. Faces, not the whole run:
+    the coherent band behind a filled outside's wall is a metre thick."""
+    mine = (nearest_direction(local, thetas, math.radians(params.off_axis_min_deg)) == d) & \
+        (labels[rows, cols] == d)
+    run = _runs(rows[mine], cols[mine], labels.shape)
+    on = face[mine]
+    if not on.any():
+        return False
+    _, run = np.unique(run[on], return_inverse=True)
+    c, s = math.cos(thetas[d]), math.sin(thetas[d])
+    x, y = cols[mine][on].astype(np.float64), rows[mine][on].astype(np.float64)
+    need = params.zone_min_votes_m / resolution
+    for along in (c * x + s * y, -s * x + c * y):
+        lo = np.full(run.max() + 1, np.inf)
+        hi = np.full(run.max() + 1, -np.inf)
+        np.minimum.at(lo, run, along)
+        np.maximum.at(hi, run, along)
+        if not (hi - lo >= need).any():
+            return False
+    return True
 
 
 def wall_directions(occupied: np.ndarray, resolution: float, params: LatticeParams):
@@ -167,18 +199,21 @@ def nearest_direction(local: np.ndarray, thetas, tol: float) -> np.ndarray:
     return np.where(np.take_along_axis(gaps, k[None], 0)[0] <= tol, k, -1)
 
 
-def directions(rows, cols, local, n_occupied: int, theta0: float, params: LatticeParams) -> list[float]:
-    """The building's directions: θ0, then each further direction of the local wall angles
-    ``local`` (of the cells ``rows, cols``) that holds ``zone_min_share`` of the ``n_occupied``
-    occupied cells, stacks them ``off_axis_min_gain`` times sharper than the nearest direction so
-    far, and lies farther than ``off_axis_min_deg`` from all of them; strongest first."""
+def directions(rows, cols, local, shape, theta0: float, resolution: float, params: LatticeParams) -> list[float]:
+    """The candidate directions of the wall faces ``rows, cols`` (their local angles ``local``):
+    θ0, then greedily the densest window of the local angles farther than ``off_axis_min_deg``
+    from every direction so far, its angle refined on the cells near it; it is a candidate when
+    the faces nearest it (within ``off_axis_min_deg``) hold a run of ``zone_min_votes_m`` and
+    their runs stack ``off_axis_min_gain`` times sharper at it than at the nearest direction so
+    far, each run on its own (:func:`run_sharpness`). Whether a candidate is a zone is decided by
+    the part of the building it explains (:func:`building_zones`)."""
     tol = math.radians(params.off_axis_min_deg)
     step = math.radians(params.angle_bin_deg)
     nbins = int(round(QUARTER / step))
     half = max(1, int(round(tol / 2 / step)))
+    need = params.zone_min_votes_m / resolution
     thetas = [theta0]
     left = np.ones(local.shape, bool)
-    need = params.zone_min_share * n_occupied
     while len(thetas) < MAX_ZONES:
         left &= np.min([_gap(local, t) for t in thetas], axis=0) > tol
         if np.count_nonzero(left) < need:
@@ -187,17 +222,66 @@ def directions(rows, cols, local, n_occupied: int, theta0: float, params: Lattic
         window = sum(np.roll(hist, s) for s in range(-half, half + 1))
         centre = float(_quarter((int(np.argmax(window)) + 0.5) * step - QUARTER / 2))
         near = left & (_gap(local, centre) <= tol)
-        if np.count_nonzero(near) < need:
-            return thetas
         x, y = centred(cols[near], rows[near])
         theta = _refined(x, y, centre, tol, params)
         nearest = min(thetas, key=lambda t: float(_gap(theta, t)))
-        if float(_gap(theta, nearest)) > tol and projection_sharpness(x, y, theta) >= \
-                params.off_axis_min_gain * projection_sharpness(x, y, nearest):
+        if float(_gap(theta, nearest)) > tol and _sharper(rows, cols, local, thetas, theta, nearest, shape,
+                                                          need, params):
             thetas.append(theta)
         else:
             left &= ~near   # no direction of its own: clutter, or the tail of one found
     return thetas
+
+
+def _sharper(rows, cols, local, thetas, theta, nearest, shape, need, params) -> bool:
+    """Whether the faces nearest ``theta`` among ``thetas`` and it hold a run of ``need`` cells
+    and their runs stack ``off_axis_min_gain`` times sharper at ``theta`` than at ``nearest``."""
+    k = len(thetas)
+    mine = nearest_direction(local, [*thetas, theta], math.radians(params.off_axis_min_deg)) == k
+    if not mine.any():
+        return False
+    run = _runs(rows[mine], cols[mine], shape)
+    keep = np.bincount(run)[run] >= need
+    if not keep.any():
+        return False
+    x, y, run = cols[mine][keep], rows[mine][keep], run[keep]
+    if run_sharpness(x, y, run, theta) >= params.off_axis_min_gain * run_sharpness(x, y, run, nearest):
+        return True
+    x, y = centred(x, y)
+    return projection_sharpness(x, y, theta) >= params.off_axis_min_gain * projection_sharpness(x, y, nearest)
+
+
+def _runs(rows, cols, shape) -> np.ndarray:
+    """The 8-connected run (label from 1) of each of the cells ``rows, cols``."""
+    img = np.zeros(shape, bool)
+    img[rows, cols] = True
+    lab, _ = ndimage.label(img, structure=np.ones((3, 3), bool))
+    return lab[rows, cols]
+
+
+def run_sharpness(x, y, run, theta: float) -> float:
+    """:func:`~semmap_pp.lattice.frame.projection_sharpness` of the points ``(x, y)`` at ``theta``
+    summed over their runs ``run``, each run profiled on its own: walls far apart never stack into
+    one row of the profile (many parallel walls at 45° spread over every row at 0°, so their
+    profile there is no flatter than at 45°).
+
+    >>> x = np.arange(40.0); y = np.zeros(40)
+    >>> run = np.repeat([1, 2], 20); x2 = np.where(run == 2, x - 20, x); y2 = np.where(run == 2, 30.0, 0.0)
+    >>> run_sharpness(x2, y2, run, 0.0) > 3 * run_sharpness(x2, y2, run, math.pi / 4)
+    True
+    """
+    ids, inv = np.unique(run, return_inverse=True)
+    count = np.bincount(inv).astype(np.float64)
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    dx, dy = x - (np.bincount(inv, x) / count)[inv], y - (np.bincount(inv, y) / count)[inv]
+    reach = np.zeros(len(ids))
+    np.maximum.at(reach, inv, np.hypot(dx, dy))
+    reach = np.ceil(reach) + 2.0
+    start = (np.cumsum(2.0 * reach + 3.0) - reach - 3.0)[inv]   # each run's own stretch of bins
+    c, s = math.cos(theta), math.sin(theta)
+    hu = soft_hist(c * dx + s * dy + start)
+    hv = soft_hist(-s * dx + c * dy + start)
+    return float(np.dot(hu, hu) + np.dot(hv, hv))
 
 
 def _refined(x, y, centre: float, half: float, params: LatticeParams) -> float:
