@@ -96,13 +96,13 @@ def building_zones(classes: np.ndarray, resolution: float, params: LatticeParams
     if n == 0:
         return one_zone(classes.shape, float(theta0))
     rows, cols, local = wall_directions(occupied, resolution, params)
-    thetas = directions(rows, cols, local, classes.shape, float(theta0), resolution, params)
     face = faces[rows, cols]
+    thetas = directions(rows, cols, local, face, classes.shape, float(theta0), resolution, params)
     while len(thetas) > 1:
         labels = zone_labels(classes, rows, cols, local, thetas, resolution, params)
         shares = np.bincount(labels[faces], minlength=len(thetas)) / n
         weak = [d for d in range(1, len(thetas)) if shares[d] < params.zone_min_share
-                or not _both_axes(rows, cols, local, face, labels, thetas, d, resolution, params)]
+                or not _both_axes(rows, cols, local, labels, thetas, d, resolution, params)]
         if not weak:
             labels.setflags(write=False)
             return Zones(tuple(thetas), labels, tuple(float(s) for s in shares))
@@ -110,22 +110,18 @@ def building_zones(classes: np.ndarray, resolution: float, params: LatticeParams
     return one_zone(classes.shape, float(theta0))
 
 
-def _both_axes(rows, cols, local, face, labels, thetas, d: int, resolution: float, params: LatticeParams) -> bool:
-    """Whether the walls of zone ``d`` that vote for its direction run along both of its axes: the
-    wall faces (``face``, of the cells ``rows, cols``) of one run of such cells (8-connected)
-    reach ``zone_min_votes_m`` along ``thetas[d]``, those of one run along the axis at right
-    angles. One straight wall at an angle (a wall across a corner, clutter beside it) is no part
-    of a building built along that angle; a wing's rooms have both. Faces, not the whole run:
-    the coherent band behind a filled outside's wall is a metre thick."""
+def _both_axes(rows, cols, local, labels, thetas, d: int, resolution: float, params: LatticeParams) -> bool:
+    """Whether the walls of zone ``d`` that vote for its direction run along both of its axes: one
+    run of such cells (8-connected) reaches ``zone_min_votes_m`` along ``thetas[d]``, one along
+    the axis at right angles. One straight wall at an angle (a wall across a corner, clutter beside
+    it) is no part of a building built along that angle; a wing's rooms have both."""
     mine = (nearest_direction(local, thetas, math.radians(params.off_axis_min_deg)) == d) & \
         (labels[rows, cols] == d)
-    run = _runs(rows[mine], cols[mine], labels.shape)
-    on = face[mine]
-    if not on.any():
+    if not mine.any():
         return False
-    _, run = np.unique(run[on], return_inverse=True)
+    _, run = np.unique(_runs(rows[mine], cols[mine], labels.shape), return_inverse=True)
     c, s = math.cos(thetas[d]), math.sin(thetas[d])
-    x, y = cols[mine][on].astype(np.float64), rows[mine][on].astype(np.float64)
+    x, y = cols[mine].astype(np.float64), rows[mine].astype(np.float64)
     need = params.zone_min_votes_m / resolution
     for along in (c * x + s * y, -s * x + c * y):
         lo = np.full(run.max() + 1, np.inf)
@@ -199,7 +195,7 @@ def nearest_direction(local: np.ndarray, thetas, tol: float) -> np.ndarray:
     return np.where(np.take_along_axis(gaps, k[None], 0)[0] <= tol, k, -1)
 
 
-def directions(rows, cols, local, shape, theta0: float, resolution: float, params: LatticeParams) -> list[float]:
+def directions(rows, cols, local, face, shape, theta0: float, resolution: float, params: LatticeParams) -> list[float]:
     """The candidate directions of the wall faces ``rows, cols`` (their local angles ``local``):
     θ0, then greedily the densest window of the local angles farther than ``off_axis_min_deg``
     from every direction so far, its angle refined on the cells near it; it is a candidate when
@@ -222,7 +218,10 @@ def directions(rows, cols, local, shape, theta0: float, resolution: float, param
         window = sum(np.roll(hist, s) for s in range(-half, half + 1))
         centre = float(_quarter((int(np.argmax(window)) + 0.5) * step - QUARTER / 2))
         near = left & (_gap(local, centre) <= tol)
-        x, y = centred(cols[near], rows[near])
+        if not (near & face).any():
+            left &= ~near
+            continue
+        x, y = centred(cols[near & face], rows[near & face])
         theta = _refined(x, y, centre, tol, params)
         nearest = min(thetas, key=lambda t: float(_gap(theta, t)))
         if float(_gap(theta, nearest)) > tol and _sharper(rows, cols, local, thetas, theta, nearest, shape,
