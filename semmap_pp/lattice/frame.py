@@ -37,7 +37,7 @@ from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, known_box
 from semmap_pp.model import CellParams, LatticeParams, Model
 
 
-def soft_hist(u: np.ndarray) -> np.ndarray:
+def _soft_hist(u: np.ndarray) -> np.ndarray:
     """Histogram of fractional positions with linear interpolation between the two nearest bins."""
     f = np.floor(u)
     i = (f - f.min()).astype(np.intp)
@@ -54,8 +54,8 @@ def projection_sharpness(x: np.ndarray, y: np.ndarray, theta: float, bin_cells: 
     ``bin_cells``) makes the score smooth in ``theta``.
     """
     c, s = math.cos(theta), math.sin(theta)
-    hu = soft_hist((c * x + s * y) / bin_cells)
-    hv = soft_hist((-s * x + c * y) / bin_cells)
+    hu = _soft_hist((c * x + s * y) / bin_cells)
+    hv = _soft_hist((-s * x + c * y) / bin_cells)
     return float(np.dot(hu, hu) + np.dot(hv, hv))
 
 

@@ -40,7 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, mask_box
-from semmap_pp.lattice.frame import BAND_ROWS, soft_hist, centred, projection_sharpness, sharpest_angle
+from semmap_pp.lattice.frame import BAND_ROWS, centred, projection_sharpness, sharpest_angle
 from semmap_pp.model import LatticeParams
 
 QUARTER = math.pi / 2
@@ -196,13 +196,14 @@ def nearest_direction(local: np.ndarray, thetas, tol: float) -> np.ndarray:
 
 
 def directions(rows, cols, local, face, shape, theta0: float, resolution: float, params: LatticeParams) -> list[float]:
-    """The candidate directions of the wall faces ``rows, cols`` (their local angles ``local``):
-    θ0, then greedily the densest window of the local angles farther than ``off_axis_min_deg``
-    from every direction so far, its angle refined on the cells near it; it is a candidate when
-    the faces nearest it (within ``off_axis_min_deg``) hold a run of ``zone_min_votes_m`` and
-    their runs stack ``off_axis_min_gain`` times sharper at it than at the nearest direction so
-    far, each run on its own (:func:`run_sharpness`). Whether a candidate is a zone is decided by
-    the part of the building it explains (:func:`building_zones`)."""
+    """The candidate directions of the cells ``rows, cols`` with a local wall angle ``local``
+    (``face``: those that are wall faces): θ0, then greedily the densest window of the local
+    angles farther than ``off_axis_min_deg`` from every direction so far, its angle refined on the
+    wall faces near it; it is a candidate when the cells nearest it hold a run of
+    ``zone_min_votes_m`` whose faces stack ``off_axis_min_gain`` times sharper at it than at the
+    nearest direction so far (:func:`_sharper`). No share of the cells is asked for here: whether
+    a candidate is a zone is decided by the part of the building it explains
+    (:func:`building_zones`)."""
     tol = math.radians(params.off_axis_min_deg)
     step = math.radians(params.angle_bin_deg)
     nbins = int(round(QUARTER / step))
@@ -224,7 +225,7 @@ def directions(rows, cols, local, face, shape, theta0: float, resolution: float,
         x, y = centred(cols[near & face], rows[near & face])
         theta = _refined(x, y, centre, tol, params)
         nearest = min(thetas, key=lambda t: float(_gap(theta, t)))
-        if float(_gap(theta, nearest)) > tol and _sharper(rows, cols, local, thetas, theta, nearest, shape,
+        if float(_gap(theta, nearest)) > tol and _sharper(rows, cols, local, face, thetas, theta, nearest, shape,
                                                           need, params):
             thetas.append(theta)
         else:
@@ -232,21 +233,23 @@ def directions(rows, cols, local, face, shape, theta0: float, resolution: float,
     return thetas
 
 
-def _sharper(rows, cols, local, thetas, theta, nearest, shape, need, params) -> bool:
-    """Whether the faces nearest ``theta`` among ``thetas`` and it hold a run of ``need`` cells
-    and their runs stack ``off_axis_min_gain`` times sharper at ``theta`` than at ``nearest``."""
+def _sharper(rows, cols, local, face, thetas, theta, nearest, shape, need, params) -> bool:
+    """Whether the cells nearest ``theta`` among ``thetas`` and it (within ``off_axis_min_deg``)
+    hold a run of ``need`` cells and the wall faces (``face``) of such runs stack
+    ``off_axis_min_gain`` times sharper at ``theta`` than at ``nearest``
+    (:func:`~semmap_pp.lattice.frame.projection_sharpness`). Faces, not the whole runs: the
+    coherent band behind a filled outside's wall is a metre thick, and stacks alike at angles near
+    its own (lab_ipa's walls at 43.5°: 1.16 times sharper than at 0° with the band, 6.7 times on
+    their faces)."""
     k = len(thetas)
     mine = nearest_direction(local, [*thetas, theta], math.radians(params.off_axis_min_deg)) == k
     if not mine.any():
         return False
     run = _runs(rows[mine], cols[mine], shape)
-    keep = np.bincount(run)[run] >= need
+    keep = (np.bincount(run)[run] >= need) & face[mine]
     if not keep.any():
         return False
-    x, y, run = cols[mine][keep], rows[mine][keep], run[keep]
-    if run_sharpness(x, y, run, theta) >= params.off_axis_min_gain * run_sharpness(x, y, run, nearest):
-        return True
-    x, y = centred(x, y)
+    x, y = centred(cols[mine][keep], rows[mine][keep])
     return projection_sharpness(x, y, theta) >= params.off_axis_min_gain * projection_sharpness(x, y, nearest)
 
 
@@ -256,31 +259,6 @@ def _runs(rows, cols, shape) -> np.ndarray:
     img[rows, cols] = True
     lab, _ = ndimage.label(img, structure=np.ones((3, 3), bool))
     return lab[rows, cols]
-
-
-def run_sharpness(x, y, run, theta: float) -> float:
-    """:func:`~semmap_pp.lattice.frame.projection_sharpness` of the points ``(x, y)`` at ``theta``
-    summed over their runs ``run``, each run profiled on its own: walls far apart never stack into
-    one row of the profile (many parallel walls at 45° spread over every row at 0°, so their
-    profile there is no flatter than at 45°).
-
-    >>> x = np.arange(40.0); y = np.zeros(40)
-    >>> run = np.repeat([1, 2], 20); x2 = np.where(run == 2, x - 20, x); y2 = np.where(run == 2, 30.0, 0.0)
-    >>> run_sharpness(x2, y2, run, 0.0) > 3 * run_sharpness(x2, y2, run, math.pi / 4)
-    True
-    """
-    ids, inv = np.unique(run, return_inverse=True)
-    count = np.bincount(inv).astype(np.float64)
-    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
-    dx, dy = x - (np.bincount(inv, x) / count)[inv], y - (np.bincount(inv, y) / count)[inv]
-    reach = np.zeros(len(ids))
-    np.maximum.at(reach, inv, np.hypot(dx, dy))
-    reach = np.ceil(reach) + 2.0
-    start = (np.cumsum(2.0 * reach + 3.0) - reach - 3.0)[inv]   # each run's own stretch of bins
-    c, s = math.cos(theta), math.sin(theta)
-    hu = soft_hist(c * dx + s * dy + start)
-    hv = soft_hist(-s * dx + c * dy + start)
-    return float(np.dot(hu, hu) + np.dot(hv, hv))
 
 
 def _refined(x, y, centre: float, half: float, params: LatticeParams) -> float:
