@@ -3,23 +3,27 @@ pixel belongs to (issue 48: units at their own orientation; docs/model.md, "Buil
 and zones").
 
 A map built along one direction is one zone at θ0 (:func:`~semmap_pp.lattice.frame.lattice_orientation`).
-A building with wings at other angles has one zone per direction that holds at least
-``[lattice] zone_min_share`` of the occupied cells. Three steps:
+A building with wings at other angles has one zone per direction that explains a part of the
+building: its zone holds ``[lattice] zone_min_share`` of the wall faces (occupied cells next to
+free ones) and walls along both of its axes. Four steps:
 
 1. **Local wall direction** of every occupied cell, modulo 90°: the fourth-order structure tensor
    of the occupied mask (gradients at one cell, averaged over ``zone_wall_scale_m``), kept where it
    is coherent (``zone_min_coherence``): a wall and the wall at right angles to it vote alike, a
    corner does not cancel, clutter has no direction to speak of.
-2. **Directions**: θ0 first; then, greedily, the densest window of the local directions farther
-   than ``off_axis_min_deg`` from every direction so far becomes a direction when the cells near
-   it hold ``zone_min_share`` of the occupied cells and stack ``off_axis_min_gain`` times sharper
-   at it than at the nearest direction so far (:func:`~semmap_pp.lattice.frame.projection_sharpness`;
-   clutter does not); its angle is refined by the same scoring as θ0 on those cells.
+2. **Candidates**: θ0 first; then, greedily, the densest window of the local directions farther
+   than ``off_axis_min_deg`` from every direction so far, its angle refined by the same scoring as
+   θ0 on the wall faces near it; a candidate when the faces of the runs of cells nearest it stack
+   ``off_axis_min_gain`` times sharper at it than at the nearest direction so far
+   (:func:`~semmap_pp.lattice.frame.projection_sharpness`; clutter does not).
 3. **Zones**: the free space is cut into room-like regions at its narrowings (free cells farther
    than ``zone_door_m / 2`` from every other cell, each component a seed, every cell given its
    nearest seed), each region takes the direction most of its walls vote for (at least
    ``zone_min_votes_m`` of them), and every other cell the zone of the nearest decided free cell.
    A boundary between zones so runs along walls and through doorways, not through a room.
+4. **Parts**: a candidate whose zone holds less than ``zone_min_share`` of the wall faces, or
+   whose walls there run along one of its axes only (one straight wall at an angle), is dropped,
+   the weakest first, and the zones are made again.
 
 Examples
 --------
@@ -55,7 +59,7 @@ class Zones:
 
     thetas: tuple[float, ...]   # radians, each in (-π/4, π/4]; thetas[0] is θ0 as given
     labels: np.ndarray          # (H, W) uint8, read-only: index into thetas of every image pixel
-    shares: tuple[float, ...]   # share of the occupied cells in each zone
+    shares: tuple[float, ...]   # share of the wall faces (occupied cells next to free ones) in each zone
 
 
 def one_zone(shape: tuple[int, int], theta0: float) -> Zones:
@@ -82,8 +86,8 @@ def building_zones(classes: np.ndarray, resolution: float, params: LatticeParams
     Returns
     -------
     Zones
-        One zone (all labels 0, share 1.0) when no other direction holds ``zone_min_share`` of
-        the occupied cells, when the map has no occupied cell, or when ``zone_min_share`` is 0.
+        One zone (all labels 0, share 1.0) when no other direction explains a part of the
+        building, when the map has no wall face, or when ``zone_min_share`` is 0.
     """
     classes = np.asarray(classes)
     if classes.ndim != 2:
