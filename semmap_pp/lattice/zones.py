@@ -13,7 +13,7 @@ free ones) and walls along both of its axes. Four steps:
    corner does not cancel, clutter has no direction to speak of.
 2. **Candidates**: θ0 first; then, greedily, the densest window of the local directions farther
    than ``off_axis_min_deg`` from every direction so far, its angle refined by the same scoring as
-   θ0 on the wall faces near it; a candidate when the faces of the runs of cells nearest it stack
+   θ0 on the cells near it; a candidate when the faces of the runs of cells nearest it stack
    ``off_axis_min_gain`` times sharper at it than at the nearest direction so far
    (:func:`~semmap_pp.lattice.frame.projection_sharpness`; clutter does not).
 3. **Zones**: the free space is cut into room-like regions at its narrowings (free cells farther
@@ -203,7 +203,7 @@ def directions(rows, cols, local, face, shape, theta0: float, resolution: float,
     """The candidate directions of the cells ``rows, cols`` with a local wall angle ``local``
     (``face``: those that are wall faces): θ0, then greedily the densest window of the local
     angles farther than ``off_axis_min_deg`` from every direction so far, its angle refined on the
-    wall faces near it; it is a candidate when the cells nearest it hold a run of
+    cells near it; it is a candidate when the cells nearest it hold a run of
     ``zone_min_votes_m`` whose faces stack ``off_axis_min_gain`` times sharper at it than at the
     nearest direction so far (:func:`_sharper`). No share of the cells is asked for here: whether
     a candidate is a zone is decided by the part of the building it explains
@@ -223,10 +223,7 @@ def directions(rows, cols, local, face, shape, theta0: float, resolution: float,
         window = sum(np.roll(hist, s) for s in range(-half, half + 1))
         centre = float(_quarter((int(np.argmax(window)) + 0.5) * step - QUARTER / 2))
         near = left & (_gap(local, centre) <= tol)
-        if not (near & face).any():
-            left &= ~near
-            continue
-        x, y = centred(cols[near & face], rows[near & face])
+        x, y = centred(cols[near], rows[near])
         theta = _refined(x, y, centre, tol, params)
         nearest = min(thetas, key=lambda t: float(_gap(theta, t)))
         if float(_gap(theta, nearest)) > tol and _sharper(rows, cols, local, face, thetas, theta, nearest, shape,
