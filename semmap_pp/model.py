@@ -70,7 +70,8 @@ class LatticeParams:
     off_axis_min_gain: float = 1.5
     off_axis_note_share: float = 0.0
     # building directions and zones (lattice.zones.building_zones): a further direction is a zone
-    # when it holds zone_min_share of the occupied cells (0: one zone, whatever the map); local wall
+    # when its zone holds zone_min_share of the wall faces and walls along both of its axes (0: one
+    # zone, whatever the map); local wall
     # directions from the structure tensor over zone_wall_scale_m where at least zone_min_coherence;
     # free space cut at narrowings below zone_door_m; a region needs zone_min_votes_m of voting
     # walls, and is shared between directions when a second one has zone_split_share of the first's

@@ -98,7 +98,7 @@ def format_text(facts: dict) -> str:
     if len(facts.get("orientations_deg", ())) > 1:
         shares = ", ".join(f"{a:.1f} deg ({100.0 * w:.0f} %)"
                            for a, w in zip(facts["orientations_deg"], facts["direction_shares"]))
-        lines.append(f"directions  {shares} of the occupied cells: a lattice each, every unit's walls "
+        lines.append(f"directions  {shares} of the walls: a lattice each, every unit's walls "
                      f"run along or across its own")
     elif "orientation_deg" in facts:
         lines.append(f"orientation {facts['orientation_deg']:.1f} deg (the lattice's: every unit's walls "
@@ -122,8 +122,8 @@ def format_text(facts: dict) -> str:
 
 def orientation(grid: OccupancyGrid, model) -> dict:
     """θ0 of the lattice ``semmap map`` would build (degrees), the building's directions and their
-    shares of the occupied cells (:func:`semmap_pp.lattice.zones.building_zones`: a lattice each
-    when there are several) and the walls at another angle
+    shares of the walls (:func:`semmap_pp.lattice.zones.building_zones`, counted on the wall faces:
+    a lattice each when there are several) and the walls at another angle
     (:func:`semmap_pp.lattice.frame.off_axis_walls`; ``note``: whether the run would say so)."""
     from semmap_pp.lattice.frame import lattice_orientation, off_axis_noted, off_axis_walls
     from semmap_pp.lattice.zones import building_zones

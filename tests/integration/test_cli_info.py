@@ -187,7 +187,7 @@ def test_orientation_gives_the_lattices_theta_and_the_walls_at_another_angle(tmp
     a0, a1 = facts["orientations_deg"]
     w0, w1 = facts["direction_shares"]
     assert line == (f"directions  {a0:.1f} deg ({100 * w0:.0f} %), {a1:.1f} deg ({100 * w1:.0f} %) of the "
-                    f"occupied cells: a lattice each, every unit's walls run along or across its own")
+                    f"walls: a lattice each, every unit's walls run along or across its own")
     assert not [ln for ln in lines if ln.startswith("off axis")]
     assert "orientation_deg" not in json.loads(_info_json(path, capsys))      # only when asked
 

@@ -9,8 +9,10 @@ import pytest
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.grid import load_map
+from scipy import ndimage
+
 from semmap_pp.lattice.frame import lattice_orientation
-from semmap_pp.lattice.zones import Zones, building_zones, free_regions
+from semmap_pp.lattice.zones import Zones, _both_axes, building_zones, free_regions, wall_directions
 from semmap_pp.model import load_model
 from semmap_pp.synth import generate_floor
 
@@ -120,13 +122,53 @@ def test_two_wings_give_two_zones_at_their_angles_with_every_room_whole(angle):
             assert np.bincount(z.labels[room]).max() >= 0.99 * room.sum()
 
 
-def test_zone_shares_count_the_occupied_cells():
+def _faces(c):
+    """The wall faces: occupied cells with a free cell among their eight neighbours."""
+    return (c == OCCUPIED) & ndimage.binary_dilation(c == FREE, structure=np.ones((3, 3), bool))
+
+
+def test_zone_shares_count_the_wall_faces():
     c, _, _ = two_wings()
     z = building_zones(c, RES, PARAMS, lattice_orientation(c, PARAMS))
-    occupied = c == OCCUPIED
-    want = np.bincount(z.labels[occupied], minlength=len(z.thetas)) / occupied.sum()
+    faces = _faces(c)
+    want = np.bincount(z.labels[faces], minlength=len(z.thetas)) / faces.sum()
     assert np.allclose(z.shares, want)
     assert min(z.shares) >= PARAMS.zone_min_share
+
+
+@pytest.mark.parametrize("angle", [45.0, 11.0, 6.0])
+def test_a_filled_outside_does_not_hide_a_wing(angle):
+    """A drawn plan whose outside is filled (ipa's): the occupied cells near the wing's direction
+    are a small share of the occupied cells, but the wing's walls are half the building's faces."""
+    c, rooms_a, rooms_b = two_wings(angle)
+    c[c == UNKNOWN] = OCCUPIED
+    occupied = c == OCCUPIED
+    rows, cols, local = wall_directions(occupied, RES, PARAMS)
+    near = np.abs(np.remainder(np.degrees(local) - angle + 45.0, 90.0) - 45.0) <= PARAMS.off_axis_min_deg
+    assert near.sum() < PARAMS.zone_min_share * occupied.sum()      # no zone by the global share
+    z = building_zones(c, RES, PARAMS, lattice_orientation(c, PARAMS))
+    assert _same_directions(z.thetas, (0.0, angle), tol=0.5), z.thetas
+    zone = _zone_angle_deg(z)
+    free = np.logical_or.reduce(rooms_b)
+    assert (np.abs(np.remainder(zone[free] - angle + 45.0, 90.0) - 45.0) <= 0.5).mean() >= 0.95
+
+
+def test_a_zone_needs_walls_along_both_of_its_axes():
+    """One straight wall at 30 degrees is no part of a building built along 30 degrees; with a
+    wall at right angles to it, a room's corner, it is."""
+    shape = (200, 200)
+    uv = _uv(shape, (2.0, 2.0), 30.0)
+    wall = _box(uv, 0.0, 0.0, 6.0, 0.1)
+    labels = np.ones(shape, np.uint8)
+    thetas = [0.0, math.radians(30.0)]
+
+    def both(mask):
+        rows, cols = np.nonzero(mask)
+        return _both_axes(rows, cols, np.full(rows.shape, thetas[1]), labels, thetas, 1, RES, PARAMS)
+
+    assert not both(wall)
+    assert both(wall | _box(uv, 0.0, 0.0, 0.1, 2.0))
+    assert not both(wall | _box(uv, 0.0, 0.0, 0.1, 0.6))             # shorter than zone_min_votes_m
 
 
 def test_theta0_is_kept_as_given_and_no_share_means_one_zone():
