@@ -35,7 +35,7 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
-from semmap_pp.derive.crossing import cross_all, cross_data, cross_update, rect_tiles
+from semmap_pp.derive.crossing import NO_CROSS, cross_all, cross_data, cross_update, rect_tiles
 from semmap_pp.derive.doors import opening_counts
 from semmap_pp.target.geometry_evidence import (COLIKE, GEOMETRY_TYPE, FixedProvider, GeometryTable,
                                 build_evidence, geometry_class, geometry_class_compiled,
@@ -383,6 +383,7 @@ class Posterior:
 I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE, I_SPANS = range(9)   # I_SPANS: from there
 # on, a tiled lattice's flat tile spans (prior.flat_spans; none on a lattice of one direction)
 F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI, F_ENC_MIN, F_ENC_COST = range(9)
+_NO_AFF = NO_CROSS.aff     # a lattice of one direction: no tile rotations (the SaLe of one lattice)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -414,7 +415,8 @@ def _retype_changed(old_rects, old_active, rects, active, changed, geometry, adj
                 types[s] = fixed_types[g]
         elif fixed:
             types[s] = -1
-    cross_update(old_rects, old_active, rects, active, changed, adj, cross, touched, xd)
+    if xd is not None:     # None on a lattice of one direction: the branch is compiled away
+        cross_update(old_rects, old_active, rects, active, changed, adj, cross, touched, xd)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -437,9 +439,13 @@ def _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, 
         enclosure_loglik(xsum, new_rects, new_active, ip[I_WALL], fp[F_ENC_MIN], fp[F_ENC_COST])
     logprior = -np.inf
     if _all_valid(new_rects, new_active, ip[I_H], ip[I_W], ip[I_LO], ip[I_HI], ip[I_SPANS:]):
-        logprior = prior_n[n] + _sale_pairs(new_rects, new_active, adj, sale, new_types, table,
-                                            use_table, fp[F_THRESH], fp[F_RES], fp[F_INV2S2],
-                                            ip[I_SPANS:], aff)
+        if aff is None:    # a lattice of one direction (compiled away)
+            sp = _sale_pairs(new_rects, new_active, adj, sale, new_types, table, use_table,
+                             fp[F_THRESH], fp[F_RES], fp[F_INV2S2], ip[I_SPANS:], _NO_AFF)
+        else:
+            sp = _sale_pairs(new_rects, new_active, adj, sale, new_types, table, use_table,
+                             fp[F_THRESH], fp[F_RES], fp[F_INV2S2], ip[I_SPANS:], aff)
+        logprior = prior_n[n] + sp
     return loglik, logprior, gamma_total
 
 
@@ -450,6 +456,9 @@ def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_
     """:func:`_retype_changed` then :func:`_score` with the fixed provider, in one call."""
     _retype_changed(old_rects, old_active, new_rects, new_active, changed, geometry, adj, types,
                     fixed_types, ip, fp, cross, touched, xd)
+    if xd is None:
+        return _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, types,
+                      hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp, None)
     return _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, types,
                   hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp, xd[0])
 
@@ -464,9 +473,14 @@ def _retype_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects, n
     no_types = np.zeros(0, np.int8)
     _retype_changed(old_rects, old_active, new_rects, new_active, changed, geometry, adj,
                     no_types, no_types, ip, fp, cross, touched, xd)
-    loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
-                                  new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
-                                  never_sale, True, prior_n, ip, fp, xd[0])
+    if xd is None:
+        loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
+                                      new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
+                                      never_sale, True, prior_n, ip, fp, None)
+    else:
+        loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
+                                      new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
+                                      never_sale, True, prior_n, ip, fp, xd[0])
     return 0 + loglik + logprior
 
 
@@ -504,9 +518,6 @@ class ScoredProposal:
 
 
 _NO_TYPES = np.zeros(0, np.int8)   # written by _retype_changed only with fixed types
-# a lattice of one direction: no openings of pairs of two tiles, no slot marked (never written)
-_NO_CROSS_OPENINGS = np.zeros((0, 0, 2), np.int32)
-_NO_TOUCH = np.zeros(0, np.bool_)
 _NO_SALE = _ro(np.zeros((1, 1)))
 # P(SaLe) of every pair below any threshold: the SaLe factor's upper bound 1 (log 0)
 _NEVER_SALE = _ro(np.full((len(UNIT_TYPES), len(UNIT_TYPES)), -np.inf))
@@ -578,11 +589,12 @@ class Tracker(KnowledgeTracking):
         changed = np.array(changed_slots, dtype=np.int64)
         hist = self.hist.copy()
         data = post.data
-        xd = post.cross
+        # a tiled lattice: the relations of pairs of two tiles (None, compiled away, otherwise)
         tiled = old.cross is not None
-        cross = old.cross.copy() if tiled else None
-        xo = _NO_CROSS_OPENINGS if cross is None else cross
-        touched = np.zeros(ow.capacity, np.bool_) if tiled else _NO_TOUCH
+        xd = post.cross if tiled else None
+        xo = cross = old.cross.copy() if tiled else None
+        touched = np.zeros(ow.capacity, np.bool_) if tiled else None
+        aff = xd.aff if tiled else None
         if self._fixed:
             types = ow.types.copy()
             loglik, logprior, gamma_total = _propose_fixed(
@@ -617,7 +629,7 @@ class Tracker(KnowledgeTracking):
                 bound = sum(_score_ro(
                     data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                     new_world.active, types, hist.copy(), self.gamma_total, adj, _NO_SALE,
-                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp, xd.aff)[:2])
+                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp, aff)[:2])
                 if bound + 1e-9 * abs(bound) < floor:
                     self.skipped[1] += 1
                     return self._bounded(new_world)
@@ -625,7 +637,7 @@ class Tracker(KnowledgeTracking):
             loglik, logprior, gamma_total = _score_ro(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
-                post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp, xd.aff)
+                post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp, aff)
         new = wm.World(new_world.rects, new_world.active, types)
         return ScoredProposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale, cross), (hist, gamma_total, knowledge))
