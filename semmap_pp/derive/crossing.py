@@ -147,35 +147,40 @@ def _to_image(aff, k, r, col):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _corners(aff, k, rect, grow):  # pragma: no cover - compiled
-    """(4, 2) image corners ``[x, y]`` of a unit's cells grown by ``grow`` cells on every side."""
-    out = np.empty((4, 2))
+    """The image corners ``(xs, ys)`` (4-tuples, in order round the rectangle) of a unit's cells
+    grown by ``grow`` cells on every side."""
     r0, r1 = rect[0] - 0.5 - grow, rect[2] - 0.5 + grow
     c0, c1 = rect[1] - 0.5 - grow, rect[3] - 0.5 + grow
-    rs, cs = (r0, r0, r1, r1), (c0, c1, c1, c0)
-    for i in range(4):
-        out[i, 0], out[i, 1] = _to_image(aff, k, rs[i], cs[i])
-    return out
+    x0, y0 = _to_image(aff, k, r0, c0)
+    x1, y1 = _to_image(aff, k, r0, c1)
+    x2, y2 = _to_image(aff, k, r1, c1)
+    x3, y3 = _to_image(aff, k, r1, c0)
+    return (x0, x1, x2, x3), (y0, y1, y2, y3)
 
 
 @numba.njit(cache=True, nogil=True)
 def _bbox(aff, k, rect, grow):  # pragma: no cover - compiled
     """The image box ``(x0, y0, x1, y1)`` of a unit's cells grown by ``grow`` cells."""
-    p = _corners(aff, k, rect, grow)
-    return p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()
+    xs, ys = _corners(aff, k, rect, grow)
+    return (min(min(xs[0], xs[1]), min(xs[2], xs[3])), min(min(ys[0], ys[1]), min(ys[2], ys[3])),
+            max(max(xs[0], xs[1]), max(xs[2], xs[3])), max(max(ys[0], ys[1]), max(ys[2], ys[3])))
 
 
 @numba.njit(cache=True, nogil=True)
-def _separated(p, q, axis_from):  # pragma: no cover - compiled
-    """Whether an edge normal of rectangle ``axis_from`` separates ``p`` and ``q`` (touching
-    counts as separated: the overlap must have positive area)."""
+def _span(xs, ys, ax, ay):  # pragma: no cover - compiled
+    a, b = xs[0] * ax + ys[0] * ay, xs[1] * ax + ys[1] * ay
+    c, d = xs[2] * ax + ys[2] * ay, xs[3] * ax + ys[3] * ay
+    return min(min(a, b), min(c, d)), max(max(a, b), max(c, d))
+
+
+@numba.njit(cache=True, nogil=True)
+def _separated(pxs, pys, qxs, qys, axs, ays):  # pragma: no cover - compiled
+    """Whether an edge normal of the rectangle with corners ``(axs, ays)`` separates rectangles
+    ``p`` and ``q`` (touching counts as separated: the overlap must have positive area)."""
     for e in range(2):
-        ax, ay = axis_from[e + 1, 0] - axis_from[e, 0], axis_from[e + 1, 1] - axis_from[e, 1]
-        plo = phi = p[0, 0] * ax + p[0, 1] * ay
-        qlo = qhi = q[0, 0] * ax + q[0, 1] * ay
-        for i in range(1, 4):
-            a = p[i, 0] * ax + p[i, 1] * ay
-            b = q[i, 0] * ax + q[i, 1] * ay
-            plo, phi, qlo, qhi = min(plo, a), max(phi, a), min(qlo, b), max(qhi, b)
+        ax, ay = axs[e + 1] - axs[e], ays[e + 1] - ays[e]
+        plo, phi = _span(pxs, pys, ax, ay)
+        qlo, qhi = _span(qxs, qys, ax, ay)
         if phi <= qlo or qhi <= plo:
             return True
     return False
@@ -184,8 +189,9 @@ def _separated(p, q, axis_from):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def grown_overlap(aff, kp, rp, kq, rq, grow):  # pragma: no cover - compiled
     """Whether two units (tiles ``kp``, ``kq``), each grown by ``grow`` cells, overlap."""
-    p, q = _corners(aff, kp, rp, grow), _corners(aff, kq, rq, grow)
-    return not (_separated(p, q, p) or _separated(p, q, q))
+    pxs, pys = _corners(aff, kp, rp, grow)
+    qxs, qys = _corners(aff, kq, rq, grow)
+    return not (_separated(pxs, pys, qxs, qys, pxs, pys) or _separated(pxs, pys, qxs, qys, qxs, qys))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -207,12 +213,12 @@ def facing_lengths(aff, kp, rp, kq, rq):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _distance(aff, k, rect, x, y):  # pragma: no cover - compiled
-    """Distance (pixels) of image point ``(x, y)`` to the box of a unit's cell centres."""
+def _distance2(aff, k, rect, x, y):  # pragma: no cover - compiled
+    """Squared distance (pixels²) of image point ``(x, y)`` to the box of a unit's cell centres."""
     r, c = _to_lattice(aff, k, x, y)
     dr = max(rect[0] - r, 0.0, r - (rect[2] - 1))
     dc = max(rect[1] - c, 0.0, c - (rect[3] - 1))
-    return math.sqrt(dr * dr + dc * dc)
+    return dr * dr + dc * dc
 
 
 @numba.njit(cache=True, nogil=True)
@@ -222,72 +228,105 @@ def _covers(aff, k, rect, x, y):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _rows(pix, g0, g1, y0, y1):  # pragma: no cover - compiled
+    """The index range ``[lo, hi)`` of the pixels of group ``[g0, g1)`` (sorted by row) whose row
+    lies in ``[y0, y1]``."""
+    lo, hi = g0, g1
+    while lo < hi:
+        m = (lo + hi) // 2
+        if pix[m, 0] < y0:
+            lo = m + 1
+        else:
+            hi = m
+    top, hi = lo, g1
+    while top < hi:
+        m = (top + hi) // 2
+        if pix[m, 0] <= y1:
+            top = m + 1
+        else:
+            hi = m
+    return lo, top
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach):  # pragma: no cover
+    """Which pixels ``[lo, hi)`` of a pair's group may be opening pixels: in the window ``box``,
+    within ``reach`` of both units and covered by no third unit."""
+    cand = np.zeros(hi - lo, np.bool_)
+    third = np.empty(rects.shape[0], np.int64)      # the other units whose box meets the window
+    tiles = np.empty(rects.shape[0], np.int64)
+    n = 0
+    for t in range(rects.shape[0]):
+        if t != i and t != j and active[t]:
+            k = tile_of(rects[t, 1], spans)
+            x0, y0, x1, y1 = _bbox(aff, k, rects[t], 0.5)
+            if x0 <= box[2] and box[0] <= x1 and y0 <= box[3] and box[1] <= y1:
+                third[n], tiles[n] = t, k
+                n += 1
+    r2 = reach * reach
+    for p in range(lo, hi):
+        y, x = float(pix[p, 0]), float(pix[p, 1])
+        if not _inside(box, x, y) or _distance2(aff, ki, rects[i], x, y) > r2 or \
+                _distance2(aff, kj, rects[j], x, y) > r2:
+            continue
+        free = True
+        for m in range(n):
+            if _covers(aff, tiles[m], rects[third[m]], x, y):
+                free = False
+                break
+        cand[p - lo] = free
+    return cand
+
+
+@numba.njit(cache=True, nogil=True)
 def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: no cover
-    """``(adjacent by the grown rectangles, labels, n)``: the openings (module docstring) of
-    units ``i`` and ``j`` of two tiles, as component labels 1..n over their zones' pixel group
-    (0: no opening pixel); components shorter than ``door_min`` are left out (label 0)."""
+    """``(adjacent by the grown rectangles, labels, widths, lo)``: the openings (module
+    docstring) of units ``i`` and ``j`` of two tiles, as component labels 1..n of the pixels
+    ``lo, lo + 1, ...`` of their zones' group (0: no opening pixel) and each one's width
+    (``widths[k - 1]``, ``n = len(widths)``); components shorter than ``door_min`` are left out."""
     ki, kj = tile_of(rects[i, 1], spans), tile_of(rects[j, 1], spans)
-    a, b = min(ki, kj), max(ki, kj)
     n_t = aff.shape[0]
-    g0, g1 = off[a * n_t + b], off[a * n_t + b + 1]
-    labels = np.zeros(g1 - g0, np.int64)
+    g = min(ki, kj) * n_t + max(ki, kj)
     adjacent = grown_overlap(aff, ki, rects[i], kj, rects[j], float(ip[0]))
     reach = float(ip[1])
     x0, y0, x1, y1 = _bbox(aff, ki, rects[i], reach)
     u0, v0, u1, v1 = _bbox(aff, kj, rects[j], reach)
-    x0, y0, x1, y1 = max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)
-    cand = np.zeros(g1 - g0, np.bool_)
-    for p in range(g0, g1):
-        y, x = float(pix[p, 0]), float(pix[p, 1])
-        if x < x0 or x > x1 or y < y0 or y > y1:
-            continue
-        if _distance(aff, ki, rects[i], x, y) > reach or _distance(aff, kj, rects[j], x, y) > reach:
-            continue
-        free = True
-        for t in range(rects.shape[0]):
-            if t != i and t != j and active[t] and _covers(aff, tile_of(rects[t, 1], spans), rects[t], x, y):
-                free = False
-                break
-        cand[p - g0] = free
+    box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
+    lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
+    labels = np.zeros(hi - lo, np.int64)
+    widths = np.zeros(hi - lo, np.int64)
+    if hi == lo:
+        return adjacent, labels, widths[:0], lo
+    cand = _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach)
     n = 0
-    stack = np.empty(g1 - g0, np.int64)
-    for p in range(g1 - g0):
+    stack = np.empty(hi - lo, np.int64)
+    for p in range(hi - lo):
         if not cand[p] or labels[p] != 0:
             continue
         n += 1
         labels[p], top, stack[0] = n, 1, p
-        ylo = yhi = pix[g0 + p, 0]
-        xlo = xhi = pix[g0 + p, 1]
+        ylo = yhi = pix[lo + p, 0]
+        xlo = xhi = pix[lo + p, 1]
         while top:
             top -= 1
             q = stack[top]
             for m in range(8):
-                s = nbr[g0 + q, m]
-                if s >= 0 and cand[s - g0] and labels[s - g0] == 0:
-                    labels[s - g0] = n
-                    stack[top] = s - g0
+                s = nbr[lo + q, m] - lo
+                if 0 <= s < hi - lo and cand[s] and labels[s] == 0:
+                    labels[s] = n
+                    stack[top] = s
                     top += 1
-                    ylo, yhi = min(ylo, pix[s, 0]), max(yhi, pix[s, 0])
-                    xlo, xhi = min(xlo, pix[s, 1]), max(xhi, pix[s, 1])
-        if max(yhi - ylo + 1, xhi - xlo + 1) < ip[2]:
-            for q in range(g1 - g0):
+                    ylo, yhi = min(ylo, pix[lo + s, 0]), max(yhi, pix[lo + s, 0])
+                    xlo, xhi = min(xlo, pix[lo + s, 1]), max(xhi, pix[lo + s, 1])
+        widths[n - 1] = max(yhi - ylo + 1, xhi - xlo + 1)
+        if widths[n - 1] < ip[2]:
+            for q in range(hi - lo):
                 if labels[q] == n:
                     labels[q] = -1
             n -= 1
-    for q in range(g1 - g0):
+    for q in range(hi - lo):
         labels[q] = max(labels[q], 0)
-    return adjacent, labels, n
-
-
-@numba.njit(cache=True, nogil=True)
-def _width(labels, pix, g0, m):  # pragma: no cover - compiled
-    ylo = xlo = 1 << 40
-    yhi = xhi = -1
-    for q in range(labels.shape[0]):
-        if labels[q] == m:
-            ylo, yhi = min(ylo, pix[g0 + q, 0]), max(yhi, pix[g0 + q, 0])
-            xlo, xhi = min(xlo, pix[g0 + q, 1]), max(xhi, pix[g0 + q, 1])
-    return max(yhi - ylo + 1, xhi - xlo + 1)
+    return adjacent, labels, widths[:n], lo
 
 
 @numba.njit(cache=True, nogil=True)
@@ -298,15 +337,12 @@ def _short(rect, wall):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def cross_pair(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: no cover
     """``(adjacent, doors, passages)`` of units ``i`` and ``j`` of two tiles."""
-    adjacent, labels, n = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
-    if n == 0:
+    adjacent, _labels, widths, _lo = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
+    if widths.shape[0] == 0:
         return adjacent, 0, 0
-    ki, kj = tile_of(rects[i, 1], spans), tile_of(rects[j, 1], spans)
-    g0 = off[min(ki, kj) * aff.shape[0] + max(ki, kj)]
     shared = min(_short(rects[i], ip[3]), _short(rects[j], ip[3]))
     doors = passages = 0
-    for m in range(1, n + 1):
-        w = _width(labels, pix, g0, m)
+    for w in widths:
         if w > ip[1] or w >= shared - 2 * ip[3]:
             passages += 1
         else:
@@ -396,24 +432,88 @@ def cross_update(old_rects, old_active, rects, active, changed, adj, xo, touched
             if t != s and active[t] and (not is_changed[t] or t > s) and \
                     tile_of(rects[s, 1], spans) != tile_of(rects[t, 1], spans):
                 _set_pair(rects, active, s, t, box, adj, xo, xd)
-    near = np.zeros(K, np.bool_)
-    sb = np.empty(4)
+    _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo,
+                 touched, xd)
+
+
+@numba.njit(cache=True, nogil=True)
+def _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo, touched,
+                 xd):  # pragma: no cover - compiled
+    """:func:`cross_update`'s pairs without a changed slot: a pair's relation depends on the
+    other units only through which of its pixels they cover, so the pairs recomputed are those
+    within reach (both units) of a zone-boundary pixel whose cover by a changed slot the edit
+    changed; ``touched`` marks the slots of those that changed."""
+    aff, spans, pix, nbr, off, ip = xd
+    K, n_t = rects.shape[0], aff.shape[0]
+    reach = float(ip[1])
+    redo = np.zeros((K, K), np.bool_)
+    any_redo = False
+    region = np.empty(4, np.int64)
     for s in changed:
-        for which in range(2):
-            r, on = (old_rects[s], old_active[s]) if which == 0 else (rects[s], active[s])
-            if not on:
-                continue
-            sb[0], sb[1], sb[2], sb[3] = _bbox(aff, tile_of(r[1], spans), r, 0.5)
-            for t in range(K):
-                if active[t] and not is_changed[t] and _meets(box[t], sb):
-                    near[t] = True
+        ko, kn = tile_of(old_rects[s, 1], spans), tile_of(rects[s, 1], spans)
+        moved = old_active[s] and active[s] and ko == kn
+        for which in range(1 if moved else 2):
+            if moved:      # one tile: the cells that changed lie in the box of the sides that moved
+                if not _moved_box(old_rects[s], rects[s], region):
+                    continue
+                k = kn
+            else:
+                r, on, k = (old_rects[s], old_active[s], ko) if which == 0 else (rects[s], active[s], kn)
+                if not on:
+                    continue
+                region[:] = r
+            x0, y0, x1, y1 = _bbox(aff, k, region, 0.5)
+            for a in range(n_t):
+                for b in range(a + 1, n_t):
+                    lo, hi = _rows(pix, off[a * n_t + b], off[a * n_t + b + 1], y0, y1)
+                    for p in range(lo, hi):
+                        y, x = float(pix[p, 0]), float(pix[p, 1])
+                        if x < x0 or x > x1:
+                            continue
+                        was = old_active[s] and _covers(aff, ko, old_rects[s], x, y)
+                        now = active[s] and _covers(aff, kn, rects[s], x, y)
+                        if was == now:
+                            continue
+                        for u in range(K):
+                            if not active[u] or is_changed[u] or tile_of(rects[u, 1], spans) != a or \
+                                    not _inside(box[u], x, y) or _distance2(aff, a, rects[u], x, y) > reach * reach:
+                                continue
+                            for v in range(K):
+                                if active[v] and not is_changed[v] and tile_of(rects[v, 1], spans) == b \
+                                        and _inside(box[v], x, y) and \
+                                        _distance2(aff, b, rects[v], x, y) <= reach * reach:
+                                    redo[min(u, v), max(u, v)] = True
+                                    any_redo = True
+    if not any_redo:
+        return
     for p in range(K):
-        if not near[p]:
-            continue
         for q in range(p + 1, K):
-            if near[q] and tile_of(rects[p, 1], spans) != tile_of(rects[q, 1], spans):
-                if _set_pair(rects, active, p, q, box, adj, xo, xd):
-                    touched[p] = touched[q] = True
+            if redo[p, q] and _set_pair(rects, active, p, q, box, adj, xo, xd):
+                touched[p] = touched[q] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def _moved_box(a, b, out):  # pragma: no cover - compiled
+    """Into ``out``: a box holding every cell in one of rectangles ``a``, ``b`` but not the other
+    (the box of both, narrowed to the moved sides' strip when only one side moved along an axis);
+    False when they are equal."""
+    if a[0] == b[0] and a[1] == b[1] and a[2] == b[2] and a[3] == b[3]:
+        return False
+    out[0], out[1] = min(a[0], b[0]), min(a[1], b[1])
+    out[2], out[3] = max(a[2], b[2]), max(a[3], b[3])
+    for lo in range(2):            # axis: rows (0) or columns (1)
+        o = 1 - lo                 # the other axis keeps its sides: the strip along this one
+        if a[o] == b[o] and a[o + 2] == b[o + 2]:
+            if a[lo + 2] == b[lo + 2]:
+                out[lo], out[lo + 2] = min(a[lo], b[lo]), max(a[lo], b[lo])
+            elif a[lo] == b[lo]:
+                out[lo], out[lo + 2] = min(a[lo + 2], b[lo + 2]), max(a[lo + 2], b[lo + 2])
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _inside(b, x, y):  # pragma: no cover - compiled
+    return b[0] <= x <= b[2] and b[1] <= y <= b[3]
 
 
 def cross_tile_openings(frame, rects: np.ndarray, slots, xd: CrossData | None = None):
@@ -431,16 +531,13 @@ def cross_tile_openings(frame, rects: np.ndarray, slots, xd: CrossData | None = 
         for j in range(i + 1, len(rects)):
             if tiles[i] == tiles[j]:
                 continue
-            adjacent, labels, n = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
-            if not (adjacent or n):
+            adjacent, labels, widths, lo = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
+            if not (adjacent or len(widths)):
                 continue
             pairs.append((i, j))
-            a, b = sorted((tiles[i], tiles[j]))
-            g0 = int(off[a * len(aff) + b])
             shared = min(int(_short(rects[i], ip[3])), int(_short(rects[j], ip[3])))
-            for m in range(1, n + 1):
-                ys, xs = pix[g0 + np.flatnonzero(labels == m)].T
-                width = max(int(ys.max() - ys.min() + 1), int(xs.max() - xs.min() + 1))
+            for m, width in enumerate(widths.tolist(), start=1):
+                ys, xs = pix[lo + np.flatnonzero(labels == m)].T
                 is_passage = width > ip[1] or width >= shared - 2 * ip[3]
                 door = Door(int(slots[i]), int(slots[j]), _box_on_tile(frame, tiles[i], ys, xs), False, width)
                 (passages if is_passage else doors).append(door)
