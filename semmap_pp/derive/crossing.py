@@ -449,6 +449,17 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
     redo = np.zeros((K, K), np.bool_)
     any_redo = False
     region = np.empty(4, np.int64)
+    # the unchanged units of each tile, in slot order
+    tile = np.full(K, -1, np.int64)
+    for u in range(K):
+        if active[u] and not is_changed[u]:
+            tile[u] = tile_of(rects[u, 1], spans)
+    by_tile = np.empty((n_t, K), np.int64)
+    count = np.zeros(n_t, np.int64)
+    for u in range(K):
+        if tile[u] >= 0:
+            by_tile[tile[u], count[tile[u]]] = u
+            count[tile[u]] += 1
     for s in changed:
         ko, kn = tile_of(old_rects[s, 1], spans), tile_of(rects[s, 1], spans)
         moved = old_active[s] and active[s] and ko == kn
@@ -468,20 +479,19 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                     lo, hi = _rows(pix, off[a * n_t + b], off[a * n_t + b + 1], y0, y1)
                     for p in range(lo, hi):
                         y, x = float(pix[p, 0]), float(pix[p, 1])
-                        if x < x0 or x > x1:
-                            continue
+                        if x < x0 or x > x1 or not _covers(aff, k, region, x, y):
+                            continue       # outside the region no cover changed
                         was = old_active[s] and _covers(aff, ko, old_rects[s], x, y)
                         now = active[s] and _covers(aff, kn, rects[s], x, y)
                         if was == now:
                             continue
-                        for u in range(K):
-                            if not active[u] or is_changed[u] or tile_of(rects[u, 1], spans) != a or \
-                                    not _inside(box[u], x, y) or _distance2(aff, a, rects[u], x, y) > reach * reach:
+                        for iu in range(count[a]):
+                            u = by_tile[a, iu]
+                            if not _inside(box[u], x, y) or _distance2(aff, a, rects[u], x, y) > reach * reach:
                                 continue
-                            for v in range(K):
-                                if active[v] and not is_changed[v] and tile_of(rects[v, 1], spans) == b \
-                                        and _inside(box[v], x, y) and \
-                                        _distance2(aff, b, rects[v], x, y) <= reach * reach:
+                            for iv in range(count[b]):
+                                v = by_tile[b, iv]
+                                if _inside(box[v], x, y) and _distance2(aff, b, rects[v], x, y) <= reach * reach:
                                     redo[min(u, v), max(u, v)] = True
                                     any_redo = True
     if not any_redo:
