@@ -12,6 +12,7 @@ from scipy.sparse import csgraph
 from semmap_pp import cells
 from semmap_pp import world as wm
 from semmap_pp.derive import derive_world
+from semmap_pp.derive.crossing import cross_data, cross_tile_openings, grown_overlap
 from semmap_pp.lattice.frame import build_frame_from_classes
 from semmap_pp.lattice.tiles import TiledFrame, build_tiled_frame, rect_spans, tile_gap, unit_theta
 from semmap_pp.model import load_model
@@ -302,7 +303,6 @@ def test_derive_world_and_the_target_agree_across_tiles():
             w = wm.add(w, s, _near_the_boundary(rng, f, base))
         slots = wm.active_slots(w)
         adj, cross = post.relations(w)
-        from semmap_pp.derive.crossing import cross_tile_openings
         pairs, doors, passages = cross_tile_openings(f, w.rects[slots], slots)
         tiles = [f.tile_of_rect(r) for r in w.rects[slots]]
         want = {(int(slots[i]), int(slots[j])) for i in range(len(slots)) for j in range(i + 1, len(slots))
@@ -313,3 +313,37 @@ def test_derive_world_and_the_target_agree_across_tiles():
                                           sum((d.p, d.q) == (p, q) for d in passages))
         found += len(want)
     assert found > 5
+
+
+def test_grown_rectangles_of_two_tiles_overlap_as_their_points_do():
+    """The rotated-rectangle test against points: two units of two tiles, each grown by g cells,
+    overlap when a fine grid of image points holds a point inside both (up to the grid's spacing:
+    grown by g + 0.3 they must share a point when the test says so, grown by g - 0.3 they must
+    not when it says not)."""
+    rng = np.random.default_rng(9)
+    _, _, f = two_zone_map(rng, shape=(120, 200), theta=0.6)
+    xd = cross_data(f)
+    yy, xx = np.mgrid[-40:160:0.25, -40:240:0.25]
+
+    def inside(k, rect, grow):
+        r, c = f.tile_image_to_lattice(k, xx, yy)
+        return ((r >= rect[0] - 0.5 - grow) & (r <= rect[2] - 0.5 + grow)
+                & (c >= rect[1] - 0.5 - grow) & (c <= rect[3] - 0.5 + grow))
+
+    (a0, a1), (b0, b1) = f.spans
+    seen = set()
+    for _ in range(60):
+        rects = []
+        for lo_, hi_ in ((a0, a1), (b0, b1)):
+            hh, ww = int(rng.integers(5, 40)), int(rng.integers(5, 40))
+            r0, c0 = int(rng.integers(0, f.shape[0] - hh)), int(rng.integers(lo_, hi_ - ww))
+            rects.append(np.array([r0, c0, r0 + hh, c0 + ww], np.int64))
+        for g in (0.0, 3.0):
+            hit = grown_overlap(xd.aff, 0, rects[0], 1, rects[1], g)
+            near, far = g + 0.3, max(g - 0.3, -0.4)
+            if hit:
+                assert (inside(0, rects[0], near) & inside(1, rects[1], near)).any()
+            else:
+                assert not (inside(0, rects[0], far) & inside(1, rects[1], far)).any()
+            seen.add(bool(hit))
+    assert seen == {True, False}
