@@ -347,3 +347,15 @@ def test_grown_rectangles_of_two_tiles_overlap_as_their_points_do():
                 assert not (inside(0, rects[0], far) & inside(1, rects[1], far)).any()
             seen.add(bool(hit))
     assert seen == {True, False}
+
+
+def test_the_posteriors_door_marginals_see_doors_across_tiles():
+    """A door between units of two tiles is one of a sampled world's doors (sampler.marginals), as
+    derive_world reports it."""
+    from semmap_pp.sampler.marginals import world_doors
+    classes, zones, thetas = corridor_map(door=True)
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    w = wm.add(wm.add(wm.empty(2), 0, corridor_units(f, thetas)[0]), 1, corridor_units(f, thetas)[1])
+    doors = world_doors(f, w)
+    assert [(d.p, d.q, d.box) for d in doors] == [(d.p, d.q, d.box) for d in derive_world(f, w).doors]
+    assert len(doors) == 1
