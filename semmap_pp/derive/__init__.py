@@ -84,7 +84,7 @@ def derive_world(frame, world: wm.World) -> Derived:
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
     doors, passages = find_openings(frame.door_classes, rects, adj, c, slots)
     if rect_spans(frame):      # a tiled lattice: what units of two tiles share, found on the image
-        pairs, d, p = cross_tile_openings(frame, rects, slots, frame.image_door_classes, c)
+        pairs, d, p = cross_tile_openings(frame, rects, slots)
         for i, j in pairs:
             adj[i, j] = adj[j, i] = True
         doors, passages = doors + d, passages + p

@@ -1,29 +1,40 @@
 """Adjacency, doors and passages between units of two tiles of a tiled lattice
-(:mod:`semmap_pp.lattice.tiles`: a building of several directions).
+(:mod:`semmap_pp.lattice.tiles`: a building of several directions), for the target and for the
+final world alike.
 
 Units of two tiles are never adjacent on the lattice: the tiles lie apart there. In the image
 they may share a wall (a room of one wing beside the link corridor of another) or an open side (a
-corridor the zones' boundary cuts in two). What they share is read on the image's pixels, the
-doorways' classes (specks made free):
+corridor the zones' boundary cuts in two). What they share is read in the image, each unit being
+the rectangle its tile's rotation puts there (a pixel is *covered* by a unit when its tile's
+lattice puts the pixel's centre inside the unit's cells; its *distance* to a unit is the
+Euclidean distance, in pixels, from its centre to the box of the unit's cell centres):
 
-* two units are *adjacent* when their rectangles, each grown by ``adjacency_dilation``, overlap
-  (the same dilation as on the lattice), or when an opening joins them;
-* an *opening* is a run (8-connected) of free pixels of the boundary between their two zones
-  that lies within ``door_max`` of both rectangles (where two lattices at different angles meet,
-  the units' ends leave wedges of floor between them that neither covers; the boundary crosses
-  them), at least ``door_min`` long;
+* two units are *adjacent* when their rectangles, each grown by ``adjacency_dilation`` cells on
+  every side (the lattice's square dilation, at each unit's own angle), overlap with positive
+  area (a rotated-rectangle test), or when an opening joins them;
+* an *opening* is an 8-connected run of the free pixels (specks made free) of the boundary
+  between their two zones that lie within ``door_max`` of both units and that no third unit
+  covers (where two lattices at different angles meet, the units' ends leave wedges of floor
+  between them that neither covers; the boundary crosses them), at least ``door_min`` long (its
+  bounding box's longer side);
 * an opening is a *passage* when it is longer than ``door_max``, or spans the narrower unit's
   interior less a wall band on each side (the open side of a corridor cut in two, as a passage
   without a jamb on the lattice), else a *door*.
 
-An opening's ``box`` is the lattice box of its pixels on the first unit's tile (a door drawn on
-that tile's lattice, as any other door).
+One compiled definition serves both users: the target's adjacency and opening evidence
+(:func:`cross_all` for a world, :func:`cross_update` after an edit: a pair is recomputed when it
+holds an edited unit or when an edited unit's old or new rectangle reaches its window, since a
+third unit's cover changes its openings) and :func:`cross_tile_openings` for ``derive_world``.
+On a lattice of one direction there is no pair of tiles and nothing is computed
+(:data:`NO_CROSS`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -31,73 +42,516 @@ from semmap_pp.cells import FREE
 from semmap_pp.derive.doors import Door
 
 
-def _footprint(frame, rect, pad: int):
-    """The image pixels of a unit's rectangle (those whose centre its tile's lattice puts inside
-    it): ``(mask, (y0, x0))`` of its bounding box grown by ``pad`` pixels, clipped to the image."""
-    k = frame.tile_of_rect(rect)
-    v = frame.rect_vertices_px(rect)
-    h, w = frame.image_shape
-    x0, y0 = max(int(math.floor(v[:, 0].min())) - pad, 0), max(int(math.floor(v[:, 1].min())) - pad, 0)
-    x1, y1 = min(int(math.ceil(v[:, 0].max())) + pad, w), min(int(math.ceil(v[:, 1].max())) + pad, h)
-    yy, xx = np.mgrid[y0:max(y1, y0), x0:max(x1, x0)]
-    r, c = frame.tile_image_to_lattice(k, xx.astype(np.float64), yy.astype(np.float64))
-    r0, c0, r1, c1 = (int(v) for v in rect)
-    mask = (r >= r0 - 0.5) & (r < r1 - 0.5) & (c >= c0 - 0.5) & (c < c1 - 0.5)
-    return mask, (y0, x0)
+class CrossData(NamedTuple):
+    """A tiled lattice's data for the compiled relations (arrays only: numba reads the tuple).
+
+    ``aff`` (T, 6): per tile ``cos θ, sin θ`` and the image and composite-lattice centres of its
+    rotation (``x_img, y_img, col_lat, row_lat``); ``spans`` (2T,): the tiles' flat column
+    ranges; ``pix`` (P, 2): the free pixels ``(y, x)`` of the boundary between each pair of
+    zones, grouped by pair; ``nbr`` (P, 8): the index of each pixel's 8-neighbours in the same
+    group (-1: none); ``off`` (T·T + 1,): where the group of tiles ``(a, b)``, ``a < b``, starts
+    (index ``a·T + b``); ``ip``: ``adjacency_dilation, door_max, door_min, wall`` in cells."""
+
+    aff: np.ndarray
+    spans: np.ndarray
+    pix: np.ndarray
+    nbr: np.ndarray
+    off: np.ndarray
+    ip: np.ndarray
 
 
-def _distance_within(fp, box):
-    """Distance (pixels) of every pixel of the window ``box`` ``(y0, x0, y1, x1)`` to a footprint."""
-    mask, (oy, ox) = fp
-    y0, x0, y1, x1 = box
-    out = np.zeros((y1 - y0, x1 - x0), bool)
-    a0, b0 = max(oy, y0), max(ox, x0)
-    a1, b1 = min(oy + mask.shape[0], y1), min(ox + mask.shape[1], x1)
-    if a1 > a0 and b1 > b0:
-        out[a0 - y0:a1 - y0, b0 - x0:b1 - x0] = mask[a0 - oy:a1 - oy, b0 - ox:b1 - ox]
-    if not out.any():
-        return np.full(out.shape, np.inf)
-    return ndimage.distance_transform_edt(~out)
+def _ro(a):
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
 
 
-def _window(fp_p, fp_q, reach: int, shape):
-    """The window ``(y0, x0, y1, x1)`` of pixels within ``reach`` of both footprints' boxes, or
-    None when their boxes lie farther apart."""
-    (mp, (py, px)), (mq, (qy, qx)) = fp_p, fp_q
-    y0, x0 = max(py, qy) - reach, max(px, qx) - reach
-    y1 = min(py + mp.shape[0], qy + mq.shape[0]) + reach
-    x1 = min(px + mp.shape[1], qx + mq.shape[1]) + reach
-    y0, x0, y1, x1 = max(y0, 0), max(x0, 0), min(y1, shape[0]), min(x1, shape[1])
-    return (y0, x0, y1, x1) if y1 > y0 and x1 > x0 else None
+#: a lattice of one direction: no tiles to relate (the compiled calls return at once)
+NO_CROSS = CrossData(_ro(np.zeros((0, 6))), _ro(np.zeros(0, np.int64)), _ro(np.zeros((0, 2), np.int64)),
+                     _ro(np.zeros((0, 8), np.int64)), _ro(np.zeros(1, np.int64)), _ro(np.zeros(4, np.int64)))
 
 
 def _zone_edge(zones: np.ndarray, a: int, b: int) -> np.ndarray:
     """The pixels of zone ``a`` or ``b`` with a 4-neighbour in the other."""
     za, zb = zones == a, zones == b
-    near_b = ndimage.binary_dilation(zb, structure=ndimage.generate_binary_structure(2, 1))
-    near_a = ndimage.binary_dilation(za, structure=ndimage.generate_binary_structure(2, 1))
-    return (za & near_b) | (zb & near_a)
+    four = ndimage.generate_binary_structure(2, 1)
+    return (za & ndimage.binary_dilation(zb, structure=four)) | (zb & ndimage.binary_dilation(za, structure=four))
 
 
-def openings_on_edge(free_edge: np.ndarray, cells, shared: int):
-    """``(width, is_passage, (ys, xs))`` of every opening (module docstring) among the free edge
-    pixels ``free_edge`` of a window; ``shared``: the narrower interior's short side."""
-    labels, n = ndimage.label(free_edge, structure=np.ones((3, 3), bool))
-    out = []
-    for k, sl in enumerate(ndimage.find_objects(labels), start=1):
-        width = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start)
-        if width < cells.door_min:
-            continue
-        ys, xs = np.nonzero(labels[sl] == k)
-        is_passage = width > cells.door_max or width >= shared - 2 * cells.wall
-        out.append((width, is_passage, (ys + sl[0].start, xs + sl[1].start)))
+def _neighbours(ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """(n, 8) index of each pixel's 8-neighbours among ``(ys, xs)`` (-1 where none)."""
+    index = {(int(y), int(x)): i for i, (y, x) in enumerate(zip(ys.tolist(), xs.tolist()))}
+    out = np.full((len(ys), 8), -1, np.int64)
+    steps = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
+    for i, (y, x) in enumerate(zip(ys.tolist(), xs.tolist())):
+        for k, (dy, dx) in enumerate(steps):
+            out[i, k] = index.get((y + dy, x + dx), -1)
     return out
 
 
-def _short_side(rect, wall: int) -> int:
-    """The short side of a unit's interior, in cells."""
-    r0, c0, r1, c1 = (int(v) for v in rect)
-    return max(min(r1 - r0, c1 - c0) - 2 * wall, 1)
+def cross_data(frame) -> CrossData:
+    """The :class:`CrossData` of a lattice: :data:`NO_CROSS` for one of one direction."""
+    spans = getattr(frame, "spans", ())
+    if not isinstance(spans, tuple) or len(spans) < 2:
+        return NO_CROSS
+    n = len(frame.tiles)
+    aff = np.zeros((n, 6))
+    for k, (t, col) in enumerate(zip(frame.tiles, frame.cols)):
+        oxi, oyi, oxl, oyl = t._centres()
+        aff[k] = (math.cos(t.theta), math.sin(t.theta), oxi, oyi, oxl + col, oyl)
+    free = frame.image_door_classes == FREE
+    pix, nbr, off = [], [], np.zeros(n * n + 1, np.int64)
+    count = 0
+    for a in range(n):
+        for b in range(n):
+            off[a * n + b] = count
+            if a < b:
+                ys, xs = np.nonzero(_zone_edge(frame.zones, a, b) & free)
+                pix.append(np.stack([ys, xs], axis=1).astype(np.int64))
+                near = _neighbours(ys, xs)
+                nbr.append(np.where(near >= 0, near + count, -1))
+                count += len(ys)
+    off[n * n] = count
+    c = frame.cells
+    return CrossData(_ro(aff), _ro(np.asarray([v for s in spans for v in s], np.int64)),
+                     _ro(np.concatenate(pix).reshape(-1, 2)), _ro(np.concatenate(nbr).reshape(-1, 8)),
+                     _ro(off), _ro(np.array([c.adjacency_dilation, c.door_max, c.door_min, c.wall],
+                                            np.int64)))
+
+
+# ---------------------------------------------------------------------- compiled geometry
+
+@numba.njit(cache=True, nogil=True)
+def tile_of(c0, spans):  # pragma: no cover - compiled
+    """The tile whose columns hold column ``c0`` (0 without spans)."""
+    for k in range(0, spans.shape[0] - 1, 2):
+        if c0 < spans[k + 1]:
+            return k // 2
+    return spans.shape[0] // 2 - 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _to_lattice(aff, k, x, y):  # pragma: no cover - compiled
+    """Composite-lattice ``(row, col)`` of image point ``(x, y)`` on tile ``k``."""
+    c, s = aff[k, 0], aff[k, 1]
+    u, v = x - aff[k, 2], y - aff[k, 3]
+    return -s * u + c * v + aff[k, 5], c * u + s * v + aff[k, 4]
+
+
+@numba.njit(cache=True, nogil=True)
+def _to_image(aff, k, r, col):  # pragma: no cover - compiled
+    c, s = aff[k, 0], aff[k, 1]
+    u, v = col - aff[k, 4], r - aff[k, 5]
+    return c * u - s * v + aff[k, 2], s * u + c * v + aff[k, 3]
+
+
+@numba.njit(cache=True, nogil=True)
+def _corners(aff, k, rect, grow):  # pragma: no cover - compiled
+    """The image corners ``(xs, ys)`` (4-tuples, in order round the rectangle) of a unit's cells
+    grown by ``grow`` cells on every side."""
+    r0, r1 = rect[0] - 0.5 - grow, rect[2] - 0.5 + grow
+    c0, c1 = rect[1] - 0.5 - grow, rect[3] - 0.5 + grow
+    x0, y0 = _to_image(aff, k, r0, c0)
+    x1, y1 = _to_image(aff, k, r0, c1)
+    x2, y2 = _to_image(aff, k, r1, c1)
+    x3, y3 = _to_image(aff, k, r1, c0)
+    return (x0, x1, x2, x3), (y0, y1, y2, y3)
+
+
+@numba.njit(cache=True, nogil=True)
+def _bbox(aff, k, rect, grow):  # pragma: no cover - compiled
+    """The image box ``(x0, y0, x1, y1)`` of a unit's cells grown by ``grow`` cells."""
+    xs, ys = _corners(aff, k, rect, grow)
+    return (min(min(xs[0], xs[1]), min(xs[2], xs[3])), min(min(ys[0], ys[1]), min(ys[2], ys[3])),
+            max(max(xs[0], xs[1]), max(xs[2], xs[3])), max(max(ys[0], ys[1]), max(ys[2], ys[3])))
+
+
+@numba.njit(cache=True, nogil=True)
+def _span(xs, ys, ax, ay):  # pragma: no cover - compiled
+    a, b = xs[0] * ax + ys[0] * ay, xs[1] * ax + ys[1] * ay
+    c, d = xs[2] * ax + ys[2] * ay, xs[3] * ax + ys[3] * ay
+    return min(min(a, b), min(c, d)), max(max(a, b), max(c, d))
+
+
+@numba.njit(cache=True, nogil=True)
+def _separated(pxs, pys, qxs, qys, axs, ays):  # pragma: no cover - compiled
+    """Whether an edge normal of the rectangle with corners ``(axs, ays)`` separates rectangles
+    ``p`` and ``q`` (touching counts as separated: the overlap must have positive area)."""
+    for e in range(2):
+        ax, ay = axs[e + 1] - axs[e], ays[e + 1] - ays[e]
+        plo, phi = _span(pxs, pys, ax, ay)
+        qlo, qhi = _span(qxs, qys, ax, ay)
+        if phi <= qlo or qhi <= plo:
+            return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True)
+def grown_overlap(aff, kp, rp, kq, rq, grow):  # pragma: no cover - compiled
+    """Whether two units (tiles ``kp``, ``kq``), each grown by ``grow`` cells, overlap."""
+    pxs, pys = _corners(aff, kp, rp, grow)
+    qxs, qys = _corners(aff, kq, rq, grow)
+    return not (_separated(pxs, pys, qxs, qys, pxs, pys) or _separated(pxs, pys, qxs, qys, qxs, qys))
+
+
+@numba.njit(cache=True, nogil=True)
+def facing_lengths(aff, kp, rp, kq, rq):  # pragma: no cover - compiled
+    """The lengths (cells) of the sides of two units of two tiles that face each other, for the
+    SaLe factor: each unit's side towards the other's centre, a side along its columns (its
+    height) when the other's centre lies farther beyond its columns than beyond its rows (as
+    :func:`~semmap_pp.target.prior.connecting_length_difference` on one lattice)."""
+    out = np.empty(2)
+    for w in range(2):
+        k, r, ko, o = (kp, rp, kq, rq) if w == 0 else (kq, rq, kp, rp)
+        x, y = _to_image(aff, ko, (o[0] + o[2] - 1) / 2.0, (o[1] + o[3] - 1) / 2.0)
+        rr, cc = _to_lattice(aff, k, x, y)
+        h, wd = r[2] - r[0], r[3] - r[1]
+        gap_c = abs(cc - (r[1] + r[3] - 1) / 2.0) - wd / 2.0
+        gap_r = abs(rr - (r[0] + r[2] - 1) / 2.0) - h / 2.0
+        out[w] = h if gap_c >= gap_r else wd
+    return out[0], out[1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _distance2(aff, k, rect, x, y):  # pragma: no cover - compiled
+    """Squared distance (pixels²) of image point ``(x, y)`` to the box of a unit's cell centres."""
+    r, c = _to_lattice(aff, k, x, y)
+    dr = max(rect[0] - r, 0.0, r - (rect[2] - 1))
+    dc = max(rect[1] - c, 0.0, c - (rect[3] - 1))
+    return dr * dr + dc * dc
+
+
+@numba.njit(cache=True, nogil=True)
+def _covers(aff, k, rect, x, y):  # pragma: no cover - compiled
+    r, c = _to_lattice(aff, k, x, y)
+    return rect[0] - 0.5 <= r < rect[2] - 0.5 and rect[1] - 0.5 <= c < rect[3] - 0.5
+
+
+@numba.njit(cache=True, nogil=True)
+def _rows(pix, g0, g1, y0, y1):  # pragma: no cover - compiled
+    """The index range ``[lo, hi)`` of the pixels of group ``[g0, g1)`` (sorted by row) whose row
+    lies in ``[y0, y1]``."""
+    lo, hi = g0, g1
+    while lo < hi:
+        m = (lo + hi) // 2
+        if pix[m, 0] < y0:
+            lo = m + 1
+        else:
+            hi = m
+    top, hi = lo, g1
+    while top < hi:
+        m = (top + hi) // 2
+        if pix[m, 0] <= y1:
+            top = m + 1
+        else:
+            hi = m
+    return lo, top
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach):  # pragma: no cover
+    """Which pixels ``[lo, hi)`` of a pair's group may be opening pixels: in the window ``box``,
+    within ``reach`` of both units and covered by no third unit."""
+    cand = np.zeros(hi - lo, np.bool_)
+    third = np.empty(rects.shape[0], np.int64)      # the other units whose box meets the window
+    tiles = np.empty(rects.shape[0], np.int64)
+    n = 0
+    for t in range(rects.shape[0]):
+        if t != i and t != j and active[t]:
+            k = tile_of(rects[t, 1], spans)
+            x0, y0, x1, y1 = _bbox(aff, k, rects[t], 0.5)
+            if x0 <= box[2] and box[0] <= x1 and y0 <= box[3] and box[1] <= y1:
+                third[n], tiles[n] = t, k
+                n += 1
+    r2 = reach * reach
+    for p in range(lo, hi):
+        y, x = float(pix[p, 0]), float(pix[p, 1])
+        if not _inside(box, x, y) or _distance2(aff, ki, rects[i], x, y) > r2 or \
+                _distance2(aff, kj, rects[j], x, y) > r2:
+            continue
+        free = True
+        for m in range(n):
+            if _covers(aff, tiles[m], rects[third[m]], x, y):
+                free = False
+                break
+        cand[p - lo] = free
+    return cand
+
+
+@numba.njit(cache=True, nogil=True)
+def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: no cover
+    """``(adjacent by the grown rectangles, labels, widths, lo)``: the openings (module
+    docstring) of units ``i`` and ``j`` of two tiles, as component labels 1..n of the pixels
+    ``lo, lo + 1, ...`` of their zones' group (0: no opening pixel) and each one's width
+    (``widths[k - 1]``, ``n = len(widths)``); components shorter than ``door_min`` are left out."""
+    ki, kj = tile_of(rects[i, 1], spans), tile_of(rects[j, 1], spans)
+    n_t = aff.shape[0]
+    g = min(ki, kj) * n_t + max(ki, kj)
+    adjacent = grown_overlap(aff, ki, rects[i], kj, rects[j], float(ip[0]))
+    reach = float(ip[1])
+    x0, y0, x1, y1 = _bbox(aff, ki, rects[i], reach)
+    u0, v0, u1, v1 = _bbox(aff, kj, rects[j], reach)
+    box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
+    lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
+    labels = np.zeros(hi - lo, np.int64)
+    widths = np.zeros(hi - lo, np.int64)
+    if hi == lo:
+        return adjacent, labels, widths[:0], lo
+    cand = _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach)
+    n = 0
+    stack = np.empty(hi - lo, np.int64)
+    for p in range(hi - lo):
+        if not cand[p] or labels[p] != 0:
+            continue
+        n += 1
+        labels[p], top, stack[0] = n, 1, p
+        ylo = yhi = pix[lo + p, 0]
+        xlo = xhi = pix[lo + p, 1]
+        while top:
+            top -= 1
+            q = stack[top]
+            for m in range(8):
+                s = nbr[lo + q, m] - lo
+                if 0 <= s < hi - lo and cand[s] and labels[s] == 0:
+                    labels[s] = n
+                    stack[top] = s
+                    top += 1
+                    ylo, yhi = min(ylo, pix[lo + s, 0]), max(yhi, pix[lo + s, 0])
+                    xlo, xhi = min(xlo, pix[lo + s, 1]), max(xhi, pix[lo + s, 1])
+        widths[n - 1] = max(yhi - ylo + 1, xhi - xlo + 1)
+        if widths[n - 1] < ip[2]:
+            for q in range(hi - lo):
+                if labels[q] == n:
+                    labels[q] = -1
+            n -= 1
+    for q in range(hi - lo):
+        labels[q] = max(labels[q], 0)
+    return adjacent, labels, widths[:n], lo
+
+
+@numba.njit(cache=True, nogil=True)
+def _short(rect, wall):  # pragma: no cover - compiled
+    return max(min(rect[2] - rect[0], rect[3] - rect[1]) - 2 * wall, 1)
+
+
+@numba.njit(cache=True, nogil=True)
+def cross_pair(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: no cover
+    """``(adjacent, doors, passages)`` of units ``i`` and ``j`` of two tiles."""
+    adjacent, _labels, widths, _lo = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
+    if widths.shape[0] == 0:
+        return adjacent, 0, 0
+    shared = min(_short(rects[i], ip[3]), _short(rects[j], ip[3]))
+    doors = passages = 0
+    for w in widths:
+        if w > ip[1] or w >= shared - 2 * ip[3]:
+            passages += 1
+        else:
+            doors += 1
+    return True, doors, passages
+
+
+@numba.njit(cache=True, nogil=True)
+def _boxes(rects, active, aff, spans, grow):  # pragma: no cover - compiled
+    """(K, 4) image boxes of the active units grown by ``grow`` cells (NaN for empty slots)."""
+    out = np.full((rects.shape[0], 4), np.nan)
+    for s in range(rects.shape[0]):
+        if active[s]:
+            out[s, 0], out[s, 1], out[s, 2], out[s, 3] = _bbox(aff, tile_of(rects[s, 1], spans), rects[s], grow)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _meets(a, b):  # pragma: no cover - compiled
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+@numba.njit(cache=True, nogil=True)
+def _set_pair(rects, active, p, q, reach_box, adj, xo, xd):  # pragma: no cover - compiled
+    """Recompute the pair ``(p, q)`` into ``adj`` and ``xo`` (``xo`` empty: adjacency alone);
+    returns whether anything changed."""
+    aff, spans, pix, nbr, off, ip = xd
+    a, d, g = False, 0, 0
+    if _meets(reach_box[p], reach_box[q]):
+        a, d, g = cross_pair(rects, active, p, q, pix, nbr, off, aff, spans, ip)
+    changed = adj[p, q] != a
+    adj[p, q] = adj[q, p] = a
+    if xo.shape[0] > 0:
+        changed = changed or xo[p, q, 0] != d or xo[p, q, 1] != g
+        xo[p, q, 0] = xo[q, p, 0] = d
+        xo[p, q, 1] = xo[q, p, 1] = g
+    return changed
+
+
+@numba.njit(cache=True, nogil=True)
+def _reach(xd):  # pragma: no cover - compiled
+    """How far (cells) from a unit a pair's relation can reach: the door width or the dilation."""
+    return float(max(xd[5][0], xd[5][1]))
+
+
+@numba.njit(cache=True, nogil=True)
+def cross_all(rects, active, adj, xo, xd):  # pragma: no cover - compiled
+    """Every pair of active units of two tiles into ``adj`` (K, K) and ``xo`` (K, K, 2) (doors,
+    passages; may be empty), from scratch."""
+    aff, spans = xd[0], xd[1]
+    if aff.shape[0] < 2:
+        return
+    box = _boxes(rects, active, aff, spans, _reach(xd))
+    for p in range(rects.shape[0]):
+        if not active[p]:
+            continue
+        for q in range(p + 1, rects.shape[0]):
+            if active[q] and tile_of(rects[p, 1], spans) != tile_of(rects[q, 1], spans):
+                _set_pair(rects, active, p, q, box, adj, xo, xd)
+
+
+@numba.njit(cache=True, nogil=True)
+def cross_update(old_rects, old_active, rects, active, changed, adj, xo, touched,
+                 xd):  # pragma: no cover - compiled
+    """After an edit of the slots ``changed`` (the old world ``old_*``, the new ``rects``,
+    ``active``; ``adj``'s rows of the changed slots already cleared and their lattice adjacency
+    set): the pairs of two tiles that hold a changed slot, and those whose window a changed
+    slot's old or new rectangle reaches (a third unit's cover changes their openings),
+    recomputed in ``adj`` and ``xo`` (see :func:`cross_all`); ``touched`` marks the slots of
+    every pair without a changed slot that changed. Equal to :func:`cross_all` of the new world
+    (tests/unit/test_tiles.py)."""
+    aff, spans = xd[0], xd[1]
+    if aff.shape[0] < 2:
+        return
+    K = rects.shape[0]
+    box = _boxes(rects, active, aff, spans, _reach(xd))
+    is_changed = np.zeros(K, np.bool_)
+    for s in changed:
+        is_changed[s] = True
+        if xo.shape[0] > 0:
+            xo[s, :, :] = 0
+            xo[:, s, :] = 0
+    for s in changed:
+        if not active[s]:
+            continue
+        for t in range(K):
+            if t != s and active[t] and (not is_changed[t] or t > s) and \
+                    tile_of(rects[s, 1], spans) != tile_of(rects[t, 1], spans):
+                _set_pair(rects, active, s, t, box, adj, xo, xd)
+    _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo,
+                 touched, xd)
+
+
+@numba.njit(cache=True, nogil=True)
+def _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo, touched,
+                 xd):  # pragma: no cover - compiled
+    """:func:`cross_update`'s pairs without a changed slot: a pair's relation depends on the
+    other units only through which of its pixels they cover, so the pairs recomputed are those
+    within reach (both units) of a zone-boundary pixel whose cover by a changed slot the edit
+    changed; ``touched`` marks the slots of those that changed."""
+    aff, spans, pix, nbr, off, ip = xd
+    K, n_t = rects.shape[0], aff.shape[0]
+    reach = float(ip[1])
+    redo = np.zeros((K, K), np.bool_)
+    any_redo = False
+    region = np.empty(4, np.int64)
+    # the unchanged units of each tile, in slot order
+    tile = np.full(K, -1, np.int64)
+    for u in range(K):
+        if active[u] and not is_changed[u]:
+            tile[u] = tile_of(rects[u, 1], spans)
+    by_tile = np.empty((n_t, K), np.int64)
+    count = np.zeros(n_t, np.int64)
+    for u in range(K):
+        if tile[u] >= 0:
+            by_tile[tile[u], count[tile[u]]] = u
+            count[tile[u]] += 1
+    for s in changed:
+        ko, kn = tile_of(old_rects[s, 1], spans), tile_of(rects[s, 1], spans)
+        moved = old_active[s] and active[s] and ko == kn
+        for which in range(1 if moved else 2):
+            if moved:      # one tile: the cells that changed lie in the box of the sides that moved
+                if not _moved_box(old_rects[s], rects[s], region):
+                    continue
+                k = kn
+            else:
+                r, on, k = (old_rects[s], old_active[s], ko) if which == 0 else (rects[s], active[s], kn)
+                if not on:
+                    continue
+                region[:] = r
+            x0, y0, x1, y1 = _bbox(aff, k, region, 0.5)
+            for a in range(n_t):
+                for b in range(a + 1, n_t):
+                    lo, hi = _rows(pix, off[a * n_t + b], off[a * n_t + b + 1], y0, y1)
+                    for p in range(lo, hi):
+                        y, x = float(pix[p, 0]), float(pix[p, 1])
+                        if x < x0 or x > x1 or not _covers(aff, k, region, x, y):
+                            continue       # outside the region no cover changed
+                        was = old_active[s] and _covers(aff, ko, old_rects[s], x, y)
+                        now = active[s] and _covers(aff, kn, rects[s], x, y)
+                        if was == now:
+                            continue
+                        for iu in range(count[a]):
+                            u = by_tile[a, iu]
+                            if not _inside(box[u], x, y) or _distance2(aff, a, rects[u], x, y) > reach * reach:
+                                continue
+                            for iv in range(count[b]):
+                                v = by_tile[b, iv]
+                                if _inside(box[v], x, y) and _distance2(aff, b, rects[v], x, y) <= reach * reach:
+                                    redo[min(u, v), max(u, v)] = True
+                                    any_redo = True
+    if not any_redo:
+        return
+    for p in range(K):
+        for q in range(p + 1, K):
+            if redo[p, q] and _set_pair(rects, active, p, q, box, adj, xo, xd):
+                touched[p] = touched[q] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def _moved_box(a, b, out):  # pragma: no cover - compiled
+    """Into ``out``: a box holding every cell in one of rectangles ``a``, ``b`` but not the other
+    (the box of both, narrowed to the moved sides' strip when only one side moved along an axis);
+    False when they are equal."""
+    if a[0] == b[0] and a[1] == b[1] and a[2] == b[2] and a[3] == b[3]:
+        return False
+    out[0], out[1] = min(a[0], b[0]), min(a[1], b[1])
+    out[2], out[3] = max(a[2], b[2]), max(a[3], b[3])
+    for lo in range(2):            # axis: rows (0) or columns (1)
+        o = 1 - lo                 # the other axis keeps its sides: the strip along this one
+        if a[o] == b[o] and a[o + 2] == b[o + 2]:
+            if a[lo + 2] == b[lo + 2]:
+                out[lo], out[lo + 2] = min(a[lo], b[lo]), max(a[lo], b[lo])
+            elif a[lo] == b[lo]:
+                out[lo], out[lo + 2] = min(a[lo + 2], b[lo + 2]), max(a[lo + 2], b[lo + 2])
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _inside(b, x, y):  # pragma: no cover - compiled
+    return b[0] <= x <= b[2] and b[1] <= y <= b[3]
+
+
+def cross_tile_openings(frame, rects: np.ndarray, slots, xd: CrossData | None = None):
+    """``(pairs, doors, passages)`` between units of different tiles: ``pairs`` the adjacent
+    index pairs ``(i, j)`` into ``rects`` (``i < j``), the openings as :class:`Door` with slots
+    from ``slots``; an opening's box is the lattice box of its pixels on the first unit's tile (a
+    door drawn on that tile's lattice, as any other door)."""
+    xd = cross_data(frame) if xd is None else xd
+    rects = np.ascontiguousarray(np.asarray(rects, np.int64).reshape(-1, 4))
+    active = np.ones(len(rects), np.bool_)
+    aff, spans, pix, nbr, off, ip = xd
+    tiles = [int(tile_of(r[1], spans)) for r in rects]
+    pairs, doors, passages = [], [], []
+    for i in range(len(rects)):
+        for j in range(i + 1, len(rects)):
+            if tiles[i] == tiles[j]:
+                continue
+            adjacent, labels, widths, lo = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
+            if not (adjacent or len(widths)):
+                continue
+            pairs.append((i, j))
+            shared = min(int(_short(rects[i], ip[3])), int(_short(rects[j], ip[3])))
+            for m, width in enumerate(widths.tolist(), start=1):
+                ys, xs = pix[lo + np.flatnonzero(labels == m)].T
+                is_passage = width > ip[1] or width >= shared - 2 * ip[3]
+                door = Door(int(slots[i]), int(slots[j]), _box_on_tile(frame, tiles[i], ys, xs), False, width)
+                (passages if is_passage else doors).append(door)
+    return pairs, doors, passages
 
 
 def _box_on_tile(frame, k: int, ys, xs):
@@ -109,55 +563,9 @@ def _box_on_tile(frame, k: int, ys, xs):
     return (max(r0, 0), max(c0, lo), max(min(r1, frame.shape[0]), r0 + 1), max(min(c1, hi), c0 + 1))
 
 
-def _cover(fps, shape) -> np.ndarray:
-    """How many units' footprints cover each pixel."""
-    cover = np.zeros(shape, np.int16)
-    for mask, (oy, ox) in fps:
-        cover[oy:oy + mask.shape[0], ox:ox + mask.shape[1]] += mask
-    return cover
-
-
-def _pair(frame, fps, rects, i, j, edge, classes_img, cells, cover):
-    """``(adjacent, openings)`` of units ``i`` and ``j`` of two tiles (module docstring): the
-    openings on free edge pixels within reach of both that no third unit covers."""
-    d, reach = int(cells.adjacency_dilation), int(cells.door_max)
-    box = _window(fps[i], fps[j], reach, frame.image_shape)
-    if box is None:
-        return False, []
-    y0, x0, y1, x1 = box
-    di, dj = _distance_within(fps[i], box), _distance_within(fps[j], box)
-    adjacent = bool(((di <= d) & (dj <= d)).any())
-    others = cover[y0:y1, x0:x1] - (di == 0) - (dj == 0) > 0
-    cand = (edge[y0:y1, x0:x1] & (di <= reach) & (dj <= reach) & ~others
-            & (classes_img[y0:y1, x0:x1] == FREE))
-    shared = min(_short_side(rects[i], cells.wall), _short_side(rects[j], cells.wall))
-    found = [(w, p, (ys + y0, xs + x0)) for w, p, (ys, xs) in openings_on_edge(cand, cells, shared)]
-    return adjacent or bool(found), found
-
-
-def cross_tile_openings(frame, rects: np.ndarray, slots, classes_img: np.ndarray, cells):
-    """``(pairs, doors, passages)`` between units of different tiles: ``pairs`` the adjacent
-    index pairs ``(i, j)`` into ``rects`` (``i < j``), the openings as :class:`Door` with slots
-    from ``slots``. ``classes_img``: the image's classes with specks made free."""
-    rects = np.asarray(rects).reshape(-1, 4)
-    tiles = [frame.tile_of_rect(r) for r in rects]
-    fps = [_footprint(frame, r, 0) for r in rects]
-    cover = _cover(fps, frame.image_shape)
-    edges: dict = {}
-    pairs, doors, passages = [], [], []
-    for i in range(len(rects)):
-        for j in range(i + 1, len(rects)):
-            a, b = sorted((tiles[i], tiles[j]))
-            if a == b:
-                continue
-            if (a, b) not in edges:
-                edges[(a, b)] = _zone_edge(frame.zones, a, b)
-            adjacent, found = _pair(frame, fps, rects, i, j, edges[(a, b)], classes_img, cells, cover)
-            if not adjacent:
-                continue
-            pairs.append((i, j))
-            for width, is_passage, (ys, xs) in found:
-                box = _box_on_tile(frame, tiles[i], ys, xs)
-                door = Door(int(slots[i]), int(slots[j]), box, False, int(width))
-                (passages if is_passage else doors).append(door)
-    return pairs, doors, passages
+def rect_tiles(rects, xd: CrossData) -> np.ndarray:
+    """The tile of each rectangle (n, 4) (all 0 on a lattice of one direction)."""
+    r = np.asarray(rects).reshape(-1, 4)
+    if len(xd.aff) < 2:
+        return np.zeros(len(r), np.intp)
+    return np.array([tile_of(int(c0), xd.spans) for c0 in r[:, 1].tolist()], np.intp)

@@ -40,7 +40,9 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_matrix
+from semmap_pp.derive.crossing import cross_tile_openings
 from semmap_pp.derive.doors import find_openings
+from semmap_pp.lattice.tiles import rect_spans
 
 #: A sampled unit is a W* unit's match when their rectangles' intersection over union is at least this.
 MATCH_IOU = 0.5
@@ -105,12 +107,16 @@ def unit_marginals(wstar: wm.World, worlds) -> dict[int, UnitMarginal]:
 
 def world_doors(frame, world: wm.World) -> list:
     """The doors of ``world`` between its adjacent units (:func:`~semmap_pp.derive.doors.find_openings`
-    on ``frame``'s door classes; passages left out)."""
+    on ``frame``'s door classes, and on a tiled lattice those between units of two tiles:
+    :func:`~semmap_pp.derive.crossing.cross_tile_openings`; passages left out)."""
     c = frame.cells
     slots = wm.active_slots(world)
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
-    return find_openings(frame.door_classes, rects, adj, c, slots)[0]
+    doors = find_openings(frame.door_classes, rects, adj, c, slots)[0]
+    if rect_spans(frame):
+        doors = doors + cross_tile_openings(frame, rects, slots)[1]
+    return doors
 
 
 def door_there(box, doors, grow: int) -> bool:

@@ -24,6 +24,7 @@ True
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import OrderedDict
 from typing import NamedTuple
@@ -34,6 +35,7 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
+from semmap_pp.derive.crossing import NO_CROSS, cross_all, cross_data, cross_update, rect_tiles
 from semmap_pp.derive.doors import opening_counts
 from semmap_pp.target.geometry_evidence import (COLIKE, GEOMETRY_TYPE, FixedProvider, GeometryTable,
                                 build_evidence, geometry_class, geometry_class_compiled,
@@ -61,13 +63,16 @@ class Terms(NamedTuple):
 class _Typing:
     """Types, adjacency and SaLe marginals of one world (all slot-indexed, (K,) / (K, K)).
 
-    ``sale`` is ``None`` when P(SaLe) = fixed_sale[type p, type q].
+    ``sale`` is ``None`` when P(SaLe) = fixed_sale[type p, type q]. ``adj`` holds the pairs of two
+    tiles too (:mod:`semmap_pp.derive.crossing`), ``cross`` their openings.
     """
 
-    __slots__ = ("world", "geometry", "adj", "sale")
+    __slots__ = ("world", "geometry", "adj", "sale", "cross")
 
-    def __init__(self, world: wm.World, geometry: np.ndarray, adj: np.ndarray, sale):
+    def __init__(self, world: wm.World, geometry: np.ndarray, adj: np.ndarray, sale, cross=None):
         self.world, self.geometry, self.adj, self.sale = world, geometry, adj, sale
+        #: (K, K, 2) (doors, passages) between units of two tiles (a tiled lattice), else None
+        self.cross = cross
 
 
 class Posterior:
@@ -89,6 +94,8 @@ class Posterior:
         self.fixed = FixedProvider(model.knowledge.fixed_sale)
         self.knowledge_on = False
         self.spans = rect_spans(frame)
+        self.cross = cross_data(frame)     # the relations of units of two tiles (none: one tile)
+        self._tile_starts = tuple(c1 for _c0, c1 in self.spans[:-1])   # a tile's columns end there
         self.log_rect = log_p_rect_const(frame.shape, self.cells.min_side, self.cells.max_side,
                                          self.spans)
         self._prior_n: dict[int, np.ndarray] = {}
@@ -129,15 +136,18 @@ class Posterior:
             self._prior_n[capacity] = table
         return table
 
-    def door_counts(self, rects: np.ndarray, adj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def door_counts(self, rects: np.ndarray, adj: np.ndarray,
+                    cross: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(doors, pieces)``: the doors of each unit that count towards MulDoor
         (:meth:`muldoor_counts`) and the room-like units that are pieces of a corridor space
         (:meth:`corridor_pieces`), from the openings between adjacent units (cached per pair of
-        rectangles)."""
+        rectangles); ``cross`` (n, n, 2): those of the pairs of two tiles (a tiled lattice)."""
         n = len(rects)
         openings = np.zeros((n, n, 2), dtype=np.int32)
+        tiles = rect_tiles(rects, self.cross)
         for p, q in zip(*np.nonzero(np.triu(adj, 1))):
-            openings[p, q] = openings[q, p] = self.pair_openings(rects[p], rects[q])
+            openings[p, q] = openings[q, p] = (self.pair_openings(rects[p], rects[q])
+                                               if tiles[p] == tiles[q] else cross[p, q])
         return self.opening_evidence(openings, rects,
                                      geometry_class(rects, self.cells.resolution, self.model.evidence))
 
@@ -169,6 +179,11 @@ class Posterior:
             return muldoor_counts(openings, colike)
         return openings[..., 0].sum(axis=1)
 
+    def same_tile(self, rp, rq) -> bool:
+        """Whether two rectangles lie on one tile (always, on a lattice of one direction)."""
+        starts = self._tile_starts
+        return bisect.bisect_right(starts, int(rp[1])) == bisect.bisect_right(starts, int(rq[1]))
+
     def pair_openings(self, rp, rq) -> tuple[int, int]:
         """``(doors, passages)`` between two rectangles (cached per pair)."""
         key = (*np.asarray(rp).tolist(), *np.asarray(rq).tolist())
@@ -180,20 +195,22 @@ class Posterior:
             self._door_cache[key] = k
         return k
 
-    def _evidence(self, world: wm.World, adj: np.ndarray, provider):
-        """The evidence of the active units of ``world`` (adjacency ``adj``), their doors and
-        corridor pieces counted when ``provider`` needs them."""
+    def _evidence(self, world: wm.World, adj: np.ndarray, provider, cross=None):
+        """The evidence of the active units of ``world`` (adjacency ``adj``, the openings of
+        pairs of two tiles ``cross``), their doors and corridor pieces counted when ``provider``
+        needs them."""
         slots = wm.active_slots(world)
         rects = world.rects[slots]
         sub = adj[np.ix_(slots, slots)]
-        doors, pieces = (self.door_counts(rects, sub) if getattr(provider, "needs_doors", True)
-                         else (None, None))
+        sub_cross = None if cross is None else cross[np.ix_(slots, slots)]
+        doors, pieces = (self.door_counts(rects, sub, sub_cross)
+                         if getattr(provider, "needs_doors", True) else (None, None))
         return build_evidence(slots, rects, sub, self.cells.resolution, self.model.evidence, doors,
                               pieces)
 
-    def _infer(self, world: wm.World, adj: np.ndarray, provider):
+    def _infer(self, world: wm.World, adj: np.ndarray, provider, cross=None):
         """The provider's result (types, SaLe, MAP types) for the active units of ``world``."""
-        ev = self._evidence(world, adj, provider)
+        ev = self._evidence(world, adj, provider, cross)
         return provider.infer(ev.to_knowledge() if not isinstance(provider, FixedProvider) else ev)
 
     def _cached_arrays(self, provider, evidence, capacity: int):
@@ -257,7 +274,7 @@ class Posterior:
         state["_geometry"] = GeometryTable(self.cells.resolution, self.model.evidence)
         return state
 
-    def _types(self, world: wm.World, geometry: np.ndarray, adj: np.ndarray):
+    def _types(self, world: wm.World, geometry: np.ndarray, adj: np.ndarray, cross=None):
         """Type indices (K,) and P(SaLe) (K, K) of the active slots from the current provider.
 
         With the fixed provider the SaLe matrix is ``None`` (read from the fixed table by type).
@@ -266,7 +283,7 @@ class Posterior:
         if isinstance(provider, FixedProvider):
             types = np.where(world.active, GEOMETRY_TYPE[geometry], wm.NO_TYPE).astype(np.int8)
             return types, None
-        ev = self._evidence(world, adj, provider)
+        ev = self._evidence(world, adj, provider, cross)
         types, sale = self._result_arrays(provider, ev.to_knowledge(), world.capacity)
         return types.copy(), sale
 
@@ -275,7 +292,8 @@ class Posterior:
         a :class:`semmap_pp.knowledge.Evidence` (``semmap rules evidence`` writes it as facts);
         the same with knowledge on or off: geometry classes, MulDoor and corridor pieces from the
         doors (counted whatever the provider), adjacency."""
-        return self._evidence(world, self.adjacency(world), None).to_knowledge()
+        adj, cross = self.relations(world)
+        return self._evidence(world, adj, None, cross).to_knowledge()
 
     def knowledge_result(self, world: wm.World):
         """Type marginals, SaLe marginals and MAP types of ``world`` from the provider in use.
@@ -284,31 +302,41 @@ class Posterior:
         on the geometry class), which is what the sampler used.
         """
         typ = self.typing(world)
-        return self._infer(typ.world, typ.adj, self.provider)
+        return self._infer(typ.world, typ.adj, self.provider, typ.cross)
 
     def _typed(self, world: wm.World, types: np.ndarray) -> wm.World:
         types.setflags(write=False)
         return wm.World(world.rects, world.active, types)
 
     def adjacency(self, world: wm.World) -> np.ndarray:
-        """(K, K) bool: which active slots of ``world`` are adjacent (walls dilated, paper Fig. 4)."""
+        """(K, K) bool: which active slots of ``world`` are adjacent (walls dilated, paper Fig. 4;
+        on a tiled lattice units of two tiles too: :mod:`semmap_pp.derive.crossing`)."""
+        return self.relations(world)[0]
+
+    def relations(self, world: wm.World) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(adjacency, cross)``: :meth:`adjacency` and the (K, K, 2) (doors, passages) of the
+        pairs of two tiles (None on a lattice of one direction), from scratch."""
         K = world.capacity
         adj = np.zeros((K, K), dtype=bool)
         slots = wm.active_slots(world)
         if len(slots):
             adj[np.ix_(slots, slots)] = adjacency_rows(
                 world.rects[slots], np.arange(len(slots)), self.cells.wall, self.cells.adjacency_dilation)
-        return adj
+        if not self.spans:
+            return adj, None
+        cross = np.zeros((K, K, 2), np.int32)
+        cross_all(_ro(world.rects), _ro(world.active), adj, cross, self.cross)
+        return adj, cross
 
     def typing(self, world: wm.World) -> _Typing:
         """Geometry classes, adjacency, types and SaLe marginals of a world, from scratch."""
         geometry = np.zeros(world.capacity, dtype=np.int8)
-        adj = self.adjacency(world)
+        adj, cross = self.relations(world)
         slots = wm.active_slots(world)
         if len(slots):
             geometry[slots] = geometry_class(world.rects[slots], self.cells.resolution, self.model.evidence)
-        types, sale = self._types(world, geometry, adj)
-        return _Typing(self._typed(world, types), geometry, adj, sale)
+        types, sale = self._types(world, geometry, adj, cross)
+        return _Typing(self._typed(world, types), geometry, adj, sale, cross)
 
     def enclosure(self, world: wm.World) -> float:
         """The enclosure term of the likelihood (:func:`~semmap_pp.target.likelihood.enclosure_loglik`)."""
@@ -323,10 +351,11 @@ class Posterior:
             return -math.inf
         if typ.sale is None:
             sale = sale_log_factor_slots(w.rects, w.active, typ.adj, self.model.prior,
-                                         c.resolution, types=w.types, table=self.fixed.fixed_sale)
+                                         c.resolution, types=w.types, table=self.fixed.fixed_sale,
+                                         cross=self.cross)
         else:
             sale = sale_log_factor_slots(w.rects, w.active, typ.adj, self.model.prior,
-                                         c.resolution, sale=typ.sale)
+                                         c.resolution, sale=typ.sale, cross=self.cross)
         return float(self.prior_n(K)[n] + sale)
 
     # ------------------------------------------------------------------ full
@@ -354,13 +383,18 @@ class Posterior:
 I_CORR, I_WALL, I_DIL, I_H, I_W, I_LO, I_HI, I_MEASURE, I_SPANS = range(9)   # I_SPANS: from there
 # on, a tiled lattice's flat tile spans (prior.flat_spans; none on a lattice of one direction)
 F_RES, F_HALL, F_RATIO, F_THRESH, F_INV2S2, F_BASE, F_LOGPSI, F_ENC_MIN, F_ENC_COST = range(9)
+_NO_AFF = NO_CROSS.aff     # a lattice of one direction: no tile rotations (the SaLe of one lattice)
 
 
 @numba.njit(cache=True, nogil=True)
-def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, ip,
-                    fp):  # pragma: no cover - compiled
-    """Geometry class and adjacency row (in place) of each ``changed`` slot of a world; with
-    ``fixed_types`` (the fixed provider's type per geometry class, empty otherwise) its type too."""
+def _retype_changed(old_rects, old_active, rects, active, changed, geometry, adj, types,
+                    fixed_types, ip, fp, cross, touched, xd):  # pragma: no cover - compiled
+    """Geometry class and adjacency row (in place) of each ``changed`` slot of a world (edited
+    from ``old_rects``, ``old_active``); with ``fixed_types`` (the fixed provider's type per
+    geometry class, empty otherwise) its type too. On a tiled lattice (``xd``) the pairs of two
+    tiles follow (:func:`~semmap_pp.derive.crossing.cross_update`: into ``adj``, their openings
+    into ``cross`` unless it is empty; ``touched`` marks the slots of the pairs without a
+    changed slot whose relation changed)."""
     K = rects.shape[0]
     row = np.empty(K, np.bool_)
     fixed = fixed_types.shape[0] > 0
@@ -381,11 +415,13 @@ def _retype_changed(rects, active, changed, geometry, adj, types, fixed_types, i
                 types[s] = fixed_types[g]
         elif fixed:
             types[s] = -1
+    if xd is not None:     # None on a lattice of one direction: the branch is compiled away
+        cross_update(old_rects, old_active, rects, active, changed, adj, cross, touched, xd)
 
 
 @numba.njit(cache=True, nogil=True)
 def _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, new_types, hist,
-           gamma_total, adj, sale, table, use_table, prior_n, ip, fp):  # pragma: no cover
+           gamma_total, adj, sale, table, use_table, prior_n, ip, fp, aff):  # pragma: no cover
     """Log-likelihood and log-prior of a proposed world; the new tallies go into ``hist``
     (returns the new Σγ as well)."""
     K = old_rects.shape[0]
@@ -403,33 +439,48 @@ def _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, 
         enclosure_loglik(xsum, new_rects, new_active, ip[I_WALL], fp[F_ENC_MIN], fp[F_ENC_COST])
     logprior = -np.inf
     if _all_valid(new_rects, new_active, ip[I_H], ip[I_W], ip[I_LO], ip[I_HI], ip[I_SPANS:]):
-        logprior = prior_n[n] + _sale_pairs(new_rects, new_active, adj, sale, new_types, table,
-                                            use_table, fp[F_THRESH], fp[F_RES], fp[F_INV2S2])
+        if aff is None:    # a lattice of one direction (compiled away)
+            sp = _sale_pairs(new_rects, new_active, adj, sale, new_types, table, use_table,
+                             fp[F_THRESH], fp[F_RES], fp[F_INV2S2], ip[I_SPANS:], _NO_AFF)
+        else:
+            sp = _sale_pairs(new_rects, new_active, adj, sale, new_types, table, use_table,
+                             fp[F_THRESH], fp[F_RES], fp[F_INV2S2], ip[I_SPANS:], aff)
+        logprior = prior_n[n] + sp
     return loglik, logprior, gamma_total
 
 
 @numba.njit(cache=True, nogil=True)
 def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, changed,
                    geometry, adj, types, fixed_types, hist, gamma_total, table, prior_n, ip,
-                   fp):  # pragma: no cover - compiled
+                   fp, cross, touched, xd):  # pragma: no cover - compiled
     """:func:`_retype_changed` then :func:`_score` with the fixed provider, in one call."""
-    _retype_changed(new_rects, new_active, changed, geometry, adj, types, fixed_types, ip, fp)
+    _retype_changed(old_rects, old_active, new_rects, new_active, changed, geometry, adj, types,
+                    fixed_types, ip, fp, cross, touched, xd)
+    if xd is None:
+        return _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, types,
+                      hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp, None)
     return _score(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, types,
-                  hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp)
+                  hist, gamma_total, adj, np.zeros((1, 1)), table, True, prior_n, ip, fp, xd[0])
 
 
 @numba.njit(cache=True, nogil=True)
 def _retype_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects, new_active,
                   changed, geometry, adj, hist, gamma_total, no_sale, never_sale, prior_n, ip,
-                  fp):  # pragma: no cover - compiled
+                  fp, cross, touched, xd):  # pragma: no cover - compiled
     """:func:`_retype_changed` (knowledge on: no types) then the type-free upper bound of the
     proposal's log posterior (:func:`_score` with the better gain per category and the SaLe
     factor at most 1), in one call; ``hist`` is not written."""
     no_types = np.zeros(0, np.int8)
-    _retype_changed(new_rects, new_active, changed, geometry, adj, no_types, no_types, ip, fp)
-    loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
-                                  new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
-                                  never_sale, True, prior_n, ip, fp)
+    _retype_changed(old_rects, old_active, new_rects, new_active, changed, geometry, adj,
+                    no_types, no_types, ip, fp, cross, touched, xd)
+    if xd is None:
+        loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
+                                      new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
+                                      never_sale, True, prior_n, ip, fp, None)
+    else:
+        loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
+                                      new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
+                                      never_sale, True, prior_n, ip, fp, xd[0])
     return 0 + loglik + logprior
 
 
@@ -444,11 +495,11 @@ def _ro(a):
 
 
 def _score_ro(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, new_types,
-              hist, gamma_total, adj, sale, table, use_table, prior_n, ip, fp):
+              hist, gamma_total, adj, sale, table, use_table, prior_n, ip, fp, aff):
     """:func:`_score` with read-only inputs (see :func:`_ro`); ``hist`` is written."""
     return _score(xsum, _ro(gain), _ro(old_rects), _ro(old_active), _ro(old_types),
                   _ro(new_rects), _ro(new_active), _ro(new_types), hist, gamma_total, _ro(adj),
-                  _ro(sale), _ro(table), use_table, _ro(prior_n), ip, fp)
+                  _ro(sale), _ro(table), use_table, _ro(prior_n), ip, fp, aff)
 
 
 class ScoredProposal:
@@ -538,13 +589,19 @@ class Tracker(KnowledgeTracking):
         changed = np.array(changed_slots, dtype=np.int64)
         hist = self.hist.copy()
         data = post.data
+        # a tiled lattice: the relations of pairs of two tiles (None, compiled away, otherwise)
+        tiled = old.cross is not None
+        xd = post.cross if tiled else None
+        xo = cross = old.cross.copy() if tiled else None
+        touched = np.zeros(ow.capacity, np.bool_) if tiled else None
+        aff = xd.aff if tiled else None
         if self._fixed:
             types = ow.types.copy()
             loglik, logprior, gamma_total = _propose_fixed(
                 data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, types,
                 GEOMETRY_TYPE, hist, self.gamma_total, _ro(post.fixed.fixed_sale),
-                _ro(self._prior_n), post._ip, post._fp)
+                _ro(self._prior_n), post._ip, post._fp, xo, touched, xd)
             types.setflags(write=False)
             knowledge = sale = None
         else:
@@ -554,22 +611,25 @@ class Tracker(KnowledgeTracking):
                 bound = _retype_bound(
                     data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                     _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, hist,
-                    self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp)
+                    self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp,
+                    xo, touched, xd)
                 if bound + 1e-9 * abs(bound) < floor:
                     self.skipped[0] += 1
                     return self._bounded(new_world)
             else:
-                _retype_changed(_ro(new_world.rects), _ro(new_world.active), changed, geometry,
-                                adj, _NO_TYPES, _NO_TYPES, post._ip, post._fp)
+                _retype_changed(_ro(ow.rects), _ro(ow.active), _ro(new_world.rects),
+                                _ro(new_world.active), changed, geometry, adj, _NO_TYPES,
+                                _NO_TYPES, post._ip, post._fp, xo, touched, xd)
             types, sale, knowledge = self._knowledge_types(new_world, adj, geometry, changed,
-                                                           map_only=floor is not None)
+                                                           map_only=floor is not None,
+                                                           cross=cross, touched=touched)
             if sale is None:
                 # bound 2, the MAP types alone (no marginals yet): the exact log-likelihood and
                 # the prior with the SaLe factor at most 1
                 bound = sum(_score_ro(
                     data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                     new_world.active, types, hist.copy(), self.gamma_total, adj, _NO_SALE,
-                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp)[:2])
+                    _NEVER_SALE, True, self._prior_n, post._ip, post._fp, aff)[:2])
                 if bound + 1e-9 * abs(bound) < floor:
                     self.skipped[1] += 1
                     return self._bounded(new_world)
@@ -577,10 +637,10 @@ class Tracker(KnowledgeTracking):
             loglik, logprior, gamma_total = _score_ro(
                 data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                 new_world.active, types, hist, self.gamma_total, adj, sale,
-                post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp)
+                post.fixed.fixed_sale, False, self._prior_n, post._ip, post._fp, aff)
         new = wm.World(new_world.rects, new_world.active, types)
         return ScoredProposal(new, loglik + logprior, loglik, logprior,
-                        _Typing(new, geometry, adj, sale), (hist, gamma_total, knowledge))
+                        _Typing(new, geometry, adj, sale, cross), (hist, gamma_total, knowledge))
 
     @staticmethod
     def _bounded(world) -> ScoredProposal:

@@ -28,6 +28,8 @@ import math
 import numba
 import numpy as np
 
+from semmap_pp.derive.crossing import NO_CROSS, facing_lengths, tile_of
+
 
 def n_rects(length: int, min_side: int, max_side: int) -> int:
     """Number of intervals ``[a, a + s)`` inside ``[0, length)`` with ``min_side <= s <= max_side``."""
@@ -171,9 +173,13 @@ def log_prior(rects: np.ndarray, capacity: int, shape, min_side: int, max_side: 
 
 @numba.njit(cache=True, nogil=True)
 def _sale_pairs(rects, active, adj, sale, types, table, use_table, threshold, resolution,
-                inv_two_sigma2):  # pragma: no cover - compiled
+                inv_two_sigma2, spans, aff):  # pragma: no cover - compiled
+    """``spans`` (flat) and ``aff`` of a tiled lattice (:class:`~semmap_pp.derive.crossing.CrossData`;
+    empty on one of one direction): a pair of two tiles compares the sides that face each other
+    (:func:`~semmap_pp.derive.crossing.facing_lengths`)."""
     total = 0.0
     K = rects.shape[0]
+    tiled = aff.shape[0] > 1
     for p in range(K):
         if not active[p]:
             continue
@@ -184,22 +190,28 @@ def _sale_pairs(rects, active, adj, sale, types, table, use_table, threshold, re
             if prob <= threshold:
                 continue
             rp, rq = rects[p], rects[q]
-            col_gap = max(rp[1], rq[1]) - min(rp[3], rq[3])
-            row_gap = max(rp[0], rq[0]) - min(rp[2], rq[2])
-            if col_gap >= row_gap:
-                d = abs((rp[2] - rp[0]) - (rq[2] - rq[0])) * resolution
+            if tiled and tile_of(rp[1], spans) != tile_of(rq[1], spans):
+                lp, lq = facing_lengths(aff, tile_of(rp[1], spans), rp, tile_of(rq[1], spans), rq)
+                d = abs(lp - lq) * resolution
             else:
-                d = abs((rp[3] - rp[1]) - (rq[3] - rq[1])) * resolution
+                col_gap = max(rp[1], rq[1]) - min(rp[3], rq[3])
+                row_gap = max(rp[0], rq[0]) - min(rp[2], rq[2])
+                if col_gap >= row_gap:
+                    d = abs((rp[2] - rp[0]) - (rq[2] - rq[0])) * resolution
+                else:
+                    d = abs((rp[3] - rp[1]) - (rq[3] - rq[1])) * resolution
             total -= d * d * inv_two_sigma2
     return total
 
 
 def sale_log_factor_slots(rects, active, adj, params, resolution, sale=None, types=None,
-                          table=None) -> float:
+                          table=None, cross=NO_CROSS) -> float:
     """:func:`sale_log_factor` over slot-indexed arrays (K, 4), (K,), (K, K), compiled.
 
     P(SaLe) comes from ``sale`` (K, K), or from ``table[types[p], types[q]]`` when a fixed table
-    is used (no (K, K) matrix to build per proposal).
+    is used (no (K, K) matrix to build per proposal); ``cross``: a tiled lattice's
+    :class:`~semmap_pp.derive.crossing.CrossData` (its pairs of two tiles compare the sides that
+    face each other).
     """
     K = len(active)
     use_table = sale is None
@@ -210,7 +222,7 @@ def sale_log_factor_slots(rects, active, adj, params, resolution, sale=None, typ
     return float(_sale_pairs(np.asarray(rects), np.asarray(active, np.bool_), adj, sale,
                              np.asarray(types), np.asarray(table, np.float64),
                              use_table, float(params.sale_threshold), float(resolution),
-                             1.0 / (2.0 * params.sale_sigma_m ** 2)))
+                             1.0 / (2.0 * params.sale_sigma_m ** 2), cross.spans, cross.aff))
 
 
 @numba.njit(cache=True, nogil=True)

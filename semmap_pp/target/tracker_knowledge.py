@@ -26,9 +26,11 @@ class KnowledgeTracking:
         # (doors, passages) between each pair of slots
         self._openings = np.zeros((w.capacity, w.capacity, 2), np.int32)
         if self._with_doors:
+            cross = self._typ.cross
             for p, q in zip(*np.nonzero(np.triu(self._typ.adj, 1))):
-                self._openings[p, q] = self._openings[q, p] = post.pair_openings(w.rects[p],
-                                                                                 w.rects[q])
+                self._openings[p, q] = self._openings[q, p] = (
+                    post.pair_openings(w.rects[p], w.rects[q])
+                    if cross is None or post.same_tile(w.rects[p], w.rects[q]) else cross[p, q])
         self._many, self._pieces = self._muldoor(w, self._openings, self._typ.geometry)
         self._evidence = self._knowledge_evidence(w, self._typ.adj, self._many, self._pieces)
 
@@ -136,14 +138,20 @@ class KnowledgeTracking:
                 return False
         return many.tobytes() == self._many.tobytes() and pieces.tobytes() == self._pieces.tobytes()
 
-    def _knowledge_types(self, world, adj, geometry, changed, map_only=False):
+    def _knowledge_types(self, world, adj, geometry, changed, map_only=False, cross=None,
+                         touched=None):
         """Types, P(SaLe) and the knowledge patch ``(openings, evidence, MulDoor flags, corridor
         pieces)`` of a proposed world (knowledge on); ``geometry`` its geometry classes (K,).
+        On a tiled lattice ``cross`` holds the proposed world's openings of pairs of two tiles and
+        ``touched`` the unchanged slots whose relation to a unit of another tile changed (a third
+        unit's cover): their evidence is patched like the changed slots'.
 
         With ``map_only`` (and a provider that :attr:`has_map_only`) an uncached result comes
         back with P(SaLe) ``None``: the MAP types alone, without the marginals."""
         post = self.post
         openings = self._openings
+        if cross is not None and touched.any():
+            changed = np.union1d(changed, np.flatnonzero(touched)).astype(np.int64)
         if self._with_doors:
             openings = openings.copy()
             rects, active = world.rects, world.active
@@ -153,7 +161,9 @@ class KnowledgeTracking:
                 if active[s]:
                     for t in np.flatnonzero(adj[s]).tolist():
                         p, q = (s, t) if s < t else (t, s)
-                        openings[p, q] = openings[q, p] = post.pair_openings(rects[p], rects[q])
+                        openings[p, q] = openings[q, p] = (
+                            post.pair_openings(rects[p], rects[q])
+                            if cross is None or post.same_tile(rects[p], rects[q]) else cross[p, q])
         cur = self._typ
         if self._same_openings(world, openings, geometry, changed):
             many, pieces = self._many, self._pieces     # the same inputs as the current world's

@@ -12,6 +12,7 @@ from scipy.sparse import csgraph
 from semmap_pp import cells
 from semmap_pp import world as wm
 from semmap_pp.derive import derive_world
+from semmap_pp.derive.crossing import cross_data, cross_tile_openings, grown_overlap
 from semmap_pp.lattice.frame import build_frame_from_classes
 from semmap_pp.lattice.tiles import TiledFrame, build_tiled_frame, rect_spans, tile_gap, unit_theta
 from semmap_pp.model import load_model
@@ -194,3 +195,167 @@ def test_a_corridor_cut_by_the_zones_is_one_passage_and_a_wall_across_it_a_door(
         assert len(d.doors) == 1 and not d.passages and d.doors[0].width < 30
     else:
         assert len(d.passages) == 1 and not d.doors
+
+
+class OpeningsProvider:
+    """A stand-in engine whose types read every part of the evidence that units of two tiles
+    change: corridor-like units (corridor pieces included) are corridors, MulDoor ones other,
+    units with two or more neighbours halls, the rest rooms; P(SaLe) 0.9 for every adjacent pair."""
+
+    needs_doors = True
+
+    def infer(self, ev):
+        from semmap_pp.target.geometry_evidence import FixedResult
+        deg = {u: 0 for u in ev.units}
+        for p, q in ev.adj:
+            deg[p] += 1
+            deg[q] += 1
+        colike = {u for u, pr in ev.colike if pr > 0.5}
+        many = {u for u, pr in ev.muldoor if pr > 0.5}
+        names = {u: "corridor" if u in colike else "other" if u in many else
+                 "hall" if deg[u] >= 2 else "room" for u in ev.units}
+        eye = np.eye(4)
+        return FixedResult({u: eye[cells.UNIT_TYPES.index(n)] for u, n in names.items()},
+                           {pq: 0.9 for pq in ev.adj}, names)
+
+
+def corridor_units(f, thetas):
+    """The two corridor units of :func:`corridor_map`, one on each tile."""
+    def unit(k, xs, ys):      # the lattice rectangle of tile k over pixel centres (xs, ys)
+        r, c = f.tile_image_to_lattice(k, np.asarray(xs, float), np.asarray(ys, float))
+        return (int(round(r.min())), int(round(c.min())), int(round(r.max())) + 1, int(round(c.max())) + 1)
+
+    rect0 = unit(0, [20, 149], [128, 172])
+    u, v = np.array([0.0, 199.0, 0.0, 199.0]), np.array([-22.0, -22.0, 22.0, 22.0])
+    t = thetas[1]
+    rect1 = unit(1, 150 + u * math.cos(t) - v * math.sin(t), 150 + u * math.sin(t) + v * math.cos(t))
+    return rect0, rect1
+
+
+def _near_the_boundary(rng, f, base):
+    """A random unit near the zones' boundary: one of ``base`` with its sides moved, or a small
+    unit around a point near the turn, on the tile of the point's side."""
+    if rng.random() < 0.6:
+        r = list(base[int(rng.integers(len(base)))])
+        for k in range(4):
+            r[k] += int(rng.integers(-14, 15))
+        return tuple(r)
+    x, y = 150 + rng.uniform(-45, 45), 150 + rng.uniform(-45, 45)
+    k = int(x >= 150)
+    r, c = f.tile_image_to_lattice(k, np.array([x]), np.array([y]))
+    h, w = int(rng.integers(21, 40)), int(rng.integers(21, 40))
+    return (int(r[0]) - h // 2, int(c[0]) - w // 2, int(r[0]) - h // 2 + h, int(c[0]) - w // 2 + w)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("knowledge", [False, True])
+def test_incremental_relations_across_tiles_equal_the_full_ones(knowledge):
+    """Units of two tiles near the turn of :func:`corridor_map` edited at random: the tracker's
+    adjacency, openings of pairs of two tiles, types and log posterior equal a full evaluation
+    after every edit, while pairs of two tiles become and stop being adjacent, and a third unit's
+    edit changes the openings of a pair it does not hold."""
+    rng = np.random.default_rng(4)
+    classes, zones, thetas = corridor_map()
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    post = Posterior(f, MODEL, OpeningsProvider() if knowledge else None)
+    post.knowledge_on = knowledge
+    base = corridor_units(f, thetas)
+    w = wm.add(wm.add(wm.empty(5), 0, base[0]), 1, base[1])
+    tr = post.start(w)
+    seen = {"cross": 0, "flips": 0, "third": 0}
+    for _ in range(400):
+        s = int(rng.integers(w.capacity))
+        old = tr.world
+        nw = (wm.remove(old, s) if old.active[s] and rng.random() < 0.2
+              else wm.replace(old, s, _near_the_boundary(rng, f, base)) if old.active[s]
+              else wm.add(old, s, _near_the_boundary(rng, f, base)))
+        prop = tr.propose(nw, [s])
+        full = post.evaluate(nw)
+        assert (prop.logp == full.total) if math.isinf(full.total) else \
+            prop.logp == pytest.approx(full.total, rel=1e-9, abs=0)
+        adj, cross = post.relations(nw)
+        assert np.array_equal(prop.typing.adj, adj) and np.array_equal(prop.typing.cross, cross)
+        assert np.array_equal(prop.world.types, full.world.types)
+        tiles = np.array([f.tile_of_rect(r) for r in nw.rects])
+        two = nw.active[:, None] & nw.active[None, :] & (tiles[:, None] != tiles[None, :])
+        seen["cross"] += int((adj & two).any())
+        seen["flips"] += int(((adj != tr._typ.adj) & two).any())
+        others = np.ones(adj.shape, bool)
+        others[s, :] = others[:, s] = False
+        seen["third"] += int(((cross != tr._typ.cross).any(axis=2) & others).any())
+        if math.isfinite(prop.logp) and rng.random() < 0.7:
+            tr.accept(prop)
+    assert seen["cross"] > 50 and seen["flips"] > 20 and seen["third"] > 0, seen
+
+
+def test_derive_world_and_the_target_agree_across_tiles():
+    """The final world's adjacency and openings between units of two tiles (derive_world) are
+    the target's, on random worlds near the turn of a corridor with a door across it."""
+    rng = np.random.default_rng(6)
+    classes, zones, thetas = corridor_map(door=True)
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    post = Posterior(f, MODEL)
+    base = corridor_units(f, thetas)
+    found = 0
+    for _ in range(30):
+        w = wm.empty(4)
+        for s in range(int(rng.integers(2, 5))):
+            w = wm.add(w, s, _near_the_boundary(rng, f, base))
+        slots = wm.active_slots(w)
+        adj, cross = post.relations(w)
+        pairs, doors, passages = cross_tile_openings(f, w.rects[slots], slots)
+        tiles = [f.tile_of_rect(r) for r in w.rects[slots]]
+        want = {(int(slots[i]), int(slots[j])) for i in range(len(slots)) for j in range(i + 1, len(slots))
+                if tiles[i] != tiles[j] and adj[slots[i], slots[j]]}
+        assert want == {(int(slots[i]), int(slots[j])) for i, j in pairs}
+        for p, q in want:
+            assert tuple(cross[p, q]) == (sum((d.p, d.q) == (p, q) for d in doors),
+                                          sum((d.p, d.q) == (p, q) for d in passages))
+        found += len(want)
+    assert found > 5
+
+
+def test_grown_rectangles_of_two_tiles_overlap_as_their_points_do():
+    """The rotated-rectangle test against points: two units of two tiles, each grown by g cells,
+    overlap when a fine grid of image points holds a point inside both (up to the grid's spacing:
+    grown by g + 0.3 they must share a point when the test says so, grown by g - 0.3 they must
+    not when it says not)."""
+    rng = np.random.default_rng(9)
+    _, _, f = two_zone_map(rng, shape=(120, 200), theta=0.6)
+    xd = cross_data(f)
+    yy, xx = np.mgrid[-40:160:0.25, -40:240:0.25]
+
+    def inside(k, rect, grow):
+        r, c = f.tile_image_to_lattice(k, xx, yy)
+        return ((r >= rect[0] - 0.5 - grow) & (r <= rect[2] - 0.5 + grow)
+                & (c >= rect[1] - 0.5 - grow) & (c <= rect[3] - 0.5 + grow))
+
+    (a0, a1), (b0, b1) = f.spans
+    seen = set()
+    for _ in range(60):
+        rects = []
+        for lo_, hi_ in ((a0, a1), (b0, b1)):
+            hh, ww = int(rng.integers(5, 40)), int(rng.integers(5, 40))
+            r0, c0 = int(rng.integers(0, f.shape[0] - hh)), int(rng.integers(lo_, hi_ - ww))
+            rects.append(np.array([r0, c0, r0 + hh, c0 + ww], np.int64))
+        for g in (0.0, 3.0):
+            hit = grown_overlap(xd.aff, 0, rects[0], 1, rects[1], g)
+            near, far = g + 0.3, max(g - 0.3, -0.4)
+            if hit:
+                assert (inside(0, rects[0], near) & inside(1, rects[1], near)).any()
+            else:
+                assert not (inside(0, rects[0], far) & inside(1, rects[1], far)).any()
+            seen.add(bool(hit))
+    assert seen == {True, False}
+
+
+def test_the_posteriors_door_marginals_see_doors_across_tiles():
+    """A door between units of two tiles is one of a sampled world's doors (sampler.marginals), as
+    derive_world reports it."""
+    from semmap_pp.sampler.marginals import world_doors
+    classes, zones, thetas = corridor_map(door=True)
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    w = wm.add(wm.add(wm.empty(2), 0, corridor_units(f, thetas)[0]), 1, corridor_units(f, thetas)[1])
+    doors = world_doors(f, w)
+    assert [(d.p, d.q, d.box) for d in doors] == [(d.p, d.q, d.box) for d in derive_world(f, w).doors]
+    assert len(doors) == 1
