@@ -15,11 +15,15 @@ Euclidean distance, in pixels, from its centre to the box of the unit's cell cen
 * an *opening* is an 8-connected run of the free pixels (specks made free) of the boundary
   between their two zones that lie within ``door_max`` of both units and that no third unit
   covers (where two lattices at different angles meet, the units' ends leave wedges of floor
-  between them that neither covers; the boundary crosses them), at least ``door_min`` long (its
-  bounding box's longer side);
-* an opening is a *passage* when it is longer than ``door_max``, or spans the narrower unit's
-  interior less a wall band on each side (the open side of a corridor cut in two, as a passage
-  without a jamb on the lattice), else a *door*.
+  between them that neither covers; the boundary crosses them); its *width along a tile* is the
+  larger extent of its pixel centres along that tile's two axes, plus one, and it is kept when it
+  is at least ``door_min`` wide along both tiles;
+* an opening is a *passage* when it is wider than ``door_max`` along both tiles (a door lies in
+  a wall of one of them, and along that tile's axes its width is the door's: a zones' boundary
+  that crosses a doorway at an angle holds a longer run of pixels), or when it spans either
+  unit's interior less a wall band on each side, measured along that unit's tile (the open side
+  of a corridor cut in two, as a passage without a jamb on the lattice), else a *door*, whose
+  width is the smaller of the two.
 
 One compiled definition serves both users: the target's adjacency and opening evidence
 (:func:`cross_all` for a world, :func:`cross_update` after an edit: a pair is recomputed when it
@@ -282,8 +286,9 @@ def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach
 def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: no cover
     """``(adjacent by the grown rectangles, labels, widths, lo)``: the openings (module
     docstring) of units ``i`` and ``j`` of two tiles, as component labels 1..n of the pixels
-    ``lo, lo + 1, ...`` of their zones' group (0: no opening pixel) and each one's width
-    (``widths[k - 1]``, ``n = len(widths)``); components shorter than ``door_min`` are left out."""
+    ``lo, lo + 1, ...`` of their zones' group (0: no opening pixel) and each one's widths along
+    the axes of the tiles of ``i`` and of ``j`` (``widths[k - 1]``, ``n = len(widths)``;
+    :func:`_run_width`); components shorter than ``door_min`` are left out."""
     ki, kj = tile_of(rects[i, 1], spans), tile_of(rects[j, 1], spans)
     n_t = aff.shape[0]
     g = min(ki, kj) * n_t + max(ki, kj)
@@ -294,7 +299,7 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
     box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
     lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
     labels = np.zeros(hi - lo, np.int64)
-    widths = np.zeros(hi - lo, np.int64)
+    widths = np.zeros((hi - lo, 2), np.int64)
     if hi == lo:
         return adjacent, labels, widths[:0], lo
     cand = _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach)
@@ -305,8 +310,6 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
             continue
         n += 1
         labels[p], top, stack[0] = n, 1, p
-        ylo = yhi = pix[lo + p, 0]
-        xlo = xhi = pix[lo + p, 1]
         while top:
             top -= 1
             q = stack[top]
@@ -316,10 +319,9 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
                     labels[s] = n
                     stack[top] = s
                     top += 1
-                    ylo, yhi = min(ylo, pix[lo + s, 0]), max(yhi, pix[lo + s, 0])
-                    xlo, xhi = min(xlo, pix[lo + s, 1]), max(xhi, pix[lo + s, 1])
-        widths[n - 1] = max(yhi - ylo + 1, xhi - xlo + 1)
-        if widths[n - 1] < ip[2]:
+        widths[n - 1, 0] = _run_width(aff, ki, pix, lo, labels, n)
+        widths[n - 1, 1] = _run_width(aff, kj, pix, lo, labels, n)
+        if min(widths[n - 1, 0], widths[n - 1, 1]) < ip[2]:
             for q in range(hi - lo):
                 if labels[q] == n:
                     labels[q] = -1
@@ -327,6 +329,22 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
     for q in range(hi - lo):
         labels[q] = max(labels[q], 0)
     return adjacent, labels, widths[:n], lo
+
+
+@numba.njit(cache=True, nogil=True)
+def _run_width(aff, k, pix, lo, labels, n):  # pragma: no cover - compiled
+    """The larger extent, along tile ``k``'s two axes, of the pixels labelled ``n`` (``pix[lo +
+    p]`` for ``labels[p] == n``), in cells, rounded: an opening's width measured along the walls of
+    that tile. A zones' boundary that crosses a doorway at an angle holds a run of pixels longer
+    than the door; along the axes of the tile whose wall holds the door the run spans the door's
+    width (and its drift across the wall, no more than that at 45 degrees)."""
+    r0 = c0 = np.inf
+    r1 = c1 = -np.inf
+    for p in range(labels.shape[0]):
+        if labels[p] == n:
+            r, c = _to_lattice(aff, k, float(pix[lo + p, 1]), float(pix[lo + p, 0]))
+            r0, r1, c0, c1 = min(r0, r), max(r1, r), min(c0, c), max(c1, c)
+    return int(round(max(r1 - r0, c1 - c0))) + 1
 
 
 @numba.njit(cache=True, nogil=True)
@@ -340,14 +358,23 @@ def cross_pair(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: n
     adjacent, _labels, widths, _lo = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
     if widths.shape[0] == 0:
         return adjacent, 0, 0
-    shared = min(_short(rects[i], ip[3]), _short(rects[j], ip[3]))
     doors = passages = 0
-    for w in widths:
-        if w > ip[1] or w >= shared - 2 * ip[3]:
+    for m in range(widths.shape[0]):
+        if _is_passage(widths[m], rects[i], rects[j], ip):
             passages += 1
         else:
             doors += 1
     return True, doors, passages
+
+
+@numba.njit(cache=True, nogil=True)
+def _is_passage(w, ri, rj, ip):  # pragma: no cover - compiled
+    """An opening of widths ``w`` (along the tiles of units ``ri`` and ``rj``) is a passage: wider
+    than ``door_max`` along both tiles' walls (a door's width is the smaller one, measured along
+    the wall that holds it), or spanning either unit's interior less a wall band on each side,
+    measured on that unit's own tile (the open side of a corridor cut in two)."""
+    return min(w[0], w[1]) > ip[1] or w[0] >= _short(ri, ip[3]) - 2 * ip[3] or \
+        w[1] >= _short(rj, ip[3]) - 2 * ip[3]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -545,11 +572,11 @@ def cross_tile_openings(frame, rects: np.ndarray, slots, xd: CrossData | None = 
             if not (adjacent or len(widths)):
                 continue
             pairs.append((i, j))
-            shared = min(int(_short(rects[i], ip[3])), int(_short(rects[j], ip[3])))
-            for m, width in enumerate(widths.tolist(), start=1):
+            for m in range(1, len(widths) + 1):
                 ys, xs = pix[lo + np.flatnonzero(labels == m)].T
-                is_passage = width > ip[1] or width >= shared - 2 * ip[3]
-                door = Door(int(slots[i]), int(slots[j]), _box_on_tile(frame, tiles[i], ys, xs), False, width)
+                is_passage = bool(_is_passage(widths[m - 1], rects[i], rects[j], ip))
+                door = Door(int(slots[i]), int(slots[j]), _box_on_tile(frame, tiles[i], ys, xs), False,
+                            int(widths[m - 1].min()))
                 (passages if is_passage else doors).append(door)
     return pairs, doors, passages
 

@@ -359,3 +359,24 @@ def test_the_posteriors_door_marginals_see_doors_across_tiles():
     doors = world_doors(f, w)
     assert [(d.p, d.q, d.box) for d in doors] == [(d.p, d.q, d.box) for d in derive_world(f, w).doors]
     assert len(doors) == 1
+
+
+def test_an_opening_is_as_wide_as_along_the_tile_whose_wall_holds_it():
+    """A run of boundary pixels crossing a doorway at 45° to the image: along the axes of a tile
+    at the image's angle it spans its 21 columns, along a tile at 45° its full length (29 cells).
+    The opening is a door when either width is a door's, a passage only when both exceed
+    ``door_max`` or it spans a unit's interior on that unit's tile."""
+    from semmap_pp.derive.crossing import _is_passage, _run_width
+    c = math.cos(math.pi / 4)
+    aff = np.array([[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [c, c, 0.0, 0.0, 0.0, 0.0]])
+    pix = np.array([[i, i] for i in range(21)], np.int64)          # (row, col) on the diagonal
+    labels = np.ones(21, np.int64)
+    assert _run_width(aff, 0, pix, 0, labels, 1) == 21
+    assert _run_width(aff, 1, pix, 0, labels, 1) == 29                # 20·√2 + 1
+    ip = np.array([3, 25, 10, 2], np.int64)                           # door_max 25 cells
+    room = np.array([0, 0, 80, 80], np.int64)                         # interiors 76 cells across
+    assert not _is_passage(np.array([21, 29]), room, room, ip)        # a door of 21 cells
+    assert _is_passage(np.array([26, 29]), room, room, ip)            # wider than a door both ways
+    corridor = np.array([0, 0, 30, 200], np.int64)                    # 26 cells across its interior
+    assert _is_passage(np.array([5, 22]), room, corridor, ip)         # spans the corridor's 22
+    assert not _is_passage(np.array([22, 5]), room, corridor, ip)     # along the room's tile: no
