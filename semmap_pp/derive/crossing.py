@@ -305,11 +305,13 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
     cand = _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach)
     n = 0
     stack = np.empty(hi - lo, np.int64)
+    members = np.empty(hi - lo, np.int64)       # the current component's pixels
     for p in range(hi - lo):
         if not cand[p] or labels[p] != 0:
             continue
         n += 1
         labels[p], top, stack[0] = n, 1, p
+        members[0], size = p, 1
         while top:
             top -= 1
             q = stack[top]
@@ -319,12 +321,12 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
                     labels[s] = n
                     stack[top] = s
                     top += 1
-        widths[n - 1, 0] = _run_width(aff, ki, pix, lo, labels, n)
-        widths[n - 1, 1] = _run_width(aff, kj, pix, lo, labels, n)
+                    members[size] = s
+                    size += 1
+        widths[n - 1, 0] = _run_width(aff, ki, pix, lo, members[:size])
+        widths[n - 1, 1] = _run_width(aff, kj, pix, lo, members[:size])
         if min(widths[n - 1, 0], widths[n - 1, 1]) < ip[2]:
-            for q in range(hi - lo):
-                if labels[q] == n:
-                    labels[q] = -1
+            labels[members[:size]] = -1         # not flooded again from its other pixels
             n -= 1
     for q in range(hi - lo):
         labels[q] = max(labels[q], 0)
@@ -332,18 +334,17 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
 
 
 @numba.njit(cache=True, nogil=True)
-def _run_width(aff, k, pix, lo, labels, n):  # pragma: no cover - compiled
-    """The larger extent, along tile ``k``'s two axes, of the pixels labelled ``n`` (``pix[lo +
-    p]`` for ``labels[p] == n``), in cells, rounded: an opening's width measured along the walls of
+def _run_width(aff, k, pix, lo, members):  # pragma: no cover - compiled
+    """The larger extent, along tile ``k``'s two axes, of the pixels ``pix[lo + p]`` for ``p`` in
+    ``members``, in cells, rounded: an opening's width measured along the walls of
     that tile. A zones' boundary that crosses a doorway at an angle holds a run of pixels longer
     than the door; along the axes of the tile whose wall holds the door the run spans the door's
     width (and its drift across the wall, no more than that at 45 degrees)."""
     r0 = c0 = np.inf
     r1 = c1 = -np.inf
-    for p in range(labels.shape[0]):
-        if labels[p] == n:
-            r, c = _to_lattice(aff, k, float(pix[lo + p, 1]), float(pix[lo + p, 0]))
-            r0, r1, c0, c1 = min(r0, r), max(r1, r), min(c0, c), max(c1, c)
+    for p in members:
+        r, c = _to_lattice(aff, k, float(pix[lo + p, 1]), float(pix[lo + p, 0]))
+        r0, r1, c0, c1 = min(r0, r), max(r1, r), min(c0, c), max(c1, c)
     return int(round(max(r1 - r0, c1 - c0))) + 1
 
 

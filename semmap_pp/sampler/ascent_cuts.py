@@ -113,7 +113,7 @@ class CutMoves(WallMoves):
         share their wall bands, as a split's), unless a wall line stands on their border
         (:meth:`~semmap_pp.sampler.ascent_joins.JoinMoves.boundary_lines` at least
         ``trim_line_min``), and the middle piece's side and ``v``'s facing edge move together
-        into ``s``, to the positions :meth:`positions` gives; the best is
+        into ``s``, to the line-evidence peaks inside it (:meth:`inward_peaks`); the best is
         kept when it raises log p, and its pieces' walls then move to their best positions."""
         changed = False
         for s in self.units():

@@ -173,12 +173,8 @@ def corridor_map(theta_deg=30.0, door=False):
     return classes, zones, (0.0, t)
 
 
-@pytest.mark.parametrize("door", [False, True])
-def test_a_corridor_cut_by_the_zones_is_one_passage_and_a_wall_across_it_a_door(door):
-    classes, zones, thetas = corridor_map(door=door)
-    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
-    (a0, _), (b0, _) = f.spans
-
+def corridor_units(f, thetas):
+    """The two corridor units of :func:`corridor_map`, one on each tile."""
     def unit(k, xs, ys):      # the lattice rectangle of tile k over pixel centres (xs, ys)
         r, c = f.tile_image_to_lattice(k, np.asarray(xs, float), np.asarray(ys, float))
         return (int(round(r.min())), int(round(c.min())), int(round(r.max())) + 1, int(round(c.max())) + 1)
@@ -187,6 +183,14 @@ def test_a_corridor_cut_by_the_zones_is_one_passage_and_a_wall_across_it_a_door(
     u, v = np.array([0.0, 199.0, 0.0, 199.0]), np.array([-22.0, -22.0, 22.0, 22.0])
     t = thetas[1]
     rect1 = unit(1, 150 + u * math.cos(t) - v * math.sin(t), 150 + u * math.sin(t) + v * math.cos(t))
+    return rect0, rect1
+
+
+@pytest.mark.parametrize("door", [False, True])
+def test_a_corridor_cut_by_the_zones_is_one_passage_and_a_wall_across_it_a_door(door):
+    classes, zones, thetas = corridor_map(door=door)
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    rect0, rect1 = corridor_units(f, thetas)
     assert f.tile_of_rect(rect0) == 0 and f.tile_of_rect(rect1) == 1
     w = wm.add(wm.add(wm.empty(2), 0, rect0), 1, rect1)
     d = derive_world(f, w)
@@ -217,19 +221,6 @@ class OpeningsProvider:
         eye = np.eye(4)
         return FixedResult({u: eye[cells.UNIT_TYPES.index(n)] for u, n in names.items()},
                            {pq: 0.9 for pq in ev.adj}, names)
-
-
-def corridor_units(f, thetas):
-    """The two corridor units of :func:`corridor_map`, one on each tile."""
-    def unit(k, xs, ys):      # the lattice rectangle of tile k over pixel centres (xs, ys)
-        r, c = f.tile_image_to_lattice(k, np.asarray(xs, float), np.asarray(ys, float))
-        return (int(round(r.min())), int(round(c.min())), int(round(r.max())) + 1, int(round(c.max())) + 1)
-
-    rect0 = unit(0, [20, 149], [128, 172])
-    u, v = np.array([0.0, 199.0, 0.0, 199.0]), np.array([-22.0, -22.0, 22.0, 22.0])
-    t = thetas[1]
-    rect1 = unit(1, 150 + u * math.cos(t) - v * math.sin(t), 150 + u * math.sin(t) + v * math.cos(t))
-    return rect0, rect1
 
 
 def _near_the_boundary(rng, f, base):
@@ -370,9 +361,9 @@ def test_an_opening_is_as_wide_as_along_the_tile_whose_wall_holds_it():
     c = math.cos(math.pi / 4)
     aff = np.array([[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], [c, c, 0.0, 0.0, 0.0, 0.0]])
     pix = np.array([[i, i] for i in range(21)], np.int64)          # (row, col) on the diagonal
-    labels = np.ones(21, np.int64)
-    assert _run_width(aff, 0, pix, 0, labels, 1) == 21
-    assert _run_width(aff, 1, pix, 0, labels, 1) == 29                # 20·√2 + 1
+    members = np.arange(21, dtype=np.int64)
+    assert _run_width(aff, 0, pix, 0, members) == 21
+    assert _run_width(aff, 1, pix, 0, members) == 29                  # 20·√2 + 1
     ip = np.array([3, 25, 10, 2], np.int64)                           # door_max 25 cells
     room = np.array([0, 0, 80, 80], np.int64)                         # interiors 76 cells across
     assert not _is_passage(np.array([21, 29]), room, room, ip)        # a door of 21 cells
