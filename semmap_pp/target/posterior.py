@@ -464,23 +464,17 @@ def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_
 
 
 @numba.njit(cache=True, nogil=True)
-def _retype_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects, new_active,
-                  changed, geometry, adj, hist, gamma_total, no_sale, never_sale, prior_n, ip,
-                  fp, cross, touched, xd):  # pragma: no cover - compiled
-    """:func:`_retype_changed` (knowledge on: no types) then the type-free upper bound of the
-    proposal's log posterior (:func:`_score` with the better gain per category and the SaLe
-    factor at most 1), in one call; ``hist`` is not written."""
-    no_types = np.zeros(0, np.int8)
-    _retype_changed(old_rects, old_active, new_rects, new_active, changed, geometry, adj,
-                    no_types, no_types, ip, fp, cross, touched, xd)
-    if xd is None:
-        loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
-                                      new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
-                                      never_sale, True, prior_n, ip, fp, None)
-    else:
-        loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
-                                      new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
-                                      never_sale, True, prior_n, ip, fp, xd[0])
+def _type_free_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects, new_active, adj,
+                     hist, gamma_total, no_sale, never_sale, prior_n, ip, fp,
+                     aff):  # pragma: no cover - compiled
+    """The type-free upper bound of a proposal's log posterior: :func:`_score` with the better
+    gain per category and the SaLe factor at most 1; ``hist`` is not written. It depends on no
+    unit's type, geometry class or adjacency (``adj`` is only read, and no pair passes the SaLe
+    threshold), so it is taken before :func:`_retype_changed` derives them: a proposal below its
+    floor never pays for them (on a tiled lattice, the pairs of two tiles)."""
+    loglik, logprior, _g = _score(xsum, gain_max, old_rects, old_active, old_types, new_rects,
+                                  new_active, old_types, hist.copy(), gamma_total, adj, no_sale,
+                                  never_sale, True, prior_n, ip, fp, aff)
     return 0 + loglik + logprior
 
 
@@ -595,6 +589,19 @@ class Tracker(KnowledgeTracking):
         xo = cross = old.cross.copy() if tiled else None
         touched = np.zeros(ow.capacity, np.bool_) if tiled else None
         aff = xd.aff if tiled else None
+        if floor is not None and (tiled or not self._fixed):
+            # bound 1, no types: per category the better of the corridor / non-corridor gains,
+            # SaLe factor at most 1; before the units' classes and relations are derived
+            # (with the fixed provider only on a tiled lattice, whose relations of pairs of two
+            # tiles cost several times the score: on one lattice the bound would only add a score)
+            bound = _type_free_bound(
+                data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), hist,
+                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp,
+                aff)
+            if bound + 1e-9 * abs(bound) < floor:
+                self.skipped[0] += 1
+                return self._bounded(new_world)
         if self._fixed:
             types = ow.types.copy()
             loglik, logprior, gamma_total = _propose_fixed(
@@ -605,21 +612,9 @@ class Tracker(KnowledgeTracking):
             types.setflags(write=False)
             knowledge = sale = None
         else:
-            if floor is not None:
-                # bound 1, no types: per category the better of the corridor / non-corridor
-                # gains, SaLe factor at most 1 (with the retyping of the changed slots)
-                bound = _retype_bound(
-                    data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
-                    _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, hist,
-                    self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp,
-                    xo, touched, xd)
-                if bound + 1e-9 * abs(bound) < floor:
-                    self.skipped[0] += 1
-                    return self._bounded(new_world)
-            else:
-                _retype_changed(_ro(ow.rects), _ro(ow.active), _ro(new_world.rects),
-                                _ro(new_world.active), changed, geometry, adj, _NO_TYPES,
-                                _NO_TYPES, post._ip, post._fp, xo, touched, xd)
+            _retype_changed(_ro(ow.rects), _ro(ow.active), _ro(new_world.rects),
+                            _ro(new_world.active), changed, geometry, adj, _NO_TYPES,
+                            _NO_TYPES, post._ip, post._fp, xo, touched, xd)
             types, sale, knowledge = self._knowledge_types(new_world, adj, geometry, changed,
                                                            map_only=floor is not None,
                                                            cross=cross, touched=touched)

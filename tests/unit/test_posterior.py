@@ -261,18 +261,18 @@ def test_pair_openings_equal_the_door_detector():
 
 
 def recorded_bounds(monkeypatch) -> list:
-    """The type-free bound (``posterior._retype_bound``: no types, per category the better gain,
+    """The type-free bound (``posterior._type_free_bound``: no types, per category the better gain,
     SaLe factor at most 1) of every proposal made with a floor from now on, in order."""
     import semmap_pp.target.posterior as P
 
-    seen, bound = [], P._retype_bound
+    seen, bound = [], P._type_free_bound
 
     def recording(*args):
         value = bound(*args)
         seen.append(float(value))
         return value
 
-    monkeypatch.setattr(P, "_retype_bound", recording)
+    monkeypatch.setattr(P, "_type_free_bound", recording)
     return seen
 
 
