@@ -35,7 +35,7 @@ import numpy as np
 from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_row, adjacency_rows
-from semmap_pp.derive.crossing import NO_CROSS, cross_all, cross_data, cross_update, rect_tiles
+from semmap_pp.derive.crossing import NO_CROSS, cross_all, cross_data, cross_update, rect_tiles, tile_of
 from semmap_pp.derive.doors import opening_counts
 from semmap_pp.target.geometry_evidence import (COLIKE, GEOMETRY_TYPE, FixedProvider, GeometryTable,
                                 build_evidence, geometry_class, geometry_class_compiled,
@@ -464,6 +464,31 @@ def _propose_fixed(xsum, gain, old_rects, old_active, old_types, new_rects, new_
 
 
 @numba.njit(cache=True, nogil=True)
+def _fixed_bound(xsum, gain, old_rects, old_active, old_types, new_rects, new_active, changed,
+                 geometry, adj, types, fixed_types, hist, gamma_total, table, prior_n, ip, fp,
+                 cross, touched, aff):  # pragma: no cover - compiled
+    """An upper bound of a proposal's log posterior under the fixed provider on a tiled lattice,
+    without the relations of pairs of two tiles: the changed slots retyped on the lattice alone
+    (their geometry classes, hence their fixed types and the likelihood, are exact), and every
+    pair of two tiles left out of the SaLe factor (a pair's factor is at most 1). No argument is
+    written (copies are retyped)."""
+    g, a, t = geometry.copy(), adj.copy(), types.copy()
+    _retype_changed(old_rects, old_active, new_rects, new_active, changed, g, a, t, fixed_types,
+                    ip, fp, cross, touched, None)
+    spans = ip[I_SPANS:]
+    K = new_rects.shape[0]
+    for p in range(K):
+        if new_active[p]:
+            for q in range(p + 1, K):
+                if a[p, q] and tile_of(new_rects[p, 1], spans) != tile_of(new_rects[q, 1], spans):
+                    a[p, q] = a[q, p] = False
+    loglik, logprior, _g = _score(xsum, gain, old_rects, old_active, old_types, new_rects,
+                                  new_active, t, hist.copy(), gamma_total, a, np.zeros((1, 1)),
+                                  table, True, prior_n, ip, fp, aff)
+    return 0 + loglik + logprior
+
+
+@numba.njit(cache=True, nogil=True)
 def _type_free_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects, new_active, adj,
                      hist, gamma_total, no_sale, never_sale, prior_n, ip, fp,
                      aff):  # pragma: no cover - compiled
@@ -589,11 +614,9 @@ class Tracker(KnowledgeTracking):
         xo = cross = old.cross.copy() if tiled else None
         touched = np.zeros(ow.capacity, np.bool_) if tiled else None
         aff = xd.aff if tiled else None
-        if floor is not None and (tiled or not self._fixed):
+        if floor is not None and not self._fixed:
             # bound 1, no types: per category the better of the corridor / non-corridor gains,
             # SaLe factor at most 1; before the units' classes and relations are derived
-            # (with the fixed provider only on a tiled lattice, whose relations of pairs of two
-            # tiles cost several times the score: on one lattice the bound would only add a score)
             bound = _type_free_bound(
                 data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), hist,
@@ -604,6 +627,19 @@ class Tracker(KnowledgeTracking):
                 return self._bounded(new_world)
         if self._fixed:
             types = ow.types.copy()
+            if floor is not None and tiled:
+                # the fixed types are exact without the relations of pairs of two tiles, which
+                # cost several times the score: bounded without them first (on one lattice the
+                # bound would only add a score)
+                bound = _fixed_bound(
+                    data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                    _ro(new_world.rects), _ro(new_world.active), changed, _ro(geometry),
+                    _ro(adj), _ro(types), GEOMETRY_TYPE, hist, self.gamma_total,
+                    _ro(post.fixed.fixed_sale), _ro(self._prior_n), post._ip, post._fp, xo,
+                    touched, aff)
+                if bound + 1e-9 * abs(bound) < floor:
+                    self.skipped[1] += 1
+                    return self._bounded(new_world)
             loglik, logprior, gamma_total = _propose_fixed(
                 data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, types,

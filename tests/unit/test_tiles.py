@@ -279,6 +279,58 @@ def test_incremental_relations_across_tiles_equal_the_full_ones(knowledge):
     assert seen["cross"] > 50 and seen["flips"] > 20 and seen["third"] > 0, seen
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("knowledge", [False, True])
+def test_a_floor_skips_a_proposal_across_tiles_only_below_its_bound(knowledge, monkeypatch):
+    """With a floor (MH with the uniform drawn first) on a tiled lattice, a proposal comes back
+    unevaluated only when its full log posterior lies below the floor, and otherwise is the full
+    evaluation; the bound taken before the relations of pairs of two tiles (the fixed provider's
+    without those pairs, the type-free one with knowledge) is never below the full value. Both
+    skips and full evaluations occur, near the zones' boundary of :func:`corridor_map`."""
+    import semmap_pp.target.posterior as P
+
+    name = "_type_free_bound" if knowledge else "_fixed_bound"
+    seen, bound_fn = [], getattr(P, name)
+
+    def recording(*args):
+        value = bound_fn(*args)
+        seen.append(float(value))
+        return value
+
+    monkeypatch.setattr(P, name, recording)
+    rng = np.random.default_rng(9)
+    classes, zones, thetas = corridor_map()
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    post = Posterior(f, MODEL, OpeningsProvider() if knowledge else None)
+    post.knowledge_on = knowledge
+    base = corridor_units(f, thetas)
+    tr = post.start(wm.add(wm.add(wm.empty(5), 0, base[0]), 1, base[1]))
+    counts = {"skipped": 0, "full": 0}
+    for _ in range(300):
+        s = int(rng.integers(tr.world.capacity))
+        old = tr.world
+        nw = (wm.remove(old, s) if old.active[s] and rng.random() < 0.2
+              else wm.replace(old, s, _near_the_boundary(rng, f, base)) if old.active[s]
+              else wm.add(old, s, _near_the_boundary(rng, f, base)))
+        full = post.evaluate(nw).total
+        if not math.isfinite(full):
+            continue
+        floor = full + float(rng.uniform(-100.0, 600.0))
+        n_seen = len(seen)
+        prop = tr.propose(nw, [s], floor=floor)
+        if len(seen) > n_seen:
+            assert seen[-1] + 1e-9 * abs(seen[-1]) >= full, (seen[-1], full)
+        if prop.bounded:
+            counts["skipped"] += 1
+            assert full < floor
+        else:
+            counts["full"] += 1
+            assert prop.logp == pytest.approx(full, rel=1e-9, abs=0)
+            if rng.random() < 0.5:
+                tr.accept(prop)
+    assert counts["skipped"] > 20 and counts["full"] > 20, counts
+
+
 def test_derive_world_and_the_target_agree_across_tiles():
     """The final world's adjacency and openings between units of two tiles (derive_world) are
     the target's, on random worlds near the turn of a corridor with a door across it."""
