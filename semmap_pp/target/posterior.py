@@ -614,32 +614,10 @@ class Tracker(KnowledgeTracking):
         xo = cross = old.cross.copy() if tiled else None
         touched = np.zeros(ow.capacity, np.bool_) if tiled else None
         aff = xd.aff if tiled else None
-        if floor is not None and not self._fixed:
-            # bound 1, no types: per category the better of the corridor / non-corridor gains,
-            # SaLe factor at most 1; before the units' classes and relations are derived
-            bound = _type_free_bound(
-                data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
-                _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), hist,
-                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp,
-                aff)
-            if bound + 1e-9 * abs(bound) < floor:
-                self.skipped[0] += 1
-                return self._bounded(new_world)
+        if floor is not None and self._below_floor(new_world, changed, floor, tiled, xo, touched):
+            return self._bounded(new_world)
         if self._fixed:
             types = ow.types.copy()
-            if floor is not None and tiled:
-                # the fixed types are exact without the relations of pairs of two tiles, which
-                # cost several times the score: bounded without them first (on one lattice the
-                # bound would only add a score)
-                bound = _fixed_bound(
-                    data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
-                    _ro(new_world.rects), _ro(new_world.active), changed, _ro(geometry),
-                    _ro(adj), _ro(types), GEOMETRY_TYPE, hist, self.gamma_total,
-                    _ro(post.fixed.fixed_sale), _ro(self._prior_n), post._ip, post._fp, xo,
-                    touched, aff)
-                if bound + 1e-9 * abs(bound) < floor:
-                    self.skipped[1] += 1
-                    return self._bounded(new_world)
             loglik, logprior, gamma_total = _propose_fixed(
                 data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), changed, geometry, adj, types,
@@ -672,6 +650,37 @@ class Tracker(KnowledgeTracking):
         new = wm.World(new_world.rects, new_world.active, types)
         return ScoredProposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale, cross), (hist, gamma_total, knowledge))
+
+    def _below_floor(self, new_world, changed, floor, tiled, xo, touched) -> bool:
+        """Whether an upper bound of ``new_world``'s log posterior, taken before its changed slots
+        are retyped and its pairs of two tiles computed, lies below ``floor`` (counted in
+        :attr:`skipped`). With knowledge: the type-free bound (bound 1). With the fixed provider on
+        a tiled lattice: the proposal's score without the pairs of two tiles, which cost several
+        times the score (the fixed types and the likelihood are exact without them, and each
+        pair's SaLe factor is at most 1); on one lattice no bound (it would only add a score)."""
+        post, old = self.post, self._typ
+        ow, data = old.world, post.data
+        aff = post.cross.aff if tiled else None
+        if not self._fixed:
+            bound = _type_free_bound(
+                data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), _ro(self.hist),
+                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp, aff)
+            which = 0
+        elif tiled:
+            bound = _fixed_bound(
+                data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                _ro(new_world.rects), _ro(new_world.active), changed, _ro(old.geometry),
+                _ro(old.adj), _ro(ow.types), GEOMETRY_TYPE, _ro(self.hist), self.gamma_total,
+                _ro(post.fixed.fixed_sale), _ro(self._prior_n), post._ip, post._fp, xo, touched,
+                aff)
+            which = 1
+        else:
+            return False
+        if bound + 1e-9 * abs(bound) < floor:
+            self.skipped[which] += 1
+            return True
+        return False
 
     @staticmethod
     def _bounded(world) -> ScoredProposal:
