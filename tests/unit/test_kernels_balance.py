@@ -166,3 +166,43 @@ def test_interchange_balance_where_it_makes_or_breaks_adjacency(shape):
     diff = abs(flow - flow.T)
     assert diff.max() <= 1e-12 * abs(flow).max()
     assert np.max(np.abs(pi @ p - pi)) < 1e-12 * pi.max()
+
+
+@pytest.mark.parametrize("share", [0.5, pytest.param(1.0, marks=pytest.mark.slow)])
+def test_detailed_balance_with_a_start_worlds_units_among_the_births(share):
+    """The sample around W* adds W*'s units to the birth table (``with_start_births``): with two
+    start units that are not candidates of the map (one of them off every candidate by more than
+    the jitter), the table holds them, its weights sum to 1, ADD's density gives them their share,
+    and the whole mix keeps a random target in exact detailed balance, irreducible."""
+    from semmap_pp.sampler.kernels.add_remove import birth_pmf, birth_q, with_start_births
+
+    base = build_data(tiny_classes((4, 5)), min_side=2, wall_cells=1, wall_share=0, door_min=1,
+                      door_max=1, settings=SETTINGS)
+    start = wm.add(wm.add(wm.empty(2), 0, (0, 0, 2, 2)), 1, (2, 3, 4, 5))
+    known = {tuple(r) for r in base.birth_rects.tolist()}
+    assert {(0, 0, 2, 2), (2, 3, 4, 5)} - known
+    data = with_start_births(base, [start, start], share)
+    assert len(data.birth_rects) == len(base.birth_rects) + len({(0, 0, 2, 2), (2, 3, 4, 5)} - known)
+    assert data.birth_weights.sum() == pytest.approx(1.0, abs=1e-12)
+    pmf = birth_pmf(data)
+    assert sum(pmf.values()) <= 1.0 + 1e-12
+    for rect in pmf:
+        assert birth_q(rect, data) == pytest.approx(pmf[rect], rel=1e-12)
+    assert birth_q((2, 3, 4, 5), data) > birth_q((2, 3, 4, 5), base)
+    assert with_start_births(base, [start], 0.0) is base
+
+    mix = default_mix(SETTINGS)
+    states = all_states(data, 2)
+    target = TableTarget(np.random.default_rng(5), 2)
+    logpi = np.array([target.evaluate(s) for s in states])
+    pi = np.exp(logpi - logpi.max())
+    pi /= pi.sum()
+    p, q_kernel = transition_matrix(states, data, mix, logpi)
+    for (kind, i, j), (q, lr) in q_kernel.items():
+        back = q_kernel.get((kind, j, i))
+        assert back is not None
+        assert lr == pytest.approx(math.log(back[0]) - math.log(q), abs=1e-9)
+    flow = sparse.diags(pi) @ p
+    assert abs(flow - flow.T).max() <= 1e-12 * abs(flow).max()
+    assert np.max(np.abs(pi @ p - pi)) < 1e-12 * pi.max()
+    assert csgraph.connected_components(p, directed=True, connection="strong")[0] == 1
