@@ -138,18 +138,10 @@ def walled_map():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("start_births", [False, True])
-def test_prior_is_recovered_with_the_likelihood_off(start_births):
-    """Number of units and the r0 marginal of units match the prior (chi-square, thinned chain);
-    also with a start world's units among the birth candidates (the sample around W*'s table,
-    ``add_remove.with_start_births``): sampled = exact marginals."""
-    from semmap_pp.sampler.kernels.add_remove import with_start_births
+def test_prior_is_recovered_with_the_likelihood_off():
+    """Number of units and the r0 marginal of units match the prior (chi-square, thinned chain)."""
     data = build_data(walled_map(), min_side=3, wall_cells=1, wall_share=1, max_side=8, door_min=1,
                       door_max=2, settings=KernelSettings(wall_line_min=3))
-    if start_births:
-        start = wm.add(wm.add(wm.empty(4), 0, (1, 1, 5, 7)), 1, (5, 2, 9, 9))
-        data = with_start_births(data, [start], 0.5)
-        assert len(data.birth_rects) > 0 and abs(data.birth_weights.sum() - 1.0) < 1e-12
     capacity, rate = 4, 1.5
     target = PriorTarget(data, capacity, rate)
     tr = target.start(wm.empty(capacity))
