@@ -278,9 +278,6 @@ class KernelSettings(NamedTuple):
         from the data-driven candidate table.
     birth_jitter : int
         Each coordinate of a candidate birth is moved by a uniform offset in ``[-j, j]``.
-    birth_start_share : float
-        In the sample around W*, the share of the birth candidates' weight on W*'s own units
-        (:func:`semmap_pp.sampler.kernels.add_remove.with_start_births`; 0: the map's candidates alone).
     box_prob, box_jitter_prob : float
         ALLOCATE draws each coordinate of the new unit exactly from the free-space box behind the
         wall (``box_prob``), near it (``box_jitter_prob``, offset within ``box_jitter``) or uniformly
@@ -309,7 +306,6 @@ class KernelSettings(NamedTuple):
     local_radius: int = 3
     birth_uniform: float = 0.2
     birth_jitter: int = 2
-    birth_start_share: float = 0.5
     box_prob: float = 0.5
     box_jitter_prob: float = 0.3
     box_jitter: int = 2

@@ -29,7 +29,7 @@ from semmap_pp.plans.world_file import read_start_world
 from semmap_pp.run.inputs import load_inputs
 from semmap_pp.run.target_factory import run_target
 from semmap_pp.sampler.kernels import data_from_frame
-from semmap_pp.sampler.kernels.add_remove import _rho, add_log_ratio, birth_q, with_start_births
+from semmap_pp.sampler.kernels.add_remove import _rho, add_log_ratio, birth_q
 from semmap_pp.sampler.kernels.split_merge import (_merge_proposal, _split_proposal, cut_weights,
                                                    mergeable)
 from semmap_pp.target.prior import log_p_n, log_slots
@@ -88,7 +88,6 @@ def main(argv=None) -> int:
     lag = inputs.model.sampler.spread_correlation_lag_m if a.lag_m is None else a.lag_m
     lam, area = likelihood_exponent(post, wstar, lag)
     data = data_from_frame(frame, inputs.model.kernels)
-    around = with_start_births(data, [wstar], inputs.model.kernels.birth_start_share)
     uniform = math.log(_rho(data) / (data.side_counts[0] * data.side_counts[1]))
     rows = []
     n = int(wstar.active.sum())
@@ -98,9 +97,6 @@ def main(argv=None) -> int:
         death = delta(post, lam, wstar, without, -add_log_ratio(n - 1, wstar.capacity, rect, data))
         death["log_qb"] = math.log(birth_q(rect, data))
         death["log_qb_uniform"] = uniform
-        # the sample around W*'s birth table (W*'s own units among the candidates)
-        death["log_qb_wstar"] = math.log(birth_q(rect, around))
-        death["log_alpha_wstar"] = death["log_alpha"] - death["log_qb"] + death["log_qb_wstar"]
         split = best_split(post, lam, wstar, int(s), data)
         area_m2 = (rect[2] - rect[0]) * (rect[3] - rect[1]) * frame.cells.resolution ** 2
         rows.append({"slot": int(s), "rect": rect, "area_m2": area_m2,
@@ -119,14 +115,13 @@ def main(argv=None) -> int:
         return 0
     print(f"A = {area:.1f} cells, λ = 1/A = {lam:.4g}; {n} units in {wstar.capacity} slots; "
           f"log p_rect = {post.log_rect:.2f}; log q_b(uniform part) = {uniform:.2f}")
-    hdr = ("slot  m²    type | death: Δℓ  λΔℓ  n,slots rects  SaLe  logratio (log q_b) log α "
-           "[W* births: log q_b, log α] | split: λΔℓ  n,slots rects SaLe logratio log α")
+    hdr = "slot  m²    type | death: Δℓ  λΔℓ  n,slots rects  SaLe  logratio (log q_b) log α | split: λΔℓ  n,slots rects SaLe logratio log α"
     print(hdr)
     for r in rows:
         d, sp = r["death"], r["split"]
         line = (f"{r['slot']:4d} {r['area_m2']:6.1f} {r['type']:3d} | {d['loglik']:9.1f} {d['tempered_loglik']:7.1f} "
                 f"{d['n_slots']:6.2f} {d['rects']:6.2f} {d['sale']:6.2f} {d['log_ratio']:7.2f} ({d['log_qb']:7.2f}) "
-                f"{d['log_alpha']:8.1f} [{d['log_qb_wstar']:6.2f} {d['log_alpha_wstar']:7.1f}]")
+                f"{d['log_alpha']:8.1f}")
         if sp:
             line += (f" | {sp['tempered_loglik']:7.1f} {sp['n_slots']:6.2f} {sp['rects']:6.2f} {sp['sale']:6.2f} "
                      f"{sp['log_ratio']:7.2f} {sp['log_alpha']:8.1f}")

@@ -16,7 +16,6 @@ from semmap_pp.run.lattice_cpr import LatticeCPR
 from semmap_pp.run.results import (MapRun, RunSettings, SpreadSample, Tempering, collect_draws, figure_source,
                                    sampled_worlds, spread_chains, spread_first_draw)
 from semmap_pp.run.target_factory import run_target
-from semmap_pp.sampler.kernels.add_remove import with_start_births
 from semmap_pp.sampler.replicas import geometric_ladder, geometric_temperatures
 from semmap_pp.sampler.sampling import sample_worlds
 from semmap_pp.sampler.spread import typed_worlds
@@ -82,7 +81,6 @@ def sample_spread(inputs: Inputs, settings: RunSettings, wstar: wm.World, wstar_
             + ", ".join(f"{b:.3g}" for b in ladder)
             + (f"; {p.spread_swaps} swap(s) per draw" if len(ladder) > 1 else "")
             + ("; temperatures " + ", ".join(f"{t:.3g}" for t in heat) if heat[-1] != 1.0 else ""))
-    data = with_start_births(data, starts, model.kernels.birth_start_share)
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=settings.spread_draws, tune=0,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.spread_n_inner,

@@ -11,10 +11,6 @@ distance-transform maxima and regions) with weights ``w``, each coordinate jitte
 REMOVE picks one of the ``n`` units uniformly. For ``W (n units) -> W' (n + 1)``:
 
     log q(W'->W) / q(W->W') = -log(n + 1) + log(K - n) - log q_b(r).
-
-The sample around W* adds W*'s own units to the candidate table (:func:`with_start_births`), so
-that the reverse of a death of one of them is a birth of likely rectangles, not of the uniform
-part alone.
 """
 
 from __future__ import annotations
@@ -117,28 +113,6 @@ def propose_remove(rng, world, data: KernelData):
     rect = world.rects[slot]
     return Proposal(wm.remove(world, slot),
                     -add_log_ratio(act.size - 1, world.capacity, rect, data), (slot,))
-
-
-def with_start_births(data: KernelData, worlds, share: float) -> KernelData:
-    """``data`` whose birth candidates also hold the units of ``worlds`` (the sample's start
-    worlds: W*): each of those rectangles not yet a candidate weighs ``share`` / their number, the
-    map's candidates the rest (all of it when ``share`` is 0 or there are none). A fixed table, so
-    ADD / REMOVE stay a reversible pair (their log ratios read the same table)."""
-    known = {tuple(r) for r in data.birth_rects.tolist()}
-    extra = []
-    for w in worlds:
-        for r in w.rects[w.active].tolist():
-            if tuple(r) not in known and _valid(tuple(r), data):
-                known.add(tuple(r))
-                extra.append(r)
-    if not extra or not share > 0.0:
-        return data
-    old = np.asarray(data.birth_weights, np.float64)
-    share = float(share) if len(old) else 1.0
-    weights = np.concatenate([old * (1.0 - share), np.full(len(extra), share / len(extra))])
-    rects = np.concatenate([np.asarray(data.birth_rects, np.int64).reshape(-1, 4),
-                            np.asarray(extra, np.int64).reshape(-1, 4)])
-    return data._replace(birth_rects=rects, birth_weights=weights)
 
 
 def birth_pmf(data: KernelData) -> dict:
