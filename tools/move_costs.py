@@ -7,7 +7,9 @@ by (knowledge on), the log acceptance ratio of
 
 * its death (REMOVE) and, reversed, its birth (ADD) from W* without it;
 * its best split (SPLIT at the three strongest cut positions per axis) and that split's merge;
-* the merge of every pair MERGE may join;
+* the merge of every pair MERGE may join (units attached along a whole wall, the same span);
+* every pair of units replaced by their bounding box where it exceeds their union by at most 15 %
+  (the target's view of a unit fewer there; no kernel proposes it in one step);
 
 split into: the likelihood's change, untempered and tempered (times 1/A), the prior's number of
 units and slots (``log p_n − log C(K, n)``), the rectangles (``Σ log p_rect``), the SaLe factor,
@@ -74,6 +76,25 @@ def best_split(post, lam, world, slot, data):
     return best
 
 
+def box_merges(post, lam, world, max_side, slack=0.15):
+    """Every pair of ``world``'s units replaced by their bounding box (in the first's slot) where
+    it exceeds their union by at most ``slack`` and is a valid unit: the target's terms only."""
+    out = []
+    slots = [int(s) for s in wm.active_slots(world)]
+    for i in slots:
+        for j in (j for j in slots if j > i):
+            a, b = world.rects[i], world.rects[j]
+            box = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+            area = (box[2] - box[0]) * (box[3] - box[1])
+            union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1])
+            if area > (1.0 + slack) * union or max(box[2] - box[0], box[3] - box[1]) > max_side:
+                continue
+            d = delta(post, lam, world, wm.remove(wm.replace(world, i, box), j), 0.0)
+            d["pair"] = [i, j]
+            out.append(d)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("map")
@@ -108,8 +129,9 @@ def main(argv=None) -> int:
         d = delta(post, lam, wstar, prop.world, prop.log_ratio)
         d["pair"] = [int(p[1]), int(p[2])]
         merges.append(d)
+    boxes = box_merges(post, lam, wstar, data.max_side)
     out = {"A": area, "lambda": lam, "units": n, "K": wstar.capacity, "log_rect": post.log_rect,
-           "log_qb_uniform": uniform, "rows": rows, "merges": merges}
+           "log_qb_uniform": uniform, "rows": rows, "merges": merges, "box_merges": boxes}
     if a.json:
         json.dump(out, sys.stdout, indent=1, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
         return 0
@@ -126,6 +148,11 @@ def main(argv=None) -> int:
             line += (f" | {sp['tempered_loglik']:7.1f} {sp['n_slots']:6.2f} {sp['rects']:6.2f} {sp['sale']:6.2f} "
                      f"{sp['log_ratio']:7.2f} {sp['log_alpha']:8.1f}")
         print(line)
+    if not merges:
+        print("merge: no pair of units MERGE may join")
+    for m in boxes:
+        print(f"bounding box of {m['pair']}: Δℓ {m['loglik']:.1f} λΔℓ {m['tempered_loglik']:.1f} "
+              f"n,slots {m['n_slots']:.2f} rects {m['rects']:.2f} SaLe {m['sale']:.2f} log π change {m['log_alpha']:.1f}")
     for m in merges:
         print(f"merge {m['pair']}: Δℓ {m['loglik']:.1f} λΔℓ {m['tempered_loglik']:.1f} n,slots {m['n_slots']:.2f} "
               f"rects {m['rects']:.2f} SaLe {m['sale']:.2f} log ratio {m['log_ratio']:.2f} log α {m['log_alpha']:.1f}")
