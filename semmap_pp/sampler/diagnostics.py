@@ -302,9 +302,11 @@ class ConvergenceReport:
                           or any(math.isinf(q.rhat) for q in self.quantities)):
             cure = ("a ladder reaching nearer the prior (more rungs: `--rungs N`, a smaller "
                     "[sampler] spread_ladder_ratio) and more swaps (spread_swaps)" if self.tempered else
-                    "replica exchange between tempered replicas is the remedy built for this "
-                    "(`semmap map --tempered`, docs/sampler.md, \"Replica exchange\"; measured not to "
-                    "suffice yet on the bundled maps)")
+                    "what joins such modes is a flatter target, and none measured does yet: replica "
+                    "exchange (`semmap map --tempered`) keeps them apart on the bundled maps, and at its "
+                    "exponent the target prefers fewer units than W* (docs/model.md, \"What a unit more "
+                    "or less costs at 1 / A\"); whether other seeds find the same plan: `semmap "
+                    "stability`")
             return ("the chains disagree (R-hat): they sit in separate modes or have not left their "
                     f"starts, which more draws mend only slowly; {cure}" + (f"; then {more}" if more else ""))
         if more:

@@ -316,8 +316,9 @@ def test_the_default_thresholds_are_vehtari_et_al_2021s():
 
 def test_a_failing_verdict_names_the_quantity_the_summaries_and_a_remedy():
     """Chains apart on the log posterior only: R-hat fails there, not on n_units; every summary's
-    ESS is short of 400, split into bulk and tail; the remedy for chains apart is replica exchange
-    (with --tempered already on: a longer ladder)."""
+    ESS is short of 400, split into bulk and tail; for chains apart it names replica exchange as
+    measured not to join them, and the seeds' comparison (with --tempered already on: a longer
+    ladder)."""
     rng = np.random.default_rng(5)
     lp = rng.normal(size=(2, 200))
     lp[1] += 6.0
@@ -330,6 +331,7 @@ def test_a_failing_verdict_names_the_quantity_the_summaries_and_a_remedy():
     assert f"log_posterior ({dg.format_rhat(lp_q.rhat)})" in parts["R-hat > 1.01"]
     assert f"log_posterior ({lp_q.ess_bulk:.0f})" in parts["bulk ESS < 400"]
     assert "--tempered" in rep.remedy() and "--rungs" not in rep.remedy()
+    assert "none measured does yet" in rep.remedy() and "semmap stability" in rep.remedy()
     tempered = dataclasses.replace(rep, tempered=True)
     assert "--rungs" in tempered.remedy() and "`semmap map --tempered`" not in tempered.remedy()
     text = rep.to_text().splitlines()
