@@ -614,7 +614,7 @@ class Tracker(KnowledgeTracking):
         xo = cross = old.cross.copy() if tiled else None
         touched = np.zeros(ow.capacity, np.bool_) if tiled else None
         aff = xd.aff if tiled else None
-        if floor is not None and self._below_floor(new_world, changed, floor, tiled, xo, touched):
+        if floor is not None and self._below_floor(new_world, changed, floor, xo, touched, aff):
             return self._bounded(new_world)
         if self._fixed:
             types = ow.types.copy()
@@ -651,7 +651,7 @@ class Tracker(KnowledgeTracking):
         return ScoredProposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale, cross), (hist, gamma_total, knowledge))
 
-    def _below_floor(self, new_world, changed, floor, tiled, xo, touched) -> bool:
+    def _below_floor(self, new_world, changed, floor, xo, touched, aff) -> bool:
         """Whether an upper bound of ``new_world``'s log posterior, taken before its changed slots
         are retyped and its pairs of two tiles computed, lies below ``floor`` (counted in
         :attr:`skipped`). With knowledge: the type-free bound (bound 1). With the fixed provider on
@@ -660,14 +660,13 @@ class Tracker(KnowledgeTracking):
         pair's SaLe factor is at most 1); on one lattice no bound (it would only add a score)."""
         post, old = self.post, self._typ
         ow, data = old.world, post.data
-        aff = post.cross.aff if tiled else None
         if not self._fixed:
             bound = _type_free_bound(
                 data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), _ro(self.hist),
                 self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp, aff)
             which = 0
-        elif tiled:
+        elif aff is not None:      # a tiled lattice (``aff``: its tiles' rotations)
             bound = _fixed_bound(
                 data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), changed, _ro(old.geometry),

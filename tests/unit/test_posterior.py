@@ -260,19 +260,20 @@ def test_pair_openings_equal_the_door_detector():
     assert {d for d, _ in seen} >= {0, 1, 2} and max(p for _, p in seen) >= 1
 
 
-def recorded_bounds(monkeypatch) -> list:
-    """The type-free bound (``posterior._type_free_bound``: no types, per category the better gain,
-    SaLe factor at most 1) of every proposal made with a floor from now on, in order."""
+def recorded_bounds(monkeypatch, name: str = "_type_free_bound") -> list:
+    """The bound ``posterior.<name>`` of every proposal that takes it from now on, in order: by
+    default the type-free bound (no types, per category the better gain, SaLe factor at most 1);
+    ``"_fixed_bound"``: the fixed provider's on a tiled lattice, without the pairs of two tiles."""
     import semmap_pp.target.posterior as P
 
-    seen, bound = [], P._type_free_bound
+    seen, bound = [], getattr(P, name)
 
     def recording(*args):
         value = bound(*args)
         seen.append(float(value))
         return value
 
-    monkeypatch.setattr(P, "_type_free_bound", recording)
+    monkeypatch.setattr(P, name, recording)
     return seen
 
 

@@ -21,6 +21,7 @@ from semmap_pp.target.posterior import Posterior
 from semmap_pp.target.prior import log_p_rect_const, n_rects, rect_faults, rects_valid
 from standin import TableTarget
 from test_kernels_balance import SETTINGS, all_states, tiny_classes, transition_matrix
+from test_posterior import recorded_bounds
 
 MODEL = load_model()
 
@@ -238,6 +239,26 @@ def _near_the_boundary(rng, f, base):
     return (int(r[0]) - h // 2, int(c[0]) - w // 2, int(r[0]) - h // 2 + h, int(c[0]) - w // 2 + w)
 
 
+def _corridor_tracker(knowledge):
+    """``(frame, posterior, base units, tracker)`` on the turn of :func:`corridor_map`, the
+    tracker started at its two corridor units; knowledge from :class:`OpeningsProvider` or off."""
+    classes, zones, thetas = corridor_map()
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    post = Posterior(f, MODEL, OpeningsProvider() if knowledge else None)
+    post.knowledge_on = knowledge
+    base = corridor_units(f, thetas)
+    return f, post, base, post.start(wm.add(wm.add(wm.empty(5), 0, base[0]), 1, base[1]))
+
+
+def _edit_near_the_boundary(rng, f, base, old):
+    """``(slot, world)``: ``old`` with a random slot removed, moved or born near the boundary."""
+    s = int(rng.integers(old.capacity))
+    nw = (wm.remove(old, s) if old.active[s] and rng.random() < 0.2
+          else wm.replace(old, s, _near_the_boundary(rng, f, base)) if old.active[s]
+          else wm.add(old, s, _near_the_boundary(rng, f, base)))
+    return s, nw
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("knowledge", [False, True])
 def test_incremental_relations_across_tiles_equal_the_full_ones(knowledge):
@@ -246,20 +267,10 @@ def test_incremental_relations_across_tiles_equal_the_full_ones(knowledge):
     after every edit, while pairs of two tiles become and stop being adjacent, and a third unit's
     edit changes the openings of a pair it does not hold."""
     rng = np.random.default_rng(4)
-    classes, zones, thetas = corridor_map()
-    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
-    post = Posterior(f, MODEL, OpeningsProvider() if knowledge else None)
-    post.knowledge_on = knowledge
-    base = corridor_units(f, thetas)
-    w = wm.add(wm.add(wm.empty(5), 0, base[0]), 1, base[1])
-    tr = post.start(w)
+    f, post, base, tr = _corridor_tracker(knowledge)
     seen = {"cross": 0, "flips": 0, "third": 0}
     for _ in range(400):
-        s = int(rng.integers(w.capacity))
-        old = tr.world
-        nw = (wm.remove(old, s) if old.active[s] and rng.random() < 0.2
-              else wm.replace(old, s, _near_the_boundary(rng, f, base)) if old.active[s]
-              else wm.add(old, s, _near_the_boundary(rng, f, base)))
+        s, nw = _edit_near_the_boundary(rng, f, base, tr.world)
         prop = tr.propose(nw, [s])
         full = post.evaluate(nw)
         assert (prop.logp == full.total) if math.isinf(full.total) else \
@@ -287,31 +298,12 @@ def test_a_floor_skips_a_proposal_across_tiles_only_below_its_bound(knowledge, m
     evaluation; the bound taken before the relations of pairs of two tiles (the fixed provider's
     without those pairs, the type-free one with knowledge) is never below the full value. Both
     skips and full evaluations occur, near the zones' boundary of :func:`corridor_map`."""
-    import semmap_pp.target.posterior as P
-
-    name = "_type_free_bound" if knowledge else "_fixed_bound"
-    seen, bound_fn = [], getattr(P, name)
-
-    def recording(*args):
-        value = bound_fn(*args)
-        seen.append(float(value))
-        return value
-
-    monkeypatch.setattr(P, name, recording)
+    seen = recorded_bounds(monkeypatch, "_type_free_bound" if knowledge else "_fixed_bound")
     rng = np.random.default_rng(9)
-    classes, zones, thetas = corridor_map()
-    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
-    post = Posterior(f, MODEL, OpeningsProvider() if knowledge else None)
-    post.knowledge_on = knowledge
-    base = corridor_units(f, thetas)
-    tr = post.start(wm.add(wm.add(wm.empty(5), 0, base[0]), 1, base[1]))
+    f, post, base, tr = _corridor_tracker(knowledge)
     counts = {"skipped": 0, "full": 0}
     for _ in range(300):
-        s = int(rng.integers(tr.world.capacity))
-        old = tr.world
-        nw = (wm.remove(old, s) if old.active[s] and rng.random() < 0.2
-              else wm.replace(old, s, _near_the_boundary(rng, f, base)) if old.active[s]
-              else wm.add(old, s, _near_the_boundary(rng, f, base)))
+        s, nw = _edit_near_the_boundary(rng, f, base, tr.world)
         full = post.evaluate(nw).total
         if not math.isfinite(full):
             continue
