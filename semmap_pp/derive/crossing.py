@@ -36,6 +36,7 @@ On a lattice of one direction there is no pair of tiles and nothing is computed
 from __future__ import annotations
 
 import math
+import weakref
 from typing import NamedTuple
 
 import numba
@@ -94,7 +95,25 @@ def _neighbours(ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
 
 
 def cross_data(frame) -> CrossData:
-    """The :class:`CrossData` of a lattice: :data:`NO_CROSS` for one of one direction."""
+    """The :class:`CrossData` of a lattice: :data:`NO_CROSS` for one of one direction. Built once
+    per frame (frames are frozen) and kept while the frame lives."""
+    try:
+        return _CROSS_DATA[frame]
+    except (KeyError, TypeError):
+        pass
+    xd = _cross_data(frame)
+    try:
+        _CROSS_DATA[frame] = xd
+    except TypeError:        # a frame that cannot be weakly referenced: built every time
+        pass
+    return xd
+
+
+#: :func:`cross_data` per frame, dropped with the frame.
+_CROSS_DATA = weakref.WeakKeyDictionary()
+
+
+def _cross_data(frame) -> CrossData:
     spans = getattr(frame, "spans", ())
     if not isinstance(spans, tuple) or len(spans) < 2:
         return NO_CROSS

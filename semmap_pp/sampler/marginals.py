@@ -83,25 +83,49 @@ def best_match(rect, world: wm.World) -> int | None:
     return slot
 
 
+def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The :func:`iou` of every rectangle of ``a`` (n, 4) with every one of ``b`` (m, 4): (n, m).
+
+    >>> iou_matrix(np.array([(0, 0, 10, 10)]), np.array([(0, 0, 10, 8), (0, 0, 2, 2)])).round(2).tolist()
+    [[0.8, 0.04]]
+    """
+    a = np.asarray(a, np.int64).reshape(-1, 1, 4)
+    b = np.asarray(b, np.int64).reshape(1, -1, 4)
+    inter = (np.maximum(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0)
+             * np.maximum(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0))
+    union = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1]) + (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1]) - inter
+    out = np.zeros(inter.shape, np.float64)
+    np.divide(inter, union, out=out, where=union > 0)
+    return out
+
+
 def unit_marginals(wstar: wm.World, worlds) -> dict[int, UnitMarginal]:
-    """Per active slot of ``wstar``: its :class:`UnitMarginal` over the typed ``worlds``."""
+    """Per active slot of ``wstar``: its :class:`UnitMarginal` over the typed ``worlds``.
+
+    Each world's matches are :func:`best_match`'s, found for all of W*'s units at once
+    (:func:`iou_matrix`)."""
     worlds = list(worlds)
+    slots = wm.active_slots(wstar)
+    mine = np.asarray(wstar.rects[slots], np.int64).reshape(-1, 4)
+    counts = np.zeros((len(slots), len(UNIT_TYPES)), np.int64)
+    found = np.zeros(len(slots), np.int64)
+    rows = np.arange(len(slots))
+    for w in worlds:
+        theirs = wm.active_slots(w)
+        if not len(theirs) or not len(slots):
+            continue
+        v = iou_matrix(mine, w.rects[theirs])
+        best = np.argmax(v, axis=1)                  # the lower slot on a tie, as best_match
+        hit = v[rows, best] >= MATCH_IOU
+        found += hit
+        t = np.asarray(w.types, np.int64)[np.asarray(theirs)[best]]
+        ok = hit & (t >= 0) & (t < len(UNIT_TYPES))
+        np.add.at(counts, (rows[ok], t[ok]), 1)
     out = {}
-    for s in wm.active_slots(wstar):
-        rect = tuple(int(v) for v in wstar.rects[s])
-        counts = np.zeros(len(UNIT_TYPES), np.int64)
-        found = 0
-        for w in worlds:
-            m = best_match(rect, w)
-            if m is None:
-                continue
-            found += 1
-            t = int(w.types[m])
-            if 0 <= t < len(UNIT_TYPES):
-                counts[t] += 1
-        typed = int(counts.sum())
-        out[int(s)] = UnitMarginal(found / len(worlds) if worlds else float("nan"),
-                                   tuple(float(c) / typed for c in counts) if typed else None, len(worlds))
+    for i, s in enumerate(slots):
+        typed = int(counts[i].sum())
+        out[int(s)] = UnitMarginal(int(found[i]) / len(worlds) if worlds else float("nan"),
+                                   tuple(float(c) / typed for c in counts[i]) if typed else None, len(worlds))
     return out
 
 
@@ -150,5 +174,5 @@ def door_marginals(frame, wstar_doors, worlds, doors_of=world_doors) -> list[flo
     return [float(v) / len(worlds) for v in found]
 
 
-__all__ = ["MATCH_IOU", "UnitMarginal", "iou", "best_match", "unit_marginals", "world_doors", "door_there",
+__all__ = ["MATCH_IOU", "UnitMarginal", "iou", "iou_matrix", "best_match", "unit_marginals", "world_doors", "door_there",
            "door_marginals"]

@@ -70,6 +70,31 @@ def test_the_iou_threshold_is_inclusive_and_the_best_match_wins():
     assert unit_marginals(world((0, (0, 0, 10, 10), ROOM)), [w])[0].types[HALL] == 1.0
 
 
+def test_unit_marginals_are_best_match_per_unit_over_random_worlds():
+    """The marginals, found for all units at once, equal best_match unit by unit: random
+    overlapping worlds with ties, empty worlds and IoU exactly at the threshold among them."""
+    rng = np.random.default_rng(3)
+
+    def random_world(k):
+        w = wm.empty(8)
+        for slot in rng.choice(8, size=k, replace=False):
+            r0, c0 = (int(v) for v in rng.integers(0, 12, 2))
+            w = wm.add(w, int(slot), (r0, c0, r0 + int(rng.integers(1, 8)), c0 + int(rng.integers(1, 8))),
+                       type_index=int(rng.integers(0, len(UNIT_TYPES))))
+        return w
+
+    for _ in range(40):
+        wstar = random_world(int(rng.integers(1, 7)))
+        worlds = [random_world(int(rng.integers(0, 7))) for _ in range(12)] + [wstar]
+        got = unit_marginals(wstar, worlds)
+        for s in wm.active_slots(wstar):
+            matches = [(w, best_match(tuple(int(v) for v in wstar.rects[s]), w)) for w in worlds]
+            typed = [int(w.types[m]) for w, m in matches if m is not None]
+            assert got[int(s)].exists == sum(m is not None for _, m in matches) / len(worlds)
+            want = tuple(typed.count(t) / len(typed) for t in range(len(UNIT_TYPES))) if typed else None
+            assert got[int(s)].types == want
+
+
 def test_door_marginals_count_worlds_with_a_door_at_the_place():
     """Two doors of W*; worlds give their own door lists (doors_of): door 0 is in worlds 1 and 2
     (world 2's a cell off, within the wall band), door 1 in world 3 only; world 4 none."""
