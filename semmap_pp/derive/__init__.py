@@ -93,8 +93,9 @@ def derive_world(frame, world: wm.World) -> Derived:
     states = cell_states(frame.classes, rects, c.wall, c.object_max_extent, doors=doors + passages)
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
     ext = np.zeros(len(rects), bool)
+    seen = getattr(frame, "seen_classes", frame.classes)   # other zones' pixels as the map shows them
     for group in _tile_groups(frame, rects):   # a footprint's hulls are drawn on one lattice
-        ext[group] = find_exterior(frame.classes, rects[group], c.wall, c.exterior_max_share,
+        ext[group] = find_exterior(seen, rects[group], c.wall, c.exterior_max_share,
                                    c.exterior_seen_min, across=c.adjacency_dilation,
                                    fan_seen_max=c.exterior_fan_seen_max,
                                    outline_gap=c.exterior_outline_gap,

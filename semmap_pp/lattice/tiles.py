@@ -104,6 +104,21 @@ class TiledFrame(Frame):
         return r, c + self.cols[k]
 
     @functools.cached_property
+    def seen_classes(self) -> np.ndarray:
+        """The lattice's classes with each tile's cells showing what the map shows at their pixel,
+        the other zones' pixels included (:attr:`classes` holds those unknown: they are explained on
+        their own tile). What a unit's surroundings look like, whichever tile they lie on: the
+        exterior test reads them (:func:`semmap_pp.derive.exterior.find_exterior`)."""
+        out = np.full(self.classes.shape, UNKNOWN, np.uint8)
+        for t, c in zip(self.tiles, self.cols):
+            for b0, b1 in t.bands():
+                xi, yi, ok = Frame.lattice_pixels(t, b0, b1)
+                part = out[b0:b1, c:c + t.shape[1]]
+                part[ok] = self.image_classes[yi[ok], xi[ok]]
+        out.setflags(write=False)
+        return out
+
+    @functools.cached_property
     def image_door_classes(self) -> np.ndarray:
         """The input image's classes with specks made free (:func:`doorway_classes`, as the
         lattice's :attr:`door_classes`): what openings between units of two tiles are read on

@@ -13,7 +13,7 @@ from semmap_pp import cells
 from semmap_pp import world as wm
 from semmap_pp.derive import derive_world
 from semmap_pp.derive.crossing import cross_data, cross_tile_openings, grown_overlap
-from semmap_pp.lattice.frame import build_frame_from_classes
+from semmap_pp.lattice.frame import Frame, build_frame_from_classes
 from semmap_pp.lattice.tiles import TiledFrame, build_tiled_frame, rect_spans, tile_gap, unit_theta
 from semmap_pp.model import load_model
 from semmap_pp.sampler.kernels import build_data, default_mix
@@ -415,3 +415,24 @@ def test_an_opening_is_as_wide_as_along_the_tile_whose_wall_holds_it():
     corridor = np.array([0, 0, 30, 200], np.int64)                    # 26 cells across its interior
     assert _is_passage(np.array([5, 22]), room, corridor, ip)         # spans the corridor's 22
     assert not _is_passage(np.array([22, 5]), room, corridor, ip)     # along the room's tile: no
+
+
+def test_seen_classes_show_every_pixel_on_each_tiles_lattice():
+    """TiledFrame.seen_classes: a tile's own cells as its classes, the cells over another zone's
+    pixels as the image shows them (its classes hold them unknown)."""
+    classes, zones, thetas = corridor_map(door=True)
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    seen = f.seen_classes
+    own = ~f.outside
+    assert np.array_equal(seen[own], f.classes[own])
+    theirs = 0
+    for k, (t, c) in enumerate(zip(f.tiles, f.cols)):
+        for b0, b1 in t.bands():
+            xi, yi, ok = Frame.lattice_pixels(t, b0, b1)
+            other = ok & (zones[np.clip(yi, 0, zones.shape[0] - 1), np.clip(xi, 0, zones.shape[1] - 1)] != k)
+            got = seen[b0:b1, c:c + t.shape[1]]
+            assert np.array_equal(got[other], classes[yi[other], xi[other]])
+            assert (f.classes[b0:b1, c:c + t.shape[1]][other] == cells.UNKNOWN).all()
+            theirs += int((classes[yi[other], xi[other]] != cells.UNKNOWN).sum())
+    assert theirs > 0        # the tiles do reach over the boundary onto pixels the map saw
+
