@@ -112,7 +112,7 @@ class TiledFrame(Frame):
         out = np.full(self.classes.shape, UNKNOWN, np.uint8)
         for t, c in zip(self.tiles, self.cols):
             for b0, b1 in t.bands():
-                xi, yi, ok = Frame.lattice_pixels(t, b0, b1)
+                xi, yi, ok = t.lattice_pixels(b0, b1)      # a tile is a plain Frame: no zone mask
                 part = out[b0:b1, c:c + t.shape[1]]
                 part[ok] = self.image_classes[yi[ok], xi[ok]]
         out.setflags(write=False)

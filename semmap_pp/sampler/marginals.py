@@ -65,11 +65,7 @@ def iou(a, b) -> float:
     >>> iou((0, 0, 10, 10), (0, 0, 10, 8)), iou((0, 0, 2, 2), (2, 2, 4, 4))
     (0.8, 0.0)
     """
-    r0, c0 = max(a[0], b[0]), max(a[1], b[1])
-    r1, c1 = min(a[2], b[2]), min(a[3], b[3])
-    inter = max(0, r1 - r0) * max(0, c1 - c0)
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
-    return float(inter) / float(union) if union > 0 else 0.0
+    return float(iou_matrix(np.asarray(a)[None], np.asarray(b)[None])[0, 0])
 
 
 def best_match(rect, world: wm.World) -> int | None:

@@ -13,7 +13,7 @@ from semmap_pp import cells
 from semmap_pp import world as wm
 from semmap_pp.derive import derive_world
 from semmap_pp.derive.crossing import cross_data, cross_tile_openings, grown_overlap
-from semmap_pp.lattice.frame import Frame, build_frame_from_classes
+from semmap_pp.lattice.frame import build_frame_from_classes
 from semmap_pp.lattice.tiles import TiledFrame, build_tiled_frame, rect_spans, tile_gap, unit_theta
 from semmap_pp.model import load_model
 from semmap_pp.sampler.kernels import build_data, default_mix
@@ -428,7 +428,7 @@ def test_seen_classes_show_every_pixel_on_each_tiles_lattice():
     theirs = 0
     for k, (t, c) in enumerate(zip(f.tiles, f.cols)):
         for b0, b1 in t.bands():
-            xi, yi, ok = Frame.lattice_pixels(t, b0, b1)
+            xi, yi, ok = t.lattice_pixels(b0, b1)
             other = ok & (zones[np.clip(yi, 0, zones.shape[0] - 1), np.clip(xi, 0, zones.shape[1] - 1)] != k)
             got = seen[b0:b1, c:c + t.shape[1]]
             assert np.array_equal(got[other], classes[yi[other], xi[other]])
