@@ -244,6 +244,7 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
     from semmap_pp.cli.progress import Progress
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
+    from semmap_pp.run.memory import young_heap
     from semmap_pp.run.pipeline import run_map
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.step import StopFlag
@@ -262,7 +263,8 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
     previous = _install_sigint(stop)
     try:
         with Progress(settings.chains, left, budget=args.budget, mode=args.progress,
-                      every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
+                      every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress, \
+                young_heap():
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
                              stop=stop, budget=args.budget, resume=state, starts=starts,
                              previous_ids=previous_ids)
@@ -366,6 +368,7 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
     from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_posterior, write_wstar
+    from semmap_pp.run.memory import young_heap
     from semmap_pp.run.spread import posterior_worlds
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.resume import write_resume
@@ -387,8 +390,10 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
             raise KeyboardInterrupt
         # typed before world.json, which holds the posterior marginals over them
         worlds = posterior_worlds(run, N_SAMPLED_WORLDS)
-        wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
-        written += write_posterior(out, run, worlds, wstar, rules_name=rules.name, other_files=(RESUME_FILE,))
+        with young_heap():
+            wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
+            written += write_posterior(out, run, worlds, wstar, rules_name=rules.name,
+                                       other_files=(RESUME_FILE,))
     except KeyboardInterrupt:
         quiet_finalizers()
         return written, True

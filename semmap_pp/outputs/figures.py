@@ -50,7 +50,9 @@ def png(fig: Figure) -> bytes:
     The figure is cleared once saved and unreachable cycles collected: a figure's artists refer to
     each other, so without this its images (copies of arrays of the input's size, float64 for the
     probability panels) waited for the garbage collector, and on a campus map the report's figures
-    piled up to several GB."""
+    piled up to several GB. ``semmap map`` makes its figures inside
+    :func:`semmap_pp.run.memory.young_heap`, so that this collection reads only the objects the
+    outputs made."""
     buf = io.BytesIO()
     FigureCanvasAgg(fig)
     fig.savefig(buf, format="png", dpi=DPI)

@@ -1,7 +1,10 @@
-"""The estimated peak memory of a run and `semmap map --max-memory` (semmap_pp/run/memory.py)."""
+"""The estimated peak memory of a run, `semmap map --max-memory`, and the heap set aside from the
+garbage collector while a stage runs (semmap_pp/run/memory.py)."""
 
 from __future__ import annotations
 
+import gc
+import weakref
 from pathlib import Path
 
 import pytest
@@ -57,3 +60,31 @@ def test_semmap_map_rejects_a_malformed_size(capsys):
         main(["map", str(TINY), "--out", "x", "--max-memory", "lots"])
     assert exc.value.code == 2
     assert "--max-memory" in capsys.readouterr().err
+
+
+class _Node:
+    """An object in a reference cycle (only the cycle collector frees it), weakly referable."""
+
+    def __init__(self):
+        self.me = self
+
+
+def test_young_heap_collects_a_stages_garbage_and_sets_the_older_heap_aside():
+    old = _Node()
+    old_ref = weakref.ref(old)
+    with memory.young_heap():
+        assert gc.get_freeze_count() > 0
+        young = _Node()
+        young_ref = weakref.ref(young)
+        del young, old
+        gc.collect()
+        assert young_ref() is None          # a cycle made inside: collected
+        assert old_ref() is not None        # one made before: set aside, not read again
+    assert gc.get_freeze_count() == 0
+    gc.collect()
+    assert old_ref() is None                # handed back to the collector at the end
+
+    with pytest.raises(KeyboardInterrupt):  # Ctrl-C (or any error) inside hands it back too
+        with memory.young_heap():
+            raise KeyboardInterrupt
+    assert gc.get_freeze_count() == 0
