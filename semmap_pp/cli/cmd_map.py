@@ -367,7 +367,8 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     once. Either way the search is saved, and every file written is complete (each is renamed
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
-    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, write_posterior, write_wstar
+    from semmap_pp.outputs.forked import Forked
+    from semmap_pp.outputs.write import N_SAMPLED_WORLDS, posterior_pngs, write_posterior, write_wstar
     from semmap_pp.run.memory import young_heap
     from semmap_pp.run.spread import posterior_worlds
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
@@ -391,9 +392,14 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         # typed before world.json, which holds the posterior marginals over them
         worlds = posterior_worlds(run, N_SAMPLED_WORLDS)
         with young_heap():
-            wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
-            written += write_posterior(out, run, worlds, wstar, rules_name=rules.name,
-                                       other_files=(RESUME_FILE,))
+            # with two cores, report.html's figures that need no other file are drawn meanwhile
+            figures = Forked(lambda: posterior_pngs(run, worlds), fork=run.settings.cores > 1)
+            try:
+                wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
+                written += write_posterior(out, run, worlds, wstar, rules_name=rules.name,
+                                           other_files=(RESUME_FILE,), figures=figures.result)
+            finally:
+                figures.close()
     except KeyboardInterrupt:
         quiet_finalizers()
         return written, True

@@ -147,13 +147,12 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
 
 class WstarFiles(NamedTuple):
     """What :func:`write_wstar` wrote and :func:`write_posterior` needs: the paths, the world.json
-    document, the figures' PNG bytes so far, the regions and their image."""
+    document, the figures' PNG bytes so far and the regions."""
 
     written: list
     doc: dict
     pngs: dict
     regions: dict
-    region_img: np.ndarray
 
 
 def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
@@ -169,9 +168,9 @@ def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=
     written, doc = write_core(out, run, rules_name=rules_name,
                               rules_path=rules_path if rules_path is not None else rules_name, worlds=worlds)
 
-    plan, pngs, regions, region_img = write_plan(out, sm, doc)
+    plan, pngs, regions, _ = write_plan(out, sm, doc)
     written += plan
-    return WstarFiles(written, doc, pngs, regions, region_img)
+    return WstarFiles(written, doc, pngs, regions)
 
 
 class SpreadImages:
@@ -214,27 +213,36 @@ class SpreadImages:
 PANEL_BAND_ROWS = 64
 
 
-def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
-                    other_files: tuple[str, ...] = ()) -> list[Path]:
-    """posterior.png, posterior_cells.png and report.html, after :func:`write_wstar`; the paths
-    written, those of ``wstar`` first. The second half of :func:`write_all`."""
-    out = Path(out_dir)
+def posterior_pngs(run, worlds: list) -> dict[str, bytes]:
+    """The figures of report.html that need neither world.json nor the plan files, as PNG bytes:
+    posterior.png and posterior_cells.png (of the typed sampled ``worlds``) and the previews of
+    regions.png, rooms.png and the region of interest. ``semmap map`` draws them in a forked
+    process while it writes the other files (:mod:`semmap_pp.outputs.forked`)."""
     sm = run.semantic
-    written, doc, pngs, regions, region_img = list(wstar.written), wstar.doc, dict(wstar.pngs), \
-        wstar.regions, wstar.region_img
     images = SpreadImages(sm.frame, worlds)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
     cells_png = fig.posterior_cells_png(sm, images, len(worlds), ess)
     del images   # the counts: not kept through the other figures
-    pngs |= {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png}
+    return {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png,
+            "regions": fig.regions_preview_png(sm, regions_image(sm)),
+            "rooms": fig.regions_preview_png(sm, sm.rooms.labels),
+            "roi": fig.roi_png(sm, run.inputs.roi_name)}
+
+
+def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
+                    other_files: tuple[str, ...] = (), figures=None) -> list[Path]:
+    """posterior.png, posterior_cells.png and report.html, after :func:`write_wstar`; the paths
+    written, those of ``wstar`` first. ``figures``: a callable that returns
+    :func:`posterior_pngs` (drawn elsewhere meanwhile); by default they are drawn here. The second
+    half of :func:`write_all`."""
+    out = Path(out_dir)
+    written, doc, pngs, regions = list(wstar.written), wstar.doc, dict(wstar.pngs), wstar.regions
+    pngs |= figures() if figures is not None else posterior_pngs(run, worlds)
     for name in ("posterior", "posterior_cells"):
         atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")
-    pngs["regions"] = fig.regions_preview_png(sm, region_img)
-    pngs["rooms"] = fig.regions_preview_png(sm, sm.rooms.labels)
-    pngs["roi"] = fig.roi_png(sm, run.inputs.roi_name)
     names = [p.name for p in written] + ["report.html"] + list(other_files)
     files = [n for n in FILES if n in names] + [n for n in names if n not in FILES]
     written.append(write_report(out / "report.html",
@@ -272,5 +280,5 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
     return write_posterior(out_dir, run, worlds, wstar, rules_name=rules_name, other_files=other_files)
 
 
-__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "write_core", "posterior_doc",
-           "write_plan", "diagnostics_text"]
+__all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "posterior_pngs",
+           "write_core", "posterior_doc", "write_plan", "diagnostics_text"]

@@ -9,6 +9,7 @@ below B (unexplored). Ids follow reading order of the unit centres: A = 1, B = 2
 import html
 import io
 import json
+import os
 import re
 
 import networkx as nx
@@ -346,3 +347,23 @@ def test_report_and_diagnostics_name_chains_in_separate_modes(floor, hostile_run
     out, _, _ = hostile_run
     for name in ("diagnostics.txt", "report.html"):
         assert "chains in separate modes" not in (out / name).read_text()
+
+
+def test_figures_drawn_in_a_forked_process_are_the_same_bytes(hostile_run, tmp_path):
+    """`semmap map` with two cores draws report.html's posterior figures and previews in a forked
+    process (outputs/forked.py) while it writes the other files: the same figures, byte for byte,
+    and the same report, as drawn in one process."""
+    from semmap_pp.outputs.forked import Forked
+    from semmap_pp.outputs.write import posterior_pngs, write_posterior, write_wstar
+
+    out, run, _ = hostile_run
+    worlds = posterior_worlds(run, N_SAMPLED_WORLDS)
+    here = posterior_pngs(run, worlds)
+    assert set(here) == {"posterior", "posterior_cells", "regions", "rooms", "roi"}
+    forked = Forked(lambda: (os.getpid(), posterior_pngs(run, worlds)), fork=True).result()
+    assert forked[0] != os.getpid() and forked[1] == here
+    figures = Forked(lambda: posterior_pngs(run, worlds), fork=True)
+    wstar = write_wstar(tmp_path, run, rules_name="<b>rules</b>.lp", worlds=worlds)
+    write_posterior(tmp_path, run, worlds, wstar, rules_name="<b>rules</b>.lp", figures=figures.result)
+    for name in ("posterior.png", "posterior_cells.png", "report.html"):
+        assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name

@@ -1,0 +1,94 @@
+"""Figures drawn in a forked process while this one writes the other outputs.
+
+``semmap map`` with two cores or more (``--cores``) hands the figures of report.html that need
+neither world.json nor the plan files (:func:`semmap_pp.outputs.write.posterior_pngs`: 1.5-2 s of
+matplotlib on a real floor) to a child process forked after the sampling, and writes world.json,
+the plan files and their own figures meanwhile; then it takes the child's PNG bytes through a pipe
+and writes the rest. The child writes no file and ignores Ctrl-C (this process ends it). Whatever
+keeps the child from handing the figures over (a system without ``fork``, the child killed, an
+error in it), they are drawn in this process instead, as with one core: the outputs are the same
+bytes either way.
+
+>>> import os
+>>> Forked(os.getpid, fork=False).result() == os.getpid()
+True
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from typing import Callable
+
+
+class Forked:
+    """``make()`` run in a child process forked now (when ``fork`` and the system can), its
+    result handed back by :meth:`result`; else, or when the child fails, run by :meth:`result`
+    itself. ``make``'s result must pickle. :meth:`close` ends a child still running."""
+
+    def __init__(self, make: Callable[[], object], *, fork: bool):
+        self._make = make
+        self._proc = self._conn = None
+        # a daemonic process (a worker of a pool) may not have children of its own
+        if fork and "fork" in multiprocessing.get_all_start_methods() and \
+                not multiprocessing.current_process().daemon:
+            self._start()
+
+    def _start(self) -> None:
+        ctx = multiprocessing.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        proc = ctx.Process(target=_child, args=(self._make, send), daemon=True)
+        # SIGINT blocked across the fork: the child sets it aside before it could run this
+        # process's handler; one pressed meanwhile reaches this process when unblocked
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            proc.start()
+        except OSError:          # no process to be had (limits, memory): drawn here
+            recv.close()
+            return
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+            send.close()
+        self._proc, self._conn = proc, recv
+
+    def result(self):
+        """The child's result, or ``make()`` here when there is no child or it handed none."""
+        if self._proc is not None:
+            proc, conn = self._proc, self._conn
+            self._proc = self._conn = None
+            try:
+                ok, value = conn.recv()
+            except (EOFError, OSError):          # the child ended without a word
+                ok, value = False, None
+            finally:
+                conn.close()
+                proc.join()
+            if ok:
+                return value
+        return self._make()
+
+    def close(self) -> None:
+        """End the child if it still runs (Ctrl-C or an error here before :meth:`result`)."""
+        if self._proc is not None:
+            self._proc.kill()
+            self._proc.join()
+            self._conn.close()
+            self._proc = self._conn = None
+
+
+def _child(make, conn) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)       # Ctrl-C is the parent's to handle
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    try:
+        reply = (True, make())
+    except BaseException:     # drawn again by the parent, which then reports what goes wrong
+        reply = (False, None)
+    try:
+        conn.send(reply)
+    except (OSError, ValueError):    # the parent is gone or closed the pipe
+        pass
+    finally:
+        conn.close()
+
+
+__all__ = ["Forked"]
