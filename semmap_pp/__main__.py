@@ -1,5 +1,5 @@
 import sys
 
-from semmap_pp.cli import main
+from semmap_pp.cli import console_main
 
-sys.exit(main())
+sys.exit(console_main())

@@ -15,6 +15,7 @@ text (a file name of other bytes) is one line and status 2 before the command st
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import pkgutil
@@ -115,5 +116,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+def console_main(argv: list[str] | None = None) -> int:
+    """The ``semmap`` command and ``python -m semmap_pp``: :func:`main`, after which every object
+    is set aside from the garbage collector (:func:`gc.freeze`), so that the interpreter's teardown
+    does not collect over the whole heap again: those collections took 0.8-0.9 s at the end of
+    ``semmap map`` on a real floor (docs/benchmarks.md). Every file a command writes is closed
+    and renamed into place by then (:mod:`semmap_pp.atomic`), and exit handlers run as before."""
+    try:
+        return main(argv)
+    finally:
+        gc.freeze()
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console_main())

@@ -42,3 +42,22 @@ def test_after_ctrl_c_a_half_built_objects_finalizer_prints_nothing(capfd, monke
     HalfBuilt()
     gc.collect()
     assert capfd.readouterr().err == ""
+
+
+def test_the_command_sets_the_heap_aside_before_the_teardown_whatever_its_end(capsys):
+    """console_main (the `semmap` script, `python -m semmap_pp`) returns main's status, and leaves
+    every object frozen so that the interpreter's teardown does not collect over the heap, also
+    after an error."""
+    import gc
+
+    from semmap_pp.cli import console_main
+
+    try:
+        for argv, status in ((["rules", "list"], 0), (["map", "/nonexistent/map.yaml", "--out", "x"], 2)):
+            gc.unfreeze()
+            assert gc.get_freeze_count() == 0
+            assert console_main(argv) == status
+            assert gc.get_freeze_count() > 0
+        assert "semmap: error:" in capsys.readouterr().err
+    finally:
+        gc.unfreeze()
