@@ -39,8 +39,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping
 
-import arviz as az
+import arviz_base
+import arviz_stats
 import numpy as np
+import xarray as xr
 
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
@@ -398,7 +400,7 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
         else:
             # ArviZ gives NaN for one chain: judge its two halves as two chains instead.
             half = a.shape[1] // 2
-            rhat = float(az.rhat(a if a.shape[0] > 1 else a[:, :2 * half].reshape(2, half)))
+            rhat = float(arviz_stats.rhat(a if a.shape[0] > 1 else a[:, :2 * half].reshape(2, half)))
             stuck = ""
             if a.shape[0] > 1 and np.all(np.ptp(a, axis=1) == 0) and np.ptp(a[:, 0]) > 0:
                 stuck = "each chain stuck at its own value"
@@ -408,8 +410,8 @@ def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> 
                     stuck = "each half of every chain stuck at one value: a chain jumped once"
             if stuck:
                 rhat = math.inf     # ArviZ: a huge finite number (split R-hat, no variance within)
-            ess_b = float(az.ess(a, method="bulk"))
-            ess_t = float(az.ess(a, method="tail", prob=(0.05, 0.95)))
+            ess_b = float(arviz_stats.ess(a, method="bulk"))
+            ess_t = float(arviz_stats.ess(a, method="tail", prob=(0.05, 0.95)))
         mean, sd = float(np.nanmean(a)) if a.size else float("nan"), float(np.nanstd(a))
         chain_means = tuple(float(v) for v in np.nanmean(a, axis=1))
         chain_sds = tuple(float(v) for v in np.nanstd(a, axis=1))
@@ -510,7 +512,7 @@ def climb(x) -> float:
     return 0.0
 
 
-def convergence(summaries: Mapping[str, object] | "az.DataTree", *, rhat_max: float,
+def convergence(summaries: Mapping[str, object] | "xr.DataTree", *, rhat_max: float,
                 ess_min: float, draws_option: str = "--draws") -> ConvergenceReport:
     """Judge convergence of label-invariant summaries.
 
@@ -561,7 +563,7 @@ def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, o
     groups = {"posterior": {k: _as_chain_draw(k, v) for k, v in summaries.items()}}
     if sample_stats:
         groups["sample_stats"] = {k: np.asarray(v) for k, v in sample_stats.items()}
-    tree = az.from_dict(groups)
+    tree = arviz_base.from_dict(groups)
     tree.attrs.update({k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in (attrs or {}).items()})
     return tree
 
@@ -580,7 +582,7 @@ def read_trace(path: str | os.PathLike):
     if not path.is_file():
         raise SemmapError(path, "no trace file here (expected trace.nc written by `semmap map`)")
     try:
-        tree = az.from_netcdf(path, engine="h5netcdf")
+        tree = xr.open_datatree(path, engine="h5netcdf")
         tree["posterior"]
     except Exception as exc:  # h5py/xarray raise many kinds; the user needs one line
         raise SemmapError(path, f"not a readable ArviZ trace ({type(exc).__name__}: {exc})") from None
