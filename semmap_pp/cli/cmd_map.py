@@ -176,7 +176,7 @@ def _install_sigint(stop):
 
 
 def run(args) -> int:
-    from semmap_pp.run.memory import check_memory
+    from semmap_pp.run.memory import check_memory, young_heap
     from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
     from semmap_pp.run.outdir import check_out_dir
@@ -230,7 +230,9 @@ def run(args) -> int:
     h, w = inputs.grid.shape
     check_memory(inputs, args.max_memory)   # the estimated peak, before any sampling
     check_free_space(out, needed_bytes(h * w))
-    with lock_out_dir(out):      # held until every file is written: one run at a time in a folder
+    # the lock is held until every file is written: one run at a time in a folder; the sampling
+    # and the outputs collect only what they make
+    with lock_out_dir(out), young_heap():
         if state is None or out.resolve() != args.resume.resolve():
             check_out_dir(out, args.force)     # again under the lock: a run that ended meanwhile may have filled it
         return _sample_and_write(args, out, inputs, settings, state, rules, starts, previous_ids,
@@ -244,7 +246,6 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
     from semmap_pp.cli.progress import Progress
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
-    from semmap_pp.run.memory import young_heap
     from semmap_pp.run.pipeline import run_map
     from semmap_pp.sampler.resume import FILE_NAME as RESUME_FILE
     from semmap_pp.sampler.step import StopFlag
@@ -263,8 +264,7 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
     previous = _install_sigint(stop)
     try:
         with Progress(settings.chains, left, budget=args.budget, mode=args.progress,
-                      every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress, \
-                young_heap():
+                      every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
                              stop=stop, budget=args.budget, resume=state, starts=starts,
                              previous_ids=previous_ids)

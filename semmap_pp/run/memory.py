@@ -64,22 +64,29 @@ def trim_heap() -> bool:
 @contextlib.contextmanager
 def young_heap():
     """A stage of a run whose garbage collections should read only the objects it makes: the
-    objects alive before it are set aside from the collector (:func:`gc.freeze`, after one full
-    collection) and handed back at its end (:func:`gc.unfreeze`, which hands back whatever was
-    frozen), on an error or Ctrl-C too.
+    objects alive before it are set aside from the collector (:func:`gc.freeze`, after a
+    collection of those not set aside yet) and handed back when the outermost such stage ends
+    (:func:`gc.unfreeze`, which hands back whatever was frozen), on an error or Ctrl-C too.
 
-    ``semmap map`` samples in it (the modules imported and the inputs set aside: the chains'
-    processes, forked from it, do not read them either) and writes its outputs in another (the
-    search's objects set aside too). Each full collection otherwise read the whole heap: 0.1-0.2 s
-    on a real floor, and the figures ask for one each (:func:`semmap_pp.outputs.figures.png`).
-    What a stage makes, the figures' cycles among it, is as young as the stage and collected all
-    the same."""
+    ``semmap map`` runs in one (the modules imported and the inputs set aside: the chains'
+    processes, forked from it, do not read them either) and writes its outputs in another inside
+    it (the search's objects set aside too). Each full collection otherwise read the whole heap:
+    0.1-0.2 s on a real floor, and the figures ask for one each
+    (:func:`semmap_pp.outputs.figures.png`). What a stage makes, the figures' cycles among it, is
+    as young as the stage and collected all the same."""
     gc.collect()
     gc.freeze()
+    _depth[0] += 1
     try:
         yield
     finally:
-        gc.unfreeze()
+        _depth[0] -= 1
+        if not _depth[0]:
+            gc.unfreeze()
+
+
+#: How many :func:`young_heap` stages are open (the outermost one hands the heap back).
+_depth = [0]
 
 
 def machine_memory_bytes() -> int | None:

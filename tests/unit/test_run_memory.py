@@ -88,3 +88,19 @@ def test_young_heap_collects_a_stages_garbage_and_sets_the_older_heap_aside():
         with memory.young_heap():
             raise KeyboardInterrupt
     assert gc.get_freeze_count() == 0
+
+
+def test_a_young_heap_inside_another_hands_the_heap_back_only_at_the_outer_end():
+    with memory.young_heap():
+        middle = _Node()
+        middle_ref = weakref.ref(middle)
+        with memory.young_heap():            # the outputs' stage inside the run's
+            del middle
+            gc.collect()
+            assert middle_ref() is not None  # made before the inner stage: set aside by it
+        assert gc.get_freeze_count() > 0     # the inner end leaves the outer stage's heap aside
+        gc.collect()
+        assert middle_ref() is not None
+    assert gc.get_freeze_count() == 0
+    gc.collect()
+    assert middle_ref() is None
