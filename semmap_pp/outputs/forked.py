@@ -5,9 +5,10 @@ neither world.json nor the plan files (:func:`semmap_pp.outputs.write.posterior_
 matplotlib on a real floor) to a child process forked after the sampling, and writes world.json,
 the plan files and their own figures meanwhile; then it takes the child's PNG bytes through a pipe
 and writes the rest. The child writes no file and ignores Ctrl-C (this process ends it). Whatever
-keeps the child from handing the figures over (a system without ``fork``, the child killed, an
-error in it), they are drawn in this process instead, as with one core: the outputs are the same
-bytes either way.
+keeps the child from handing the figures over (a system without ``fork``, a process running
+other threads, which a fork does not copy, so that a lock one of them holds stays held in the
+child; the child killed, an error in it, no answer within :data:`WAIT_S`), they are drawn in this
+process instead, as with one core: the outputs are the same bytes either way.
 
 >>> import os
 >>> Forked(os.getpid, fork=False).result() == os.getpid()
@@ -17,8 +18,13 @@ True
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
+import threading
 from typing import Callable
+
+#: Seconds to wait for the child's figures before it is ended and they are drawn here.
+WAIT_S = 600.0
 
 
 class Forked:
@@ -31,7 +37,7 @@ class Forked:
         self._proc = self._conn = None
         # a daemonic process (a worker of a pool) may not have children of its own
         if fork and "fork" in multiprocessing.get_all_start_methods() and \
-                not multiprocessing.current_process().daemon:
+                not multiprocessing.current_process().daemon and _one_thread():
             self._start()
 
     def _start(self) -> None:
@@ -56,12 +62,14 @@ class Forked:
         if self._proc is not None:
             proc, conn = self._proc, self._conn
             self._proc = self._conn = None
-            try:
-                ok, value = conn.recv()
-            except (EOFError, OSError):          # the child ended without a word
+            try:     # ready also when the child ended without a word: recv then raises EOFError
+                ok, value = conn.recv() if conn.poll(WAIT_S) else (False, None)
+            except (EOFError, OSError):
                 ok, value = False, None
             finally:
                 conn.close()
+                if proc.is_alive():              # no answer in time
+                    proc.kill()
                 proc.join()
             if ok:
                 return value
@@ -74,6 +82,14 @@ class Forked:
             self._proc.join()
             self._conn.close()
             self._proc = self._conn = None
+
+
+def _one_thread() -> bool:
+    """Whether this process runs a single thread (Linux counts them in ``/proc``)."""
+    try:
+        return len(os.listdir("/proc/self/task")) == 1
+    except OSError:
+        return threading.active_count() == 1
 
 
 def _child(make, conn) -> None:

@@ -9,9 +9,16 @@ import time
 
 import pytest
 
+from semmap_pp.outputs import forked
 from semmap_pp.outputs.forked import Forked
 
 PARENT = os.getpid()
+
+
+@pytest.fixture(autouse=True)
+def one_thread(monkeypatch):
+    """`semmap map` forks from a process of one thread; the test runner may hold others."""
+    monkeypatch.setattr(forked, "_one_thread", lambda: True)
 
 
 def _pid():
@@ -55,6 +62,32 @@ def _sleeps_in_child():
     if os.getpid() != PARENT:
         time.sleep(60)
     return "drawn here"
+
+
+def test_a_child_that_does_not_answer_in_time_is_ended_and_the_drawing_done_here(monkeypatch):
+    monkeypatch.setattr(forked, "WAIT_S", 0.5)
+    f = Forked(_sleeps_in_child, fork=True)
+    child = f._proc
+    assert f.result() == "drawn here" and not child.is_alive()
+
+
+def _threads_in_child():
+    return forked._one_thread()
+
+
+def test_no_fork_from_a_process_running_other_threads(monkeypatch):
+    import threading
+
+    monkeypatch.undo()                         # the real count
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    try:
+        assert not forked._one_thread()
+        assert Forked(_pid, fork=True).result() == PARENT
+    finally:
+        stop.set()
+        t.join()
 
 
 def test_close_ends_a_child_that_still_runs():
