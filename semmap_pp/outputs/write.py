@@ -123,11 +123,11 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     return gone
 
 
-def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.ndarray]:
+def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict]:
     """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
     regions.png, rooms.png, the types layer, the ROS 2 bag rosbag2/, overlay.png and graph.png
-    (world.json and labels.png are the caller's). Returns the paths, the two figures' PNG bytes, the
-    regions and their image."""
+    (world.json and labels.png are the caller's). Returns the paths, the two figures' PNG bytes and
+    the regions."""
     passages = passage_pairs(sm)
     regions = join_regions(sm.unit_ids, passages)
     region_img = regions_image(sm, regions)
@@ -142,7 +142,7 @@ def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict, np.nda
     for name, data in pngs.items():
         atomic.write_bytes(out / f"{name}.png", data)
         written.append(out / f"{name}.png")
-    return written, pngs, regions, region_img
+    return written, pngs, regions
 
 
 class WstarFiles(NamedTuple):
@@ -168,7 +168,7 @@ def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=
     written, doc = write_core(out, run, rules_name=rules_name,
                               rules_path=rules_path if rules_path is not None else rules_name, worlds=worlds)
 
-    plan, pngs, regions, _ = write_plan(out, sm, doc)
+    plan, pngs, regions = write_plan(out, sm, doc)
     written += plan
     return WstarFiles(written, doc, pngs, regions)
 
