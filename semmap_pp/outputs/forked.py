@@ -60,23 +60,19 @@ class Forked:
     def result(self):
         """The child's result, or ``make()`` here when there is no child or it handed none."""
         if self._proc is not None:
-            proc, conn = self._proc, self._conn
-            self._proc = self._conn = None
             try:     # ready also when the child ended without a word: recv then raises EOFError
-                ok, value = conn.recv() if conn.poll(WAIT_S) else (False, None)
+                ok, value = self._conn.recv() if self._conn.poll(WAIT_S) else (False, None)
             except (EOFError, OSError):
                 ok, value = False, None
             finally:
-                conn.close()
-                if proc.is_alive():              # no answer in time
-                    proc.kill()
-                proc.join()
+                self.close()                     # ended, or no answer in time: ended now
             if ok:
                 return value
         return self._make()
 
     def close(self) -> None:
-        """End the child if it still runs (Ctrl-C or an error here before :meth:`result`)."""
+        """End the child if it still runs (Ctrl-C or an error here before :meth:`result`); a child
+        that has ended is only reaped."""
         if self._proc is not None:
             self._proc.kill()
             self._proc.join()
