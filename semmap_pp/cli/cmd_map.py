@@ -367,7 +367,7 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     once. Either way the search is saved, and every file written is complete (each is renamed
     whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
     back."""
-    from semmap_pp.outputs.forked import Forked
+    from semmap_pp.forked import Forked
     from semmap_pp.outputs.write import N_SAMPLED_WORLDS, posterior_pngs, write_posterior, write_wstar
     from semmap_pp.run.memory import young_heap
     from semmap_pp.run.spread import posterior_worlds

@@ -217,7 +217,7 @@ def posterior_pngs(run, worlds: list) -> dict[str, bytes]:
     """The figures of report.html that need neither world.json nor the plan files, as PNG bytes:
     posterior.png and posterior_cells.png (of the typed sampled ``worlds``) and the previews of
     regions.png, rooms.png and the region of interest. ``semmap map`` draws them in a forked
-    process while it writes the other files (:mod:`semmap_pp.outputs.forked`)."""
+    process while it writes the other files (:mod:`semmap_pp.forked`)."""
     sm = run.semantic
     images = SpreadImages(sm.frame, worlds)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from

@@ -1,4 +1,4 @@
-"""Figures drawn in a forked process (semmap_pp/outputs/forked.py): the child's result when it
+"""Figures drawn in a forked process (semmap_pp/forked.py): the child's result when it
 hands one over, the same thing drawn here whenever it cannot."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from semmap_pp.outputs import forked
-from semmap_pp.outputs.forked import Forked
+from semmap_pp import forked
+from semmap_pp.forked import Forked
 
 PARENT = os.getpid()
 

@@ -17,11 +17,11 @@ PACKAGE = Path(__file__).resolve().parents[2] / "semmap_pp"
 
 #: the foundations, loose at the root of the package: every folder may import them, they import
 #: no folder
-ROOT = ("errors", "cells", "atomic", "resources", "model", "world", "jitcache", "userdirs")
+ROOT = ("errors", "cells", "atomic", "resources", "model", "world", "jitcache", "userdirs", "forked")
 #: the folders in the order of the stages; each imports only the root and the folders before it
 STAGES = ("grid", "synth", "lattice", "derive", "knowledge", "target", "sampler", "evaluate",
           "semantic", "run", "plans", "studies", "outputs", "cli")
-MAX_LOOSE = 10
+MAX_LOOSE = 11
 #: arrows the stage order allows but the layers do not: outputs are handed typed worlds by the run
 #: (semmap_pp.run.spread.posterior_worlds) and never call back into it
 FORBIDDEN = {("outputs", "run"): "outputs write what the run hands them; they never call back into it"}

@@ -351,10 +351,10 @@ def test_report_and_diagnostics_name_chains_in_separate_modes(floor, hostile_run
 
 def test_figures_drawn_in_a_forked_process_are_the_same_bytes(hostile_run, tmp_path, monkeypatch):
     """`semmap map` with two cores draws report.html's posterior figures and previews in a forked
-    process (outputs/forked.py) while it writes the other files: the same figures, byte for byte,
+    process (semmap_pp/forked.py) while it writes the other files: the same figures, byte for byte,
     and the same report, as drawn in one process."""
-    from semmap_pp.outputs import forked as forked_module
-    from semmap_pp.outputs.forked import Forked
+    from semmap_pp import forked as forked_module
+    from semmap_pp.forked import Forked
     from semmap_pp.outputs.write import posterior_pngs, write_posterior, write_wstar
 
     monkeypatch.setattr(forked_module, "_one_thread", lambda: True)   # the test runner may hold threads

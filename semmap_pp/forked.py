@@ -1,4 +1,4 @@
-"""Figures drawn in a forked process while this one writes the other outputs.
+"""A function run in a forked process while this one goes on: report.html's figures.
 
 ``semmap map`` with two cores or more (``--cores``) hands the figures of report.html that need
 neither world.json nor the plan files (:func:`semmap_pp.outputs.write.posterior_pngs`: 1.5-2 s of
