@@ -6,9 +6,13 @@ matplotlib on a real floor) to a child process forked after the sampling, and wr
 the plan files and their own figures meanwhile; then it takes the child's PNG bytes through a pipe
 and writes the rest. The child writes no file and ignores Ctrl-C (this process ends it). Whatever
 keeps the child from handing the figures over (a system without ``fork``, a process running
-other threads, which a fork does not copy, so that a lock one of them holds stays held in the
-child; the child killed, an error in it, no answer within :data:`WAIT_S`), they are drawn in this
-process instead, as with one core: the outputs are the same bytes either way.
+other Python threads, which a fork does not copy, so that a lock one of them holds stays held in
+the child; the child killed, an error in it, no answer within :data:`WAIT_S`), they are drawn in
+this process instead, as with one core: the outputs are the same bytes either way.
+
+``semmap map`` with two cores also makes its start world in one
+(:func:`semmap_pp.run.pipeline.timed_start_world`, 1-2 s of one core on a real floor) while it
+imports PyMC, ArviZ and matplotlib, which take as long.
 
 >>> import os
 >>> Forked(os.getpid, fork=False).result() == os.getpid()
@@ -18,7 +22,6 @@ True
 from __future__ import annotations
 
 import multiprocessing
-import os
 import signal
 import threading
 from typing import Callable
@@ -81,11 +84,11 @@ class Forked:
 
 
 def _one_thread() -> bool:
-    """Whether this process runs a single thread (Linux counts them in ``/proc``)."""
-    try:
-        return len(os.listdir("/proc/self/task")) == 1
-    except OSError:
-        return threading.active_count() == 1
+    """Whether this process runs no Python thread but the main one. The idle worker threads of
+    OpenBLAS (numpy's and scipy's, two on two cores) are not counted: OpenBLAS stops them
+    before every fork (``pthread_atfork``) and starts them again when next needed, as PyMC's
+    forked chains rely on too."""
+    return threading.active_count() == 1
 
 
 def _child(make, conn) -> None:

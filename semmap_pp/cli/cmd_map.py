@@ -235,14 +235,45 @@ def run(args) -> int:
     with lock_out_dir(out), young_heap():
         if state is None or out.resolve() != args.resume.resolve():
             check_out_dir(out, args.force)     # again under the lock: a run that ended meanwhile may have filled it
-        return _sample_and_write(args, out, inputs, settings, state, rules, starts, previous_ids,
-                                 previous_places, ids_from)
+        job = _start_job(inputs, settings) if state is None and starts is None else None
+        try:
+            _import_the_rest()
+            return _sample_and_write(args, out, inputs, settings, state, rules, starts, previous_ids,
+                                     previous_places, ids_from, job)
+        finally:
+            if job is not None:
+                job.close()
+
+
+def _start_job(inputs, settings):
+    """With two cores or more, the data-driven start world made in a forked process
+    (:func:`semmap_pp.run.pipeline.timed_start_world`, one core for 1-2 s on a real floor) while
+    this one imports the rest of the program (:func:`_import_the_rest`), which the run then
+    waits for; None with one core: the run makes it itself, as it would."""
+    if settings.cores < 2:
+        return None
+    import functools
+
+    from semmap_pp.forked import Forked
+    from semmap_pp.run.pipeline import timed_start_world
+
+    return Forked(functools.partial(timed_start_world, inputs), fork=True)
+
+
+def _import_the_rest() -> None:
+    """Import the modules that the chains and the outputs import later (PyMC, ArviZ, matplotlib:
+    about 1.5 s), here, while :func:`_start_job`'s process makes the start world."""
+    import arviz_base  # noqa: F401  (sampler.diagnostics imports ArviZ when it judges the draws)
+    import arviz_stats  # noqa: F401
+
+    from semmap_pp.outputs import write  # noqa: F401  (matplotlib)
+    from semmap_pp.sampler import step  # noqa: F401  (PyMC)
 
 
 def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, previous_ids,
-                      previous_places, ids_from) -> int:
+                      previous_places, ids_from, start_job=None) -> int:
     """Sample (:func:`semmap_pp.run.pipeline.run_map`) and write every output into ``out``, which
-    the caller holds the lock of; the exit status."""
+    the caller holds the lock of; the exit status. ``start_job``: :func:`_start_job`'s."""
     from semmap_pp.cli.progress import Progress
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
@@ -267,7 +298,7 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
                       every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
                              stop=stop, budget=args.budget, resume=state, starts=starts,
-                             previous_ids=previous_ids)
+                             start_job=start_job, previous_ids=previous_ids)
     except BaseException as exc:
         signal.signal(signal.SIGINT, previous)
         if isinstance(exc, SemmapError) and stop():

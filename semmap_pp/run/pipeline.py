@@ -88,11 +88,21 @@ def data_start_world(inputs: Inputs, data=None) -> wm.World:
     return clean
 
 
-def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, base_start, data=None):
+def timed_start_world(inputs: Inputs) -> tuple[wm.World, float]:
+    """:func:`data_start_world` of ``inputs`` (with kernel data of its own) and the seconds it took:
+    what ``semmap map`` hands :func:`run_map` as ``start_job``, made in a forked process."""
+    t0 = time.perf_counter()
+    world = data_start_world(inputs)
+    return world, time.perf_counter() - t0
+
+
+def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, base_start, data=None,
+                start_job=None):
     """Where the chains start and how long they run, said in the log: ``(first start worlds,
     start worlds, burn-in and draws pm.sample is asked for, schedule, chain starts, history)``,
     for a new run (data-driven or given start worlds) or one that resumes an earlier run; ``data``
-    is the run's kernel data, which the start worlds' ascent reuses."""
+    is the run's kernel data, which the start worlds' ascent reuses; ``start_job`` (see
+    :func:`run_map`) hands over the data-driven start world made elsewhere."""
     frame = inputs.frame
     head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
             f"{directions_text(frame)}")
@@ -100,9 +110,12 @@ def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, b
         rng = np.random.default_rng(settings.seed)
         if starts is None:   # minutes on a large map: say so before, and how long after
             log(f"{head}; building the start worlds")
-            t_start = time.perf_counter()
+            t_start, made = time.perf_counter(), "shared" if base_start is not None else None
+            if base_start is None and start_job is not None:
+                base_start, seconds = start_job.result()
+                made = f"{seconds:.1f} s"
             starts = start_worlds(inputs, settings.chains, rng, base=base_start, data=data)
-            made = "shared" if base_start is not None else f"{time.perf_counter() - t_start:.1f} s"
+            made = made or f"{time.perf_counter() - t_start:.1f} s"
             log(f"start world: {wm.n_units(starts[0])} units ({made})")
         else:
             starts = [starts[i % len(starts)] for i in range(settings.chains)]
@@ -168,7 +181,7 @@ def _through_door_units(inputs: Inputs, post, sm, data, *, log, previous_ids):
 
 def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,
             budget: float | None = None, resume=None, starts: list | None = None,
-            base_start: wm.World | None = None, previous_ids=None) -> MapRun:
+            base_start: wm.World | None = None, start_job=None, previous_ids=None) -> MapRun:
     """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report.
 
     Parameters
@@ -188,6 +201,11 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     base_start : World, optional
         :func:`data_start_world` of ``inputs``, made earlier (it does not depend on the seed:
         ``semmap stability`` makes it once for all its seeds); the run is the same as without.
+    start_job : object with ``result() -> (World, seconds)``, optional
+        :func:`timed_start_world` of ``inputs`` being made elsewhere (``semmap map`` forks a process
+        for it before it imports PyMC, ArviZ and matplotlib); asked for when the chains' start
+        worlds are made, and unused with ``resume``, ``starts`` or ``base_start``. The run is the
+        same as without.
     previous_ids : semmap_pp.plans.world_file.PreviousIds, optional
         The units of an earlier world.json whose ids W*'s units carry over where they are the
         same place (:mod:`semmap_pp.semantic.ids`); W* itself is the same as without.
@@ -195,7 +213,8 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
 
     with shared_folder() as folder:   # the lattice tables the chains' processes map, not copy
         run = _run_map(inputs, settings, folder, log=log, callback=callback, stop=stop, budget=budget,
-                       resume=resume, starts=starts, base_start=base_start, previous_ids=previous_ids)
+                       resume=resume, starts=starts, base_start=base_start, start_job=start_job,
+                       previous_ids=previous_ids)
     trim_heap()   # what the search freed, given back before the outputs' images are made
     return run
 
@@ -212,13 +231,14 @@ def shared_tables(inputs: Inputs, folder) -> tuple:
 
 
 def _run_map(inputs: Inputs, settings: RunSettings, folder, *, log, callback, stop, budget, resume, starts,
-             base_start, previous_ids) -> MapRun:
+             base_start, start_job, previous_ids) -> MapRun:
     """:func:`run_map` with the shared tables' ``folder``."""
     model, frame = inputs.model, inputs.frame
     kernel_settings = model.kernels
     data, factory = shared_tables(inputs, folder)
     first, starts, pm_tune, pm_draws, schedule, chain_starts, history = _chain_plan(
-        inputs, settings, log=log, resume=resume, starts=starts, base_start=base_start, data=data)
+        inputs, settings, log=log, resume=resume, starts=starts, base_start=base_start, data=data,
+        start_job=start_job)
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=pm_draws, tune=pm_tune,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.n_inner,

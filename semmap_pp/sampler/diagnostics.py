@@ -18,6 +18,9 @@ Posterior spread is shown per cell: the probability, over sampled worlds, that a
 belongs to a unit of each type (:class:`SpreadAccumulator`), and one number, the mean Bernoulli
 variance ``p (1 - p)`` of the wall indicator over the cells that are ever wall.
 
+ArviZ (and xarray) are imported by the functions that use them, not with this module: they take
+about 1 s, which ``semmap map`` spends while its start world is made in another process.
+
 Examples
 --------
 >>> import numpy as np
@@ -39,10 +42,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping
 
-import arviz_base
-import arviz_stats
 import numpy as np
-import xarray as xr
 
 from semmap_pp import atomic
 from semmap_pp.cells import UNIT_TYPES
@@ -393,6 +393,8 @@ def _as_chain_draw(name: str, values) -> np.ndarray:
 
 
 def _diagnose_one(name: str, a: np.ndarray, rhat_max: float, ess_min: float) -> QuantityDiagnostics:
+    import arviz_stats  # ArviZ takes about 1 s to import: only when draws are judged (module docstring)
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         if np.all(np.isnan(a)):
@@ -560,6 +562,8 @@ def convergence(summaries: Mapping[str, object] | "xr.DataTree", *, rhat_max: fl
 def to_datatree(summaries: Mapping[str, object], *, sample_stats: Mapping[str, object] | None = None,
                 attrs: Mapping[str, object] | None = None):
     """Pack (chains, draws) summaries (and optional sampler stats) into an ArviZ DataTree."""
+    import arviz_base  # deferred, as in _diagnose_one
+
     groups = {"posterior": {k: _as_chain_draw(k, v) for k, v in summaries.items()}}
     if sample_stats:
         groups["sample_stats"] = {k: np.asarray(v) for k, v in sample_stats.items()}
@@ -581,6 +585,8 @@ def read_trace(path: str | os.PathLike):
     path = Path(path)
     if not path.is_file():
         raise SemmapError(path, "no trace file here (expected trace.nc written by `semmap map`)")
+    import xarray as xr  # deferred, as in _diagnose_one
+
     try:
         tree = xr.open_datatree(path, engine="h5netcdf")
         tree["posterior"]

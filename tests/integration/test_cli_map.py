@@ -192,3 +192,13 @@ def test_a_rule_file_off_the_fast_path_is_named_at_the_start(first_run, tmp_path
     assert r.stderr.index(notes[0]) < r.stderr.index("sampling")
     assert json.loads((out / "world.json").read_text())["rules"].endswith("halls_to_corridors.lp")
     assert "pairwise-local" not in first_run[1].stderr
+
+
+def test_two_cores_give_the_same_world_json_as_one(first_run, tmp_path):
+    """With two cores the start world is made in a forked process while the rest of the program
+    is imported, and the chains run side by side: the same world.json as with one core."""
+    out, _ = first_run
+    r = semmap("map", MAP, "--out", tmp_path / "c", "--seed", 7, *FAST, "--cores", "2")
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"start world: \d+ units \(\d+\.\d s\)", r.stderr)
+    assert (tmp_path / "c" / "world.json").read_bytes() == (out / "world.json").read_bytes()

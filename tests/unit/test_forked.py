@@ -90,6 +90,29 @@ def test_no_fork_from_a_process_running_other_threads(monkeypatch):
         t.join()
 
 
+def _matmul_in_child():
+    import numpy as np
+    import scipy.linalg
+
+    a = np.arange(90000, dtype=float).reshape(300, 300) / 90000
+    return os.getpid(), float((a @ a).sum()), float(scipy.linalg.norm(a @ a.T))
+
+
+def test_a_child_forked_beside_the_idle_blas_threads_uses_blas(monkeypatch):
+    """numpy's and scipy's OpenBLAS keep idle worker threads (native, not Python's): a fork
+    beside them still happens, and the child's products are right, not deadlocked."""
+    import numpy as np
+    import scipy.linalg
+
+    monkeypatch.undo()                         # the real count
+    monkeypatch.setattr(forked, "WAIT_S", 60.0)
+    a = np.arange(90000, dtype=float).reshape(300, 300) / 90000
+    here = (float((a @ a).sum()), float(scipy.linalg.norm(a @ a.T)))   # the pools started
+    assert forked._one_thread()
+    pid, *sums = Forked(_matmul_in_child, fork=True).result()
+    assert pid != PARENT and tuple(sums) == pytest.approx(here, rel=1e-12)
+
+
 def test_close_ends_a_child_that_still_runs():
     f = Forked(_sleeps_in_child, fork=True)
     child = f._proc
