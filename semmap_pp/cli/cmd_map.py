@@ -261,13 +261,20 @@ def _start_job(inputs, settings):
 
 
 def _import_the_rest() -> None:
-    """Import the modules that the chains and the outputs import later (PyMC, ArviZ, matplotlib:
-    about 1.5 s), here, while :func:`_start_job`'s process makes the start world."""
+    """Import the modules that the chains and the outputs import later (PyMC, ArviZ, matplotlib,
+    dask, the ROS 2 message types: about 1.8 s), here, while :func:`_start_job`'s process makes
+    the start world."""
     import arviz_base  # noqa: F401  (sampler.diagnostics imports ArviZ when it judges the draws)
     import arviz_stats  # noqa: F401
+    import dask.base  # noqa: F401  (xarray asks dask for its scheduler when it writes trace.nc)
+    import distributed  # noqa: F401
+    import h5netcdf  # noqa: F401
+    from rosbags.typesys import Stores, get_typestore
 
     from semmap_pp.outputs import write  # noqa: F401  (matplotlib)
     from semmap_pp.sampler import step  # noqa: F401  (PyMC)
+
+    get_typestore(Stores.ROS2_JAZZY)   # imports the message types the ROS 2 bag is written with
 
 
 def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, previous_ids,
