@@ -92,9 +92,8 @@ def main(argv: list[str] | None = None) -> int:
               "semmap writes the names it is given into its outputs as UTF-8: rename the file or "
               "folder", file=sys.stderr)
         return 2
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
+    try:    # building the parser imports every command's module: a second on a cold start
+        args = build_parser().parse_args(argv)
         return int(args.func(args) or 0)
     except SemmapError as exc:
         print(f"semmap: error: {exc}", file=sys.stderr)

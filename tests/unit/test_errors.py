@@ -61,3 +61,16 @@ def test_the_command_sets_the_heap_aside_before_the_teardown_whatever_its_end(ca
         assert "semmap: error:" in capsys.readouterr().err
     finally:
         gc.unfreeze()
+
+
+def test_ctrl_c_while_the_commands_are_imported_is_one_line(capsys, monkeypatch):
+    """Building the parser imports every command's module (a second on a cold start): Ctrl-C
+    then is `semmap: interrupted` and exit 130, as later, not a traceback."""
+    import semmap_pp.cli as cli
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert cli.main(["rules", "list"]) == 130
+    assert capsys.readouterr().err == "semmap: interrupted\n"
