@@ -124,17 +124,38 @@ class Climb:
 
     def best_of(self, worlds, changed) -> bool:
         """Accept the best of ``worlds`` (all differing from the current one in ``changed``) if it helps."""
-        best, best_lp = None, self.tr.logp + 1e-9
-        for new in worlds:
-            if not self.valid(new):
-                continue
-            prop = self.propose_above(new, changed, best_lp)
-            if prop.logp > best_lp:
-                best, best_lp = prop, prop.logp
+        best = self.best_proposal([(w, changed) for w in worlds if self.valid(w)])
         if best is None:
             return False
         self.tr.accept(best)
         return True
+
+    def best_proposal(self, candidates):
+        """The proposal of highest log p among ``candidates`` (valid ``(world, changed)`` pairs),
+        when it exceeds the current log p; the first in the list of those that tie; else None.
+
+        With a tracker that takes floors and has an
+        :meth:`~semmap_pp.target.posterior.Tracker.upper_bound`, the
+        candidates are tried in the order of their bounds, highest first, each with the best log p
+        so far as its floor, and the search stops at the first bound below it: the best comes
+        early and raises the floor, so that most of the others are skipped before their types
+        are inferred. The choice is the one made by trying them all in list order."""
+        floor = self.tr.logp + 1e-9
+        bound = (getattr(self.tr, "upper_bound", None)
+                 if len(candidates) > 1 and getattr(self.tr, "supports_floor", False) else None)
+        order = range(len(candidates))
+        if bound is not None:
+            bounds = [bound(w, changed) for w, changed in candidates]
+            order = sorted(order, key=lambda i: -bounds[i])
+        best, best_lp, best_i = None, floor, len(candidates)
+        for i in order:
+            if bound is not None and bounds[i] + 1e-9 * abs(bounds[i]) < best_lp:
+                break                # this bound and every later one lie below the best so far
+            w, changed = candidates[i]
+            prop = self.propose_above(w, changed, best_lp)
+            if prop.logp > best_lp or (best is not None and prop.logp == best_lp and i < best_i):
+                best, best_lp, best_i = prop, prop.logp, i
+        return best
 
     def units(self, within=None) -> list:
         """The active slots, in slot order: all, or those in the set ``within``."""
@@ -207,16 +228,14 @@ class WallMoves(Climb):
             if not self.world.active[slot]:
                 break
             rect = [int(v) for v in self.world.rects[slot]]
-            best, best_lp = None, self.tr.logp + 1e-9
+            candidates = []
             for c in self.positions(rect, side):
                 r = list(rect)
                 r[side] = c
                 new, gone = self.absorb(wm.replace(self.world, slot, r), slot)
-                if not self.valid(new):
-                    continue
-                prop = self.propose_above(new, (slot, *gone), best_lp)
-                if prop.logp > best_lp:
-                    best, best_lp = prop, prop.logp
+                if self.valid(new):
+                    candidates.append((new, (slot, *gone)))
+            best = self.best_proposal(candidates)
             if best is not None:
                 self.tr.accept(best)
                 moved = True

@@ -652,34 +652,49 @@ class Tracker(KnowledgeTracking):
                         _Typing(new, geometry, adj, sale, cross), (hist, gamma_total, knowledge))
 
     def _below_floor(self, new_world, changed, floor, xo, touched, aff) -> bool:
-        """Whether an upper bound of ``new_world``'s log posterior, taken before its changed slots
-        are retyped and its pairs of two tiles computed, lies below ``floor`` (counted in
-        :attr:`skipped`). With knowledge: the type-free bound (bound 1). With the fixed provider on
-        a tiled lattice: the proposal's score without the pairs of two tiles, which cost several
-        times the score (the fixed types and the likelihood are exact without them, and each
-        pair's SaLe factor is at most 1); on one lattice no bound (it would only add a score)."""
-        post, old = self.post, self._typ
-        ow, data = old.world, post.data
-        if not self._fixed:
-            bound = _type_free_bound(
-                data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
-                _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), _ro(self.hist),
-                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp, aff)
-            which = 0
-        elif aff is not None:      # a tiled lattice (``aff``: its tiles' rotations)
-            bound = _fixed_bound(
-                data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
-                _ro(new_world.rects), _ro(new_world.active), changed, _ro(old.geometry),
-                _ro(old.adj), _ro(ow.types), GEOMETRY_TYPE, _ro(self.hist), self.gamma_total,
-                _ro(post.fixed.fixed_sale), _ro(self._prior_n), post._ip, post._fp, xo, touched,
-                aff)
-            which = 1
-        else:
-            return False
+        """Whether :meth:`upper_bound` of ``new_world`` lies below ``floor`` (counted in
+        :attr:`skipped`)."""
+        bound, which = self._bound(new_world, changed, xo, touched, aff)
         if bound + 1e-9 * abs(bound) < floor:
             self.skipped[which] += 1
             return True
         return False
+
+    def upper_bound(self, new_world: wm.World, changed_slots) -> float:
+        """An upper bound of :meth:`propose`'s log posterior of ``new_world`` (which differs from
+        :attr:`world` only in ``changed_slots``), taken before its changed slots are retyped and
+        its pairs of two tiles computed; ``inf`` when there is none (the fixed provider on a
+        lattice of one direction). :meth:`propose` with a ``floor`` above it would skip the
+        proposal; a caller choosing the best of many proposals tries them in the order of this
+        bound (:meth:`semmap_pp.sampler.ascent_walls.Climb.best_proposal`)."""
+        old = self._typ
+        tiled = old.cross is not None
+        changed = np.array(changed_slots, dtype=np.int64)
+        return self._bound(new_world, changed, old.cross if tiled else None,
+                           np.zeros(old.world.capacity, np.bool_) if tiled else None,
+                           self.post.cross.aff if tiled else None)[0]
+
+    def _bound(self, new_world, changed, xo, touched, aff) -> tuple[float, int]:
+        """``(bound, which)``: with knowledge the type-free bound (bound 1, ``which`` 0); with the
+        fixed provider on a tiled lattice the proposal's score without the pairs of two tiles,
+        which cost several times the score (the fixed types and the likelihood are exact without
+        them, and each pair's SaLe factor is at most 1; ``which`` 1); on one lattice no bound
+        (``inf``: it would only add a score). ``xo`` and ``touched`` are only read."""
+        post, old = self.post, self._typ
+        ow, data = old.world, post.data
+        if not self._fixed:
+            return float(_type_free_bound(
+                data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), _ro(self.hist),
+                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp, aff)), 0
+        if aff is not None:      # a tiled lattice (``aff``: its tiles' rotations)
+            return float(_fixed_bound(
+                data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
+                _ro(new_world.rects), _ro(new_world.active), changed, _ro(old.geometry),
+                _ro(old.adj), _ro(ow.types), GEOMETRY_TYPE, _ro(self.hist), self.gamma_total,
+                _ro(post.fixed.fixed_sale), _ro(self._prior_n), post._ip, post._fp, xo, touched,
+                aff)), 1
+        return math.inf, 1
 
     @staticmethod
     def _bounded(world) -> ScoredProposal:

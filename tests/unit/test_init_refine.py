@@ -325,9 +325,10 @@ def test_bridges_span_two_rooms_wide_gaps_but_not_a_wall_across_the_corridor():
 
 
 def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
-    """With knowledge on, the ascent passes its acceptance threshold to the tracker as a floor, so
-    proposals whose type-free bound is below it skip the knowledge engine; the moves taken, the
-    world and its log p are those of the ascent without floors."""
+    """With knowledge on, the ascent tries a move's candidates in the order of their type-free
+    bounds and passes the best log p so far to the tracker as a floor, so candidates whose bound is
+    below it skip the knowledge engine; the moves taken, the world and its log p are those of the
+    ascent without floors, which evaluates every candidate."""
     from pathlib import Path
 
     from semmap_pp.sampler.ascent import _Ascent
@@ -344,7 +345,18 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
                            (38, 299, 124, 402)]):
         start = wm.add(start, s, r)
 
+    evaluated = []
+    propose = Tracker.propose
+
+    def counting(self, new_world, changed_slots, floor=None):
+        out = propose(self, new_world, changed_slots, floor)
+        evaluated[-1] += not out.bounded
+        return out
+
+    monkeypatch.setattr(Tracker, "propose", counting)
+
     def ascend():
+        evaluated.append(0)
         post = TargetFactory(frame, model, rules)()
         post.knowledge_on = True
         asc = _Ascent(post, start, data_from_frame(frame))
@@ -354,10 +366,10 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
         return asc
 
     with_floors = ascend()
-    assert sum(with_floors.tr.skipped) > 0
     monkeypatch.setattr(Tracker, "supports_floor", False)
     without = ascend()
     assert sum(without.tr.skipped) == 0
+    assert evaluated[0] < 0.5 * evaluated[1]
     assert np.array_equal(with_floors.world.active, without.world.active)
     assert np.array_equal(with_floors.world.rects, without.world.rects)
     assert with_floors.tr.logp == without.tr.logp
@@ -743,3 +755,43 @@ def test_w_stars_polish_cuts_a_corridor_where_its_wall_jogs_and_moves_the_wall_w
     assert rects(out) == [(8, 8, 72, 162), (8, 160, 86, 244), (8, 242, 72, 396),
                           (70, 8, 136, 162), (70, 242, 136, 396), (84, 160, 136, 244)]
     assert post.evaluate(out).total > post.evaluate(start).total + 100
+
+
+def test_best_proposal_tried_by_bound_chooses_as_trying_all_in_order():
+    """:meth:`Climb.best_proposal` tries candidates by their upper bounds, highest first, and
+    stops at the first bound below the best log p so far; on random candidates, ties included,
+    it picks what trying every candidate in list order picks (the first of the best), and it
+    evaluates fewer of them."""
+    from types import SimpleNamespace
+
+    from semmap_pp.sampler.ascent_walls import Climb
+
+    class Fake:
+        supports_floor = True
+
+        def __init__(self, logps, slack):
+            self.logp, self.logps, self.slack, self.evaluated = 0.0, logps, slack, 0
+
+        def upper_bound(self, world, changed):
+            return self.logps[world] + self.slack[world]
+
+        def propose(self, world, changed, floor=None):
+            if floor is not None and self.upper_bound(world, changed) < floor:
+                return SimpleNamespace(logp=-np.inf, bounded=True)
+            self.evaluated += 1
+            return SimpleNamespace(logp=self.logps[world], bounded=False, world=world)
+
+    rng = np.random.default_rng(3)
+    fewer = 0
+    for trial in range(400):
+        n = int(rng.integers(1, 12))
+        logps = rng.integers(-6, 4, n).astype(float)      # small integers: many ties
+        slack = rng.choice([0.0, 0.5, 3.0, 20.0], n)
+        climb = Climb.__new__(Climb)
+        climb.tr = Fake(logps, slack)
+        got = climb.best_proposal([(i, (0,)) for i in range(n)])
+        above = np.flatnonzero(logps > 1e-9)
+        want = None if above.size == 0 else int(above[np.argmax(logps[above])])
+        assert (got is None and want is None) or got.world == want, (logps, slack)
+        fewer += climb.tr.evaluated < n
+    assert fewer > 100
