@@ -147,7 +147,7 @@ class LocalPath:
             if marg is None:
                 raise RuleError(path, "the hard rules admit no world for this evidence")
             method = "exact"
-            given = {pq: float(np.dot(pm.reshape(-1), c[2].reshape(-1)))
+            given = {pq: float(np.vdot(pm, c[2]))
                      for (pq, c), pm in zip(conds, joint)}
             for pq, c in tn.sale.items():
                 sale[pq] = c if isinstance(c, float) else given[pq]

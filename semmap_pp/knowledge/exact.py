@@ -11,6 +11,7 @@ and fast; a clique of more than :data:`MAX_CLIQUE_STATES` joint states is refuse
 from __future__ import annotations
 
 import heapq
+import math
 
 import numba
 
@@ -426,6 +427,12 @@ class Plan:
         self.order = np.array(jt.order, dtype=np.int64)
         self.card = list(jt.card)
         self.scopes = list(scopes)
+        # where each variable's marginal lies in the flat result, and each scope's table shape
+        self.marg_slices, at = [], 0
+        for v in jt.order:
+            self.marg_slices.append((v, at, at + self.card[v]))
+            at += self.card[v]
+        self.scope_shapes = [tuple(self.card[v] for v in s) for s in self.scopes]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -681,22 +688,18 @@ def calibrate_flat(plan: Plan, tables, want=()):
         ``log Z``, the marginal of each variable (None when no world is possible) and the joint
         distribution of each wanted factor's scope (shaped as its table).
     """
-    values = (np.concatenate([np.asarray(t, dtype=np.float64).reshape(-1) for t in tables])
-              if len(tables) else np.zeros(0))
+    values = np.concatenate(tables, axis=None, dtype=np.float64) if len(tables) else np.zeros(0)
     w = np.asarray(want, dtype=np.int64)
     log_z, flat, pairs = _calibrate_flat(*plan.ints, values, w)
     if not np.isfinite(log_z):
         return float(log_z), None, []
     marg = [None] * len(plan.order)
-    at = 0
-    for i, v in enumerate(plan.order.tolist()):
-        k = plan.card[v]
-        marg[v] = flat[at:at + k]
-        at += k
+    for v, a, b in plan.marg_slices:
+        marg[v] = flat[a:b]
     out, at = [], 0
-    for f in w.tolist():
-        shape = tuple(plan.card[v] for v in plan.scopes[f])
-        size = int(np.prod(shape))
+    for f in want:
+        shape = plan.scope_shapes[f]
+        size = math.prod(shape)
         out.append(pairs[at:at + size].reshape(shape))
         at += size
     return float(log_z), marg, out
