@@ -7,11 +7,14 @@ edge on one wall together.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
 from semmap_pp import world as wm
 from semmap_pp.model import MAX_K
+from semmap_pp.target.posterior import below_floor
 from semmap_pp.target.prior import all_valid
 from semmap_pp.sampler.kernels.shrink_dilate import wall_range
 
@@ -146,10 +149,11 @@ class Climb:
         order = range(len(candidates))
         if bound is not None:
             bounds = [bound(w, changed) for w, changed in candidates]
-            order = sorted(order, key=lambda i: -bounds[i])
+            # highest first; a NaN bound (never below a floor) first, with +inf
+            order = sorted(order, key=lambda i: -bounds[i] if bounds[i] == bounds[i] else -math.inf)
         best, best_lp, best_i = None, floor, len(candidates)
         for i in order:
-            if bound is not None and bounds[i] + 1e-9 * abs(bounds[i]) < best_lp:
+            if bound is not None and below_floor(bounds[i], best_lp):
                 break                # this bound and every later one lie below the best so far
             w, changed = candidates[i]
             prop = self.propose_above(w, changed, best_lp)

@@ -503,6 +503,14 @@ def _type_free_bound(xsum, gain_max, old_rects, old_active, old_types, new_rects
     return 0 + loglik + logprior
 
 
+def below_floor(bound: float, floor: float) -> bool:
+    """Whether an upper bound ``bound`` of a proposal's log posterior shows it below ``floor``
+    (a relative slack of 1e-9 for rounding; a bound of ``-inf``, an invalid world, always is).
+    The tracker's skips and the ascent's early stop (:meth:`Climb.best_proposal
+    <semmap_pp.sampler.ascent_walls.Climb.best_proposal>`) use this one test."""
+    return bound == -math.inf or bound + 1e-9 * abs(bound) < floor
+
+
 def _ro(a):
     """``a`` as a read-only array (a view when it is writable). The compiled calls get every
     input read-only, whatever made it: one signature each, not one per mix of writable and
@@ -639,7 +647,7 @@ class Tracker(KnowledgeTracking):
                     data.xsum, data.gain, ow.rects, ow.active, ow.types, new_world.rects,
                     new_world.active, types, hist.copy(), self.gamma_total, adj, _NO_SALE,
                     _NEVER_SALE, True, self._prior_n, post._ip, post._fp, aff)[:2])
-                if bound + 1e-9 * abs(bound) < floor:
+                if below_floor(bound, floor):
                     self.skipped[1] += 1
                     return self._bounded(new_world)
                 types, sale = post._result_arrays(self._provider, knowledge[1], new_world.capacity)
@@ -655,7 +663,7 @@ class Tracker(KnowledgeTracking):
         """Whether :meth:`upper_bound` of ``new_world`` lies below ``floor`` (counted in
         :attr:`skipped`)."""
         bound, which = self._bound(new_world, changed, xo, touched, aff)
-        if bound + 1e-9 * abs(bound) < floor:
+        if below_floor(bound, floor):
             self.skipped[which] += 1
             return True
         return False
@@ -667,6 +675,8 @@ class Tracker(KnowledgeTracking):
         lattice of one direction). :meth:`propose` with a ``floor`` above it would skip the
         proposal; a caller choosing the best of many proposals tries them in the order of this
         bound (:meth:`semmap_pp.sampler.ascent_walls.Climb.best_proposal`)."""
+        if self.post.provider is not self._provider:   # knowledge switched without a resync
+            self.resync()
         old = self._typ
         tiled = old.cross is not None
         changed = np.array(changed_slots, dtype=np.int64)

@@ -173,3 +173,17 @@ def test_quality_synthetic_wings_scores_a_floor_of_wings_beside_the_manhattan_on
     assert part["groups"]["wings2-30"]["unit_f1"] == row["unit_f1"]
     assert set(row["unit_recall_by_wing"]) == {"0", "1", "2"}
     assert all(0 <= v <= 1 for v in row["unit_recall_by_wing"].values())
+
+
+def test_the_fuzzer_runs_from_the_checkout():
+    """``python bench/fuzz.py`` (docs/robustness.md) finds the fuzz targets of tests/unit and
+    ends with its JSON summary: a short run of one target."""
+    import subprocess
+
+    proc = subprocess.run([sys.executable, str(BENCH / "fuzz.py"), "--seconds", "0.1", "--examples", "5",
+                           "--targets", "mutated-yaml"], capture_output=True, text=True, timeout=300,
+                          cwd=BENCH.parent)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["benchmark"] == "fuzz" and result["cases"]["mutated-yaml"] >= 1
+    assert result["failures"] == 0
