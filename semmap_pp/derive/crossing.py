@@ -583,11 +583,12 @@ def cross_tile_openings(frame, rects: np.ndarray, slots, xd: CrossData | None = 
     active = np.ones(len(rects), np.bool_)
     aff, spans, pix, nbr, off, ip = xd
     tiles = [int(tile_of(r[1], spans)) for r in rects]
+    reach = _boxes(rects, active, aff, spans, _reach(xd)) if len(rects) else np.zeros((0, 4))
     pairs, doors, passages = [], [], []
     for i in range(len(rects)):
         for j in range(i + 1, len(rects)):
-            if tiles[i] == tiles[j]:
-                continue
+            if tiles[i] == tiles[j] or not _meets(reach[i], reach[j]):
+                continue     # boxes apart by more than a pair's reach: no relation (as cross_all)
             adjacent, labels, widths, lo = pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip)
             if not (adjacent or len(widths)):
                 continue

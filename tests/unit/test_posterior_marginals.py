@@ -134,6 +134,34 @@ def test_world_doors_finds_the_door_of_two_rooms():
     assert door_marginals(frame, doors, [w, w, alone]) == [pytest.approx(2 / 3)]
 
 
+def test_world_doors_with_a_pair_cache_equal_those_found_anew():
+    """The doors of worlds that share pairs of units, found with one pair cache (as
+    door_marginals does), equal those found for each world alone, slots included."""
+    from semmap_pp.lattice.frame import build_frame_from_classes
+    from semmap_pp.model import load_model
+
+    from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+
+    classes = np.full((40, 100), UNKNOWN, np.uint8)
+    classes[4:36, 4:96] = OCCUPIED
+    for c0 in (6, 36, 66):                             # three rooms in a row ...
+        classes[6:34, c0:c0 + 28] = FREE
+    classes[16:30, 34:36] = FREE                       # ... a door between the first two
+    classes[10:24, 64:66] = FREE                       # ... and one between the last two
+    frame = build_frame_from_classes(classes, 0.05, load_model(), theta=0.0)
+    rooms = [(4, 4, 36, 36), (4, 34, 36, 66), (4, 64, 36, 96)]
+    worlds = []
+    for order in ((0, 1, 2), (2, 0, 1), (1, 2, 0)):    # the same pairs in other slots
+        w = wm.empty(5)
+        for slot, k in enumerate(order):
+            w = wm.add(w, slot + 1, rooms[k], type_index=ROOM)
+        worlds += [w, wm.remove(w, 2)]
+    cache = {}
+    for w in worlds:
+        assert world_doors(frame, w, cache) == world_doors(frame, w)
+    assert len(cache) >= 2 and sum(len(world_doors(frame, w)) for w in worlds) >= 6
+
+
 def test_world_json_gets_them_on_the_right_unit_and_door_ids():
     """with_posterior puts each slot's marginals on its unit id and each door's on the id
     world.json gave it (doors ordered by their units' ids, then box)."""
