@@ -236,6 +236,9 @@ def run(args) -> int:
         if state is None or out.resolve() != args.resume.resolve():
             check_out_dir(out, args.force)     # again under the lock: a run that ended meanwhile may have filled it
         job = _start_job(inputs, settings) if state is None and starts is None else None
+        if job is not None:     # said now: the imports below take a second or two
+            from semmap_pp.run.pipeline import BUILDING_STARTS, map_head
+            print(f"{map_head(inputs)}; {BUILDING_STARTS}", file=sys.stderr, flush=True)
         try:
             _import_the_rest()
             return _sample_and_write(args, out, inputs, settings, state, rules, starts, previous_ids,

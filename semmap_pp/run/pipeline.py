@@ -96,6 +96,16 @@ def timed_start_world(inputs: Inputs) -> tuple[wm.World, float]:
     return world, time.perf_counter() - t0
 
 
+#: What the first line of a run's log says it does next (after :func:`map_head`).
+BUILDING_STARTS = "building the start worlds"
+
+
+def map_head(inputs: Inputs) -> str:
+    """The head of a run's first log line: the map, its size and its building directions."""
+    return (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
+            f"{directions_text(inputs.frame)}")
+
+
 def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, base_start, data=None,
                 start_job=None):
     """Where the chains start and how long they run, said in the log: ``(first start worlds,
@@ -103,13 +113,12 @@ def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, b
     for a new run (data-driven or given start worlds) or one that resumes an earlier run; ``data``
     is the run's kernel data, which the start worlds' ascent reuses; ``start_job`` (see
     :func:`run_map`) hands over the data-driven start world made elsewhere."""
-    frame = inputs.frame
-    head = (f"map {inputs.grid.source}: {inputs.grid.width}x{inputs.grid.height} cells, "
-            f"{directions_text(frame)}")
+    head = map_head(inputs)
     if resume is None:
         rng = np.random.default_rng(settings.seed)
         if starts is None:   # minutes on a large map: say so before, and how long after
-            log(f"{head}; building the start worlds")
+            if start_job is None:       # else the caller said it when it began the job
+                log(f"{head}; {BUILDING_STARTS}")
             t_start, made = time.perf_counter(), "shared" if base_start is not None else None
             if base_start is None and start_job is not None:
                 base_start, seconds = start_job.result()
@@ -205,7 +214,8 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
         :func:`timed_start_world` of ``inputs`` being made elsewhere (``semmap map`` forks a process
         for it before it imports PyMC, ArviZ and matplotlib); asked for when the chains' start
         worlds are made, and unused with ``resume``, ``starts`` or ``base_start``. The run is the
-        same as without.
+        same as without; its log leaves out the first line (:func:`map_head`, "building the start
+        worlds"), which the caller says when it begins the job.
     previous_ids : semmap_pp.plans.world_file.PreviousIds, optional
         The units of an earlier world.json whose ids W*'s units carry over where they are the
         same place (:mod:`semmap_pp.semantic.ids`); W* itself is the same as without.

@@ -42,3 +42,27 @@ def test_one_core_makes_no_process_and_the_run_makes_its_start_world_itself(inpu
     assert _start_job(inputs, NS(cores=1)) is None
     world, seconds = timed_start_world(inputs)
     assert seconds > 0 and _same(world, data_start_world(inputs))
+
+
+def test_the_first_line_is_said_before_the_rest_is_imported_and_once(monkeypatch, capsys, tmp_path):
+    """With two cores `semmap map` says the map's head line ("...; building the start worlds")
+    as soon as the start world's process is forked, before the second or two of imports, and
+    the run's own log does not say it again."""
+    from semmap_pp.cli import cmd_map
+    from semmap_pp.cli import main
+
+    monkeypatch.setattr(forked, "_one_thread", lambda: True)
+    seen = []
+    real = cmd_map._import_the_rest
+
+    def importing():
+        seen.append(capsys.readouterr().err)
+        real()
+
+    monkeypatch.setattr(cmd_map, "_import_the_rest", importing)
+    rc = main(["map", str(ROOT / "tests/data/maps/intel_corner.yaml"), "--out", str(tmp_path / "out"),
+               "--cores", "2", "--chains", "2", "--draws", "4", "--tune", "0", "--n-inner", "2",
+               "--spread-draws", "0", "--progress", "none"])
+    err = seen[0] + capsys.readouterr().err
+    assert rc == 0 and "building the start worlds" in seen[0]
+    assert err.count("building the start worlds") == 1
