@@ -43,14 +43,24 @@ def bench(capsys, monkeypatch, *argv) -> dict:
 
 
 def test_every_benchmark_is_tested():
-    assert NAMES == ["batch", "knowledge", "large", "learn", "likelihood", "quality", "sampler", "zones"]
+    assert NAMES == ["against", "batch", "knowledge", "large", "learn", "likelihood", "quality", "sampler",
+                     "zones"]
 
 
 @pytest.mark.parametrize("name", NAMES)
 def test_benchmark_runs_at_a_tiny_size(name, capsys, monkeypatch):
+    if name == "against" and not (BENCH.parent / ".git").exists():
+        pytest.skip("bench against checks out another version: a git checkout only")
     result = bench(capsys, monkeypatch, name, "--tiny")
     assert result["command"] == f"python bench/run.py {name} --tiny --json"
-    if name == "batch":
+    if name == "against":
+        (row,) = result["rows"]
+        assert row["map"] == "tests/data/maps/tiny.yaml"
+        # HEAD against this checkout: the same plan, unless uncommitted changes change it
+        assert row["same_plan"] is True or result["this"].endswith("+uncommitted changes")
+        assert len(row["other_s"]) == len(row["this_s"]) == 1 and row["ratio_of_means"] > 0
+        assert len(result["rev"]) == 40 and result["max_ratio"] == row["ratio_of_means"]
+    elif name == "batch":
         assert result["one_worker_s"] > 0 and result["two_workers_s"] > 0
         assert set(result["task_wall_s_one_worker"]) == {"tiny"}
     elif name == "knowledge":
