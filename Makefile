@@ -37,6 +37,10 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do n=$$(basename $$b .py); n=$${n#bench_}; \
+	  if [ "$$n" = against ]; then \
+	    if [ -z "$(AGAINST)" ]; then echo "== against: skipped (make bench AGAINST=REV times each map against REV)"; continue; fi; \
+	    echo "== against $(AGAINST)"; $(BIN)/python bench/run.py against --rev "$(AGAINST)" --json || exit 1; continue; \
+	  fi; \
 	  echo "== $$n"; $(BIN)/python bench/run.py $$n --json || exit 1; done
 
 clean:
