@@ -208,18 +208,29 @@ def doors_between(classes: np.ndarray, rp, rq, cells, p: int = 0, q: int = 1) ->
 
 
 def find_openings(classes: np.ndarray, rects: np.ndarray, adj: np.ndarray, cells,
-                  slots=None) -> tuple[list[Door], list[Door]]:
+                  slots=None, cache: dict | None = None) -> tuple[list[Door], list[Door]]:
     """``(doors, passages)`` of a world: :func:`openings_between` for every adjacent pair.
 
     ``rects`` (n, 4) and ``adj`` (n, n) of the active units; ``slots`` their ids (default 0..n-1).
+    ``cache`` (a dict kept across calls on one ``classes``): a pair's openings depend on its two
+    rectangles alone, so they are kept by them and found once for all the worlds that hold the
+    pair (labelled with each world's own slots).
     """
     rects = np.asarray(rects).reshape(-1, 4)
     slots = np.arange(len(rects)) if slots is None else np.asarray(slots)
     doors, passages = [], []
     for i, j in zip(*np.nonzero(np.triu(np.asarray(adj, bool), 1))):
-        d, p = openings_between(classes, rects[i], rects[j], cells, int(slots[i]), int(slots[j]))
+        p, q = int(slots[i]), int(slots[j])
+        if cache is None:
+            d, g = openings_between(classes, rects[i], rects[j], cells, p, q)
+        else:
+            key = (*rects[i].tolist(), *rects[j].tolist())
+            found = cache.get(key)
+            if found is None:
+                found = cache[key] = openings_between(classes, rects[i], rects[j], cells)
+            d, g = ([o._replace(p=p, q=q) for o in kind] for kind in found)
         doors += d
-        passages += p
+        passages += g
     return doors, passages
 
 

@@ -33,6 +33,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,7 +42,7 @@ from semmap_pp import world as wm
 from semmap_pp.cells import UNIT_TYPES
 from semmap_pp.derive.adjacency import adjacency_matrix
 from semmap_pp.derive.crossing import cross_tile_openings
-from semmap_pp.derive.doors import doors_between, find_openings
+from semmap_pp.derive.doors import find_openings
 from semmap_pp.lattice.tiles import rect_spans
 
 #: A sampled unit is a W* unit's match when their rectangles' intersection over union is at least this.
@@ -130,24 +131,13 @@ def world_doors(frame, world: wm.World, pair_cache: dict | None = None) -> list:
     on ``frame``'s door classes, and on a tiled lattice those between units of two tiles:
     :func:`~semmap_pp.derive.crossing.cross_tile_openings`; passages left out).
 
-    ``pair_cache`` (a dict kept across calls on one frame): the doors of two units of one tile
-    depend on their two rectangles alone, so they are kept by them and found once for all the
-    worlds that hold the pair (with each world's own slots)."""
+    ``pair_cache``: :func:`~semmap_pp.derive.doors.find_openings`'s cache of the pairs of units of
+    one tile, kept across calls on one frame."""
     c = frame.cells
     slots = wm.active_slots(world)
     rects = world.rects[slots]
     adj = adjacency_matrix(rects, c.wall, c.adjacency_dilation)
-    if pair_cache is None:
-        doors = find_openings(frame.door_classes, rects, adj, c, slots)[0]
-    else:
-        doors = []
-        for i, j in zip(*np.nonzero(np.triu(adj, 1))):
-            key = (*rects[i].tolist(), *rects[j].tolist())
-            found = pair_cache.get(key)
-            if found is None:
-                found = pair_cache[key] = doors_between(frame.door_classes, rects[i], rects[j], c)
-            p, q = int(slots[i]), int(slots[j])
-            doors += [d._replace(p=p, q=q) for d in found]
+    doors = find_openings(frame.door_classes, rects, adj, c, slots, cache=pair_cache)[0]
     if rect_spans(frame):
         doors = doors + cross_tile_openings(frame, rects, slots)[1]
     return doors
@@ -165,22 +155,24 @@ def door_there(box, doors, grow: int) -> bool:
     return any(max(r0, d.box[0]) < min(r1, d.box[2]) and max(c0, d.box[1]) < min(c1, d.box[3]) for d in doors)
 
 
-def door_marginals(frame, wstar_doors, worlds, doors_of=world_doors) -> list[float]:
+def door_marginals(frame, wstar_doors, worlds, doors_of=None) -> list[float]:
     """For each of ``wstar_doors`` (:class:`~semmap_pp.derive.doors.Door`), the share of ``worlds``
     with a door at its place (:func:`door_there`, grown by ``frame.cells.wall``). A world repeated
-    in ``worlds`` has its doors found once (``doors_of(frame, world)``; with :func:`world_doors`,
-    each pair of units of one tile once for all the worlds)."""
+    in ``worlds`` has its doors found once (``doors_of(frame, world)``; by default
+    :func:`world_doors` with one pair cache for all the worlds)."""
     worlds = list(worlds)
     if not worlds:
         return [float("nan")] * len(wstar_doors)
     found = np.zeros(len(wstar_doors), np.int64)
     cache: dict[bytes, list] = {}
-    pairs: dict = {}
+    if doors_of is None:
+        pairs: dict = {}
+        doors_of = functools.partial(world_doors, pair_cache=pairs)
     grow = int(frame.cells.wall)
     for w in worlds:
         key = w.rects.tobytes() + w.active.tobytes()
         if key not in cache:
-            doors = world_doors(frame, w, pairs) if doors_of is world_doors else doors_of(frame, w)
+            doors = doors_of(frame, w)
             cache[key] = [door_there(d.box, doors, grow) for d in wstar_doors]
         found += np.asarray(cache[key], np.int64)
     return [float(v) / len(worlds) for v in found]
