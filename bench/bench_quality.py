@@ -55,7 +55,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
 * **partial**: two partial explorations of each real-gt floor (``bench/partial_maps.py``: the robot
   drove through the corridors and 30 % or 60 % of the rooms and saw the others only through their
   doors), rooms.png scored by the ROSE2 protocol on the cells the partial map saw. ROSE2's
-  output exists for the full floors only.
+  output exists for the full floors only. ``--held-out`` runs explorations of other seeds
+  (:data:`HELD_OUT_FIRST` + 1 and + 2: other rooms entered), which no setting was tuned on.
 * **types**: the five maps of ``/work/shared/data/ipa-types`` (same pixel rule), per-cell room vs
   corridor accuracy (:func:`semmap_pp.evaluate.type_accuracy`).
 
@@ -149,7 +150,8 @@ def add_arguments(parser) -> None:
                         help="sampler seeds of --subset stability, comma-separated (default 0,1,2)")
     parser.add_argument("--first-floor", type=int, default=0, help="first synthetic seed")
     parser.add_argument("--held-out", action="store_true",
-                        help=f"synthetic-wings: the held-out seeds ({HELD_OUT_FIRST} + --first-floor on)")
+                        help=f"synthetic-wings: the held-out seeds ({HELD_OUT_FIRST} + --first-floor on); "
+                             f"partial: explorations of seeds {HELD_OUT_FIRST} + 1, + 2")
     parser.add_argument("--furniture", action="store_true",
                         help="ipa: the plans with furniture drawn in (NAME_furnitures.png), same truth")
     parser.add_argument("--resolution", type=float, default=0.05,
@@ -1142,6 +1144,20 @@ def bench_real_gt(args, model, rules) -> dict:
             "protocol": "ROSE2: truth rooms = one-colour regions > 200 cells, segments whole"}
 
 
+def partial_explorations(held_out: bool) -> list[tuple[float, int, str]]:
+    """``(share of rooms entered, exploration seed, suffix of the map's name)`` of the partial
+    subset: :data:`partial_maps.EXPLORATIONS`, or with ``held_out`` the same shares explored with
+    seeds :data:`HELD_OUT_FIRST` on (named by their seed).
+
+    >>> partial_explorations(True)
+    [(0.3, 1001, '-seed1001'), (0.6, 1002, '-seed1002')]
+    """
+    import partial_maps
+    if not held_out:
+        return [(e, s, "") for e, s in partial_maps.EXPLORATIONS]
+    return [(e, HELD_OUT_FIRST + s, f"-seed{HELD_OUT_FIRST + s}") for e, s in partial_maps.EXPLORATIONS]
+
+
 def bench_partial(args, model, rules) -> dict:
     """rooms.png on partial explorations of the real-gt floors (:mod:`partial_maps`)."""
     import tempfile
@@ -1153,8 +1169,8 @@ def bench_partial(args, model, rules) -> dict:
     with tempfile.TemporaryDirectory(prefix="semmap-partial-") as tmp:
         for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
             truth = read_segmentation_truth(folder / "gt.png", "rose2")
-            for explored, seed in partial_maps.EXPLORATIONS:
-                name = f"{folder.name}@{explored:g}"
+            for explored, seed, suffix in partial_explorations(args.held_out):
+                name = f"{folder.name}@{explored:g}{suffix}"
                 if not _keep(name, args):
                     continue
                 out = Path(tmp) / f"{folder.name}-{seed}"
@@ -1177,6 +1193,7 @@ def bench_partial(args, model, rules) -> dict:
                 _log(args, f"partial {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f}; "
                            f"{row['rooms']} rooms ({row['rooms_seen_through_door']} seen through their door)")
     return {"rows": rows, "means": {k: _mean(rows, k) for k in ("precision", "recall", "run_s")},
+            "held_out": bool(args.held_out),
             "protocol": "ROSE2 on the cells the partial map saw: truth rooms = regions > 200 cells"}
 
 
