@@ -1,7 +1,7 @@
 """The user docs describe the program as it is: its history is CHANGELOG.md's.
 
 docs/ and README.md are checked for the marks of a lab notebook (a session named, a "What changed"
-entry) and every file a doc, a code comment, the model file or a rule file cites under docs/ must
+entry, a figure dated by a changelog entry or a commit) and every file a doc, a code comment, the model file or a rule file cites under docs/ must
 exist (no DESIGN.md the project does not ship).
 """
 
@@ -22,9 +22,19 @@ SOURCES = ([p for p in (ROOT / "semmap_pp").rglob("*.py")] + list((ROOT / "bench
            + list((ROOT / "models").glob("*.toml")) + list((ROOT / "rules").rglob("*.lp")))
 
 
+#: a figure dated by an entry of the changelog ("0.946 before CHANGELOG.md, quality change 34"), the
+#: words possibly broken over two lines, or by a commit ("at 39c63c7 just before it")
+DATED = re.compile(r"(?i:\b(?:before|since|after|until)\s+CHANGELOG\.md)|\bat [0-9a-f]{7,40}\s+just before\b")
+
+
 def history_lines(path: Path, base: Path = ROOT) -> list[str]:
-    return [f"{path.relative_to(base)}:{i}: {line.strip()[:100]}"
-            for i, line in enumerate(path.read_text().splitlines(), 1) if HISTORY.search(line)]
+    text = path.read_text()
+    hits = {i: line for i, line in enumerate(text.splitlines(), 1) if HISTORY.search(line)}
+    lines = text.splitlines()
+    for m in DATED.finditer(text):
+        i = text.count("\n", 0, m.start()) + 1
+        hits[i] = lines[i - 1]
+    return [f"{path.relative_to(base)}:{i}: {hits[i].strip()[:100]}" for i in sorted(hits)]
 
 
 def test_user_docs_hold_no_history():
@@ -56,3 +66,7 @@ def test_the_check_sees_history(tmp_path):
                                              "page.md:5: ## What changed"]
     page.write_text("semmap diff: what changed between two files.\n")
     assert history_lines(page, tmp_path) == []
+    page.write_text("CPR 0.947 (0.946 before\nCHANGELOG.md, quality change 34).\nSee CHANGELOG.md for the history.\n")
+    assert history_lines(page, tmp_path) == ["page.md:1: CPR 0.947 (0.946 before"]
+    page.write_text("types 0.985 (0.983 at 39c63c7 just before it)\n")
+    assert history_lines(page, tmp_path) == ["page.md:1: types 0.985 (0.983 at 39c63c7 just before it)"]
