@@ -94,12 +94,18 @@ def derive_world(frame, world: wm.World) -> Derived:
     unexplored = find_unexplored(frame.classes, rects, c.min_side, c.unexplored_min_area)
     ext = np.zeros(len(rects), bool)
     seen = getattr(frame, "seen_classes", frame.classes)   # other zones' pixels as the map shows them
+    index = {int(s): i for i, s in enumerate(slots)}
+    opened = np.zeros(len(rects), bool)     # units with a door or a passage to another unit
+    for d in doors + passages:
+        opened[index[int(d.p)]] = opened[index[int(d.q)]] = True
     for group in _tile_groups(frame, rects):   # a footprint's hulls are drawn on one lattice
         ext[group] = find_exterior(seen, rects[group], c.wall, c.exterior_max_share,
                                    c.exterior_seen_min, across=c.adjacency_dilation,
                                    fan_seen_max=c.exterior_fan_seen_max,
                                    outline_gap=c.exterior_outline_gap,
-                                   object_extent=c.object_max_extent)
+                                   object_extent=c.object_max_extent,
+                                   outline_walls_max=c.exterior_outline_walls_max,
+                                   opened=opened[group])
     inside = {int(s) for s in slots[~ext]}
     exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))
                 for i in np.flatnonzero(ext)]

@@ -47,6 +47,14 @@ blobs no longer than ``object_extent`` (where rays outside end) not counted as w
 building's walls enclose is never exterior. Where the outer wall has a wider gap (unseen, a glass
 front) the outline lets the outside in, and the rules above decide alone.
 
+A fan beyond a window between two wings can escape every rule above: the walls of both wings
+enclose two of its sides, and the hull of a lattice's units spans the notch between them. Such a
+unit is exterior by the outline alone when it has neither a door nor a passage to any other unit,
+lies mostly outside the outline, shows less than ``fan_seen_max`` of its interior, and its own
+walls line less than ``outline_walls_max`` of its perimeter. A room glimpsed through its door,
+whose outer walls the laser never drew, lies outside the outline as well, but it opens onto the
+corridor or the room it was seen from: W* gives it a door.
+
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
 labels.png, doors, adjacency and objects hold the building's units only (docs/model.md,
@@ -270,10 +278,29 @@ def building_outline(classes: np.ndarray, gap: int, object_extent: int = 0) -> n
     return ~swept[pad:pad + c.shape[0], pad:pad + c.shape[1]]
 
 
+def _outside_the_outline(classes, rects, own, share, opened, taken, wall, outside_min,
+                         fan_seen_max, walls_max, inside) -> list:
+    """The ranking entries (as :func:`find_exterior` sorts them) of the units not in ``taken``
+    that lie mostly outside the outline ``inside``, have no door and no passage (``opened``),
+    show less than ``fan_seen_max`` of their interior and whose own walls (``own``: side shares
+    without cover) line less than ``walls_max`` of their perimeter: fans of rays beyond a window
+    that the hulls keep in (module docstring)."""
+    out = []
+    for i in range(len(rects)):
+        if i in taken or opened[i]:
+            continue
+        o = _mask_outside_share(rects[i], inside)
+        if (o > outside_min and _seen_inside(classes, rects[i], wall) < fan_seen_max
+                and perimeter_share(own[i], rects[i]) < walls_max):
+            out.append(((-o, share[i], tuple(int(v) for v in rects[i])), i))
+    return out
+
+
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
                   seen_min: float, outside_min: float = 0.5, across: int = 3,
                   fan_seen_max: float = 0.0, outline_gap: int = 0,
-                  object_extent: int = 0) -> np.ndarray:
+                  object_extent: int = 0, outline_walls_max: float = 0.0,
+                  opened=None) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -291,7 +318,11 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     ``rects``. With ``outline_gap`` (cells, 0: off) a unit is flagged only when more than
     ``outside_min`` of its area lies outside :func:`building_outline` too (``object_extent``: the
     longest occupied component that is an object, not a wall): a unit the building's walls
-    enclose is never exterior."""
+    enclose is never exterior. With ``outline_walls_max`` (0: off) and ``opened`` ((n,) bool: the
+    units with a door or a passage to another unit) a unit the rules above keep is exterior when it
+    has no door and no passage, more than ``outside_min`` of it lies outside the outline, less than
+    ``fan_seen_max`` of its interior is seen and its own walls line less than
+    ``outline_walls_max`` of its perimeter (:func:`_outside_the_outline`)."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
@@ -334,6 +365,10 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     if order and outline_gap > 0:   # the building's own outline: what its walls enclose stays in
         inside = building_outline(classes, outline_gap, object_extent)
         order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside) > outside_min]
+    if outline_walls_max > 0.0 and outline_gap > 0 and opened is not None:
+        order += _outside_the_outline(classes, rects, own, share, opened, {i for _k, i in order},
+                                      wall, outside_min, fan_seen_max, outline_walls_max,
+                                      building_outline(classes, outline_gap, object_extent))
     for _key, i in sorted(order)[:max(n - 2, 0)]:
         exterior[i] = True
     return exterior

@@ -374,6 +374,33 @@ def test_a_fan_in_the_notch_of_a_u_is_exterior_but_a_corridor_there_is_not():
         assert not find_exterior(c, rects, wall=2, max_share=0.3, seen_min=0.1).any()
 
 
+def test_a_fan_with_no_door_outside_the_outline_is_exterior_however_the_hulls_hold_it():
+    """The U's notch fan when W* has no unit over the east wing: its two sides are the wings'
+    drawn walls, but no enclosed unit lies across the east one, so the rules of the hulls keep
+    it. It lies outside the outline (the notch is wider than the gap), shows little of its
+    interior and has no door: with its own walls along less than ``outline_walls_max`` of its
+    perimeter it is exterior; with a door (a room glimpsed through it), with walls along more, or
+    with the rule off it is kept, and so is a corridor seen whole there. The west wing and the
+    base, inside the outline, are never flagged."""
+    from semmap_pp.derive.exterior import building_outline, perimeter_share
+
+    rects = np.array([UL, UB, NOTCH])
+    kw = dict(wall=2, max_share=0.3, seen_min=0.1, fan_seen_max=0.7, outline_gap=30)
+    c = u_building("fan")
+    assert not building_outline(c, 30)[30, 60] and building_outline(c, 30)[50, 25]
+    assert not find_exterior(c, rects, **kw).any()
+    per = perimeter_share(side_shares(c, NOTCH, None, 2, 0.1, own=0), NOTCH)
+    assert 0.3 < per < 0.7
+    no_doors = np.zeros(3, bool)
+    assert find_exterior(c, rects, **kw, outline_walls_max=per + 0.01,
+                         opened=no_doors).tolist() == [False, False, True]
+    for walls_max, opened in ((per - 0.01, no_doors), (per + 0.01, np.ones(3, bool)),
+                              (0.0, no_doors), (per + 0.01, None)):
+        assert not find_exterior(c, rects, **kw, outline_walls_max=walls_max, opened=opened).any()
+    assert not find_exterior(u_building("corridor"), rects, **kw, outline_walls_max=1.0,
+                             opened=no_doors).any()
+
+
 # ------------------------------------------------------------------ the building's own outline
 
 def rotated_wing_building():
