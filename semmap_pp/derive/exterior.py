@@ -78,6 +78,8 @@ wall with the window.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import ndimage
 
@@ -281,17 +283,18 @@ def building_outline(classes: np.ndarray, gap: int, object_extent: int = 0) -> n
 def _outside_the_outline(classes, rects, own, share, opened, taken, wall, outside_min,
                          fan_seen_max, walls_max, inside) -> list:
     """The ranking entries (as :func:`find_exterior` sorts them) of the units not in ``taken``
-    that lie mostly outside the outline ``inside``, have no door and no passage (``opened``),
-    show less than ``fan_seen_max`` of their interior and whose own walls (``own``: side shares
-    without cover) line less than ``walls_max`` of their perimeter: fans of rays beyond a window
-    that the hulls keep in (module docstring)."""
+    that have no door and no passage (``opened``), show less than ``fan_seen_max`` of their
+    interior, whose own walls (``own``: side shares without cover) line less than ``walls_max`` of
+    their perimeter and that lie mostly outside the outline ``inside()`` (asked for only when a
+    unit passes the rest): fans of rays beyond a window that the hulls keep in (module
+    docstring)."""
     out = []
     for i in range(len(rects)):
-        if i in taken or opened[i]:
+        if (i in taken or opened[i] or _seen_inside(classes, rects[i], wall) >= fan_seen_max
+                or perimeter_share(own[i], rects[i]) >= walls_max):
             continue
-        o = _mask_outside_share(rects[i], inside)
-        if (o > outside_min and _seen_inside(classes, rects[i], wall) < fan_seen_max
-                and perimeter_share(own[i], rects[i]) < walls_max):
+        o = _mask_outside_share(rects[i], inside())
+        if o > outside_min:
             out.append(((-o, share[i], tuple(int(v) for v in rects[i])), i))
     return out
 
@@ -362,13 +365,13 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
                 out = 1.0               # a fan in a notch: flagged first, as wholly outside
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
-    if order and outline_gap > 0:   # the building's own outline: what its walls enclose stays in
-        inside = building_outline(classes, outline_gap, object_extent)
-        order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside) > outside_min]
+    # the building's own outline, made once and only when a unit needs it
+    inside = functools.cache(lambda: building_outline(classes, outline_gap, object_extent))
+    if order and outline_gap > 0:   # what the building's walls enclose stays in
+        order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside()) > outside_min]
     if outline_walls_max > 0.0 and outline_gap > 0 and opened is not None:
         order += _outside_the_outline(classes, rects, own, share, opened, {i for _k, i in order},
-                                      wall, outside_min, fan_seen_max, outline_walls_max,
-                                      building_outline(classes, outline_gap, object_extent))
+                                      wall, outside_min, fan_seen_max, outline_walls_max, inside)
     for _key, i in sorted(order)[:max(n - 2, 0)]:
         exterior[i] = True
     return exterior
