@@ -52,6 +52,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   licence: LICENSE-ROSE2 there) with their hand-drawn room truth. rooms.png is scored by the ROSE2
   protocol (:func:`semmap_pp.evaluate.protocol_scores`), and so, with the same code, are ROSE2's own
   published output (``rose2.png``) and regions.png cut to the map's free cells; per map and as means.
+  ``--turn 15,30,45`` (or ``default``) runs the floors turned by those angles with their truth
+  instead (``bench/turned_maps.py``: a map frame at another angle to the building), held out.
 * **partial**: two partial explorations of each real-gt floor (``bench/partial_maps.py``: the robot
   drove through the corridors and 30 % or 60 % of the rooms and saw the others only through their
   doors), rooms.png scored by the ROSE2 protocol on the cells the partial map saw. ROSE2's
@@ -141,6 +143,17 @@ def _budget(text: str) -> str | float:
     return value
 
 
+def _angles(text: str) -> tuple[float, ...]:
+    """``--turn``'s angles: comma-separated degrees, or ``default`` (:data:`turned_maps.ANGLES`)."""
+    if text.strip() == "default":
+        import turned_maps
+        return tuple(turned_maps.ANGLES)
+    try:
+        return tuple(float(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"angles must be comma-separated degrees, got {text!r}") from None
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--subset", default="all",
                         choices=["synthetic", "synthetic-wings", "truth", "surgery", "real", "real-gt", "partial", "wings", "ipa", "types", "stability",
@@ -152,6 +165,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--held-out", action="store_true",
                         help=f"synthetic-wings: the held-out seeds ({HELD_OUT_FIRST} + --first-floor on); "
                              f"partial: explorations of seeds {HELD_OUT_FIRST} + 1, + 2")
+    parser.add_argument("--turn", type=_angles, default=None, metavar="DEG[,DEG...]",
+                        help="real-gt: the floors turned by these angles (degrees; turned_maps) "
+                             "instead of as they are; 'default' for 15,30,45")
     parser.add_argument("--furniture", action="store_true",
                         help="ipa: the plans with furniture drawn in (NAME_furnitures.png), same truth")
     parser.add_argument("--resolution", type=float, default=0.05,
@@ -1104,44 +1120,61 @@ REAL_GT = ROOT / "bench" / "data" / "real-gt"
 
 
 def bench_real_gt(args, model, rules) -> dict:
+    """rooms.png on the real-gt floors beside ROSE2's own output; with ``--turn`` the floors turned
+    by those angles instead (:mod:`turned_maps`: ROSE2's output exists for the floors as they are)."""
+    import tempfile
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="semmap-turned-") as tmp:
+        for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
+            for degrees in args.turn or (None,):
+                name = folder.name if degrees is None else f"{folder.name}@{degrees:g}deg"
+                if _keep(folder.name, args):
+                    _real_gt_row(args, model, folder, name, degrees, Path(tmp), rows)
+    keys = ("precision", "recall", "regions_free_precision", "regions_free_recall", "run_s")
+    if not args.turn:
+        keys += ("rose2_precision", "rose2_recall")
+    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys}, "turned": list(args.turn or ()),
+            "protocol": "ROSE2: truth rooms = one-colour regions > 200 cells, segments whole"}
+
+
+def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows: list) -> None:
+    """Run and score one real-gt floor (turned by ``degrees`` unless None) into ``rows``."""
+    import turned_maps
     from semmap_pp.cells import FREE
     from semmap_pp.evaluate import protocol_scores, read_segmentation, read_segmentation_truth
     from semmap_pp.resources import DEFAULT_RULES
     from semmap_pp.run.inputs import load_inputs
-    rows = []
-    for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
-        name = folder.name
-        if not _keep(name, args):
-            continue
-        inputs = load_inputs(folder / "map.yaml", model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
-        ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"real-gt {name}")
-        if ran is None:
-            continue
-        run, clock = ran
-        sm = run.semantic
-        gt = read_segmentation_truth(folder / "gt.png", "rose2")
-        rooms = protocol_scores(gt, sm.rooms.labels)
+    gt = read_segmentation_truth(folder / "gt.png", "rose2")
+    map_yaml = folder / "map.yaml"
+    if degrees is not None:
+        gt = turned_maps.write(folder, tmp / name, degrees, gt)
+        map_yaml = tmp / name / "map.yaml"
+    inputs = load_inputs(map_yaml, model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
+    ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"real-gt {name}")
+    if ran is None:
+        return
+    run, clock = ran
+    sm = run.semantic
+    rooms = protocol_scores(gt, sm.rooms.labels)
+    seg, _ = regions_of(sm)
+    regions = protocol_scores(gt, np.where(inputs.grid.classes == FREE, seg, 0))
+    row = {"map": name, "units": len(sm.unit_ids), "rooms": len(sm.rooms.rooms),
+           "rooms_seen_through_door": sum(r.seen_through_door for r in sm.rooms.rooms),
+           "true_rooms": rooms.n_rooms,
+           "precision": round(rooms.precision, 4), "recall": round(rooms.recall, 4),
+           "regions_free_precision": round(regions.precision, 4),
+           "regions_free_recall": round(regions.recall, 4),
+           "cpr": round(sm.cpr, 4), "theta_deg": round(math.degrees(sm.frame.theta), 2),
+           "run_s": round(run.seconds, 1)}
+    if degrees is None:
         rose2 = protocol_scores(gt, read_segmentation(folder / "rose2.png"))
-        seg, _ = regions_of(sm)
-        regions = protocol_scores(gt, np.where(inputs.grid.classes == FREE, seg, 0))
-        row = {"map": name, "units": len(sm.unit_ids), "rooms": len(sm.rooms.rooms),
-               "rooms_seen_through_door": sum(r.seen_through_door for r in sm.rooms.rooms),
-               "true_rooms": rooms.n_rooms,
-               "precision": round(rooms.precision, 4), "recall": round(rooms.recall, 4),
-               "rose2_precision": round(rose2.precision, 4), "rose2_recall": round(rose2.recall, 4),
-               "regions_free_precision": round(regions.precision, 4),
-               "regions_free_recall": round(regions.recall, 4),
-               "cpr": round(sm.cpr, 4), "run_s": round(run.seconds, 1)}
-        rows.append(row)
-        _save(args, name, sm)
-        _log(args, f"real-gt {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f} | ROSE2 "
-                   f"{row['rose2_precision']:.3f} / {row['rose2_recall']:.3f} | regions cut to free "
-                   f"{row['regions_free_precision']:.3f} / {row['regions_free_recall']:.3f}; "
-                   f"{row['rooms']} rooms, run {row['run_s']} s")
-    keys = ("precision", "recall", "rose2_precision", "rose2_recall", "regions_free_precision",
-            "regions_free_recall", "run_s")
-    return {"rows": rows, "means": {k: _mean(rows, k) for k in keys},
-            "protocol": "ROSE2: truth rooms = one-colour regions > 200 cells, segments whole"}
+        row |= {"rose2_precision": round(rose2.precision, 4), "rose2_recall": round(rose2.recall, 4)}
+    rows.append(row)
+    _save(args, name.replace("@", "_"), sm)
+    ref = (f" | ROSE2 {row['rose2_precision']:.3f} / {row['rose2_recall']:.3f}" if degrees is None else "")
+    _log(args, f"real-gt {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f}{ref} | regions "
+               f"cut to free {row['regions_free_precision']:.3f} / {row['regions_free_recall']:.3f}; "
+               f"{row['rooms']} rooms, run {row['run_s']} s")
 
 
 def partial_explorations(held_out: bool) -> list[tuple[float, int, str]]:
@@ -1334,6 +1367,8 @@ def run(args) -> dict:
     if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05)
                          and args.subset not in ("synthetic", "truth", "surgery")):
         raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic, truth and surgery only")
+    if args.turn and args.subset != "real-gt":
+        raise SystemExit("--turn applies to --subset real-gt only")
     model = load_model(args.model)
     rules = load_rules(args.rules or DEFAULT_RULES)
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)
