@@ -4,8 +4,10 @@ The robot starts in the room with the most neighbours (a corridor), and goes on,
 into each neighbouring room that is long and thin (``elongation`` at least 3: a corridor, always
 driven) or, otherwise, with probability ``explored``. From a scan position every metre in the rooms
 it drove through (at least 0.3 m from a wall) it casts 720 rays of 8 m over the full floor's map;
-a ray stops at the first occupied cell or at a cell the full map never saw. The partial map keeps
-the cells a ray reached, with their grey values, and is unknown elsewhere: rooms the robot passed
+a ray stops at the first occupied cell or at a cell the full map never saw (its unknown grey: the
+commonest grey value its YAML's thresholds call unknown, 153 on the freiburg floors, 205 on the
+others). The partial map keeps the cells a ray reached, with their grey values, and is that grey
+elsewhere: rooms the robot passed
 are seen only through their doors, as fans of rays. The truth is the floor's hand-drawn truth on
 the cells the partial map saw (the truth is drawn on the floor: on a map saved with graded values
 it holds cells lighter than the unknown grey that the YAML's thresholds call unknown); the ROSE2
@@ -23,6 +25,8 @@ import numpy as np
 import yaml
 from PIL import Image
 from scipy import ndimage as ndi
+
+from turned_maps import unknown_grey
 
 #: (share of the rooms entered, seed) of the two explorations of each floor
 EXPLORATIONS = ((0.3, 1), (0.6, 2))
@@ -66,7 +70,8 @@ def explore(folder: Path, explored: float, seed: int, truth: np.ndarray):
     p = (255.0 - img) / 255.0
     free = p < float(meta["free_thresh"])
     occupied = p > float(meta["occupied_thresh"])
-    unseen = np.abs(img.astype(int) - 205) <= 3          # the canvas the full map never saw
+    canvas = unknown_grey(img, meta)                      # the grey of the cells the map never saw
+    unseen = np.abs(img.astype(int) - canvas) <= 3
     rng = np.random.default_rng(seed)
     ids = [int(t) for t in np.unique(truth) if t > 0 and (truth == t).sum() > 200]
     neighbours = {t: set() for t in ids}
@@ -88,7 +93,7 @@ def explore(folder: Path, explored: float, seed: int, truth: np.ndarray):
     keep = (clear[yy, xx] >= 0.3) & np.isin(truth[yy, xx], sorted(entered))
     poses = np.stack([yy[keep], xx[keep]], 1).astype(np.float64)
     seen = _cast(occupied | unseen, poses, 720, 8.0 / res)
-    part = np.full(img.shape, 205, np.uint8)
+    part = np.full(img.shape, canvas, np.uint8)
     part[seen] = img[seen]
     return part, dict(meta, image="map.png"), np.where(seen, truth, 0)
 
