@@ -70,7 +70,7 @@ def explore(folder: Path, explored: float, seed: int, truth: np.ndarray):
     p = (255.0 - img) / 255.0
     free = p < float(meta["free_thresh"])
     occupied = p > float(meta["occupied_thresh"])
-    canvas = unknown_grey(img, meta)                      # the grey of the cells the map never saw
+    canvas = unknown_grey(folder, img)                    # the grey of the cells the map never saw
     unseen = np.abs(img.astype(int) - canvas) <= 3
     rng = np.random.default_rng(seed)
     ids = [int(t) for t in np.unique(truth) if t > 0 and (truth == t).sum() > 200]

@@ -5,8 +5,8 @@ A SLAM map's frame is where the robot started, so a user's floor comes at any an
 floors of ``bench/data/real-gt`` come almost square to the image. Turned, the walls are drawn at
 the angle as the staircases of pixels a map at that angle holds (nearest neighbour, no new grey
 values); the canvas grows to hold the whole floor and the new corners are the map's own unknown
-grey (the commonest grey value its YAML's thresholds call unknown). The truth turns with the map, so
-the ROSE2 protocol scores rooms.png on the same cells.
+grey (the commonest grey value of the pixels the program reads as unknown). The truth turns with
+the map, so the ROSE2 protocol scores rooms.png on the same cells.
 
 The same folder and angle always give the same map.
 """
@@ -24,13 +24,14 @@ from scipy import ndimage as ndi
 ANGLES = (15.0, 30.0, 45.0)
 
 
-def unknown_grey(img: np.ndarray, meta: dict) -> int:
-    """The commonest grey value of ``img`` that ``meta``'s thresholds call unknown (ROS map_server:
-    occupancy ``p = (255 - v) / 255``, or ``v / 255`` with ``negate``); 205 when none is."""
-    v = np.arange(256)
-    p = v / 255.0 if int(meta.get("negate", 0)) else (255.0 - v) / 255.0
-    unknown = (p >= float(meta["free_thresh"])) & (p <= float(meta["occupied_thresh"]))
-    counts = np.bincount(img.ravel(), minlength=256) * unknown
+def unknown_grey(folder: Path, img: np.ndarray) -> int:
+    """The commonest grey value of ``img`` (the floor's image, as read here) among the pixels the
+    program itself reads as unknown from ``folder``'s map.yaml (:func:`semmap_pp.grid.load_map`:
+    its thresholds, negate and mode); 205 when none is."""
+    from semmap_pp.cells import UNKNOWN
+    from semmap_pp.grid import load_map
+    unknown = load_map(folder / "map.yaml").classes == UNKNOWN
+    counts = np.bincount(img[unknown], minlength=256)
     return int(counts.argmax()) if counts.any() else 205
 
 
@@ -39,7 +40,7 @@ def turn(folder: Path, degrees: float, truth: np.ndarray) -> tuple[np.ndarray, d
     ``truth`` (room labels, 0 none) turned with it."""
     meta = yaml.safe_load((folder / "map.yaml").read_text())
     img = np.asarray(Image.open(folder / meta["image"]).convert("L"))
-    grey = unknown_grey(img, meta)
+    grey = unknown_grey(folder, img)
     out = ndi.rotate(img, degrees, order=0, reshape=True, mode="constant", cval=grey, prefilter=False)
     labels = ndi.rotate(np.asarray(truth), degrees, order=0, reshape=True, mode="constant", cval=0,
                         prefilter=False)

@@ -136,7 +136,7 @@ def test_partial_explorations_see_part_of_the_floor_and_are_reproducible(monkeyp
     assert (part == again).all() and (gt == gt2).all()
     from PIL import Image
     full = np.asarray(Image.open(folder / "map.png").convert("L"))
-    canvas = partial_maps.unknown_grey(full, meta)
+    canvas = partial_maps.unknown_grey(folder, full)
     seen = part != canvas
     assert canvas == 153 and (part[seen] == full[seen]).all()
     assert 0.2 < seen.mean() / (full != canvas).mean() < 1.0

@@ -5,7 +5,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from PIL import Image
 
 from benchmod import bench_quality as bq
@@ -26,9 +25,8 @@ def test_the_new_corners_are_the_maps_own_unknown_grey(turned_maps, name, grey):
     """The freiburg floors' unknown is 153, which a 205 canvas would not be (their thresholds call
     205 free-ish grey); map17's is 205."""
     folder = REAL_GT / name
-    meta = yaml.safe_load((folder / "map.yaml").read_text())
     img = np.asarray(Image.open(folder / "map.png").convert("L"))
-    assert turned_maps.unknown_grey(img, meta) == grey
+    assert turned_maps.unknown_grey(folder, img) == grey
     out, _, _ = turned_maps.turn(folder, 30.0, np.zeros(img.shape, np.int32))
     assert out[0, 0] == out[-1, -1] == grey
     assert set(np.unique(out)) <= set(np.unique(img))          # no new grey values

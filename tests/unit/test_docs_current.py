@@ -29,8 +29,8 @@ DATED = re.compile(r"(?i:\b(?:before|since|after|until)\s+CHANGELOG\.md)|\bat [0
 
 def history_lines(path: Path, base: Path = ROOT) -> list[str]:
     text = path.read_text()
-    hits = {i: line for i, line in enumerate(text.splitlines(), 1) if HISTORY.search(line)}
     lines = text.splitlines()
+    hits = {i: line for i, line in enumerate(lines, 1) if HISTORY.search(line)}
     for m in DATED.finditer(text):
         i = text.count("\n", 0, m.start()) + 1
         hits[i] = lines[i - 1]
