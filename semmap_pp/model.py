@@ -81,6 +81,13 @@ class LatticeParams:
     zone_door_m: float = 1.0
     zone_min_votes_m: float = 1.0
     zone_split_share: float = 0.25
+    # resampling onto a turned lattice (lattice.frame.resample): each cell takes the class of the
+    # pixel under its centre, and a cell that closes a hole the centres left in a wall of the image
+    # is occupied (lattice.frame.closes_wall): an occupied pixel under the centre of one of its
+    # wall_samples x wall_samples sub-cells, and the image showing a wall through it within
+    # wall_join_px pixels (1 or 0: the centre only)
+    wall_samples: int = 1
+    wall_join_px: int = 0
 
 
 @dataclass(frozen=True)
@@ -581,7 +588,10 @@ def _lattice(r: _Reader) -> LatticeParams:
         zone_min_coherence=r.optional("lattice.zone_min_coherence", 0.5, r.number, lo=0.0, hi=1.0),
         zone_door_m=r.optional("lattice.zone_door_m", 1.0, r.number, positive=True, hi=100.0),
         zone_min_votes_m=r.optional("lattice.zone_min_votes_m", 1.0, r.number, lo=0.0, hi=1000.0),
-        zone_split_share=r.optional("lattice.zone_split_share", 0.25, r.number, lo=0.0, hi=1.0))
+        zone_split_share=r.optional("lattice.zone_split_share", 0.25, r.number, lo=0.0, hi=1.0),
+        # optional: a model file without them resamples a turned lattice from cell centres alone
+        wall_samples=r.optional("lattice.wall_samples", 1, r.integer, lo=1, hi=8),
+        wall_join_px=r.optional("lattice.wall_join_px", 0, r.integer, lo=0, hi=10))
     return lattice
 
 

@@ -266,6 +266,10 @@ class Frame:
         The model's lengths in cells at this resolution.
     origin : (x, y, yaw)
         The input map's origin (ROS map_server), for metres.
+    wall_samples, wall_join_px : int
+        How the image is read onto this lattice where it is turned (:func:`resample`; ``[lattice]``
+        of the model): sub-cells per side whose centres are read for a wall's pixels, and the
+        radius in pixels of the image window that must show a wall running through a cell.
     """
 
     theta: float
@@ -276,6 +280,8 @@ class Frame:
     cells: CellParams
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     crop: tuple[int, int, int, int] | None = None
+    wall_samples: int = 1
+    wall_join_px: int = 0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -508,6 +514,7 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
     share = CROP_MAX_SHARE if crop_max_share is None else float(crop_max_share)
     classes = np.asarray(classes, dtype=np.uint8)
     theta = lattice_orientation(classes, model.lattice, theta)
+    samples, join_px = model.lattice.wall_samples, model.lattice.wall_join_px
     h, w = classes.shape
     cells = model.cells(resolution)
     origin = tuple(float(v) for v in origin)
@@ -538,15 +545,152 @@ def build_frame_from_classes(classes: np.ndarray, resolution: float, model: Mode
                 crop = (i0, j0, hl, wl)
             else:
                 i0, j0, i1, j1 = 0, 0, hl, wl
-        lat = np.full((i1 - i0, j1 - j0), UNKNOWN, dtype=np.uint8)
-        outside = np.ones(lat.shape, dtype=bool)
-        for b0, b1 in probe.bands(i0, i1):   # in bands: no coordinate array of the lattice's size
-            xi, yi, inside = probe.lattice_pixels(b0, b1, j0, j1)
-            lat[b0 - i0:b1 - i0][inside] = classes[yi[inside], xi[inside]]
-            outside[b0 - i0:b1 - i0] = ~inside
+        lat, inside = resample(probe, classes, i0, i1, j0, j1, samples, join_px)
+        outside = ~inside
     lat.setflags(write=False)
     outside.setflags(write=False)
-    return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin, crop)
+    return Frame(float(theta), lat, outside, (h, w), float(resolution), cells, origin, crop, samples,
+                 join_px)
+
+
+def resample(frame: Frame, classes: np.ndarray, i0: int, i1: int, j0: int, j1: int,
+             samples: int = 1, join_px: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The image ``classes`` read onto rows ``i0:i1``, columns ``j0:j1`` of ``frame``'s lattice:
+    ``(cells, inside)``. Each cell takes the class of the pixel under its centre
+    (:meth:`Frame.lattice_pixels`; UNKNOWN where that lies outside the image, ``inside`` false).
+
+    A wall one pixel thick at an angle to the lattice is a staircase of pixels; where it runs
+    between two rows of cells the centres read it on either row by turns, with holes where neither
+    does, and the rooms on its two sides become one. With ``samples`` > 1 and ``join_px`` > 0 a
+    cell is occupied too when it closes such a hole (:func:`closes_wall`): an occupied pixel lies
+    under the centre of one of its ``samples`` x ``samples`` sub-cells, and the cell joins what
+    the image shows joined and the centres broke apart.
+    """
+    cells = np.full((i1 - i0, j1 - j0), UNKNOWN, dtype=np.uint8)
+    inside = np.zeros(cells.shape, dtype=bool)
+    joining = samples > 1 and join_px > 0
+    hits = np.zeros(cells.shape, dtype=bool) if joining else None
+    occupied_px = np.asarray(classes) == OCCUPIED
+    h, w = occupied_px.shape
+    offsets = (np.arange(samples) + 0.5) / samples - 0.5
+    for b0, b1 in frame.bands(i0, i1):   # in bands: no coordinate array of the lattice's size
+        xi, yi, ok = frame.lattice_pixels(b0, b1, j0, j1)
+        cells[b0 - i0:b1 - i0][ok] = classes[yi[ok], xi[ok]]
+        inside[b0 - i0:b1 - i0] = ok
+        if not joining:
+            continue
+        rows, cols = np.mgrid[b0:b1, j0:j1]
+        for dr in offsets:
+            for dc in offsets:
+                x, y = frame.lattice_to_image(rows + dr, cols + dc)
+                xs, ys = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
+                sub = ok & (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+                hits[b0 - i0:b1 - i0][sub] |= occupied_px[ys[sub], xs[sub]]
+    if joining:
+        cells[closes_wall(frame, classes, cells, hits, i0, j0, join_px)] = OCCUPIED
+    return cells, inside
+
+
+def closes_wall(frame: Frame, classes: np.ndarray, cells: np.ndarray, hits: np.ndarray, i0: int,
+                j0: int, join_px: int) -> np.ndarray:
+    """The cells of ``cells`` (lattice rows ``i0:``, columns ``j0:`` of ``frame``) that close a hole
+    the centres left in a wall of the image ``classes``; ``hits``: an occupied pixel lies under one
+    of the cell's sub-cell centres. A cell closes a hole when, besides its hit, it is not occupied
+    and
+
+    * the occupied cells around it form two or more 8-connected pieces (:func:`joins_pieces`),
+    * the free cells around it two or more 4-connected pieces (:func:`ring_pieces`): floor on both
+      sides, a hole that lets one side's floor into the other's (the edge of furniture with unknown
+      behind it, or an outer wall, joins nothing),
+    * and in the image the pixels that are not occupied within ``join_px`` of its centre form two
+      or more 4-connected pieces of at least two pixels each (:func:`image_splits`): a wall of the
+      image runs through it unbroken, so the cell does not join specks of clutter or a dotted line
+      that the image leaves open.
+    """
+    occupied = cells == OCCUPIED
+    cand = hits & ~occupied & joins_pieces(occupied) & (ring_pieces(cells == FREE, 4) >= 2)
+    if cand.any():
+        cand &= image_splits(frame, classes, cand, i0, j0, join_px)
+    return cand
+
+
+def image_splits(frame: Frame, classes: np.ndarray, cand: np.ndarray, i0: int, j0: int,
+                 radius: int) -> np.ndarray:
+    """For each cell of ``cand`` (lattice rows ``i0:``, columns ``j0:``): whether the pixels of the
+    image ``classes`` that are not occupied, within ``radius`` pixels (a square window) of the
+    pixel under its centre, form two or more 4-connected pieces of at least two pixels (a wall of
+    the image runs through the cell). Cells whose window leaves the image: False.
+
+    >>> c = np.full((9, 9), FREE, np.uint8); c[4, :] = OCCUPIED           # a wall across
+    >>> f = Frame(0.0, c, np.zeros(c.shape, bool), c.shape, 0.05, None)
+    >>> one = np.zeros(c.shape, bool); one[4, 4] = True
+    >>> bool(image_splits(f, c, one, 0, 0, 2)[4, 4])
+    True
+    >>> c[4, 4] = FREE                                                      # a gap in it
+    >>> bool(image_splits(f, c, one, 0, 0, 2)[4, 4])
+    False
+    """
+    out = np.zeros(cand.shape, dtype=bool)
+    rr, cc = np.nonzero(cand)
+    x, y = frame.lattice_to_image(rr + i0, cc + j0)
+    xs, ys = np.rint(x).astype(np.intp), np.rint(y).astype(np.intp)
+    h, w = np.shape(classes)
+    open_px = np.asarray(classes) != OCCUPIED
+    for r, c, xa, ya in zip(rr, cc, xs - radius, ys - radius):
+        if ya < 0 or xa < 0 or ya + 2 * radius + 1 > h or xa + 2 * radius + 1 > w:
+            continue
+        labels, n = ndimage.label(open_px[ya:ya + 2 * radius + 1, xa:xa + 2 * radius + 1])
+        if n >= 2 and np.count_nonzero(np.bincount(labels.ravel())[1:] >= 2) >= 2:
+            out[r, c] = True
+    return out
+
+
+@functools.cache
+def _ring_table(connectivity: int) -> np.ndarray:
+    """For each of the 256 ways the 8 neighbours of a cell can be set (bit k: the k-th of
+    :data:`_RING`), how many pieces they form (``connectivity`` 4 or 8), the cell itself left out."""
+    structure = np.ones((3, 3), bool) if connectivity == 8 else None
+    out = np.zeros(256, dtype=np.uint8)
+    for code in range(256):
+        m = np.zeros((3, 3), bool)
+        for k, (dr, dc) in enumerate(_RING):
+            m[1 + dr, 1 + dc] = bool(code >> k & 1)
+        out[code] = ndimage.label(m, structure=structure)[1]
+    return out
+
+
+#: the 8 neighbours of a cell, (row, column) offsets
+_RING = ((0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), (1, 1))
+
+
+def ring_pieces(mask: np.ndarray, connectivity: int = 8) -> np.ndarray:
+    """How many pieces (``connectivity`` 4 or 8) the cells of ``mask`` among each cell's 8
+    neighbours form, the cell itself left out.
+
+    >>> m = np.zeros((3, 3), bool); m[0, :] = m[2, :] = True               # floor above and below
+    >>> int(ring_pieces(m, 4)[1, 1]), int(ring_pieces(~m, 8)[1, 1])
+    (2, 2)
+    """
+    p = np.pad(np.asarray(mask, bool), 1)
+    h, w = np.shape(mask)
+    code = np.zeros((h, w), dtype=np.intp)
+    for k, (dr, dc) in enumerate(_RING):
+        code |= p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w].astype(np.intp) << k
+    return _ring_table(connectivity)[code]
+
+
+def joins_pieces(occupied: np.ndarray) -> np.ndarray:
+    """Whether the occupied cells among each cell's 8 neighbours form two or more 8-connected
+    pieces (a cell made occupied there would join them).
+
+    >>> m = np.zeros((3, 5), bool); m[1, [1, 3]] = True         # two pieces of a wall, a gap
+    >>> joins_pieces(m)[1].tolist()
+    [False, False, True, False, False]
+    >>> m[1, 3] = False; m[0, 2] = True                         # a bend: one piece
+    >>> bool(joins_pieces(m)[1, 2])
+    False
+    """
+    return ring_pieces(occupied, 8) >= 2
 
 
 def build_frame(grid, model: Model, theta: float | None = None) -> Frame:

@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from semmap_pp.cells import UNKNOWN
-from semmap_pp.lattice.frame import Frame, build_frame, build_frame_from_classes, doorway_classes
+from semmap_pp.lattice.frame import (Frame, build_frame, build_frame_from_classes, doorway_classes,
+                                     resample)
 from semmap_pp.lattice.zones import building_zones
 from semmap_pp.model import Model
 
@@ -107,14 +108,16 @@ class TiledFrame(Frame):
     def seen_classes(self) -> np.ndarray:
         """The lattice's classes with each tile's cells showing what the map shows at their pixel,
         the other zones' pixels included (:attr:`classes` holds those unknown: they are explained on
-        their own tile). What a unit's surroundings look like, whichever tile they lie on: the
-        exterior test reads them (:func:`semmap_pp.derive.exterior.find_exterior`)."""
+        their own tile), read as the tile's own cells are (:func:`resample`). What a unit's
+        surroundings look like, whichever tile they lie on: the exterior test reads them
+        (:func:`semmap_pp.derive.exterior.find_exterior`)."""
         out = np.full(self.classes.shape, UNKNOWN, np.uint8)
-        for t, c in zip(self.tiles, self.cols):
-            for b0, b1 in t.bands():
-                xi, yi, ok = t.lattice_pixels(b0, b1)      # a tile is a plain Frame: no zone mask
-                part = out[b0:b1, c:c + t.shape[1]]
-                part[ok] = self.image_classes[yi[ok], xi[ok]]
+        for t, c in zip(self.tiles, self.cols):    # a tile is a plain Frame: no zone mask
+            cells, ok = resample(t, self.image_classes, 0, t.shape[0], 0, t.shape[1], t.wall_samples,
+                                 t.wall_join_px)
+            out[:t.shape[0], c:c + t.shape[1]][ok] = cells[ok]
+        own = ~self.outside
+        out[own] = self.classes[own]     # a tile's own cells as its classes hold them
         out.setflags(write=False)
         return out
 
@@ -221,7 +224,9 @@ def _tile(classes: np.ndarray, zones: np.ndarray, k: int, theta: float, resoluti
         theirs[ok] = ~mine[yi[ok], xi[ok]]
         outside[b0:b1] |= theirs
     outside.setflags(write=False)
-    return dataclasses.replace(t, outside=outside)
+    own = np.where(outside, np.uint8(UNKNOWN), t.classes)  # a sub-cell may reach a wall of the zone
+    own.setflags(write=False)
+    return dataclasses.replace(t, classes=own, outside=outside)
 
 
 def build_tiled_frame(classes: np.ndarray, resolution: float, model: Model, thetas, zones,
@@ -255,7 +260,8 @@ def build_tiled_frame(classes: np.ndarray, resolution: float, model: Model, thet
     classes.setflags(write=False)
     first = tiles[0]
     return TiledFrame(thetas[0], lat, outside, first.image_shape, first.resolution, first.cells,
-                      first.origin, None, tuple(tiles), tuple(cols), zones, classes)
+                      first.origin, None, first.wall_samples, first.wall_join_px, tuple(tiles),
+                      tuple(cols), zones, classes)
 
 
 def unit_theta(frame, rect) -> float:

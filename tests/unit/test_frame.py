@@ -70,6 +70,88 @@ def test_to_image_resamples_back():
     assert np.mean(back == img) > 0.97
 
 
+def thin_wall(deg: float, size: int = 200, door: int = 0) -> np.ndarray:
+    """Free floor cut in two by a wall one pixel thick through the centre at ``deg`` degrees (an
+    8-connected line of pixels, as a laser scan draws it), with a doorway ``door`` pixels wide in
+    its middle."""
+    c = np.full((size, size), FREE, np.uint8)
+    t = math.radians(deg)
+    s = np.linspace(-size, size, 4 * size)
+    s = s[np.abs(s) >= door / 2]
+    x = np.rint(size / 2 + s * math.cos(t)).astype(int)
+    y = np.rint(size / 2 + s * math.sin(t)).astype(int)
+    ok = (x >= 0) & (x < size) & (y >= 0) & (y < size)
+    c[y[ok], x[ok]] = OCCUPIED
+    return c
+
+
+def free_sides(frame) -> int:
+    """How many 4-connected parts of free floor larger than a few cells the lattice shows."""
+    labels, n = ndimage.label(frame.classes == FREE)
+    return int(np.count_nonzero(np.bincount(labels.ravel())[1:] > 100))
+
+
+CENTRES = dataclasses.replace(MODEL, lattice=dataclasses.replace(MODEL.lattice, wall_samples=1))
+
+
+@pytest.mark.parametrize("deg", [3.0, 7.0, 15.0, 30.0, 37.0])
+def test_a_thin_wall_at_the_lattice_angle_stays_closed(deg):
+    """Resampled at its own angle, a wall one pixel thick keeps the floor on its two sides apart
+    (the default ``wall_samples`` 2), and leaks through holes when cells read their centres alone."""
+    img = thin_wall(deg)
+    f = build_frame_from_classes(img, 0.05, MODEL, theta=math.radians(deg))
+    assert MODEL.lattice.wall_samples == 2 and f.wall_samples == 2
+    assert free_sides(f) == 2
+    assert free_sides(build_frame_from_classes(img, 0.05, CENTRES, theta=math.radians(deg))) == 1
+
+
+@pytest.mark.parametrize("deg", [7.0, 30.0])
+def test_closing_the_gaps_leaves_doorways_and_thick_walls_as_they_are(deg):
+    """Only cells joining two pieces of a wall are added: a doorway 20 pixels wide keeps its free
+    cells (the rooms stay joined), and 3-pixel walls (rooms(), turned) come out as their centres
+    read them, but for a few cells where specks lie close."""
+    img = thin_wall(deg, door=20)
+    a = build_frame_from_classes(img, 0.05, CENTRES, theta=math.radians(deg))
+    b = build_frame_from_classes(img, 0.05, MODEL, theta=math.radians(deg))
+    assert free_sides(b) == 1
+    changed = a.classes != b.classes
+    assert changed.any() and np.all(b.classes[changed] == OCCUPIED) and np.array_equal(a.outside, b.outside)
+    mid = np.zeros(b.shape, bool)
+    r, c = np.rint(b.image_to_lattice(np.array([100.0]), np.array([100.0]))).astype(int).ravel()
+    mid[r - 3:r + 4, c - 8:c + 9] = True                        # the doorway: 17 of its 20 cells
+    assert not (mid & (b.classes == OCCUPIED)).any()
+    walls = ndimage.rotate(rooms(), deg, order=0, reshape=True, cval=UNKNOWN, mode="constant")
+    a = build_frame_from_classes(walls, 0.05, CENTRES, theta=-math.radians(deg))
+    b = build_frame_from_classes(walls, 0.05, MODEL, theta=-math.radians(deg))
+    changed = a.classes != b.classes
+    assert np.all(b.classes[changed] == OCCUPIED)
+    assert changed.sum() < 0.01 * (a.classes == OCCUPIED).sum()
+    z = build_frame_from_classes(rooms(), 0.05, MODEL, theta=0.0)
+    assert np.array_equal(z.classes, rooms())                   # the identity frame reads no sub-cell
+
+
+@pytest.mark.parametrize("deg", [15.0, 30.0])
+def test_no_cell_is_added_where_the_image_shows_no_wall_with_floor_on_both_sides(deg):
+    """Clutter (scattered specks), a dotted line the image leaves open, and the edge of furniture
+    with unknown behind it (floor on one side only) come out as the centres read them."""
+    rng = np.random.default_rng(3)
+    specks = np.full((200, 200), FREE, np.uint8)       # one in two cells of a 3-pixel grid
+    specks[::3, ::3][rng.random((67, 67)) < 0.5] = OCCUPIED
+    dotted = thin_wall(deg)
+    dotted[:, ::2] = np.where(dotted[:, ::2] == OCCUPIED, FREE, dotted[:, ::2])
+    edge = thin_wall(deg)
+    below = np.add.outer(np.arange(200) - 100.0, -(np.arange(200) - 100.0) * math.tan(math.radians(deg))) > 0
+    edge[below & (edge == FREE)] = UNKNOWN
+    for img in (specks, dotted, edge):
+        a = build_frame_from_classes(img, 0.05, CENTRES, theta=math.radians(deg))
+        b = build_frame_from_classes(img, 0.05, MODEL, theta=math.radians(deg))
+        assert np.array_equal(a.classes, b.classes)
+    whole = thin_wall(deg)          # the same wall drawn whole, floor on both sides: closed
+    a = build_frame_from_classes(whole, 0.05, CENTRES, theta=math.radians(deg))
+    b = build_frame_from_classes(whole, 0.05, MODEL, theta=math.radians(deg))
+    assert free_sides(a) == 1 and free_sides(b) == 2
+
+
 def test_rect_vertices_follow_the_rotation():
     f = build_frame_from_classes(np.zeros((10, 20), np.uint8), 0.05, MODEL, theta=0.0)
     v = f.rect_vertices_px((2, 3, 5, 9))
