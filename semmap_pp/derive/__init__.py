@@ -98,14 +98,15 @@ def derive_world(frame, world: wm.World) -> Derived:
     opened = np.zeros(len(rects), bool)     # units with a door or a passage to another unit
     for d in doors + passages:
         opened[index[int(d.p)]] = opened[index[int(d.q)]] = True
-    for group in _tile_groups(frame, rects):   # a footprint's hulls are drawn on one lattice
+    groups = _tile_groups(frame, rects)
+    for group in groups:   # a footprint's hulls are drawn on one lattice
         ext[group] = find_exterior(seen, rects[group], c.wall, c.exterior_max_share,
                                    c.exterior_seen_min, across=c.adjacency_dilation,
                                    fan_seen_max=c.exterior_fan_seen_max,
                                    outline_gap=c.exterior_outline_gap,
                                    object_extent=c.object_max_extent,
                                    outline_walls_max=c.exterior_outline_walls_max,
-                                   opened=opened[group])
+                                   opened=opened[group], keep=2 if len(groups) == 1 else 1)
     inside = {int(s) for s in slots[~ext]}
     exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))
                 for i in np.flatnonzero(ext)]

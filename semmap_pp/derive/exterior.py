@@ -21,7 +21,8 @@ that pass the test with cover too) whose own walls enclose at least three of the
 corridor stub open at its end, held by its neighbour's cover, may reach out of the building and
 does not widen the footprint). Fans are never enclosed, so they neither shield each other
 nor widen the footprint; a world without such a unit has no footprint and no exterior unit,
-and at least two units are always left (a world is never left without units).
+and at least two units are always left (a world is never left without units; on a lattice of
+several directions, where each tile's units are tested on their own, one unit per tile).
 
 A fan in a concave corner of the building (beyond a window in one wing, against the outer wall
 of the other) has two enclosed sides, the two outer walls, and lies within the convex hull. It
@@ -303,7 +304,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
                   seen_min: float, outside_min: float = 0.5, across: int = 3,
                   fan_seen_max: float = 0.0, outline_gap: int = 0,
                   object_extent: int = 0, outline_walls_max: float = 0.0,
-                  opened=None) -> np.ndarray:
+                  opened=None, keep: int = 2) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -325,12 +326,14 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     units with a door or a passage to another unit) a unit the rules above keep is exterior when it
     has no door and no passage, more than ``outside_min`` of it lies outside the outline, less than
     ``fan_seen_max`` of its interior is seen and its own walls line less than
-    ``outline_walls_max`` of its perimeter (:func:`_outside_the_outline`)."""
+    ``outline_walls_max`` of its perimeter (:func:`_outside_the_outline`). At least ``keep`` of
+    ``rects`` stay in the building (2: a world is never left without units; the units of one tile
+    of a tiled lattice keep 1, the world's other tiles holding the rest)."""
     classes = np.asarray(classes)
     rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
     n = len(rects)
     exterior = np.zeros(n, dtype=bool)
-    if max_share <= 0.0 or n < 3:
+    if max_share <= 0.0 or n <= keep:
         return exterior
     own = [side_shares(classes, r, None, wall, seen_min, own=0) for r in rects]
     supported = np.array([np.sort(sh)[2] >= max_share and perimeter_share(sh, r) >= max_share
@@ -372,7 +375,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     if outline_walls_max > 0.0 and outline_gap > 0 and opened is not None:
         order += _outside_the_outline(classes, rects, own, share, opened, {i for _k, i in order},
                                       wall, outside_min, fan_seen_max, outline_walls_max, inside)
-    for _key, i in sorted(order)[:max(n - 2, 0)]:
+    for _key, i in sorted(order)[:max(n - keep, 0)]:
         exterior[i] = True
     return exterior
 

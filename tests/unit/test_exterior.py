@@ -151,6 +151,18 @@ def test_a_unit_inside_the_building_footprint_is_not_exterior():
     assert find_exterior(c, np.array([ROOM, FAN]), 2, 0.3, 0.1).tolist() == [False, False]
 
 
+def test_the_units_of_one_tile_keep_one_unit_not_two():
+    """On a lattice of several directions each tile's units are tested on their own and the
+    world's other tiles hold units too: a tile of a room and the fan beyond its window loses the
+    fan (``keep=1``, what ``derive_world`` passes when there are several tiles), a world of those
+    two units alone keeps both (``keep=2``, the default)."""
+    c = room_with_window()
+    rects = np.array([ROOM, FAN])
+    assert find_exterior(c, rects, 2, 0.3, 0.1, keep=1).tolist() == [False, True]
+    assert find_exterior(c, rects, 2, 0.3, 0.1).tolist() == [False, False]
+    assert find_exterior(c, rects[:1], 2, 0.3, 0.1, keep=1).tolist() == [False]
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 7))
 def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
@@ -167,6 +179,9 @@ def test_flags_do_not_depend_on_order_and_two_units_always_remain(seed, n):
     assert np.count_nonzero(~flags) >= min(n, 2)
     perm = rng.permutation(n)
     assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1), flags[perm])
+    one = find_exterior(c, rects, 1, 0.6, 0.1, keep=1)    # a tile's units: one kept
+    assert np.count_nonzero(~one) >= min(n, 1) and np.all(one[flags])
+    assert np.array_equal(find_exterior(c, rects[perm], 1, 0.6, 0.1, keep=1), one[perm])
     # with the building's outline as well (the random occupied cells: walls, or objects)
     for gap, extent in ((4, 0), (6, 2)):
         out = find_exterior(c, rects, 1, 0.6, 0.1, outline_gap=gap, object_extent=extent)
