@@ -673,9 +673,9 @@ def ring_pieces(mask: np.ndarray, connectivity: int = 8) -> np.ndarray:
     """
     p = np.pad(np.asarray(mask, bool), 1)
     h, w = np.shape(mask)
-    code = np.zeros((h, w), dtype=np.intp)
+    code = np.zeros((h, w), dtype=np.uint8)     # 8 neighbours, one bit each: a byte per cell
     for k, (dr, dc) in enumerate(_RING):
-        code |= p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w].astype(np.intp) << k
+        code |= p[1 + dr:1 + dr + h, 1 + dc:1 + dc + w].view(np.uint8) << np.uint8(k)
     return _ring_table(connectivity)[code]
 
 
