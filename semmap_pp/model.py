@@ -85,7 +85,7 @@ class LatticeParams:
     # pixel under its centre, and a cell that closes a hole the centres left in a wall of the image
     # is occupied (lattice.frame.closes_wall): an occupied pixel under the centre of one of its
     # wall_samples x wall_samples sub-cells, and the image showing a wall through it within
-    # wall_join_px pixels (1 or 0: the centre only)
+    # wall_join_px pixels (wall_samples 1 or wall_join_px 0: the centre alone)
     wall_samples: int = 1
     wall_join_px: int = 0
 
