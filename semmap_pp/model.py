@@ -308,6 +308,10 @@ class KernelSettings(NamedTuple):
         The ascent's wall moves try a few local steps and the strongest peaks of the wall-line
         evidence along the wall's range: this many at 0.05 m cells and coarser, more on finer maps
         (:func:`semmap_pp.sampler.ascent.ascent_peaks`).
+    cross_tries : int
+        W*'s polish cuts a unit along both axes at once (four pieces) at this many of the best
+        crosses of its wall lines, each tried with its pieces' walls moved (0 = never;
+        :meth:`semmap_pp.sampler.ascent_cuts.CutMoves.crosses`).
     """
 
     line_floor: float = 0.05
@@ -325,6 +329,7 @@ class KernelSettings(NamedTuple):
     start_rounds: int = 6
     polish_rounds: int = 3
     ascent_peaks: int = 8
+    cross_tries: int = 2
 
 
 def settings_from_mapping(table: Mapping, source="<model> [kernels]") -> KernelSettings:

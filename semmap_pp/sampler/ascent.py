@@ -11,11 +11,13 @@ moves, each taken only when it raises log p: remove a unit, move one wall to a n
 a line of wall evidence (SHRINK/DILATE), merge two units that share a wall (MERGE), add a unit from
 the birth table where free space is left uncovered (ADD), split a unit at a wall line (SPLIT); and
 one compound move no single kernel makes, *bridging* two collinear pieces of a corridor across the
-unit between them (:meth:`_Ascent.bridges`); in W*'s polish also two more, recutting an L-shaped
-pair the other way (:meth:`_Ascent.recuts`) and moving every edge on one wall together
-(:meth:`_Ascent.shared_wall_moves`), and two fewer: the start ascent cuts a unit twice at once when
-no single cut helps (a room inside an L of walls) and adds units over uncovered free space (births),
-W*'s polish cuts once, all along a plateau of line evidence, and adds none (:func:`polish`).
+unit between them (:meth:`_Ascent.bridges`); in W*'s polish also four more, recutting an L-shaped
+pair the other way (:meth:`_Ascent.recuts`), moving every edge on one wall together
+(:meth:`_Ascent.shared_wall_moves`), cutting a unit where a neighbour's wall jogs
+(:meth:`_Ascent.jogs`) and cutting it along both axes at once into four spaces
+(:meth:`_Ascent.crosses`), and two fewer: the start ascent cuts a unit twice at once when no single
+cut helps (a room inside an L of walls) and adds units over uncovered free space (births), W*'s
+polish cuts once, all along a plateau of line evidence, and adds none (:func:`polish`).
 
 After sampling, the same ascent under the full target (knowledge on) polishes W*, the best sampled
 world: a short chain at T = 1 leaves it a few wall moves or one merge short of the nearest local
@@ -51,14 +53,16 @@ class _Ascent(JoinMoves, CutMoves):
 
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
                  merges: bool = True, recuts: bool = False, shared_walls: bool = False,
-                 double_cuts: bool = True, wide_cuts: bool = False, jogs: bool = False) -> wm.World:
+                 double_cuts: bool = True, wide_cuts: bool = False, jogs: bool = False,
+                 crosses: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
     L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
     (:meth:`_Ascent.shared_wall_moves`), ``double_cuts=False`` the second cut of a piece when no
     single cut helps, ``wide_cuts=True`` cuts all along a plateau of line evidence
     (:meth:`_Ascent.splits`), ``jogs=True`` the jogs last (:meth:`_Ascent.jogs`), each followed
-    by the joining moves; W*'s polish is :func:`polish`.
+    by the joining moves, ``crosses=True`` the cuts along both axes at once after the splits
+    (:meth:`_Ascent.crosses`); W*'s polish is :func:`polish`.
 
     Parameters
     ----------
@@ -84,18 +88,13 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     if not np.isfinite(asc.tr.logp):
         return world
 
-    def one_round() -> bool:
-        changed = asc.removals()
-        changed |= asc.all_wall_moves()
-        changed |= asc.removals()
-        if merges:
-            changed |= asc.merges()
-            changed |= asc.bridges()
-        if recuts:
-            changed |= asc.recuts()
+    def one_round() -> bool:     # each move in turn (`|` runs every one; `and` skips those off)
+        changed = asc.removals() | asc.all_wall_moves() | asc.removals()
+        changed |= merges and (asc.merges() | asc.bridges())
+        changed |= recuts and asc.recuts()
         changed |= asc.splits(double_cuts, wide_cuts)
-        if births:
-            changed |= asc.births()
+        changed |= crosses and asc.crosses()
+        changed |= births and asc.births()
         return changed
 
     def join_round() -> bool:     # after whole walls moved: nothing cut, nothing born
@@ -148,7 +147,7 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
     evidence")."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
-                        double_cuts=False, births=False, wide_cuts=True, jogs=True)
+                        double_cuts=False, births=False, wide_cuts=True, jogs=True, crosses=True)
 
 
 def add_units(posterior, world: wm.World, data, boxes) -> tuple[wm.World, list[int]]:

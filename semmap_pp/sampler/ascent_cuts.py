@@ -1,6 +1,7 @@
 """The ascent's moves that cut and add units (:mod:`semmap_pp.sampler.ascent`): splits at wall
-lines, jogs (a unit cut where a neighbour's wall lies inside it, the wall moved with the
-neighbour's) and births over uncovered free space."""
+lines, crosses (a unit cut along both axes at once into four spaces), jogs (a unit cut where a
+neighbour's wall lies inside it, the wall moved with the neighbour's) and births over uncovered
+free space."""
 
 from __future__ import annotations
 
@@ -46,28 +47,80 @@ def _wall_runs(w: np.ndarray, lo: int, k: int, local: int) -> list[int]:
 
 
 class CutMoves(WallMoves):
-    """Splits of a unit at its strongest wall lines and births of units over free space."""
+    """Splits and crosses of a unit at its strongest wall lines, jogs, and births of units over
+    free space."""
 
-    def cuts(self, rect, wide: bool = False) -> list[tuple[list, list]]:
-        """The two pieces of ``rect`` cut at each of its three strongest interior wall lines per
-        axis (the pieces share the wall band); ``wide``: at the three strongest runs of lines
-        instead, a plateau of equal line evidence tried all along and ``local`` steps past its
-        ends (:func:`_wall_runs`)."""
+    def cut_lines(self, rect, axis: int, wide: bool = False) -> list[int]:
+        """Where ``rect`` may be cut across ``axis``: its three strongest interior wall lines
+        (pieces of at least ``min_side``); ``wide``: the three strongest runs of lines, a
+        plateau of equal line evidence tried all along and ``local`` steps past its ends
+        (:func:`_wall_runs`)."""
         d = self.data
         m, t, g = d.min_side, d.wall_cells, d.wall_share
+        lo, hi = rect[axis] + m, rect[axis + 2] + g - m
+        if hi < lo:
+            return []
+        w = band_weights(line_cum(d, axis), lo, hi, -t, t - g, rect[1 - axis], rect[3 - axis],
+                         d.settings.line_floor)
+        return _wall_runs(w, lo, 3, self.local) if wide else _line_peaks(w, lo, 3)
+
+    def cuts(self, rect, wide: bool = False) -> list[tuple[list, list]]:
+        """The two pieces of ``rect`` cut at each of its :meth:`cut_lines` per axis (the pieces
+        share the wall band)."""
+        g = self.data.wall_share
         rect = [int(v) for v in rect]
         out = []
         for axis in (0, 1):
-            lo, hi = rect[axis] + m, rect[axis + 2] + g - m
-            if hi < lo:
-                continue
-            w = band_weights(line_cum(d, axis), lo, hi, -t, t - g, rect[1 - axis], rect[3 - axis],
-                             d.settings.line_floor)
-            for cut in (_wall_runs(w, lo, 3, self.local) if wide else _line_peaks(w, lo, 3)):
+            for cut in self.cut_lines(rect, axis, wide):
                 a, b = list(rect), list(rect)
                 a[axis + 2], b[axis] = cut, cut - g
                 out.append((a, b))
         return out
+
+    def crosses(self) -> bool:
+        """Cut a unit along both axes at once into four pieces when that helps: a unit over four
+        spaces that meet at a junction of walls (a corridor, the clutter beside it and two rooms
+        behind a broken wall), out of which no single or double cut climbs. Each piece of a cut
+        there is a long strip typed as a corridor, whose clutter and unknown cells the corridor's
+        sensor row makes dear, so every cut alone lowers log p, while the four pieces, their
+        walls moved, are a room, a room, the clutter and the corridor.
+
+        The crosses are the pairs of :meth:`cut_lines` (three per axis; the four pieces share
+        the wall bands, as a split's); the ``[kernels] cross_tries`` best by log p as cut are
+        tried in turn, each with its four pieces wall-moved (:meth:`tentative`), and the first
+        that raises log p with four spaces is kept: every piece still there (a cross one of
+        whose pieces a wall move absorbs carves the unit, and cut freiburg_building101's rooms
+        into pieces) and at least ``2 min_side`` long (the ascent's fragments are narrower than
+        that; a piece shorter both ways is a corner of furniture, not a space: docs/sampler.md)."""
+        tries = int(self.data.settings.cross_tries)
+        g, least = self.data.wall_share, 2 * int(self.data.min_side)
+        changed = False
+        for s in self.units():
+            if tries <= 0 or not self.world.active[s]:
+                continue
+            r0, c0, r1, c1 = rect = [int(v) for v in self.world.rects[s]]
+            rows, cols = self.cut_lines(rect, 0), self.cut_lines(rect, 1)
+            if not rows or not cols:
+                continue
+            slots = (s, *(int(f) for f in self.free(3)[:3]))
+            scored = []
+            for r in rows:
+                for c in cols:
+                    pieces = ([r0, c0, r, c], [r0, c - g, r, c1], [r - g, c0, r1, c], [r - g, c - g, r1, c1])
+                    new = wm.replace(self.world, s, pieces[0])
+                    for slot, piece in zip(slots[1:], pieces[1:]):
+                        new = wm.add(new, slot, piece)
+                    if self.valid(new):
+                        scored.append((self.tr.propose(new, slots).logp, len(scored), new))
+            def spaces(world) -> bool:
+                sides = np.diff(world.rects[list(slots)].reshape(-1, 2, 2), axis=1)[:, 0]
+                return bool(world.active[list(slots)].all() and (sides.max(axis=1) >= least).all())
+
+            for _, _, new in sorted(scored, key=lambda x: (-x[0], x[1]))[:tries]:
+                if self.tentative(new, slots, slots, keep=spaces):
+                    changed = True
+                    break
+        return changed
 
     def splits(self, double: bool = True, wide: bool = False) -> bool:
         """Split a unit at its strongest interior wall line when that helps (pieces share the

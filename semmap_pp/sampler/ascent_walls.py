@@ -192,15 +192,16 @@ class WallMoves(Climb):
     """The wall moves of the ascent: each wall of a unit to its best position, or every edge on
     one wall together, and a candidate world kept only when its wall-moved units raise log p."""
 
-    def tentative(self, new: wm.World, changed, polish) -> bool:
-        """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo)."""
+    def tentative(self, new: wm.World, changed, polish, keep=None) -> bool:
+        """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo);
+        with ``keep`` (a test of the world then) also only if it passes."""
         if not self.valid(new):
             return False
         old, before = self.world, self.tr.logp
         self.tr.accept(self.tr.propose(new, tuple(int(s) for s in changed)))
         for s in polish:
             self.wall_moves(int(s))
-        if self.tr.logp > before + 1e-9:
+        if self.tr.logp > before + 1e-9 and (keep is None or keep(self.world)):
             return True
         diff = np.flatnonzero((old.active != self.world.active)
                               | np.any(old.rects != self.world.rects, axis=1))

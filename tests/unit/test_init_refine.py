@@ -799,3 +799,95 @@ def test_best_proposal_tried_by_bound_chooses_as_trying_all_in_order():
             (start, logps, slack)
         fewer += climb.tr.evaluated < n
     assert fewer > 400
+
+
+def test_a_tentative_move_that_fails_its_test_is_undone():
+    """``tentative(..., keep=test)``: the left room's wall move swallows the strip beside it (log
+    p rises); kept as a plain tentative move, undone when the test asks every polished unit to
+    remain."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    post, data = knowledge_free(two_rooms())
+    start = wm.add(wm.add(wm.empty(8), 0, (2, 2, 82, 50)), 2, (2, 70, 82, 142))
+    new = wm.add(start, 1, (4, 50, 80, 70))                 # a strip between the room and its wall
+    for keep, kept in ((None, True), (lambda w: bool(w.active[[0, 1]].all()), False)):
+        asc = _Ascent(post, start, data)
+        before = asc.tr.logp
+        assert asc.tentative(new, (1,), (0, 1), keep=keep) is kept
+        if kept:
+            assert not asc.world.active[1] and asc.tr.logp > before   # swallowed, and a gain
+        else:
+            assert asc.world.active.tolist() == start.active.tolist()       # as it was
+            assert np.array_equal(asc.world.rects[start.active], start.rects[start.active])
+            assert abs(asc.tr.logp - before) < 1e-6
+
+
+def four_rooms() -> np.ndarray:
+    """Four 3 m x 3 m rooms in two rows and two columns (0.05 m cells, 2-cell walls meeting in a
+    cross), a 0.8 m door in each arm of the cross."""
+    m = np.full((130, 130), UNKNOWN, np.uint8)
+    m[2:128, 2:128] = OCCUPIED
+    for r0 in (4, 66):
+        for c0 in (4, 66):
+            m[r0:r0 + 60, c0:c0 + 60] = FREE
+    m[20:36, 64:66] = FREE          # the doors in the cross's four arms
+    m[90:106, 64:66] = FREE
+    m[64:66, 20:36] = FREE
+    m[64:66, 90:106] = FREE
+    return m
+
+
+def test_a_cross_cuts_a_unit_into_four_pieces_that_share_their_wall_bands():
+    """One unit over four rooms whose walls meet in a cross: :meth:`crosses` cuts it along both
+    axes at once, each piece on its room's walls and the four sharing the cross's wall bands, and
+    tracks log p exactly; with ``[kernels] cross_tries = 0`` it cuts nothing."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    m = four_rooms()
+    model = load_model()
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.empty(8), 0, (2, 2, 128, 128))
+    off = _Ascent(post, start, data_from_frame(frame, model.kernels._replace(cross_tries=0)))
+    assert not off.crosses() and wm.n_units(off.world) == 1
+    asc = _Ascent(post, start, data_from_frame(frame, model.kernels))
+    before = asc.tr.logp
+    assert asc.crosses()
+    rects = sorted(tuple(int(v) for v in asc.world.rects[s]) for s in wm.active_slots(asc.world))
+    assert rects == [(2, 2, 66, 66), (2, 64, 66, 128), (64, 2, 128, 66), (64, 64, 128, 128)]
+    assert asc.tr.logp > before + 100
+    assert abs(asc.tr.logp - post.evaluate(asc.world).total) < 1e-6
+    # pieces shorter both ways than twice the smallest unit side are no spaces: not cut
+    small = _Ascent(post, start, data_from_frame(frame, model.kernels)._replace(min_side=33))
+    assert not small.crosses() and wm.n_units(small.world) == 1
+
+
+def test_w_stars_polish_cuts_a_unit_over_four_spaces_along_both_axes():
+    """A piece of a real floor (map17 of bench/data/real-gt turned by 30 degrees, read onto its
+    lattice; tests/data/README.md): a corridor, the clutter beside it and two rooms behind a
+    broken wall under one hall-sized unit, as W* had it. Every cut alone makes long strips that
+    are typed as corridors, whose clutter the corridor's sensor row makes dear, so single cuts and
+    wall moves leave the hall whole; cut along both axes at once, the four pieces wall-moved, the
+    rooms and the clutter come apart (log p up by thousands of nats)."""
+    from pathlib import Path
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.target_factory import run_target
+    from semmap_pp.sampler.ascent import polish
+
+    inputs = load_inputs(Path(__file__).parents[1] / "data" / "map17_turned" / "map17_30deg_crop.yaml")
+    post = run_target(inputs)
+    hall = wm.add(wm.empty(8), 0, (20, 21, 234, 452))
+
+    def units_over(w, *cells):
+        return [s for s in wm.active_slots(w)
+                if all(w.rects[s][0] <= r < w.rects[s][2] and w.rects[s][1] <= c < w.rects[s][3]
+                       for r, c in cells)]
+
+    kernels = inputs.model.kernels
+    whole = polish(post, hall, data_from_frame(inputs.frame, kernels._replace(cross_tries=0)), 3)
+    assert units_over(whole, (60, 100), (180, 100), (180, 350))      # still one unit over all three
+    cut = polish(post, hall, data_from_frame(inputs.frame, kernels), 3)
+    assert post.evaluate(cut).total > post.evaluate(whole).total + 1000
+    assert not units_over(cut, (180, 100), (180, 350))               # the two rooms apart
+    assert not units_over(cut, (60, 300), (180, 350))                # the clutter and a room apart
+    assert not units_over(cut, (60, 100), (180, 100))
