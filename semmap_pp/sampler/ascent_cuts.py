@@ -103,6 +103,8 @@ class CutMoves(WallMoves):
             if not rows or not cols:
                 continue
             slots = (s, *(int(f) for f in self.free(3)[:3]))
+            if len(slots) < 4:            # a full world at its largest capacity
+                continue
             scored = []
             for r in rows:
                 for c in cols:

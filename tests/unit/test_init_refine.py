@@ -862,6 +862,36 @@ def test_a_cross_cuts_a_unit_into_four_pieces_that_share_their_wall_bands():
     assert not small.crosses() and wm.n_units(small.world) == 1
 
 
+def test_a_cross_whose_piece_a_wall_move_absorbs_is_undone():
+    """The four rooms' unit cut in four, but the first piece's wall move grows it over its
+    neighbour (stood in for here: the top-left piece takes the top-right's place): log p still
+    rises above the one unit (the cross's other wall stays a band), yet three pieces are a
+    carving, not four spaces, so the cross is undone."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    m = four_rooms()
+    model = load_model()
+    frame = build_frame(OccupancyGrid(m, np.zeros(m.shape, np.float32), 0.05), model)
+    post = Posterior(frame, model, None)
+    start = wm.add(wm.empty(8), 0, (2, 2, 128, 128))
+    asc = _Ascent(post, start, data_from_frame(frame, model.kernels))
+    before, seen = asc.tr.logp, []
+
+    def absorbing(slot):          # the cross's first piece is slot 0, the next one slot 1
+        if slot == 0 and asc.world.active[1]:
+            top = [int(v) for v in asc.world.rects[0]]
+            top[3] = int(asc.world.rects[1][3])
+            grown = wm.remove(wm.replace(asc.world, 0, top), 1)
+            asc.tr.accept(asc.tr.propose(grown, (0, 1)))
+            seen.append(asc.tr.logp)
+        return False
+
+    asc.wall_moves = absorbing
+    assert not asc.crosses()
+    assert seen and max(seen) > before                       # a gain, refused all the same
+    assert wm.n_units(asc.world) == 1 and abs(asc.tr.logp - before) < 1e-6
+
+
 def test_w_stars_polish_cuts_a_unit_over_four_spaces_along_both_axes():
     """A piece of a real floor (map17 of bench/data/real-gt turned by 30 degrees, read onto its
     lattice; tests/data/README.md): a corridor, the clutter beside it and two rooms behind a
