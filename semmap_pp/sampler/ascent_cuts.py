@@ -105,7 +105,7 @@ class CutMoves(WallMoves):
             slots = (s, *(int(f) for f in self.free(3)[:3]))
             if len(slots) < 4:            # a full world at its largest capacity
                 continue
-            scored = []
+            crosses = []
             for r in rows:
                 for c in cols:
                     pieces = ([r0, c0, r, c], [r0, c - g, r, c1], [r - g, c0, r1, c], [r - g, c - g, r1, c1])
@@ -113,12 +113,12 @@ class CutMoves(WallMoves):
                     for slot, piece in zip(slots[1:], pieces[1:]):
                         new = wm.add(new, slot, piece)
                     if self.valid(new):
-                        scored.append((self.tr.propose(new, slots).logp, len(scored), new))
+                        crosses.append((new, slots))
             def spaces(world) -> bool:
                 sides = np.diff(world.rects[list(slots)].reshape(-1, 2, 2), axis=1)[:, 0]
                 return bool(world.active[list(slots)].all() and (sides.max(axis=1) >= least).all())
 
-            for _, _, new in sorted(scored, key=lambda x: (-x[0], x[1]))[:tries]:
+            for new in self.best_few(crosses, tries):     # the best by log p as cut
                 if self.tentative(new, slots, slots, keep=spaces):
                     changed = True
                     break

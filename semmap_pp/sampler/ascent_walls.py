@@ -144,22 +144,47 @@ class Climb:
         early and raises the floor, so that most of the others are skipped before their types
         are inferred. The choice is the one made by trying them all in list order."""
         floor = self.tr.logp + 1e-9
-        bound = (getattr(self.tr, "upper_bound", None)
-                 if len(candidates) > 1 and getattr(self.tr, "supports_floor", False) else None)
-        order = range(len(candidates))
-        if bound is not None:
-            bounds = [bound(w, changed) for w, changed in candidates]
-            # highest first; a NaN bound (never below a floor) first, with +inf
-            order = sorted(order, key=lambda i: -bounds[i] if bounds[i] == bounds[i] else -math.inf)
+        bounds, order = self.bound_order(candidates)
         best, best_lp, best_i = None, floor, len(candidates)
         for i in order:
-            if bound is not None and below_floor(bounds[i], best_lp):
+            if bounds is not None and below_floor(bounds[i], best_lp):
                 break                # this bound and every later one lie below the best so far
             w, changed = candidates[i]
             prop = self.propose_above(w, changed, best_lp)
             if prop.logp > best_lp or (best is not None and prop.logp == best_lp and i < best_i):
                 best, best_lp, best_i = prop, prop.logp, i
         return best
+
+    def bound_order(self, candidates):
+        """``(bounds, order)``: the candidates' upper bounds and their indices highest bound
+        first (a NaN bound, never below a floor, first with +inf), when the tracker takes floors
+        and has :meth:`~semmap_pp.target.posterior.Tracker.upper_bound` and there are several;
+        else ``(None, list order)``."""
+        bound = (getattr(self.tr, "upper_bound", None)
+                 if len(candidates) > 1 and getattr(self.tr, "supports_floor", False) else None)
+        if bound is None:
+            return None, range(len(candidates))
+        bounds = [bound(w, changed) for w, changed in candidates]
+        return bounds, sorted(range(len(candidates)),
+                              key=lambda i: -bounds[i] if bounds[i] == bounds[i] else -math.inf)
+
+    def best_few(self, candidates, k: int) -> list:
+        """The worlds of the ``k`` candidates (valid ``(world, changed)`` pairs) of highest log p,
+        highest first, the earlier in the list first on a tie: what scoring every candidate in
+        full gives. In the order of their bounds (:meth:`bound_order`), each scored with the
+        ``k``-th best log p so far as its floor, stopping at the first bound below it: the rest
+        cannot be among the ``k``, and their types are never inferred."""
+        bounds, order = self.bound_order(candidates)
+        scored = []                                   # (log p, index), -inf when bounded
+        for i in order:
+            floor = sorted(lp for lp, _ in scored)[-k] if len(scored) >= k else -math.inf
+            if bounds is not None and floor > -math.inf and below_floor(bounds[i], floor):
+                break
+            w, changed = candidates[i]
+            prop = (self.propose_above(w, changed, floor) if floor > -math.inf
+                    else self.tr.propose(w, changed))
+            scored.append((prop.logp, i))
+        return [candidates[i][0] for _, i in sorted(scored, key=lambda x: (-x[0], x[1]))[:k]]
 
     def units(self, within=None) -> list:
         """The active slots, in slot order: all, or those in the set ``within``."""

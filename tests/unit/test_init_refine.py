@@ -801,6 +801,46 @@ def test_best_proposal_tried_by_bound_chooses_as_trying_all_in_order():
     assert fewer > 400
 
 
+def test_best_few_tried_by_bound_chooses_as_scoring_every_candidate():
+    """:meth:`Climb.best_few` (the crosses' choice of the ``k`` to try) tries candidates by their
+    upper bounds and stops at the first below the ``k``-th best log p so far; on random
+    candidates (ties, bounds equal to the log p, infinite and NaN bounds, trackers without
+    floors, k from 1 to 4) it returns what scoring all of them gives: the ``k`` of highest log p,
+    the earlier first on a tie, and it scores fewer of them in full."""
+    from types import SimpleNamespace
+
+    from semmap_pp.sampler.ascent_walls import Climb
+    from semmap_pp.target.posterior import below_floor
+
+    class Fake:
+        def __init__(self, logps, bounds, floors):
+            self.logp, self.logps, self.bounds, self.evaluated = 0.0, logps, bounds, 0
+            self.supports_floor = floors
+
+        def upper_bound(self, world, changed):
+            return self.bounds[world]
+
+        def propose(self, world, changed, floor=None):
+            if floor is not None and below_floor(self.bounds[world], floor):   # the tracker's test
+                return SimpleNamespace(logp=-np.inf, bounded=True)
+            self.evaluated += 1
+            return SimpleNamespace(logp=self.logps[world], bounded=False, world=world)
+
+    rng = np.random.default_rng(5)
+    fewer = 0
+    for trial in range(2000):
+        n, k = int(rng.integers(0, 12)), int(rng.integers(1, 5))
+        logps = rng.integers(-6, 4, n).astype(float)      # small integers: many ties
+        slack = rng.choice([0.0, 0.5, 3.0, 20.0, np.inf, np.nan], n, p=[.4, .2, .15, .1, .1, .05])
+        climb = Climb.__new__(Climb)
+        climb.tr = Fake(logps, logps + slack, bool(rng.random() < 0.85))
+        got = climb.best_few([(i, (0,)) for i in range(n)], k)
+        want = sorted(range(n), key=lambda i: (-logps[i], i))[:k]
+        assert got == want, (k, logps, slack)
+        fewer += climb.tr.evaluated < n
+    assert fewer > 300
+
+
 def test_a_tentative_move_that_fails_its_test_is_undone():
     """``tentative(..., keep=test)``: the left room's wall move swallows the strip beside it (log
     p rises); kept as a plain tentative move, undone when the test asks every polished unit to
