@@ -95,8 +95,8 @@ class CutMoves(WallMoves):
         tries = int(self.data.settings.cross_tries)
         g, least = self.data.wall_share, 2 * int(self.data.min_side)
         changed = False
-        for s in self.units():
-            if tries <= 0 or not self.world.active[s]:
+        for s in self.units() if tries > 0 else ():
+            if not self.world.active[s]:
                 continue
             r0, c0, r1, c1 = rect = [int(v) for v in self.world.rects[s]]
             rows, cols = self.cut_lines(rect, 0), self.cut_lines(rect, 1)

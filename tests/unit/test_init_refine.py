@@ -1,5 +1,7 @@
 """The greedy ascent (ascent.refine_world) and the door candidates it relies on."""
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from semmap_pp import world as wm
@@ -9,7 +11,7 @@ from semmap_pp.grid import OccupancyGrid
 from semmap_pp.sampler.ascent import align_walls, refine_world
 from semmap_pp.sampler.kernels import build_data, data_from_frame
 from semmap_pp.model import load_model
-from semmap_pp.target.posterior import Posterior
+from semmap_pp.target.posterior import Posterior, below_floor
 
 
 def two_rooms() -> np.ndarray:
@@ -758,30 +760,32 @@ def test_w_stars_polish_cuts_a_corridor_where_its_wall_jogs_and_moves_the_wall_w
     assert post.evaluate(out).total > post.evaluate(start).total + 100
 
 
+class FakeTracker:
+    """A tracker of candidates 0..n-1 with log p ``logps[i]`` and upper bound ``bounds[i]``; with
+    ``floors`` it skips (log p -inf) a proposal whose bound lies below its floor, by the real
+    tracker's test, and counts the proposals it evaluates in full."""
+
+    def __init__(self, logp, logps, bounds, floors):
+        self.logp, self.logps, self.bounds, self.evaluated = logp, logps, bounds, 0
+        self.supports_floor = floors
+
+    def upper_bound(self, world, changed):
+        return self.bounds[world]
+
+    def propose(self, world, changed, floor=None):
+        if floor is not None and below_floor(self.bounds[world], floor):   # the tracker's test
+            return SimpleNamespace(logp=-np.inf, bounded=True)
+        self.evaluated += 1
+        return SimpleNamespace(logp=self.logps[world], bounded=False, world=world)
+
+
 def test_best_proposal_tried_by_bound_chooses_as_trying_all_in_order():
     """:meth:`Climb.best_proposal` tries candidates by their upper bounds, highest first, and
     stops at the first bound below the best log p so far; on random candidates (ties, bounds
     equal to the log p, infinite and NaN bounds, starts at and around 0, trackers without floors)
     it picks what trying every candidate in list order picks (the first of the best), and it
     evaluates fewer of them."""
-    from types import SimpleNamespace
-
     from semmap_pp.sampler.ascent_walls import Climb
-    from semmap_pp.target.posterior import below_floor
-
-    class Fake:
-        def __init__(self, logp, logps, bounds, floors):
-            self.logp, self.logps, self.bounds, self.evaluated = logp, logps, bounds, 0
-            self.supports_floor = floors
-
-        def upper_bound(self, world, changed):
-            return self.bounds[world]
-
-        def propose(self, world, changed, floor=None):
-            if floor is not None and below_floor(self.bounds[world], floor):   # the tracker's test
-                return SimpleNamespace(logp=-np.inf, bounded=True)
-            self.evaluated += 1
-            return SimpleNamespace(logp=self.logps[world], bounded=False, world=world)
 
     rng = np.random.default_rng(3)
     fewer = 0
@@ -791,7 +795,7 @@ def test_best_proposal_tried_by_bound_chooses_as_trying_all_in_order():
         slack = rng.choice([0.0, 0.5, 3.0, 20.0, np.inf, np.nan], n, p=[.4, .2, .15, .1, .1, .05])
         start = float(rng.choice([-2.0, -0.5, 0.0, 1.0]))
         climb = Climb.__new__(Climb)
-        climb.tr = Fake(start, logps, logps + slack, bool(rng.random() < 0.85))
+        climb.tr = FakeTracker(start, logps, logps + slack, bool(rng.random() < 0.85))
         got = climb.best_proposal([(i, (0,)) for i in range(n)])
         above = np.flatnonzero(logps > start + 1e-9)
         want = None if above.size == 0 else int(above[np.argmax(logps[above])])
@@ -807,24 +811,7 @@ def test_best_few_tried_by_bound_chooses_as_scoring_every_candidate():
     candidates (ties, bounds equal to the log p, infinite and NaN bounds, trackers without
     floors, k from 1 to 4) it returns what scoring all of them gives: the ``k`` of highest log p,
     the earlier first on a tie, and it scores fewer of them in full."""
-    from types import SimpleNamespace
-
     from semmap_pp.sampler.ascent_walls import Climb
-    from semmap_pp.target.posterior import below_floor
-
-    class Fake:
-        def __init__(self, logps, bounds, floors):
-            self.logp, self.logps, self.bounds, self.evaluated = 0.0, logps, bounds, 0
-            self.supports_floor = floors
-
-        def upper_bound(self, world, changed):
-            return self.bounds[world]
-
-        def propose(self, world, changed, floor=None):
-            if floor is not None and below_floor(self.bounds[world], floor):   # the tracker's test
-                return SimpleNamespace(logp=-np.inf, bounded=True)
-            self.evaluated += 1
-            return SimpleNamespace(logp=self.logps[world], bounded=False, world=world)
 
     rng = np.random.default_rng(5)
     fewer = 0
@@ -833,7 +820,7 @@ def test_best_few_tried_by_bound_chooses_as_scoring_every_candidate():
         logps = rng.integers(-6, 4, n).astype(float)      # small integers: many ties
         slack = rng.choice([0.0, 0.5, 3.0, 20.0, np.inf, np.nan], n, p=[.4, .2, .15, .1, .1, .05])
         climb = Climb.__new__(Climb)
-        climb.tr = Fake(logps, logps + slack, bool(rng.random() < 0.85))
+        climb.tr = FakeTracker(0.0, logps, logps + slack, bool(rng.random() < 0.85))
         got = climb.best_few([(i, (0,)) for i in range(n)], k)
         want = sorted(range(n), key=lambda i: (-logps[i], i))[:k]
         assert got == want, (k, logps, slack)
