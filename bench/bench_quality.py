@@ -185,7 +185,7 @@ def add_arguments(parser) -> None:
         parser.add_argument(f"--{name}", type=int, default=None, help=f"override {name}")
     parser.add_argument("--anneal", type=float, default=None, help="override the burn-in temperature")
     parser.add_argument("--maps", default=None, help="comma-separated map names to keep (real/ipa/types)")
-    parser.add_argument("--save", type=Path, default=None, help="write W* pictures/world.json here")
+    parser.add_argument("--save", type=Path, default=None, help="write each W*'s world.json, labels.png and rooms.png here (DIR/MAP/)")
     parser.add_argument("--outside-from", type=Path, default=None,
                         help="truth subset: add the units lying mostly outside the building of the W*s "
                              "saved here (--subset synthetic --save DIR) to the seen truth")
@@ -359,6 +359,7 @@ def _save(args, name, sm, extra=None):
     out.mkdir(parents=True, exist_ok=True)
     write_world_json(out / "world.json", world_dict(sm))
     write_labels_png(out / "labels.png", sm.labels_image)
+    write_labels_png(out / "rooms.png", sm.rooms.labels)
 
 
 def _r4(v):

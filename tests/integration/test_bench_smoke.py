@@ -174,6 +174,21 @@ def test_quality_wings_scores_rooms_png_against_the_drawn_truth_of_each_plan(cap
     assert 0 <= row["exterior_inside"] <= row["exterior_units"]
 
 
+def test_quality_save_writes_each_wstar_with_its_labels_and_rooms(capsys, monkeypatch, tmp_path):
+    """``--save DIR``: DIR/MAP/ holds world.json, labels.png and rooms.png, whose room ids are
+    world.json's rooms and whose free cells are those the bench scored."""
+    from PIL import Image
+    bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "wings", "--maps", "wing30",
+          "--save", str(tmp_path))
+    out = tmp_path / "wing30"
+    world = json.loads((out / "world.json").read_text())
+    rooms = np.asarray(Image.open(out / "rooms.png"))
+    labels = np.asarray(Image.open(out / "labels.png"))
+    assert rooms.dtype == np.uint16 and rooms.shape == labels.shape
+    assert set(np.unique(rooms[rooms > 0]).tolist()) == {r["id"] for r in world["rooms"]}
+    assert all(int((rooms == r["id"]).sum()) == r["cells"] for r in world["rooms"])
+
+
 def test_quality_synthetic_wings_scores_a_floor_of_wings_beside_the_manhattan_ones(capsys, monkeypatch):
     result = bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "synthetic-wings",
                    "--maps", "wings2-30")
