@@ -17,7 +17,11 @@ Euclidean distance, in pixels, from its centre to the box of the unit's cell cen
   covers (where two lattices at different angles meet, the units' ends leave wedges of floor
   between them that neither covers; the boundary crosses them); its *width along a tile* is the
   larger extent of its pixel centres along that tile's two axes, plus one, and it is kept when it
-  is at least ``door_min`` wide along both tiles;
+  is at least ``door_min`` wide along both tiles and, unless it is a passage (below), has a *jamb*
+  at each end: a pixel of the run touching an occupied pixel within ``wall`` pixels of each of
+  its two extreme pixels (along the image axis it extends most along). A doorway ends at the
+  wall it is cut in; a run of the free rays of a fan, seen through a window into the space
+  between two wings, ends at the unknown cells between the rays;
 * an opening is a *passage* when it is wider than ``door_max`` along both tiles (a door lies in
   a wall of one of them, and along that tile's axes its width is the door's: a zones' boundary
   that crosses a doorway at an angle holds a longer run of pixels), or when it spans either
@@ -43,7 +47,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-from semmap_pp.cells import FREE
+from semmap_pp.cells import FREE, OCCUPIED
 from semmap_pp.derive.doors import Door
 
 
@@ -52,8 +56,9 @@ class CrossData(NamedTuple):
 
     ``aff`` (T, 6): per tile ``cos θ, sin θ`` and the image and composite-lattice centres of its
     rotation (``x_img, y_img, col_lat, row_lat``); ``spans`` (2T,): the tiles' flat column
-    ranges; ``pix`` (P, 2): the free pixels ``(y, x)`` of the boundary between each pair of
-    zones, grouped by pair; ``nbr`` (P, 8): the index of each pixel's 8-neighbours in the same
+    ranges; ``pix`` (P, 3): the free pixels ``(y, x)`` of the boundary between each pair of
+    zones, grouped by pair, and whether an occupied pixel is among each one's 8 neighbours (a
+    jamb, 1 or 0); ``nbr`` (P, 8): the index of each pixel's 8-neighbours in the same
     group (-1: none); ``off`` (T·T + 1,): where the group of tiles ``(a, b)``, ``a < b``, starts
     (index ``a·T + b``); ``ip``: ``adjacency_dilation, door_max, door_min, wall`` in cells."""
 
@@ -72,7 +77,7 @@ def _ro(a):
 
 
 #: a lattice of one direction: no tiles to relate (the compiled calls return at once)
-NO_CROSS = CrossData(_ro(np.zeros((0, 6))), _ro(np.zeros(0, np.int64)), _ro(np.zeros((0, 2), np.int64)),
+NO_CROSS = CrossData(_ro(np.zeros((0, 6))), _ro(np.zeros(0, np.int64)), _ro(np.zeros((0, 3), np.int64)),
                      _ro(np.zeros((0, 8), np.int64)), _ro(np.zeros(1, np.int64)), _ro(np.zeros(4, np.int64)))
 
 
@@ -123,6 +128,7 @@ def _cross_data(frame) -> CrossData:
         oxi, oyi, oxl, oyl = t._centres()
         aff[k] = (math.cos(t.theta), math.sin(t.theta), oxi, oyi, oxl + col, oyl)
     free = frame.image_door_classes == FREE
+    jamb = ndimage.binary_dilation(frame.image_door_classes == OCCUPIED, structure=np.ones((3, 3), bool))
     pix, nbr, off = [], [], np.zeros(n * n + 1, np.int64)
     count = 0
     for a in range(n):
@@ -130,14 +136,14 @@ def _cross_data(frame) -> CrossData:
             off[a * n + b] = count
             if a < b:
                 ys, xs = np.nonzero(_zone_edge(frame.zones, a, b) & free)
-                pix.append(np.stack([ys, xs], axis=1).astype(np.int64))
+                pix.append(np.stack([ys, xs, jamb[ys, xs]], axis=1).astype(np.int64))
                 near = _neighbours(ys, xs)
                 nbr.append(np.where(near >= 0, near + count, -1))
                 count += len(ys)
     off[n * n] = count
     c = frame.cells
     return CrossData(_ro(aff), _ro(np.asarray([v for s in spans for v in s], np.int64)),
-                     _ro(np.concatenate(pix).reshape(-1, 2)), _ro(np.concatenate(nbr).reshape(-1, 8)),
+                     _ro(np.concatenate(pix).reshape(-1, 3)), _ro(np.concatenate(nbr).reshape(-1, 8)),
                      _ro(off), _ro(np.array([c.adjacency_dilation, c.door_max, c.door_min, c.wall],
                                             np.int64)))
 
@@ -307,7 +313,8 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
     docstring) of units ``i`` and ``j`` of two tiles, as component labels 1..n of the pixels
     ``lo, lo + 1, ...`` of their zones' group (0: no opening pixel) and each one's widths along
     the axes of the tiles of ``i`` and of ``j`` (``widths[k - 1]``, ``n = len(widths)``;
-    :func:`_run_width`); components shorter than ``door_min`` are left out."""
+    :func:`_run_width`); components shorter than ``door_min`` are left out, and so are those
+    that would be doors without a jamb at each end (:func:`_jambs`)."""
     ki, kj = tile_of(rects[i, 1], spans), tile_of(rects[j, 1], spans)
     n_t = aff.shape[0]
     g = min(ki, kj) * n_t + max(ki, kj)
@@ -344,12 +351,41 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
                     size += 1
         widths[n - 1, 0] = _run_width(aff, ki, pix, lo, members[:size])
         widths[n - 1, 1] = _run_width(aff, kj, pix, lo, members[:size])
-        if min(widths[n - 1, 0], widths[n - 1, 1]) < ip[2]:
+        if min(widths[n - 1, 0], widths[n - 1, 1]) < ip[2] or not (
+                _is_passage(widths[n - 1], rects[i], rects[j], ip) or _jambs(pix, lo, members[:size], ip[3])):
             labels[members[:size]] = -1         # not flooded again from its other pixels
             n -= 1
     for q in range(hi - lo):
         labels[q] = max(labels[q], 0)
     return adjacent, labels, widths[:n], lo
+
+
+@numba.njit(cache=True, nogil=True)
+def _jambs(pix, lo, members, reach):  # pragma: no cover - compiled
+    """Whether the run of pixels ``pix[lo + p]`` (``p`` in ``members``) has a jamb at each end: a
+    pixel of the run touching an occupied one (``pix[:, 2]``) within ``reach`` pixels
+    (Chebyshev) of each of its two extreme pixels along the image axis it extends most along."""
+    y0 = x0 = np.int64(1) << 62
+    y1 = x1 = -(np.int64(1) << 62)
+    for p in members:
+        y, x = pix[lo + p, 0], pix[lo + p, 1]
+        y0, y1, x0, x1 = min(y0, y), max(y1, y), min(x0, x), max(x1, x)
+    along_x = x1 - x0 >= y1 - y0
+    a = b = -1
+    for p in members:
+        v = pix[lo + p, 1] if along_x else pix[lo + p, 0]
+        if a < 0 and v == (x0 if along_x else y0):
+            a = p
+        if b < 0 and v == (x1 if along_x else y1):
+            b = p
+    at_a = at_b = False
+    for p in members:
+        if pix[lo + p, 2] == 0:
+            continue
+        y, x = pix[lo + p, 0], pix[lo + p, 1]
+        at_a |= max(abs(y - pix[lo + a, 0]), abs(x - pix[lo + a, 1])) <= reach
+        at_b |= max(abs(y - pix[lo + b, 0]), abs(x - pix[lo + b, 1])) <= reach
+    return at_a and at_b
 
 
 @numba.njit(cache=True, nogil=True)
@@ -594,7 +630,7 @@ def cross_tile_openings(frame, rects: np.ndarray, slots, xd: CrossData | None = 
                 continue
             pairs.append((i, j))
             for m in range(1, len(widths) + 1):
-                ys, xs = pix[lo + np.flatnonzero(labels == m)].T
+                ys, xs = pix[lo + np.flatnonzero(labels == m), :2].T
                 is_passage = bool(_is_passage(widths[m - 1], rects[i], rects[j], ip))
                 door = Door(int(slots[i]), int(slots[j]), _box_on_tile(frame, tiles[i], ys, xs), False,
                             int(widths[m - 1].min()))

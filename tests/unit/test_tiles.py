@@ -211,6 +211,27 @@ def test_a_corridor_cut_by_the_zones_is_one_passage_and_a_wall_across_it_a_door(
         assert len(d.passages) == 1 and not d.doors
 
 
+def test_a_gap_without_jambs_at_the_zones_boundary_is_no_door():
+    """The door of :func:`corridor_map` with its wall made unknown (the free rays of a fan seen
+    across the boundary end at unseen cells, not at a wall): no door. The door in the wall stays
+    a door, and the corridor cut by the zones a passage, whether or not its walls touch it."""
+    classes, zones, thetas = corridor_map(door=True)
+    wall = (abs(np.mgrid[0:300, 0:400][1] - 150) <= 1) & (classes == cells.OCCUPIED)
+    unseen = classes.copy()
+    unseen[wall] = cells.UNKNOWN
+    for grid, doors in ((classes, 1), (unseen, 0)):
+        f = build_tiled_frame(grid, 0.05, MODEL, thetas, zones)
+        rect0, rect1 = corridor_units(f, thetas)
+        d = derive_world(f, wm.add(wm.add(wm.empty(2), 0, rect0), 1, rect1))
+        assert len(d.doors) == doors and not d.passages
+    open_side, zones, thetas = corridor_map(door=False)
+    open_side[(open_side == cells.OCCUPIED) & (abs(np.mgrid[0:300, 0:400][1] - 150) <= 3)] = cells.UNKNOWN
+    f = build_tiled_frame(open_side, 0.05, MODEL, thetas, zones)
+    rect0, rect1 = corridor_units(f, thetas)
+    d = derive_world(f, wm.add(wm.add(wm.empty(2), 0, rect0), 1, rect1))
+    assert len(d.passages) == 1 and not d.doors
+
+
 class OpeningsProvider:
     """A stand-in engine whose types read every part of the evidence that units of two tiles
     change: corridor-like units (corridor pieces included) are corridors, MulDoor ones other,
