@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from semmap_pp.lattice.frame import Frame
-from semmap_pp.target.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN, X_WALLLIKE
+from semmap_pp.target.likelihood import (N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, X_OBJECTLIKE, X_SHADOW,
+                                         X_UNKNOWN, X_WALLLIKE)
 
 
 # Which (extended input code, region) pairs count as correctly explained (docs/evaluation.md, CPR): the sampler's
@@ -16,14 +17,14 @@ from semmap_pp.target.likelihood import N_X, R_INTERIOR, R_OUT, R_WALL, X_FREE, 
 _CORRECT = np.zeros((N_X, 3), bool)
 _CORRECT[X_UNKNOWN, R_OUT] = True
 _CORRECT[[X_OBJECTLIKE, X_WALLLIKE], R_WALL] = True
-_CORRECT[[X_FREE, X_UNKNOWN, X_OBJECTLIKE], R_INTERIOR] = True
+_CORRECT[[X_FREE, X_UNKNOWN, X_OBJECTLIKE, X_SHADOW], R_INTERIOR] = True
 
 
 CORRECT_CATEGORY = np.concatenate([_CORRECT.T.ravel()] * 2)  # corridor or not: same verdict
 
 
 def category_hist(tracker) -> np.ndarray:
-    """The tracker's (24,) category histogram of the current world."""
+    """The tracker's (30,) category histogram of the current world."""
     hist = getattr(tracker, "hist", None)
     if hist is None:  # older trackers kept it on their likelihood cover
         hist = tracker.cover.hist

@@ -8,12 +8,14 @@ units that have it in their wall band, ``n_int`` the number that have it in thei
 
 * state: WALL if ``n_wall > 0``; otherwise, if ``n_int > 0``, the interior state of its input
   code (FREE for free and wall-like occupied input, OBJECT for unknown and object-like occupied
-  input); otherwise UNKNOWN;
+  input); otherwise UNKNOWN. A free cell beside a wall thinner than the band (a *shadow*,
+  :func:`thin_wall_shadow`) is read by a wall band as the wall's occupied cell, by an interior as
+  free;
 * table: the corridor table when every covering unit is a corridor, else the other table;
 * overlap: ``k = n_int + [n_wall > 0]`` (wall bands may overlap each other without penalty: two
   rooms share one real wall), ``γ = max(k - 1, 0)``.
 
-Every term depends on the cell only through a *category* (input code x region x corridor flag, 24
+Every term depends on the cell only through a *category* (input code x region x corridor flag, 30
 of them) and the integer ``γ``, so the log-likelihood is an exact function of integer counts:
 ``baseline + Σ_cat N_cat · gain_cat + log ψ · Σ γ``, where ``baseline`` is the log-likelihood of
 the empty world and ``gain`` the change a category makes relative to an uncovered cell. The full
@@ -50,9 +52,10 @@ from scipy import ndimage
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, W_FREE, W_OBJECT, W_UNKNOWN, W_WALL
 
-# Extended input codes: the input class, with occupied split into object-like and wall-like.
-X_FREE, X_UNKNOWN, X_OBJECTLIKE, X_WALLLIKE = 0, 1, 2, 3
-N_X = 4
+# Extended input codes: the input class, with occupied split into object-like and wall-like, and
+# the free cells beside a wall thinner than the band apart (thin_wall_shadow).
+X_FREE, X_UNKNOWN, X_OBJECTLIKE, X_WALLLIKE, X_SHADOW = 0, 1, 2, 3, 4
+N_X = 5
 # A side band with fewer seen (free or occupied) cells than this share of its cells has not been
 # seen: the enclosure term counts it as a wall (enclosure_loglik).
 SEEN_MIN = 0.05
@@ -60,8 +63,10 @@ SEEN_MIN = 0.05
 R_OUT, R_WALL, R_INTERIOR = 0, 1, 2
 N_CATEGORIES = N_X * 3 * 2  # x + 4 * (region + 3 * corridor)
 
-_X_INPUT = np.array([FREE, UNKNOWN, OCCUPIED, OCCUPIED])          # input class of each code
-_X_INTERIOR_STATE = np.array([W_FREE, W_OBJECT, W_OBJECT, W_FREE])  # interior state of each code
+_X_INPUT = np.array([FREE, UNKNOWN, OCCUPIED, OCCUPIED, FREE])          # input class of each code
+_X_INTERIOR_STATE = np.array([W_FREE, W_OBJECT, W_OBJECT, W_FREE, W_FREE])  # interior state of each code
+# A wall band reads a free cell beside a wall line thinner than the band as the wall's occupied cell.
+_X_WALL_INPUT = np.array([FREE, UNKNOWN, OCCUPIED, OCCUPIED, OCCUPIED])
 
 
 def category(x: int, region: int, corridor: bool) -> int:
@@ -94,13 +99,23 @@ def wall_like(occupied: np.ndarray, object_max_extent: int, tolerance: int = 0,
     >>> int(wall_like(occ, 5).sum()), int(wall_like(occ, 5, gap=1).sum())
     (0, 6)
     """
+    occ = np.asarray(occupied, dtype=bool)
+    out = np.zeros(occ.shape, dtype=bool)
+    for along in (1, 0):  # lines along the rows (axis 1), then along the columns (axis 0)
+        out |= wall_like_axis(occ, object_max_extent, tolerance, gap, along)
+    return out
+
+
+def wall_like_axis(occupied: np.ndarray, object_max_extent: int, tolerance: int, gap: int,
+                   along: int) -> np.ndarray:
+    """:func:`wall_like`'s cells on lines along one axis (1: along the rows, 0: the columns)."""
     n = int(object_max_extent) + 1
     tol, gap = int(tolerance), int(gap)
     if tol < 0 or gap < 0:
         raise ValueError(f"tolerance and gap must be >= 0, got {tolerance}, {gap}")
     occ = np.asarray(occupied, dtype=bool)
     out = np.zeros(occ.shape, dtype=bool)
-    for along in (1, 0):  # lines along the rows (axis 1), then along the columns (axis 0)
+    for along in (along,):
         across = 1 - along
         band = occ
         if tol:
@@ -118,6 +133,56 @@ def wall_like(occupied: np.ndarray, object_max_extent: int, tolerance: int = 0,
     return out
 
 
+def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, object_max_extent: int,
+                     tolerance: int, gap: int, wall: int) -> np.ndarray:
+    """Free cells beside a wall thinner than the wall band (docs/model.md, "A wall thinner than the
+    band"): a cell of a :func:`wall_like` line whose occupied run across the line is ``t < wall``
+    cells, with a free cell on each side of that run (a wall between two seen spaces, not the face
+    of something the laser saw from one side), makes the free cells within ``wall - t`` cells of it
+    across the line shadows."""
+    occ = np.asarray(occupied, dtype=bool)
+    free = np.asarray(free, dtype=bool)
+    out = np.zeros(occ.shape, dtype=bool)
+    if wall < 2:
+        return out
+    for along in (1, 0):
+        across = 1 - along
+        a, f = (occ, free) if across == 1 else (occ.T, free.T)
+        run, start, stop = _runs(a)
+        h, w = a.shape
+        rows = np.arange(h)[:, None]
+        before = np.where(start > 0, f[rows, np.maximum(start - 1, 0)], False)
+        after = np.where(stop < w, f[rows, np.minimum(stop, w - 1)], False)
+        thin = (run > 0) & (run < wall) & before & after
+        if across == 0:
+            thin = thin.T
+        thin &= wall_like_axis(occ, object_max_extent, tolerance, gap, along)
+        out |= ndimage.maximum_filter1d(thin.view(np.uint8), 2 * (wall - 1) + 1, axis=across,
+                                        mode="constant").astype(bool)
+    return out & free
+
+
+def _runs(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(length, start, stop)`` of the run of True cells along axis 1 through each cell (0 where
+    False)."""
+    h, w = a.shape
+    length = np.zeros((h, w), np.int64)
+    start = np.zeros((h, w), np.int64)
+    stop = np.zeros((h, w), np.int64)
+    pad = np.zeros((h, 1), np.int8)
+    d = np.diff(np.concatenate([pad, a.astype(np.int8), pad], axis=1), axis=1)
+    rs, cs = np.nonzero(d == 1)
+    _, ce = np.nonzero(d == -1)
+    if len(rs):
+        n = ce - cs
+        idx = np.repeat(np.arange(len(rs)), n)
+        cols = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + cs[idx]
+        length[rs[idx], cols] = n[idx]
+        start[rs[idx], cols] = cs[idx]
+        stop[rs[idx], cols] = ce[idx]
+    return length, start, stop
+
+
 @dataclass(frozen=True, eq=False)
 class LikelihoodData:
     """Per-map products of the sensor model, built once by :func:`prepare`.
@@ -126,7 +191,7 @@ class LikelihoodData:
     ----------
     xcode : (H', W') uint8
         Extended input code of every lattice cell (``X_*``).
-    gain : (24,) float64
+    gain : (30,) float64
         ``log p(input | state, table) - log p(input | UNKNOWN)`` of each category (0 outside).
     baseline : float
         Log-likelihood of the empty world (every cell UNKNOWN).
@@ -136,9 +201,9 @@ class LikelihoodData:
         Wall band thickness in cells.
     n_free : int
         Number of input-free lattice cells (for coverage).
-    xhist : (24,) int64
+    xhist : (30,) int64
         Category histogram of the empty world (every cell R_OUT).
-    xsum : (H'+1, W'+1, 4) int32
+    xsum : (H'+1, W'+1, N_X) int32
         Prefix sums of the extended codes (:func:`prefix_sums`), for the incremental update.
     """
 
@@ -148,8 +213,8 @@ class LikelihoodData:
     log_psi: float
     wall: int
     n_free: int
-    xhist: np.ndarray   # (24,) category histogram of the empty world (every cell R_OUT)
-    xsum: np.ndarray    # (H'+1, W'+1, 4) int32 prefix sums of the extended codes (prefix_sums)
+    xhist: np.ndarray   # (30,) category histogram of the empty world (every cell R_OUT)
+    xsum: np.ndarray    # (H'+1, W'+1, N_X) int32 prefix sums of the extended codes (prefix_sums)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -157,14 +222,15 @@ class LikelihoodData:
 
 
 def gain_table(sensor) -> np.ndarray:
-    """The 24 per-category gains from the model's two sensor tables (see module docstring)."""
+    """The 30 per-category gains from the model's two sensor tables (see module docstring)."""
     gain = np.zeros(N_CATEGORIES)
     log_unknown = np.log(sensor.other[W_UNKNOWN])  # (3,) over input classes
     for corr, table in ((False, sensor.other), (True, sensor.corridor)):
         logt = np.log(table)
         for x in range(N_X):
             inp = _X_INPUT[x]
-            gain[category(x, R_WALL, corr)] = logt[W_WALL, inp] - log_unknown[inp]
+            winp = _X_WALL_INPUT[x]
+            gain[category(x, R_WALL, corr)] = logt[W_WALL, winp] - log_unknown[winp]
             gain[category(x, R_INTERIOR, corr)] = logt[_X_INTERIOR_STATE[x], inp] - log_unknown[inp]
     gain.setflags(write=False)
     return gain
@@ -205,6 +271,8 @@ def _prepare(frame, model) -> LikelihoodData:
     wl = wall_like(occ, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap)
     xcode[occ & ~wl] = X_OBJECTLIKE
     xcode[occ & wl] = X_WALLLIKE
+    xcode[thin_wall_shadow(occ, cls == FREE, c.object_max_extent, c.wall_line_tolerance,
+                           c.wall_line_gap, frame.cells.wall)] = X_SHADOW
     xcode.setflags(write=False)
     counts = np.bincount(cls.ravel(), minlength=3)
     baseline = float(np.dot(counts[:3], np.log(model.sensor.other[W_UNKNOWN])))
@@ -312,7 +380,8 @@ def enclosure_loglik(xsum, rects, active, wall, min_share, cost):  # pragma: no 
                 ra, ca, rb, cb = r0, c1 - b, r1, c1
             occ = (_box_count(xsum, ra, ca, rb, cb, X_OBJECTLIKE)
                    + _box_count(xsum, ra, ca, rb, cb, X_WALLLIKE))
-            seen = occ + _box_count(xsum, ra, ca, rb, cb, X_FREE)
+            seen = (occ + _box_count(xsum, ra, ca, rb, cb, X_FREE)
+                    + _box_count(xsum, ra, ca, rb, cb, X_SHADOW))
             share[k] = occ / seen if seen >= SEEN_MIN * (rb - ra) * (cb - ca) else 1.0
         share.sort()
         s2 = share[2]
@@ -346,7 +415,7 @@ TALLY_TILE = 512
 
 
 def full_tallies(data: LikelihoodData, rects: np.ndarray, corridor: np.ndarray):
-    """Category histogram (24,) int64 and Σγ of a world, computed from scratch.
+    """Category histogram (30,) int64 and Σγ of a world, computed from scratch.
 
     The units' bounding box is categorised tile by tile (:data:`TALLY_TILE` cells a side), each
     tile with the units that reach into it; a tile no unit reaches is left out (its cells are
@@ -458,7 +527,7 @@ def _changed_box(a, a_on, a_corr, b, b_on, b_corr, wall, box):  # pragma: no cov
 
 
 def prefix_sums(xcode: np.ndarray) -> np.ndarray:
-    """(H'+1, W'+1, 4) int32: ``S[r, c, x]`` = cells of code ``x`` in rows < r and columns < c."""
+    """(H'+1, W'+1, N_X) int32: ``S[r, c, x]`` = cells of code ``x`` in rows < r and columns < c."""
     h, w = xcode.shape
     s = np.zeros((h + 1, w + 1, N_X), dtype=np.int32)
     for x in range(N_X):
@@ -586,7 +655,7 @@ def world_delta(xsum, old_rects, old_on, old_corr, new_rects, new_on, new_corr, 
     """Tally change from one slot-indexed set of units to another (the sampler's hot path).
 
     Slots whose unit differs (rectangle, presence or corridor flag) are edited one after the
-    other; adds the histogram change into ``hist`` (24,) and returns the change of Σγ.
+    other; adds the histogram change into ``hist`` (30,) and returns the change of Σγ.
     """
     K = old_rects.shape[0]
     cur = np.empty((K, 4), np.int64)
@@ -685,8 +754,8 @@ class CoverTracker:
         return covered_free(hist)
 
 
-_FREE_COVERED = np.array([category(X_FREE, reg, corr) for reg in (R_WALL, R_INTERIOR)
-                          for corr in (False, True)])
+_FREE_COVERED = np.array([category(x, reg, corr) for x in (X_FREE, X_SHADOW)
+                          for reg in (R_WALL, R_INTERIOR) for corr in (False, True)])
 
 
 def covered_free(hist: np.ndarray) -> int:

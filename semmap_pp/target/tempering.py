@@ -88,7 +88,7 @@ def tempered(post: Posterior, beta: float) -> Posterior:
 
 def _category_residuals(sensor) -> np.ndarray:
     """Per likelihood category: the cell's log-likelihood term minus its expectation under the
-    sensor model (a cell outside every unit: the UNKNOWN row). (24,) float64."""
+    sensor model (a cell outside every unit: the UNKNOWN row). (30,) float64."""
     out = np.zeros(N_CATEGORIES)
     for corr, table in ((0, sensor.other), (1, sensor.corridor)):
         logt = np.log(table)

@@ -7,8 +7,8 @@ import pytest
 
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.lattice.frame import build_frame_from_classes
-from semmap_pp.target.likelihood import (R_INTERIOR, R_WALL, X_FREE, X_OBJECTLIKE, X_UNKNOWN,
-                                  X_WALLLIKE, Change, CoverTracker, category, changed_box,
+from semmap_pp.target.likelihood import (R_INTERIOR, R_WALL, X_FREE, X_OBJECTLIKE, X_SHADOW,
+                                  X_UNKNOWN, X_WALLLIKE, Change, CoverTracker, category, changed_box,
                                   cover_counts, full_loglik, full_tallies, prepare, wall_like)
 from semmap_pp.model import load_model
 
@@ -63,6 +63,27 @@ def test_gains_follow_the_tables():
     assert d.gain[category(X_WALLLIKE, R_INTERIOR, False)] == pytest.approx(math.log(other[1, 2] / other[3, 2]))
     assert d.gain[category(X_OBJECTLIKE, R_INTERIOR, False)] == pytest.approx(math.log(other[2, 2] / other[3, 2]))
     assert d.gain[category(X_OBJECTLIKE, R_WALL, False)] == pytest.approx(math.log(other[0, 2] / other[3, 2]))
+
+
+def test_a_wall_thinner_than_the_band_reads_whole():
+    """Two rooms with a wall of one cell between them, the band being two cells: the free cells
+    beside that wall are X_SHADOW, read by a wall band as the wall's occupied cells and by an
+    interior as free. The two rooms beat one unit over both by what the three rows of the wall
+    are worth, column by column; read as free, the band's second row cost the split −1.46 a cell
+    and the one unit won. Beside a wall of two cells there are none."""
+    c = room_map()
+    c[25, 7:43] = OCCUPIED
+    d = data_for(c)
+    shadow = np.argwhere(d.xcode == X_SHADOW)
+    assert sorted(set(shadow[:, 0].tolist())) == [24, 26] and len(shadow) == 2 * 36
+    g = lambda x, region: d.gain[category(x, region, False)]
+    per_column = (2 * g(X_SHADOW, R_WALL) + g(X_WALLLIKE, R_WALL)
+                  - 2 * g(X_SHADOW, R_INTERIOR) - g(X_WALLLIKE, R_INTERIOR))
+    split = ll(d, [(5, 5, 26, 45), (25, 5, 45, 45)]) - ll(d, [(5, 5, 45, 45)])
+    assert split == pytest.approx(36 * per_column) and split > 36 * 4.0
+    assert g(X_SHADOW, R_WALL) == g(X_WALLLIKE, R_WALL) and g(X_SHADOW, R_INTERIOR) == g(X_FREE, R_INTERIOR)
+    c[26, 7:43] = OCCUPIED               # a wall of two cells: as thick as the band
+    assert not (data_for(c).xcode == X_SHADOW).any()
 
 
 def test_corridor_table_penalises_clutter_more():
@@ -218,10 +239,11 @@ def random_edit(rng, rects, corr, shape):
 @pytest.mark.slow
 def test_incremental_equals_full_over_10000_random_edits():
     rng = np.random.default_rng(20260)
-    edits = worst = 0
+    edits = worst = shadows = 0
     for _world in range(25):
         shape = (int(rng.integers(30, 70)), int(rng.integers(30, 70)))
         d = data_for(random_map(rng, shape))
+        shadows += int((d.xcode == X_SHADOW).sum())
         n = int(rng.integers(1, 8))
         rects = [random_rect(rng, shape) if rng.random() < 0.8 else None for _ in range(n)]
         corr = [bool(rng.integers(2)) for _ in range(n)]
@@ -245,7 +267,7 @@ def test_incremental_equals_full_over_10000_random_edits():
                 rects[:], corr[:] = before
                 assert tracker.loglik == full()
             edits += 1
-    assert edits >= 10_000
+    assert edits >= 10_000 and shadows > 0
     assert worst <= 1e-9
 
 
