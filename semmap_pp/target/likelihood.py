@@ -114,32 +114,39 @@ def wall_like_axis(occupied: np.ndarray, object_max_extent: int, tolerance: int,
     if tol < 0 or gap < 0:
         raise ValueError(f"tolerance and gap must be >= 0, got {tolerance}, {gap}")
     occ = np.asarray(occupied, dtype=bool)
-    out = np.zeros(occ.shape, dtype=bool)
-    for along in (along,):
-        across = 1 - along
-        band = occ
-        if tol:
-            band = ndimage.maximum_filter1d(occ.view(np.uint8), 2 * tol + 1, axis=across,
-                                            mode="constant").astype(bool)
-        if gap:
-            pad = gap + 1  # padded so that the map border does not close anything
-            line = np.ones((1, gap + 1) if along == 1 else (gap + 1, 1), bool)
-            band = ndimage.binary_closing(np.pad(band, pad), structure=line)[pad:-pad, pad:-pad]
-        runs = ndimage.binary_opening(band, structure=np.ones((1, n) if along == 1 else (n, 1), bool))
-        if tol:
-            runs = ndimage.maximum_filter1d(runs.view(np.uint8), 2 * tol + 1, axis=across,
-                                            mode="constant").astype(bool)
-        out |= occ & runs
-    return out
+    across = 1 - along
+    band = occ
+    if tol:
+        band = ndimage.maximum_filter1d(occ.view(np.uint8), 2 * tol + 1, axis=across,
+                                        mode="constant").astype(bool)
+    if gap:
+        pad = gap + 1  # padded so that the map border does not close anything
+        line = np.ones((1, gap + 1) if along == 1 else (gap + 1, 1), bool)
+        band = ndimage.binary_closing(np.pad(band, pad), structure=line)[pad:-pad, pad:-pad]
+    runs = ndimage.binary_opening(band, structure=np.ones((1, n) if along == 1 else (n, 1), bool))
+    if tol:
+        runs = ndimage.maximum_filter1d(runs.view(np.uint8), 2 * tol + 1, axis=across,
+                                        mode="constant").astype(bool)
+    return occ & runs
 
 
 def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, object_max_extent: int,
                      tolerance: int, gap: int, wall: int) -> np.ndarray:
     """Free cells beside a wall thinner than the wall band (docs/model.md, "A wall thinner than the
     band"): a cell of a :func:`wall_like` line whose occupied run across the line is ``t < wall``
-    cells, with a free cell on each side of that run (a wall between two seen spaces, not the face
+    cells, with a free cell at each end of that run (a wall between two seen spaces, not the face
     of something the laser saw from one side), makes the free cells within ``wall - t`` cells of it
-    across the line shadows."""
+    across the line shadows.
+
+    >>> occ = np.zeros((5, 8), bool); occ[2, :] = True          # a wall one cell thick ...
+    >>> free = ~occ; free[3:, 5:] = False                        # ... seen from one side at the right
+    >>> thin_wall_shadow(occ, free, 4, 0, 0, 2).astype(int)
+    array([[0, 0, 0, 0, 0, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0],
+           [0, 0, 0, 0, 0, 0, 0, 0],
+           [1, 1, 1, 1, 1, 0, 0, 0],
+           [0, 0, 0, 0, 0, 0, 0, 0]])
+    """
     occ = np.asarray(occupied, dtype=bool)
     free = np.asarray(free, dtype=bool)
     out = np.zeros(occ.shape, dtype=bool)
@@ -147,40 +154,31 @@ def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, object_max_extent: 
         return out
     for along in (1, 0):
         across = 1 - along
-        a, f = (occ, free) if across == 1 else (occ.T, free.T)
-        run, start, stop = _runs(a)
-        h, w = a.shape
-        rows = np.arange(h)[:, None]
-        before = np.where(start > 0, f[rows, np.maximum(start - 1, 0)], False)
-        after = np.where(stop < w, f[rows, np.minimum(stop, w - 1)], False)
-        thin = (run > 0) & (run < wall) & before & after
-        if across == 0:
-            thin = thin.T
+        thin = np.zeros(occ.shape, dtype=bool)
+        for t in range(1, wall):   # runs of exactly t occupied cells with free cells at both ends
+            start = _shift(free, 1, across) & _shift(free, -t, across)
+            for j in range(t):
+                start &= _shift(occ, -j, across)
+            for j in range(t):
+                thin |= _shift(start, j, across)
         thin &= wall_like_axis(occ, object_max_extent, tolerance, gap, along)
         out |= ndimage.maximum_filter1d(thin.view(np.uint8), 2 * (wall - 1) + 1, axis=across,
                                         mode="constant").astype(bool)
     return out & free
 
 
-def _runs(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(length, start, stop)`` of the run of True cells along axis 1 through each cell (0 where
-    False)."""
-    h, w = a.shape
-    length = np.zeros((h, w), np.int64)
-    start = np.zeros((h, w), np.int64)
-    stop = np.zeros((h, w), np.int64)
-    pad = np.zeros((h, 1), np.int8)
-    d = np.diff(np.concatenate([pad, a.astype(np.int8), pad], axis=1), axis=1)
-    rs, cs = np.nonzero(d == 1)
-    _, ce = np.nonzero(d == -1)
-    if len(rs):
-        n = ce - cs
-        idx = np.repeat(np.arange(len(rs)), n)
-        cols = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + cs[idx]
-        length[rs[idx], cols] = n[idx]
-        start[rs[idx], cols] = cs[idx]
-        stop[rs[idx], cols] = ce[idx]
-    return length, start, stop
+def _shift(a: np.ndarray, k: int, axis: int) -> np.ndarray:
+    """``a`` moved by ``k`` cells along ``axis`` (``out[i] = a[i - k]``), False where nothing
+    comes in."""
+    out = np.zeros_like(a)
+    if k == 0:
+        out[...] = a
+        return out
+    src = [slice(None)] * a.ndim
+    dst = [slice(None)] * a.ndim
+    src[axis], dst[axis] = (slice(None, -k), slice(k, None)) if k > 0 else (slice(-k, None), slice(None, k))
+    out[tuple(dst)] = a[tuple(src)]
+    return out
 
 
 @dataclass(frozen=True, eq=False)
