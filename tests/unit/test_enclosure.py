@@ -11,8 +11,8 @@ import pytest
 from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.lattice.frame import build_frame_from_classes
-from semmap_pp.target.likelihood import (SEEN_MIN, X_FREE, X_OBJECTLIKE, X_WALLLIKE, enclosure_loglik,
-                                  prepare)
+from semmap_pp.target.likelihood import (SEEN_MIN, X_FREE, X_OBJECTLIKE, X_SHADOW, X_WALLLIKE,
+                                  enclosure_loglik, prepare)
 from semmap_pp.model import load_model
 from semmap_pp.target.posterior import Posterior
 
@@ -30,7 +30,7 @@ def oracle(xcode, rects, wall, min_share, cost):
         for band in (xcode[r0:r0 + b, c0:c1], xcode[r1 - b:r1, c0:c1],
                      xcode[r0:r1, c0:c0 + b], xcode[r0:r1, c1 - b:c1]):
             occ = np.isin(band, (X_OBJECTLIKE, X_WALLLIKE)).sum()
-            seen = occ + (band == X_FREE).sum()
+            seen = occ + np.isin(band, (X_FREE, X_SHADOW)).sum()   # every input-free cell
             shares.append(occ / seen if seen >= SEEN_MIN * band.size else 1.0)
         second = sorted(shares)[2]
         if second < min_share:
