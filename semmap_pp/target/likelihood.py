@@ -61,7 +61,7 @@ N_X = 5
 SEEN_MIN = 0.05
 # Regions of a cell relative to the world.
 R_OUT, R_WALL, R_INTERIOR = 0, 1, 2
-N_CATEGORIES = N_X * 3 * 2  # x + 4 * (region + 3 * corridor)
+N_CATEGORIES = N_X * 3 * 2  # x + N_X * (region + 3 * corridor)
 
 _X_INPUT = np.array([FREE, UNKNOWN, OCCUPIED, OCCUPIED, FREE])          # input class of each code
 _X_INTERIOR_STATE = np.array([W_FREE, W_OBJECT, W_OBJECT, W_FREE, W_FREE])  # interior state of each code
