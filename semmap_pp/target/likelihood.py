@@ -130,17 +130,18 @@ def wall_like_axis(occupied: np.ndarray, object_max_extent: int, tolerance: int,
     return occ & runs
 
 
-def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, object_max_extent: int,
-                     tolerance: int, gap: int, wall: int) -> np.ndarray:
+def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, lines, wall: int) -> np.ndarray:
     """Free cells beside a wall thinner than the wall band (docs/model.md, "A wall thinner than the
-    band"): a cell of a :func:`wall_like` line whose occupied run across the line is ``t < wall``
-    cells, with a free cell at each end of that run (a wall between two seen spaces, not the face
-    of something the laser saw from one side), makes the free cells within ``wall - t`` cells of it
-    across the line shadows.
+    band"): a cell of a wall-like line whose occupied run across the line is ``t < wall`` cells,
+    with a free cell at each end of that run (a wall between two seen spaces, not the face of
+    something the laser saw from one side), makes the free cells within ``wall - t`` cells of it
+    across the line shadows. ``lines``: the wall-like cells on lines along the rows and along the
+    columns (:func:`wall_like_axis` with ``along`` 1 and 0).
 
     >>> occ = np.zeros((5, 8), bool); occ[2, :] = True          # a wall one cell thick ...
     >>> free = ~occ; free[3:, 5:] = False                        # ... seen from one side at the right
-    >>> thin_wall_shadow(occ, free, 4, 0, 0, 2).astype(int)
+    >>> lines = [wall_like_axis(occ, 4, 0, 0, along) for along in (1, 0)]
+    >>> thin_wall_shadow(occ, free, lines, 2).astype(int)
     array([[0, 0, 0, 0, 0, 0, 0, 0],
            [1, 1, 1, 1, 1, 0, 0, 0],
            [0, 0, 0, 0, 0, 0, 0, 0],
@@ -152,7 +153,7 @@ def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, object_max_extent: 
     out = np.zeros(occ.shape, dtype=bool)
     if wall < 2:
         return out
-    for along in (1, 0):
+    for along, line in zip((1, 0), lines):
         across = 1 - along
         thin = np.zeros(occ.shape, dtype=bool)
         for t in range(1, wall):   # runs of exactly t occupied cells with free cells at both ends
@@ -161,7 +162,7 @@ def thin_wall_shadow(occupied: np.ndarray, free: np.ndarray, object_max_extent: 
                 start &= _shift(occ, -j, across)
             for j in range(t):
                 thin |= _shift(start, j, across)
-        thin &= wall_like_axis(occ, object_max_extent, tolerance, gap, along)
+        thin &= line
         out |= ndimage.maximum_filter1d(thin.view(np.uint8), 2 * (wall - 1) + 1, axis=across,
                                         mode="constant").astype(bool)
     return out & free
@@ -266,11 +267,12 @@ def _prepare(frame, model) -> LikelihoodData:
     xcode[cls == UNKNOWN] = X_UNKNOWN
     occ = cls == OCCUPIED
     c = frame.cells
-    wl = wall_like(occ, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap)
+    lines = [wall_like_axis(occ, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap, along)
+             for along in (1, 0)]         # wall_like's two halves, read again by the shadows
+    wl = lines[0] | lines[1]
     xcode[occ & ~wl] = X_OBJECTLIKE
     xcode[occ & wl] = X_WALLLIKE
-    xcode[thin_wall_shadow(occ, cls == FREE, c.object_max_extent, c.wall_line_tolerance,
-                           c.wall_line_gap, frame.cells.wall)] = X_SHADOW
+    xcode[thin_wall_shadow(occ, cls == FREE, lines, frame.cells.wall)] = X_SHADOW
     xcode.setflags(write=False)
     counts = np.bincount(cls.ravel(), minlength=3)
     baseline = float(np.dot(counts[:3], np.log(model.sensor.other[W_UNKNOWN])))
