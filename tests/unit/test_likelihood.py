@@ -69,8 +69,8 @@ def test_a_wall_thinner_than_the_band_reads_whole():
     """Two rooms with a wall of one cell between them, the band being two cells: the free cells
     beside that wall are X_SHADOW, read by a wall band as the wall's occupied cells and by an
     interior as free. The two rooms beat one unit over both by what the three rows of the wall
-    are worth, column by column; read as free, the band's second row cost the split −1.46 a cell
-    and the one unit won. Beside a wall of two cells there are none."""
+    are worth, column by column; read as free, the band's second row would cost the split −1.46
+    a cell and the one unit would win. Beside a wall of two cells there are none."""
     c = room_map()
     c[25, 7:43] = OCCUPIED
     d = data_for(c)
