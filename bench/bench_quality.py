@@ -1275,9 +1275,15 @@ def bench_wings(args, model, rules) -> dict:
             "protocol": "ROSE2 on the plan's free cells: truth rooms = labels > 200 cells"}
 
 
-#: the groups of ``--subset synthetic-wings``: name -> ``generate_floor`` arguments
-WING_GROUPS = {"manhattan": {}, "wings2-30": {"wings": 2, "wing_angle_deg": 30.0},
-               "wings2-45": {"wings": 2, "wing_angle_deg": 45.0}, "wings3-drawn": {"wings": 3}}
+#: the groups of ``--subset synthetic-wings``: name -> ``generate_floor`` arguments. ``wings2-0``
+#: and ``wings3-0`` are the controls: the same plans, links and robot as the turned groups of
+#: their number of wings, every joint at 0 degrees (Manhattan floors of several wings)
+WING_GROUPS = {"manhattan": {}, "wings2-0": {"wings": 2, "wing_angle_deg": 0.0},
+               "wings2-30": {"wings": 2, "wing_angle_deg": 30.0},
+               "wings2-45": {"wings": 2, "wing_angle_deg": 45.0},
+               "wings3-0": {"wings": 3, "wing_angle_deg": 0.0}, "wings3-drawn": {"wings": 3}}
+#: each turned group's control: its floors with every joint at 0 degrees
+WING_CONTROLS = {"wings2-30": "wings2-0", "wings2-45": "wings2-0", "wings3-drawn": "wings3-0"}
 #: seeds from here on are held out: no setting of the model or the generator was tuned on them
 HELD_OUT_FIRST = 1000
 WING_KEYS = ("unit_f1", "door_f1", "type_accuracy", "cpr", "cpr_building", "unit_f1_visible",
@@ -1286,9 +1292,11 @@ WING_KEYS = ("unit_f1", "door_f1", "type_accuracy", "cpr", "cpr_building", "unit
 
 def bench_synthetic_wings(args, model, rules) -> dict:
     """Floors of wings (:data:`WING_GROUPS`: two wings at 30 and at 45 degrees, three at angles
-    drawn from the seed) beside the one-wing floors of the same seeds, scored as the synthetic
-    subset scores its floors; means per group and each group's difference from the Manhattan
-    floors. ``--held-out`` takes the seeds from :data:`HELD_OUT_FIRST` on."""
+    drawn from the seed, and the same floors with every joint at 0 degrees) beside the one-wing
+    floors of the same seeds, scored as the synthetic subset scores its floors; means per group,
+    each group's difference from the one-wing floors (``minus_manhattan``) and each turned
+    group's from its control (``minus_control``, :data:`WING_CONTROLS`): what the angles cost.
+    ``--held-out`` takes the seeds from :data:`HELD_OUT_FIRST` on."""
     first = HELD_OUT_FIRST + args.first_floor if args.held_out else args.first_floor
     floors = [(g, seed, kind) for g, kind in WING_GROUPS.items() if _keep(g, args)
               for seed in range(first, first + args.floors)]
@@ -1301,11 +1309,12 @@ def bench_synthetic_wings(args, model, rules) -> dict:
             by_wing = [r["unit_recall_by_wing"] for r in rows if "unit_recall_by_wing" in r]
             for w in sorted({w for b in by_wing for w in b}):
                 groups[g][f"unit_recall_wing_{w}"] = _mean([b for b in by_wing if w in b], w)
-    base = groups.get("manhattan")
     for g, m in groups.items():
-        if base is not None and g != "manhattan":
-            m["minus_manhattan"] = {k: round(m[k] - base[k], 4) for k in WING_KEYS[:-1]
-                                    if m[k] is not None and base[k] is not None}
+        for key, base in (("minus_manhattan", groups.get("manhattan")),
+                          ("minus_control", groups.get(WING_CONTROLS.get(g)))):
+            if base is not None and g != "manhattan":
+                m[key] = {k: round(m[k] - base[k], 4) for k in WING_KEYS[:-1]
+                          if m[k] is not None and base[k] is not None}
         _log(args, f"{g}: {m['floors']} floors  unit F1 {m['unit_f1']}  door F1 {m['door_f1']}  "
                    f"types {m['type_accuracy']}  CPR {m['cpr']}  rooms P {m['rooms_precision']} "
                    f"R {m['rooms_recall']}")

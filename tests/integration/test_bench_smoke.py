@@ -189,11 +189,16 @@ def test_quality_save_writes_each_wstar_with_its_labels_and_rooms(capsys, monkey
     assert all(int((rooms == r["id"]).sum()) == r["cells"] for r in world["rooms"])
 
 
-def test_quality_synthetic_wings_scores_a_floor_of_wings_beside_the_manhattan_ones(capsys, monkeypatch):
+def test_quality_synthetic_wings_scores_a_floor_of_wings_beside_its_control(capsys, monkeypatch):
     result = bench(capsys, monkeypatch, "quality", "--tiny", "--subset", "synthetic-wings",
-                   "--maps", "wings2-30")
+                   "--maps", "wings2-30,wings2-0")
     part = result["synthetic-wings"]
-    (row,) = part["rows"]
+    row, control = sorted(part["rows"], key=lambda r: r["group"] != "wings2-30")
+    assert control["group"] == "wings2-0" and control["seed"] == 1
+    assert control["true_units"] == row["true_units"]          # the same plans, joined at 0 degrees
+    assert part["groups"]["wings2-30"]["minus_control"]["unit_f1"] == \
+        round(row["unit_f1"] - control["unit_f1"], 4)
+    assert "minus_control" not in part["groups"]["wings2-0"]
     assert row["group"] == "wings2-30" and row["seed"] == 1 and row["true_units"] >= 7
     assert 0 < row["cpr"] <= 1 and 0 <= row["unit_f1"] <= 1
     assert 0 < row["rooms_precision"] <= 1 and 0 < row["rooms_recall"] <= 1
