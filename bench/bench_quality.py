@@ -713,11 +713,19 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
     from semmap_pp.semantic.world_json import world_dict
     rows, claims = [], []
     seen = {}   # class of unit -> [(seen_share, walls_seen_share)]
+    skipped = []     # floors of a group that the generator cannot lay out
     if floors is None:
         floors = [(None, s, {}) for s in range(args.first_floor, args.first_floor + args.floors)]
     for group, seed, kind in floors:
         t0 = time.perf_counter()
-        floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution, **kind)
+        try:
+            floor, grid, inputs = _floor(seed, model, rules, args.pool, args.resolution, **kind)
+        except RuntimeError as exc:      # wings that would collide at that angle: no such floor
+            if group is None:
+                raise
+            skipped.append({"group": group, "seed": seed, "reason": str(exc)})
+            _log(args, f"{group} {seed:3d}: skipped, {exc}")
+            continue
         settings = _settings(model, args)
         label = f"synth {seed:3d}" if group is None else f"{group} {seed:3d}"
         ran = _run_or_record(args, inputs, settings, rows, {"seed": seed} | (
@@ -793,7 +801,7 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
                    for k, v in sorted(seen.items())}
     return {"rows": rows, "means": means, "errors": errors, "door_errors": door_errors,
             **({"calibration": calibration_summary(claims)} if claims else {}),
-            "routes": route_summary, "seen_shares": seen_shares,
+            "routes": route_summary, "seen_shares": seen_shares, **({"skipped": skipped} if skipped else {}),
             "targets": {k: TARGETS[k] for k in ("unit_f1", "type_accuracy", "door_f1")} | {
                 "cpr": TARGETS["synthetic_cpr"]}}
 
@@ -1310,17 +1318,34 @@ def bench_synthetic_wings(args, model, rules) -> dict:
             for w in sorted({w for b in by_wing for w in b}):
                 groups[g][f"unit_recall_wing_{w}"] = _mean([b for b in by_wing if w in b], w)
     for g, m in groups.items():
-        for key, base in (("minus_manhattan", groups.get("manhattan")),
-                          ("minus_control", groups.get(WING_CONTROLS.get(g)))):
-            if base is not None and g != "manhattan":
-                m[key] = {k: round(m[k] - base[k], 4) for k in WING_KEYS[:-1]
-                          if m[k] is not None and base[k] is not None}
+        if g == "manhattan":
+            continue
+        for key, other in (("minus_manhattan", "manhattan"), ("minus_control", WING_CONTROLS.get(g))):
+            diff = _group_difference(out["rows"], g, other)
+            if diff is not None:
+                m[key] = diff
         _log(args, f"{g}: {m['floors']} floors  unit F1 {m['unit_f1']}  door F1 {m['door_f1']}  "
                    f"types {m['type_accuracy']}  CPR {m['cpr']}  rooms P {m['rooms_precision']} "
                    f"R {m['rooms_recall']}")
     out["groups"] = groups
     out["seeds"] = [first, first + args.floors - 1]
     out["held_out"] = bool(args.held_out)
+    return out
+
+
+def _group_difference(rows: list, group: str, other: str | None) -> dict | None:
+    """The means of ``group``'s rows less ``other``'s over the seeds both hold (a seed the
+    generator could not lay out in one group is left out of both), per key of :data:`WING_KEYS`
+    but the time; None when they share no seed."""
+    by = {g: {r["seed"]: r for r in rows if r.get("group") == g and "unit_f1" in r} for g in (group, other)}
+    seeds = sorted(set(by[group]) & set(by[other])) if other is not None else []
+    if not seeds:
+        return None
+    out = {}
+    for k in WING_KEYS[:-1]:
+        a, b = _mean([by[group][s] for s in seeds], k), _mean([by[other][s] for s in seeds], k)
+        if a is not None and b is not None:
+            out[k] = round(a - b, 4)
     return out
 
 

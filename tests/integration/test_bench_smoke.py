@@ -220,3 +220,20 @@ def test_the_fuzzer_runs_from_the_checkout():
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     assert result["benchmark"] == "fuzz" and result["cases"]["mutated-yaml"] >= 1
     assert result["failures"] == 0
+
+
+def test_quality_synthetic_wings_leaves_out_a_floor_the_generator_cannot_lay_out(monkeypatch):
+    """Seed 6's three plans collide when every joint is at 0 degrees: the control skips that floor
+    (no row, the reason kept) and a turned group is compared with it on the seeds both hold."""
+    bench_runner(monkeypatch)                      # puts bench/ on the path
+    import argparse
+
+    import bench_quality as bq
+    args = argparse.Namespace(pool=1, resolution=0.05, quiet=True)
+    out = bq.bench_synthetic(args, None, None, [("wings3-0", 6, bq.WING_GROUPS["wings3-0"])])
+    assert out["rows"] == [] and out["skipped"] == [
+        {"group": "wings3-0", "seed": 6, "reason": "could not join wing 3 to wing 2"}]
+    rows = [{"group": "wings3-drawn", "seed": s, "unit_f1": f} for s, f in ((5, 0.5), (6, 0.9), (7, 0.7))] + \
+        [{"group": "wings3-0", "seed": s, "unit_f1": f} for s, f in ((5, 0.6), (7, 0.9))]
+    assert bq._group_difference(rows, "wings3-drawn", "wings3-0")["unit_f1"] == -0.15
+    assert bq._group_difference(rows, "wings3-drawn", None) is None
