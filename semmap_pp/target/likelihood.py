@@ -272,7 +272,7 @@ def _prepare(frame, model) -> LikelihoodData:
     wl = lines[0] | lines[1]
     xcode[occ & ~wl] = X_OBJECTLIKE
     xcode[occ & wl] = X_WALLLIKE
-    xcode[thin_wall_shadow(occ, cls == FREE, lines, frame.cells.wall)] = X_SHADOW
+    xcode[thin_wall_shadow(occ, cls == FREE, lines, c.wall)] = X_SHADOW
     xcode.setflags(write=False)
     counts = np.bincount(cls.ravel(), minlength=3)
     baseline = float(np.dot(counts[:3], np.log(model.sensor.other[W_UNKNOWN])))
