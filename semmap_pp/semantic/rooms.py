@@ -7,7 +7,10 @@ free cells, and on a map saved with graded values the cells seen free a few time
 
 1. **Seeds.** Every free cell inside a unit's interior (its rectangle less the wall band) takes
    the unit's region (:mod:`semmap_pp.semantic.regions`: units joined by an open wall are one
-   region). W*'s door cells are never part of a room: a door separates the rooms it joins.
+   region). W*'s door cells are never part of a room: a door separates the rooms it joins. A unit
+   too small for a room (interior under ``min_room_m2``) seeds only its main piece, and joins
+   through a passage only where the floor crosses it (:class:`UnitPieces`): drawn across a wall,
+   it does not join the rooms on its two sides.
 2. **Rooms seen through their door.** The strips along each interior (up to ``band_m`` along the
    floor) go to it; the free cells left fall into connected pieces. A piece of at least
    ``min_room_m2`` that meets the rooms only through openings no wider than a door (``door_max_m``
@@ -184,8 +187,8 @@ def _walled_share(piece: np.ndarray, free: np.ndarray, walls: np.ndarray | None)
 
 
 def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
-                params: RoomParams = RoomParams(), occupied: np.ndarray | None = None
-                ) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+                params: RoomParams = RoomParams(), occupied: np.ndarray | None = None,
+                fallback: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
     """Rooms of the free cells (see the module docstring).
 
     Parameters
@@ -251,6 +254,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     seeded, n_extra, passable = _rooms_beyond_doors(near, passable, free, walls, n_regions,
                                                     min_cells, door_cells, params.walled_min)
     flooded = geodesic_flood(seeded, passable, walls=blocked)
+    if fallback is not None:
+        fallback = np.asarray(fallback)[box]
+        flooded = np.where((flooded == 0) & (fallback > 0) & free & ~doors, fallback, flooded)
     labels, found = _numbered(flooded, n_regions, n_extra)
     full[box] = labels
     return full, found
@@ -387,7 +393,81 @@ def _through_door_ids(sm) -> set:
     return {sm.slot_ids[s] for s in sm.through_door if s in sm.slot_ids}
 
 
-def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
+class UnitPieces:
+    """Each unit's interior on the input image and its *main piece*, the part of it that is its
+    room's seed (docs/outputs.md, rooms.png step 1).
+
+    A unit whose interior holds at least ``small_cells`` image cells is its own main piece. A
+    smaller one (less than ``min_room_m2``: a doorway, a niche) can be drawn across a wall, with
+    floor of a room at each end: its main piece is the largest part of its interior, by floor
+    cells, that the map's occupied cells leave connected (4-neighbours over the cells not
+    occupied), and :meth:`joined` tells whether a passage of it joins it to another unit.
+
+    Attributes
+    ----------
+    units : (H, W) int32, the unit id of each interior cell (a cell inside two interiors: the
+        smaller id's, as the seeds always were), 0 elsewhere
+    main : (H, W) int32, the unit id on its main piece's cells, 0 elsewhere
+    """
+
+    def __init__(self, sm, floor: np.ndarray, open_cells: np.ndarray, small_cells: float):
+        wall = sm.frame.cells.wall
+        unit_lat = np.zeros(sm.frame.shape, np.int32)
+        pass_lat = np.zeros(sm.frame.shape, np.int32)
+        for s, uid in sorted(sm.slot_ids.items(), key=lambda kv: kv[1]):
+            r0, c0, r1, c1 = (max(int(v), 0) for v in interior(sm.world.rects[s], wall))
+            box = unit_lat[r0:r1, c0:c1]
+            box[box == 0] = uid
+        self._passages: dict[tuple[int, int], list[int]] = {}
+        for j, d in enumerate(sm.derived.passages, 1):
+            r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
+            pass_lat[r0:r1, c0:c1] = j
+            pair = tuple(sorted((sm.slot_ids[d.p], sm.slot_ids[d.q])))
+            self._passages.setdefault(pair, []).append(j)
+        self.units = sm.frame.to_image(unit_lat, fill=0)
+        self._pass = sm.frame.to_image(pass_lat, fill=0)
+        self._pass_slices = ndi.find_objects(self._pass)
+        self._open = np.asarray(open_cells, bool)
+        self.main = np.zeros(self.units.shape, np.int32)
+        self._slices, self._small = {}, set()
+        for uid, sl in enumerate(ndi.find_objects(self.units), 1):
+            if sl is None:
+                continue
+            self._slices[uid] = sl
+            inside = self.units[sl] == uid
+            if inside.sum() < small_cells:
+                self._small.add(uid)
+                inside = self._largest(inside & self._open[sl], np.asarray(floor, bool)[sl])
+            self.main[sl][inside] = uid
+
+    @staticmethod
+    def _largest(cells: np.ndarray, floor: np.ndarray) -> np.ndarray:
+        """The 4-connected piece of ``cells`` with the most ``floor`` cells (the first on a tie)."""
+        lab, n = ndi.label(cells, _FOUR)
+        if n <= 1:
+            return cells
+        counts = np.bincount(lab[floor & cells], minlength=n + 1)
+        counts[0] = -1
+        return lab == int(counts.argmax())
+
+    def joined(self, a: int, b: int) -> bool:
+        """Whether units ``a`` and ``b`` (ids, joined by a passage) are one floor: True unless one
+        of them is small and the open cells of the two interiors and their passages do not join
+        the two main pieces."""
+        if not self._small & {a, b} or a not in self._slices or b not in self._slices:
+            return True
+        js = self._passages.get((min(a, b), max(a, b)), [])
+        sls = [self._slices[a], self._slices[b]] + [self._pass_slices[j - 1] for j in js
+                                                   if self._pass_slices[j - 1] is not None]
+        sl = tuple(slice(min(s[k].start for s in sls), max(s[k].stop for s in sls)) for k in (0, 1))
+        units, main = self.units[sl], self.main[sl]
+        cells = ((units == a) | (units == b) | np.isin(self._pass[sl], js)) & self._open[sl]
+        lab, _ = ndi.label(cells, _FOUR)
+        in_a, in_b = set(np.unique(lab[main == a])) - {0}, set(np.unique(lab[main == b])) - {0}
+        return not (in_a and in_b) or bool(in_a & in_b)
+
+
+def room_joins(sm, params: RoomParams, pieces=None) -> tuple[list[tuple[int, int]], list]:
     """Unit-id pairs one room joins, and the doors that stay doors between rooms.
 
     Units joined by a passage (:func:`~semmap_pp.semantic.regions.passage_pairs`) are one room; so
@@ -399,13 +479,18 @@ def room_joins(sm, params: RoomParams) -> tuple[list[tuple[int, int]], list]:
     (``door_max_m``, :func:`wide_opening`): the open side of a room that a partition, a stub of
     wall or a row of cupboards half divides. A corridor's or a hall's openings, however wide, lead
     into the rooms along it. A unit added over a room seen through its door
-    (``sm.through_door``) is a room of its own: it joins no other unit."""
+    (``sm.through_door``) is a room of its own: it joins no other unit. With ``pieces``
+    (:class:`UnitPieces`), a passage of a unit too small for a room joins only where the floor
+    crosses it (:meth:`UnitPieces.joined`)."""
     ids, rects, classes = sm.slot_ids, sm.world.rects, sm.frame.door_classes
     alone = _through_door_ids(sm)
     wall = sm.frame.cells.wall
     width = params.door_max_m / sm.frame.resolution
     free = None
-    pairs, doors, decided = [p for p in passage_pairs(sm) if not alone & set(p)], [], {}
+    pairs = [p for p in passage_pairs(sm) if not alone & set(p)]
+    if pieces is not None:
+        pairs = [p for p in pairs if pieces.joined(*p)]
+    doors, decided = [], {}
     for d in sm.derived.doors:
         pair = tuple(sorted((ids[d.p], ids[d.q])))
         if alone & set(pair):
@@ -461,23 +546,23 @@ def floor_cells(grid, params: RoomParams = RoomParams()) -> np.ndarray:
 
 def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     """rooms.png's rooms of a :class:`~semmap_pp.semantic.semantic_map.SemanticMap` (module docstring)."""
-    pairs, doors = room_joins(sm, params)
+    classes = sm.grid.classes
+    floor = floor_cells(sm.grid, params)
+    pieces = UnitPieces(sm, floor, classes != OCCUPIED, params.min_room_m2 / sm.grid.resolution ** 2)
+    pairs, doors = room_joins(sm, params, pieces)
     region = join_regions(sm.unit_ids, pairs)
-    wall = sm.frame.cells.wall
-    seeds_lat = np.zeros(sm.frame.shape, np.int32)
     door_lat = np.zeros(sm.frame.shape, bool)
-    for s, uid in sorted(sm.slot_ids.items(), key=lambda kv: kv[1]):
-        r0, c0, r1, c1 = (max(int(v), 0) for v in interior(sm.world.rects[s], wall))
-        box = seeds_lat[r0:r1, c0:c1]
-        box[box == 0] = region[uid]
     for d in doors:
         r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
         door_lat[r0:r1, c0:c1] = True
-    seeds = sm.frame.to_image(seeds_lat, fill=0)
+    lut = np.zeros(max(sm.unit_ids, default=0) + 1, np.int32)
+    for uid, rid in region.items():
+        lut[uid] = rid
+    seeds = lut[pieces.main]
+    fallback = lut[pieces.units]
     door_img = sm.frame.to_image(door_lat, fill=False)
-    classes = sm.grid.classes
-    labels, found = room_labels(floor_cells(sm.grid, params), seeds, door_img, sm.grid.resolution, params,
-                                occupied=classes == OCCUPIED)
+    labels, found = room_labels(floor, seeds, door_img, sm.grid.resolution, params,
+                                occupied=classes == OCCUPIED, fallback=fallback)
     units_of: dict[int, list[int]] = {}
     for uid, rid in region.items():
         units_of.setdefault(rid, []).append(uid)

@@ -624,3 +624,52 @@ def test_a_door_taking_most_of_a_wall_joins_two_units_but_never_a_corridor_and_a
     pairs, doors = room_joins(_FakeMap(classes, rp, rq, types), params)
     assert (pairs == [(1, 2)]) is one_room
     assert len(doors) == (0 if one_room else 1)
+
+
+def two_rooms_and_a_small_unit_across_their_wall(tmp_path: Path, gap: bool):
+    """A map (0.05 m cells) of two rooms, one above the other, and the world of three units: one
+    over each room, and between them a small one (1.4 x 1.7 m, less than ``min_room_m2`` inside its
+    wall band) drawn across the wall that parts the rooms, so that its top edge opens onto the
+    upper room's floor and its bottom edge onto the lower room's. ``gap``: the wall has a 0.8 m
+    opening inside the small unit."""
+    from semmap_pp import world as wm
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.target_factory import run_target
+    from semmap_pp.semantic.semantic_map import semantic_map
+    img = np.full((130, 100), 205, np.uint8)
+    img[10:118, 10:90] = 254
+    occ = np.zeros(img.shape, bool)
+    occ[8:10, 8:92] = occ[118:120, 8:92] = occ[8:120, 8:10] = occ[8:120, 90:92] = True
+    occ[62:64, 8:92] = True                                  # the wall between the two rooms
+    if gap:
+        occ[62:64, 14:30] = False
+    img[occ] = 0
+    Image.fromarray(img).save(tmp_path / "two.pgm")
+    (tmp_path / "two.yaml").write_text("image: two.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n"
+                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    inputs = load_inputs(tmp_path / "two.yaml", rules_path=DEFAULT_RULES)
+    frame, world = inputs.frame, wm.empty(8)
+    for i, (x0, y0, x1, y1) in enumerate([(8, 8, 92, 46), (8, 46, 36, 80), (8, 80, 92, 120)]):
+        rect, _ = frame.rect_from_vertices_px([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+        world = wm.add(world, i, rect)
+    return semantic_map(inputs.grid, frame, run_target(inputs), world, roi=inputs.roi)
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_a_small_unit_across_a_wall_joins_the_rooms_only_where_the_floor_crosses_it(tmp_path, gap):
+    """Passages join the small unit to both rooms' units. Where the wall holds no opening inside
+    it, the rooms stay two and each takes the small unit's floor on its side of the wall; where
+    the floor crosses the unit through an opening, the three units are one room."""
+    from semmap_pp.semantic.regions import passage_pairs
+    sm = two_rooms_and_a_small_unit_across_their_wall(tmp_path, gap)
+    assert passage_pairs(sm) == [(1, 2), (2, 3)]
+    labels = sm.rooms.labels
+    upper, lower = np.unique(labels[12:60, 12:88]), np.unique(labels[66:116, 12:88])
+    assert len(upper) == 1 and len(lower) == 1 and upper[0] > 0 and lower[0] > 0
+    if gap:
+        assert upper[0] == lower[0]
+        assert [r.units for r in sm.rooms.rooms] == [(1, 2, 3)]
+    else:
+        assert upper[0] != lower[0]
+        assert sorted(r.units for r in sm.rooms.rooms) == [(1, 2), (3,)]
