@@ -8,9 +8,10 @@ free cells, and on a map saved with graded values the cells seen free a few time
 1. **Seeds.** Every free cell inside a unit's interior (its rectangle less the wall band) takes
    the unit's region (:mod:`semmap_pp.semantic.regions`: units joined by an open wall are one
    region). W*'s door cells are never part of a room: a door separates the rooms it joins. A unit
-   too small for a room (interior under ``min_room_m2``) seeds only its main piece, and joins
-   through a passage only where the floor crosses it (:class:`UnitPieces`): drawn across a wall,
-   it does not join the rooms on its two sides.
+   too small for a room (interior under ``min_room_m2``) seeds none (its floor joins the nearest
+   room in step 3, or keeps its unit's room where none reaches it), and joins through a passage
+   only where the floor crosses it (:class:`UnitPieces`): drawn across a wall, it does not join
+   the rooms on its two sides.
 2. **Rooms seen through their door.** The strips along each interior (up to ``band_m`` along the
    floor) go to it; the free cells left fall into connected pieces. A piece of at least
    ``min_room_m2`` that meets the rooms only through openings no wider than a door (``door_max_m``
@@ -398,10 +399,11 @@ class UnitPieces:
     room's seed (docs/outputs.md, rooms.png step 1).
 
     A unit whose interior holds at least ``small_cells`` image cells is its own main piece. A
-    smaller one (less than ``min_room_m2``: a doorway, a niche) can be drawn across a wall, with
-    floor of a room at each end: its main piece is the largest part of its interior, by floor
-    cells, that the map's occupied cells leave connected (4-neighbours over the cells not
-    occupied), and :meth:`joined` tells whether a passage of it joins it to another unit.
+    smaller one (less than ``min_room_m2``: a doorway, a niche) seeds no room (:meth:`seeds`),
+    and can be drawn across a wall, with floor of a room at each end: its main piece is the
+    largest part of its interior, by floor cells, that the map's occupied cells leave connected
+    (4-neighbours over the cells not occupied), and :meth:`joined` tells whether a passage of it
+    joins it to another unit.
 
     Attributes
     ----------
@@ -439,6 +441,13 @@ class UnitPieces:
                 self._small.add(uid)
                 inside = self._largest(inside & self._open[sl], np.asarray(floor, bool)[sl])
             self.main[sl][inside] = uid
+
+    def seeds(self) -> np.ndarray:
+        """(H, W) int32: the unit id on the cells that seed its room: every unit's main piece but
+        a small unit's (its floor joins the room nearest along the floor)."""
+        if not self._small:
+            return self.main
+        return np.where(np.isin(self.main, sorted(self._small)), 0, self.main)
 
     @staticmethod
     def _largest(cells: np.ndarray, floor: np.ndarray) -> np.ndarray:
@@ -558,7 +567,7 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     lut = np.zeros(max(sm.unit_ids, default=0) + 1, np.int32)
     for uid, rid in region.items():
         lut[uid] = rid
-    seeds = lut[pieces.main]
+    seeds = lut[pieces.seeds()]
     fallback = lut[pieces.units]
     door_img = sm.frame.to_image(door_lat, fill=False)
     labels, found = room_labels(floor, seeds, door_img, sm.grid.resolution, params,

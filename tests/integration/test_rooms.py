@@ -626,17 +626,31 @@ def test_a_door_taking_most_of_a_wall_joins_two_units_but_never_a_corridor_and_a
     assert len(doors) == (0 if one_room else 1)
 
 
+def semantic_map_of(tmp_path: Path, img: np.ndarray, boxes):
+    """The semantic map of a world of units over ``img`` (a map_server image, 0.05 m cells, saved
+    with its YAML in ``tmp_path``): one unit per pixel box ``(x0, y0, x1, y1)``, in order."""
+    from semmap_pp import world as wm
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.run.target_factory import run_target
+    from semmap_pp.semantic.semantic_map import semantic_map
+    Image.fromarray(img).save(tmp_path / "units.pgm")
+    (tmp_path / "units.yaml").write_text("image: units.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n"
+                                         "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    inputs = load_inputs(tmp_path / "units.yaml", rules_path=DEFAULT_RULES)
+    frame, world = inputs.frame, wm.empty(8)
+    for i, (x0, y0, x1, y1) in enumerate(boxes):
+        rect, _ = frame.rect_from_vertices_px([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+        world = wm.add(world, i, rect)
+    return semantic_map(inputs.grid, frame, run_target(inputs), world, roi=inputs.roi)
+
+
 def two_rooms_and_a_small_unit_across_their_wall(tmp_path: Path, gap: bool):
     """A map (0.05 m cells) of two rooms, one above the other, and the world of three units: one
     over each room, and between them a small one (1.4 x 1.7 m, less than ``min_room_m2`` inside its
     wall band) drawn across the wall that parts the rooms, so that its top edge opens onto the
     upper room's floor and its bottom edge onto the lower room's. ``gap``: the wall has a 0.8 m
     opening inside the small unit."""
-    from semmap_pp import world as wm
-    from semmap_pp.resources import DEFAULT_RULES
-    from semmap_pp.run.inputs import load_inputs
-    from semmap_pp.run.target_factory import run_target
-    from semmap_pp.semantic.semantic_map import semantic_map
     img = np.full((130, 100), 205, np.uint8)
     img[10:118, 10:90] = 254
     occ = np.zeros(img.shape, bool)
@@ -645,15 +659,7 @@ def two_rooms_and_a_small_unit_across_their_wall(tmp_path: Path, gap: bool):
     if gap:
         occ[62:64, 14:30] = False
     img[occ] = 0
-    Image.fromarray(img).save(tmp_path / "two.pgm")
-    (tmp_path / "two.yaml").write_text("image: two.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n"
-                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
-    inputs = load_inputs(tmp_path / "two.yaml", rules_path=DEFAULT_RULES)
-    frame, world = inputs.frame, wm.empty(8)
-    for i, (x0, y0, x1, y1) in enumerate([(8, 8, 92, 46), (8, 46, 36, 80), (8, 80, 92, 120)]):
-        rect, _ = frame.rect_from_vertices_px([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-        world = wm.add(world, i, rect)
-    return semantic_map(inputs.grid, frame, run_target(inputs), world, roi=inputs.roi)
+    return semantic_map_of(tmp_path, img, [(8, 8, 92, 46), (8, 46, 36, 80), (8, 80, 92, 120)])
 
 
 @pytest.mark.parametrize("gap", [False, True])
@@ -673,3 +679,28 @@ def test_a_small_unit_across_a_wall_joins_the_rooms_only_where_the_floor_crosses
     else:
         assert upper[0] != lower[0]
         assert sorted(r.units for r in sm.rooms.rooms) == [(1, 2), (3,)]
+
+
+def test_a_small_unit_seeds_no_room_of_its_own(tmp_path):
+    """A room and, beyond its outer wall, floor seen through a window (rays outside), with a
+    small unit (under ``min_room_m2`` inside its band) drawn across the wall: most of its floor
+    lies outside, the window beside it. Its passage to the room's unit does not join (the wall
+    parts its main piece from the room inside it); it seeds no room, so the floor outside joins
+    the room through the window and rooms.png holds the one room, the small unit in none."""
+    from semmap_pp.semantic.regions import passage_pairs
+    img = np.full((100, 100), 205, np.uint8)
+    img[10:60, 10:90] = 254                                  # the room
+    img[64:98, 28:80] = 254                                  # rays outside, through the window
+    img[60:64, 62:76] = 254
+    occ = np.zeros(img.shape, bool)
+    occ[8:10, 8:92] = occ[8:62, 8:10] = occ[8:62, 90:92] = True
+    occ[60:62, 8:92] = True                                  # the outer wall ...
+    occ[60:62, 62:76] = False                                # ... and its window, beside the unit
+    img[occ] = 0
+    sm = semantic_map_of(tmp_path, img, [(8, 8, 92, 50), (28, 50, 52, 88)])
+    assert passage_pairs(sm) == [(1, 2)]
+    labels = sm.rooms.labels
+    assert [r.units for r in sm.rooms.rooms] == [(1,)]
+    room = sm.rooms.rooms[0].id
+    assert (labels[12:58, 12:88] == room).all()              # the room ...
+    assert (labels[66:96, 30:78] == room).all()              # ... and the floor beyond the window
