@@ -17,9 +17,21 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from semmap_pp.errors import WriteError
+
+#: Called before each file is written (:func:`write_bytes`, :func:`atomic_path`,
+#: :func:`atomic_dir`), when set: a command's SIGINT handler raises KeyboardInterrupt wherever the
+#: signal lands, and where that is a library object's ``__del__`` Python swallows the exception
+#: (prints "Exception ignored" and goes on). The command sets this to a check that raises it again
+#: for a Ctrl-C it has seen, so the writing stops before its next file.
+before_write: Callable[[], None] | None = None
+
+
+def _check_interrupt() -> None:
+    if before_write is not None:
+        before_write()
 
 
 def _umask() -> int:
@@ -74,6 +86,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     'hello'
     """
     path = Path(path)
+    _check_interrupt()
     try:
         fd, tmp = _temporary(path)
         os.close(fd)
@@ -103,6 +116,7 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
         is removed and ``path`` is as it was.
     """
     path = Path(path)
+    _check_interrupt()
     try:
         fd, tmp = _temporary(path)
     except OSError as exc:
@@ -171,6 +185,7 @@ def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
     ('two', ['bag'])
     """
     path = Path(path)
+    _check_interrupt()
     path.parent.mkdir(parents=True, exist_ok=True)
     holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     try:

@@ -405,9 +405,11 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     return the paths written and whether Ctrl-C stopped the writing.
 
     A Ctrl-C while resume.npz is written lets it finish, then stops; a Ctrl-C after it stops at
-    once. Either way the search is saved, and every file written is complete (each is renamed
-    whole onto its name; the one being written is dropped). The caller puts its SIGINT handler
-    back."""
+    once, or, where its KeyboardInterrupt landed in a library object's ``__del__`` (which Python
+    swallows), before the next file (:data:`semmap_pp.atomic.before_write`). Either way the
+    search is saved, and every file written is complete (each is renamed whole onto its name; the
+    one being written is dropped). The caller puts its SIGINT handler back."""
+    from semmap_pp import atomic
     from semmap_pp.forked import Forked
     from semmap_pp.outputs.write import N_SAMPLED_WORLDS, posterior_pngs, write_posterior, write_wstar
     from semmap_pp.run.memory import young_heap
@@ -423,7 +425,18 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
             raise KeyboardInterrupt
         print(f"semmap: interrupted: finishing {RESUME_FILE}, then stopping", file=sys.stderr, flush=True)
 
+    def check():
+        if pressed and not saving[0]:
+            raise KeyboardInterrupt
+
+    previous = sys.unraisablehook
+
+    def unraisable(u):          # a Ctrl-C a finalizer swallowed: `check` stops at the next file
+        if u.exc_type is None or not issubclass(u.exc_type, KeyboardInterrupt):
+            previous(u)
+
     signal.signal(signal.SIGINT, handler)
+    atomic.before_write, sys.unraisablehook = check, unraisable
     written = []
     try:
         written.append(write_resume(out, run, meta))
@@ -444,4 +457,8 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
     except KeyboardInterrupt:
         quiet_finalizers()
         return written, True
+    finally:
+        atomic.before_write = None
+        if sys.unraisablehook is unraisable:       # (quiet_finalizers keeps its own)
+            sys.unraisablehook = previous
     return written, False

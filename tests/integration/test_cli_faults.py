@@ -212,6 +212,34 @@ def test_sigint_while_the_outputs_are_written_keeps_the_search(floor, tmp_path):
     assert (out / "report.html").is_file() and resume_meta(out)["chains"][0]["draw"] == 12
 
 
+def test_sigint_whose_interrupt_a_finalizer_swallows_still_stops_the_writing(floor, tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the outputs are written whose KeyboardInterrupt lands in a library object's
+    ``__del__`` (a clingo AST node's, say): Python swallows an exception raised there and goes
+    on, so the run stops before its next file instead, says so in one line and prints no
+    traceback."""
+    import os
+    from semmap_pp.run import spread
+
+    real = spread.posterior_worlds
+
+    class Finalized:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(100_000):         # the handler runs here, inside __del__
+                pass
+
+    def worlds(run, n):
+        Finalized()
+        return real(run, n)
+
+    out = tmp_path / "swallowed"
+    monkeypatch.setattr(spread, "posterior_worlds", worlds)
+    code = main(["map", str(floor), "--out", str(out), "--chains", "2", "--cores", "1", "--tune", "2",
+                 "--draws", "6", "--n-inner", "5", "--spread-draws", "0", "--progress", "none"])
+    monkeypatch.undo()
+    assert _check_saved(out, capsys.readouterr().err, code, " --draws N") == {"resume.npz"}
+
+
 def _sigint_at(name):
     """An os.write that sends this process SIGINT at the first write of the file ``name``."""
     import os
