@@ -71,14 +71,24 @@ def unit_regions(sm) -> dict[int, int]:
     return join_regions(sm.unit_ids, passage_pairs(sm))
 
 
+def region_lut(regions: dict[int, int], size: int, dtype=np.int32) -> np.ndarray:
+    """A table of ``size`` entries holding each unit id's region id (``regions``), 0 for the
+    others: ``region_lut(regions, n)[ids]`` maps an array of unit ids below ``n`` to regions.
+
+    >>> region_lut({1: 1, 2: 2, 3: 2}, 5).tolist()
+    [0, 1, 2, 2, 0]
+    """
+    lut = np.zeros(size, dtype)
+    for uid, rid in regions.items():
+        if uid < size:
+            lut[uid] = rid
+    return lut
+
+
 def regions_image(sm, regions: dict[int, int] | None = None) -> np.ndarray:
     """(H, W) uint16 region id per pixel of the input image (0 = no unit), from ``labels_image``."""
     regions = unit_regions(sm) if regions is None else regions
-    lut = np.zeros(int(sm.labels_image.max(initial=0)) + 1, np.uint16)
-    for uid, rid in regions.items():
-        if uid < len(lut):
-            lut[uid] = rid
-    return lut[sm.labels_image]
+    return region_lut(regions, int(sm.labels_image.max(initial=0)) + 1, np.uint16)[sm.labels_image]
 
 
 def write_regions_png(path: str | os.PathLike, image: np.ndarray) -> Path:
@@ -87,5 +97,5 @@ def write_regions_png(path: str | os.PathLike, image: np.ndarray) -> Path:
     return write_labels_png(path, np.asarray(image))
 
 
-__all__ = ["join_regions", "passage_pairs", "unit_pairs", "unit_regions", "regions_image",
+__all__ = ["join_regions", "passage_pairs", "unit_pairs", "unit_regions", "region_lut", "regions_image",
            "write_regions_png"]

@@ -44,7 +44,7 @@ from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
 from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
-from semmap_pp.semantic.regions import join_regions, passage_pairs
+from semmap_pp.semantic.regions import join_regions, passage_pairs, region_lut
 
 _FOUR = ndi.generate_binary_structure(2, 1)
 _EIGHT = np.ones((3, 3), bool)
@@ -205,6 +205,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     occupied : (H, W) bool, optional
         The map's occupied cells (the other non-free cells are unknown); None: every non-free
         cell counts as occupied.
+    fallback : (H, W) int, optional
+        Region id of cells that keep it when no room reaches them (a unit's interior that seeds
+        nothing: a closet behind its door), 0 elsewhere.
 
     Returns
     -------
@@ -395,10 +398,11 @@ def _through_door_ids(sm) -> set:
 
 
 class UnitPieces:
-    """Each unit's interior on the input image and its *main piece*, the part of it that is its
-    room's seed (docs/outputs.md, rooms.png step 1).
+    """Each unit's interior on the input image and its *main piece* (docs/outputs.md, rooms.png
+    step 1).
 
-    A unit whose interior holds at least ``small_cells`` image cells is its own main piece. A
+    A unit whose interior holds at least ``small_cells`` image cells is its own main piece, and
+    it is its room's seed. A
     smaller one (less than ``min_room_m2``: a doorway, a niche) seeds no room (:meth:`seeds`),
     and can be drawn across a wall, with floor of a room at each end: its main piece is the
     largest part of its interior, by floor cells, that the map's occupied cells leave connected
@@ -564,9 +568,7 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     for d in doors:
         r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
         door_lat[r0:r1, c0:c1] = True
-    lut = np.zeros(max(sm.unit_ids, default=0) + 1, np.int32)
-    for uid, rid in region.items():
-        lut[uid] = rid
+    lut = region_lut(region, max(sm.unit_ids, default=0) + 1)
     seeds = lut[pieces.seeds()]
     fallback = lut[pieces.units]
     door_img = sm.frame.to_image(door_lat, fill=False)
