@@ -54,6 +54,8 @@ sampling per map (``--budget 30``: ``run_map(budget=...)``); per-map rows, the m
   published output (``rose2.png``) and regions.png cut to the map's free cells; per map and as means.
   ``--turn 15,30,45`` (or ``default``) runs the floors turned by those angles with their truth
   instead (``bench/turned_maps.py``: a map frame at another angle to the building), held out.
+  ``--pool K`` runs them as maps of K times coarser cells (``bench/pooled_maps.py``: 0.1 m for
+  K = 2), rooms.png scored at the floors' own cells against their own truth, held out.
 * **partial**: two partial explorations of each real-gt floor (``bench/partial_maps.py``: the robot
   drove through the corridors and 30 % or 60 % of the rooms and saw the others only through their
   doors), rooms.png scored by the ROSE2 protocol on the cells the partial map saw. ROSE2's
@@ -173,7 +175,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--resolution", type=float, default=0.05,
                         help="synthetic floors rendered at this many metres per cell (generate_floor)")
     parser.add_argument("--pool", type=int, default=1,
-                        help="synthetic floors as maps of K times coarser cells (pooled_floor)")
+                        help="synthetic floors as maps of K times coarser cells (pooled_floor); real-gt: "
+                             "the floors so (pooled_maps), rooms.png scored at their own cells")
     parser.add_argument("--budget", default="model", type=_budget,
                         help="run lengths: 'model' ([sampler]), 'quick', or seconds of sampling per map")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed")
@@ -603,12 +606,9 @@ def pooled_floor(floor, k: int):
     """
     if k == 1:
         return floor
-    from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
-    h, w = (n // k for n in floor.classes.shape)
-    blocks = floor.classes[:h * k, :w * k].reshape(h, k, w, k).transpose(0, 2, 1, 3).reshape(h, w, k * k)
-    classes = np.full((h, w), UNKNOWN, np.uint8)
-    classes[(blocks == FREE).sum(axis=-1) * 2 >= k * k] = FREE
-    classes[(blocks == OCCUPIED).any(axis=-1)] = OCCUPIED
+    import pooled_maps
+    classes = pooled_maps.pool_classes(floor.classes, k)
+    h, w = classes.shape
     truth = _scaled_px(floor.truth, k) | {"resolution": floor.resolution * k, "width": w, "height": h}
     return dataclasses.replace(floor, classes=classes, image=floor.image[:h * k:k, :w * k:k],
                                truth_labels=floor.truth_labels[:h * k:k, :w * k:k],
@@ -1137,12 +1137,15 @@ def bench_real_gt(args, model, rules) -> dict:
         for folder in sorted(p for p in REAL_GT.iterdir() if (p / "map.yaml").is_file()):
             for degrees in args.turn or (None,):
                 name = folder.name if degrees is None else f"{folder.name}@{degrees:g}deg"
+                if args.pool > 1:
+                    name = f"{folder.name}@{args.pool}x"
                 if _keep(folder.name, args):
                     _real_gt_row(args, model, folder, name, degrees, Path(tmp), rows)
     keys = ("precision", "recall", "regions_free_precision", "regions_free_recall", "run_s")
-    if not args.turn:
+    if not args.turn and args.pool == 1:
         keys += ("rose2_precision", "rose2_recall")
     return {"rows": rows, "means": {k: _mean(rows, k) for k in keys}, "turned": list(args.turn or ()),
+            "pooled": args.pool,
             "protocol": "ROSE2: truth rooms = one-colour regions > 200 cells, segments whole"}
 
 
@@ -1153,10 +1156,14 @@ def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows:
     from semmap_pp.evaluate import protocol_scores, read_segmentation, read_segmentation_truth
     from semmap_pp.resources import DEFAULT_RULES
     from semmap_pp.run.inputs import load_inputs
+    import pooled_maps
     gt = read_segmentation_truth(folder / "gt.png", "rose2")
     map_yaml = folder / "map.yaml"
     if degrees is not None:
         gt = turned_maps.write(folder, tmp / name, degrees, gt)
+        map_yaml = tmp / name / "map.yaml"
+    elif args.pool > 1:                 # scored at the floor's own cells, against its own truth
+        pooled_maps.write(folder, tmp / name, args.pool)
         map_yaml = tmp / name / "map.yaml"
     inputs = load_inputs(map_yaml, model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
     ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"real-gt {name}")
@@ -1164,9 +1171,12 @@ def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows:
         return
     run, clock = ran
     sm = run.semantic
-    rooms = protocol_scores(gt, sm.rooms.labels)
     seg, _ = regions_of(sm)
-    regions = protocol_scores(gt, np.where(inputs.grid.classes == FREE, seg, 0))
+    seg, labels = np.where(inputs.grid.classes == FREE, seg, 0), sm.rooms.labels
+    if degrees is None and args.pool > 1:
+        seg, labels = (pooled_maps.upsampled(a, args.pool, gt.shape) for a in (seg, labels))
+    rooms = protocol_scores(gt, labels)
+    regions = protocol_scores(gt, seg)
     row = {"map": name, "units": len(sm.unit_ids), "rooms": len(sm.rooms.rooms),
            "rooms_seen_through_door": sum(r.seen_through_door for r in sm.rooms.rooms),
            "true_rooms": rooms.n_rooms,
@@ -1175,12 +1185,12 @@ def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows:
            "regions_free_recall": round(regions.recall, 4),
            "cpr": round(sm.cpr, 4), "theta_deg": round(math.degrees(sm.frame.theta), 2),
            "run_s": round(run.seconds, 1)}
-    if degrees is None:
+    if degrees is None and args.pool == 1:
         rose2 = protocol_scores(gt, read_segmentation(folder / "rose2.png"))
         row |= {"rose2_precision": round(rose2.precision, 4), "rose2_recall": round(rose2.recall, 4)}
     rows.append(row)
     _save(args, name.replace("@", "_"), sm)
-    ref = (f" | ROSE2 {row['rose2_precision']:.3f} / {row['rose2_recall']:.3f}" if degrees is None else "")
+    ref = (f" | ROSE2 {row['rose2_precision']:.3f} / {row['rose2_recall']:.3f}" if "rose2_precision" in row else "")
     _log(args, f"real-gt {name}: rooms P {row['precision']:.3f} R {row['recall']:.3f}{ref} | regions "
                f"cut to free {row['regions_free_precision']:.3f} / {row['regions_free_recall']:.3f}; "
                f"{row['rooms']} rooms, run {row['run_s']} s")
@@ -1399,11 +1409,14 @@ def run(args) -> dict:
             setattr(args, key, value)
         if args.subset == "all":
             args.subset = "synthetic"
-    if args.pool < 1 or ((args.pool > 1 or args.resolution != 0.05)
-                         and args.subset not in ("synthetic", "truth", "surgery")):
-        raise SystemExit("--pool K (K >= 1) and --resolution apply to --subset synthetic, truth and surgery only")
+    if args.pool < 1 or (args.pool > 1 and args.subset not in ("synthetic", "truth", "surgery", "real-gt")):
+        raise SystemExit("--pool K (K >= 1) applies to --subset synthetic, truth, surgery and real-gt only")
+    if args.resolution != 0.05 and args.subset not in ("synthetic", "truth", "surgery"):
+        raise SystemExit("--resolution applies to --subset synthetic, truth and surgery only")
     if args.turn and args.subset != "real-gt":
         raise SystemExit("--turn applies to --subset real-gt only")
+    if args.turn and args.pool > 1:
+        raise SystemExit("--turn and --pool: one at a time")
     model = load_model(args.model)
     rules = load_rules(args.rules or DEFAULT_RULES)
     SECONDS[0] = None if isinstance(args.budget, str) else float(args.budget)

@@ -1,0 +1,69 @@
+"""The real-gt floors at coarser cells (``bench/run.py quality --subset real-gt --pool K``): the
+map pooled K x K as the program reads it back, in the same place, and the rooms found on it given
+back to the floor's own cells."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmod import bench_quality as bq
+
+BENCH = Path(__file__).parents[2] / "bench"
+REAL_GT = BENCH / "data" / "real-gt"
+
+
+@pytest.fixture
+def pooled_maps(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCH))
+    import pooled_maps
+    return pooled_maps
+
+
+def test_a_block_is_occupied_when_any_cell_is_free_when_half_are(pooled_maps):
+    from semmap_pp.cells import FREE as F, OCCUPIED as O, UNKNOWN as U
+    c = np.array([[F, F, F, U, U, U, F, F],
+                  [F, O, F, U, U, F, U, U],
+                  [F, F, U, U, U, U, F, F]], np.uint8)   # the last row: no whole block
+    assert pooled_maps.pool_classes(c, 2).tolist() == [[O, F, U, F]]     # 4, 2, 1, 2 of 4 free
+    assert pooled_maps.pool_classes(c, 3).tolist() == [[O, U]]
+
+
+@pytest.mark.parametrize("name", ["freiburg_building52", "map17"])
+def test_the_pooled_map_reads_back_as_its_pooled_classes_in_the_same_place(pooled_maps, tmp_path, name):
+    """freiburg_building52 is saved with its own thresholds and greys, map17 as map_server's; both
+    pooled maps read back (the program's own loader) as the pooled classes, at twice the cell size,
+    the top-left corner of the building at the same map-frame point."""
+    from semmap_pp.grid import load_map
+    folder = REAL_GT / name
+    grid = load_map(folder / "map.yaml")
+    shape = pooled_maps.write(folder, tmp_path, 2)
+    assert shape == grid.classes.shape
+    coarse = load_map(tmp_path / "map.yaml")
+    assert np.array_equal(coarse.classes, pooled_maps.pool_classes(grid.classes, 2))
+    assert coarse.resolution == pytest.approx(2 * grid.resolution)
+    # the corner of coarse cell (i, j) is the corner of fine cell (2i, 2j)
+    for i, j in [(0, 0), (coarse.height - 1, coarse.width - 1), (7, 11)]:
+        xc, yc = coarse.cells_to_metres(np.array([i]), np.array([j]))
+        xf, yf = grid.cells_to_metres(np.array([2 * i]), np.array([2 * j]))
+        step = grid.resolution / 2          # the centres: a coarse cell's lies half a fine cell on
+        assert xc[0] == pytest.approx(xf[0] + step) and yc[0] == pytest.approx(yf[0] - step)
+
+
+def test_rooms_go_back_to_the_cells_each_coarse_cell_pools(pooled_maps):
+    labels = np.array([[1, 2, 0], [3, 3, 4]], np.int32)
+    up = pooled_maps.upsampled(labels, 2, (5, 7))
+    assert up.shape == (5, 7) and up.dtype == labels.dtype
+    assert np.array_equal(up[:4, :6], np.kron(labels, np.ones((2, 2), np.int32)))
+    assert not up[4].any() and not up[:, 6].any()
+    assert pooled_maps.upsampled(labels, 2, (3, 3)).tolist() == [[1, 1, 2], [1, 1, 2], [3, 3, 3]]
+
+
+def test_pool_applies_to_real_gt_and_not_with_turn():
+    import argparse
+    parser = argparse.ArgumentParser()
+    bq.add_arguments(parser)
+    with pytest.raises(SystemExit, match="one at a time"):
+        bq.run(parser.parse_args(["--subset", "real-gt", "--turn", "15", "--pool", "2"]))
+    with pytest.raises(SystemExit, match="real-gt only"):
+        bq.run(parser.parse_args(["--subset", "partial", "--pool", "2"]))
