@@ -1163,7 +1163,7 @@ def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows:
         gt = turned_maps.write(folder, tmp / name, degrees, gt)
         map_yaml = tmp / name / "map.yaml"
     elif args.pool > 1:                 # scored at the floor's own cells, against its own truth
-        pooled_maps.write(folder, tmp / name, args.pool)
+        floor = pooled_maps.write(folder, tmp / name, args.pool)
         map_yaml = tmp / name / "map.yaml"
     inputs = load_inputs(map_yaml, model_path=args.model, rules_path=args.rules or DEFAULT_RULES)
     ran = _run_or_record(args, inputs, _settings(model, args), rows, {"map": name}, f"real-gt {name}")
@@ -1174,7 +1174,7 @@ def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows:
     seg, _ = regions_of(sm)
     seg, labels = np.where(inputs.grid.classes == FREE, seg, 0), sm.rooms.labels
     if degrees is None and args.pool > 1:
-        seg, labels = (pooled_maps.upsampled(a, args.pool, gt.shape) for a in (seg, labels))
+        seg, labels = (pooled_maps.scored(a, args.pool, floor) for a in (seg, labels))
     rooms = protocol_scores(gt, labels)
     regions = protocol_scores(gt, seg)
     row = {"map": name, "units": len(sm.unit_ids), "rooms": len(sm.rooms.rooms),

@@ -29,18 +29,26 @@ def test_a_block_is_occupied_when_any_cell_is_free_when_half_are(pooled_maps):
     assert pooled_maps.pool_classes(c, 3).tolist() == [[O, U]]
 
 
-@pytest.mark.parametrize("name", ["freiburg_building52", "map17"])
+@pytest.mark.parametrize("name", ["freiburg_building52", "map17", "g4s_y2"])
 def test_the_pooled_map_reads_back_as_its_pooled_classes_in_the_same_place(pooled_maps, tmp_path, name):
-    """freiburg_building52 is saved with its own thresholds and greys, map17 as map_server's; both
-    pooled maps read back (the program's own loader) as the pooled classes, at twice the cell size,
-    the top-left corner of the building at the same map-frame point."""
+    """freiburg_building52 is saved with its own thresholds and greys, map17 as map_server's, g4s_y2
+    with graded values (cells seen free a few times, which rooms.png counts as floor); each pooled
+    map reads back (the program's own loader) as the pooled classes, at twice the cell size, the
+    top-left corner of the building at the same map-frame point."""
+    from semmap_pp.cells import FREE
     from semmap_pp.grid import load_map
+    from semmap_pp.semantic.rooms import floor_cells
     folder = REAL_GT / name
     grid = load_map(folder / "map.yaml")
-    shape = pooled_maps.write(folder, tmp_path, 2)
-    assert shape == grid.classes.shape
+    floor = pooled_maps.write(folder, tmp_path, 2)
+    assert np.array_equal(floor, floor_cells(grid))
     coarse = load_map(tmp_path / "map.yaml")
-    assert np.array_equal(coarse.classes, pooled_maps.pool_classes(grid.classes, 2))
+    assert np.array_equal(coarse.classes, pooled_maps.pool_classes(grid.classes, 2, floor))
+    by_free = (pooled_maps.pool_classes(grid.classes, 2) == FREE).sum()
+    if name == "g4s_y2":     # its graded floor is free at 0.1 m too
+        assert (coarse.classes == FREE).sum() > 1.02 * by_free
+    else:
+        assert (coarse.classes == FREE).sum() == by_free
     assert coarse.resolution == pytest.approx(2 * grid.resolution)
     # the corner of coarse cell (i, j) is the corner of fine cell (2i, 2j)
     for i, j in [(0, 0), (coarse.height - 1, coarse.width - 1), (7, 11)]:
@@ -57,6 +65,10 @@ def test_rooms_go_back_to_the_cells_each_coarse_cell_pools(pooled_maps):
     assert np.array_equal(up[:4, :6], np.kron(labels, np.ones((2, 2), np.int32)))
     assert not up[4].any() and not up[:, 6].any()
     assert pooled_maps.upsampled(labels, 2, (3, 3)).tolist() == [[1, 1, 2], [1, 1, 2], [3, 3, 3]]
+    floor = np.ones((5, 7), bool)
+    floor[0, 0] = floor[3, 5] = False
+    cut = pooled_maps.scored(labels, 2, floor)
+    assert cut[0, 0] == 0 and cut[3, 5] == 0 and np.array_equal(cut[floor], up[floor])
 
 
 def test_pool_applies_to_real_gt_and_not_with_turn():
