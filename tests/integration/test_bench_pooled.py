@@ -7,17 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import benchmod
 from benchmod import bench_quality as bq
 
 BENCH = Path(__file__).parents[2] / "bench"
 REAL_GT = BENCH / "data" / "real-gt"
 
 
-@pytest.fixture
-def pooled_maps(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCH))
-    import pooled_maps
-    return pooled_maps
+@pytest.fixture(scope="module")
+def pooled_maps():
+    return benchmod.load("pooled_maps")
 
 
 def test_a_block_is_occupied_when_any_cell_is_free_when_half_are(pooled_maps):

@@ -7,17 +7,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import benchmod
 from benchmod import bench_quality as bq
 
 BENCH = Path(__file__).parents[2] / "bench"
 REAL_GT = BENCH / "data" / "real-gt"
 
 
-@pytest.fixture
-def turned_maps(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCH))
-    import turned_maps
-    return turned_maps
+@pytest.fixture(scope="module")
+def turned_maps():
+    return benchmod.load("turned_maps")
 
 
 @pytest.mark.parametrize("name, grey", [("freiburg_building52", 153), ("map17", 205)])
