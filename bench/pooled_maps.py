@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 from PIL import Image
 
+
 def pool_classes(classes: np.ndarray, k: int, floor: np.ndarray | None = None) -> np.ndarray:
     """``classes`` (FREE / OCCUPIED / UNKNOWN per cell) pooled ``k x k``: occupied when any cell of
     the block is, free when at least half of it is free (or ``floor``, when given), else unknown;
@@ -52,7 +53,7 @@ def write(folder: Path, out: Path, k: int) -> np.ndarray:
     from semmap_pp.grid import load_map
     from semmap_pp.semantic.rooms import floor_cells
     grid = load_map(folder / "map.yaml")
-    rows, cols = grid.classes.shape
+    rows = grid.classes.shape[0]
     floor = floor_cells(grid)
     pooled = pool_classes(grid.classes, k, floor)
     img = np.full(pooled.shape, 205, np.uint8)
