@@ -59,11 +59,10 @@ def write(folder: Path, out: Path, k: int) -> np.ndarray:
     img = np.full(pooled.shape, 205, np.uint8)
     img[pooled == FREE] = 254
     img[pooled == OCCUPIED] = 0
-    meta = yaml.safe_load((folder / "map.yaml").read_text())
-    x, y, yaw = (list(meta.get("origin", [0.0, 0.0, 0.0])) + [0.0, 0.0, 0.0])[:3]
+    x, y, yaw = grid.origin
     dropped = rows - pooled.shape[0] * k        # rows cut off at the bottom, where the origin lies
-    meta = {"image": "map.pgm", "resolution": float(meta["resolution"]) * k,
-            "origin": [float(x), float(y) + dropped * float(meta["resolution"]), float(yaw)],
+    meta = {"image": "map.pgm", "resolution": grid.resolution * k,
+            "origin": [x, y + dropped * grid.resolution, yaw],
             "negate": 0, "occupied_thresh": 0.65, "free_thresh": 0.196}
     out.mkdir(parents=True, exist_ok=True)
     Image.fromarray(img).save(out / "map.pgm")
