@@ -13,9 +13,11 @@ Euclidean distance, in pixels, from its centre to the box of the unit's cell cen
   every side (the lattice's square dilation, at each unit's own angle), overlap with positive
   area (a rotated-rectangle test), or when an opening joins them;
 * an *opening* is an 8-connected run of the free pixels (specks made free) of the boundary
-  between their two zones that lie within ``door_max`` of both units and that no third unit
+  between their two zones that lie within ``door_max`` of both units, that no third unit
   covers (where two lattices at different angles meet, the units' ends leave wedges of floor
-  between them that neither covers; the boundary crosses them); its *width along a tile* is the
+  between them that neither covers; the boundary crosses them) and to which no other unit of
+  either unit's tile lies nearer (a doorway joins the two spaces on its two sides: the room
+  beside the one behind it, also within ``door_max``, is not the doorway's); its *width along a tile* is the
   larger extent of its pixel centres along that tile's two axes, plus one, and it is kept when it
   is at least ``door_min`` wide along both tiles and, unless it is a passage (below), has a *jamb*
   at each end: a pixel of the run touching an occupied pixel within ``wall`` pixels of each of
@@ -32,7 +34,7 @@ Euclidean distance, in pixels, from its centre to the box of the unit's cell cen
 One compiled definition serves both users: the target's adjacency and opening evidence
 (:func:`cross_all` for a world, :func:`cross_update` after an edit: a pair is recomputed when it
 holds an edited unit or when an edited unit's old or new rectangle reaches its window, since a
-third unit's cover changes its openings) and :func:`cross_tile_openings` for ``derive_world``.
+third unit's cover, or its distance, changes its openings) and :func:`cross_tile_openings` for ``derive_world``.
 On a lattice of one direction there is no pair of tiles and nothing is computed
 (:data:`NO_CROSS`).
 """
@@ -280,31 +282,46 @@ def _rows(pix, g0, g1, y0, y1):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach):  # pragma: no cover
     """Which pixels ``[lo, hi)`` of a pair's group may be opening pixels: in the window ``box``,
-    within ``reach`` of both units and covered by no third unit."""
+    within ``reach`` of both units, covered by no third unit and nearer to each of the pair's
+    units than to any other unit of its tile (:func:`_nearer`; ties keep the pixel)."""
     cand = np.zeros(hi - lo, np.bool_)
-    third = np.empty(rects.shape[0], np.int64)      # the other units whose box meets the window
+    third = np.empty(rects.shape[0], np.int64)      # the other units within reach of the window
     tiles = np.empty(rects.shape[0], np.int64)
     n = 0
     for t in range(rects.shape[0]):
         if t != i and t != j and active[t]:
             k = tile_of(rects[t, 1], spans)
-            x0, y0, x1, y1 = _bbox(aff, k, rects[t], 0.5)
+            x0, y0, x1, y1 = _bbox(aff, k, rects[t], reach + 0.5)
             if x0 <= box[2] and box[0] <= x1 and y0 <= box[3] and box[1] <= y1:
                 third[n], tiles[n] = t, k
                 n += 1
     r2 = reach * reach
     for p in range(lo, hi):
         y, x = float(pix[p, 0]), float(pix[p, 1])
-        if not _inside(box, x, y) or _distance2(aff, ki, rects[i], x, y) > r2 or \
-                _distance2(aff, kj, rects[j], x, y) > r2:
+        if not _inside(box, x, y):
+            continue
+        di, dj = _distance2(aff, ki, rects[i], x, y), _distance2(aff, kj, rects[j], x, y)
+        if di > r2 or dj > r2:
             continue
         free = True
         for m in range(n):
-            if _covers(aff, tiles[m], rects[third[m]], x, y):
+            t, k = third[m], tiles[m]
+            if _covers(aff, k, rects[t], x, y) or _nearer(aff, k, rects[t], x, y, ki, di, kj, dj):
                 free = False
                 break
         cand[p - lo] = free
     return cand
+
+
+@numba.njit(cache=True, nogil=True)
+def _nearer(aff, k, rect, x, y, ki, di, kj, dj):  # pragma: no cover - compiled
+    """Whether a unit ``rect`` of tile ``k`` lies nearer to pixel ``(x, y)`` than the pair's unit of
+    the same tile (squared distances ``di``, ``dj`` of the pair's units, of tiles ``ki``, ``kj``):
+    the pixel is then that unit's side of the boundary, not the pair's."""
+    if k != ki and k != kj:
+        return False
+    d = _distance2(aff, k, rect, x, y)
+    return (k == ki and d < di) or (k == kj and d < dj)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -493,7 +510,7 @@ def cross_update(old_rects, old_active, rects, active, changed, adj, xo, touched
     """After an edit of the slots ``changed`` (the old world ``old_*``, the new ``rects``,
     ``active``; ``adj``'s rows of the changed slots already cleared and their lattice adjacency
     set): the pairs of two tiles that hold a changed slot, and those whose window a changed
-    slot's old or new rectangle reaches (a third unit's cover changes their openings),
+    slot's old or new rectangle reaches (a third unit's cover or distance changes their openings),
     recomputed in ``adj`` and ``xo`` (see :func:`cross_all`); ``touched`` marks the slots of
     every pair without a changed slot that changed. Equal to :func:`cross_all` of the new world
     (tests/unit/test_tiles.py)."""
@@ -523,9 +540,11 @@ def cross_update(old_rects, old_active, rects, active, changed, adj, xo, touched
 def _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo, touched,
                  xd):  # pragma: no cover - compiled
     """:func:`cross_update`'s pairs without a changed slot: a pair's relation depends on the
-    other units only through which of its pixels they cover, so the pairs recomputed are those
-    within reach (both units) of a zone-boundary pixel whose cover by a changed slot the edit
-    changed; ``touched`` marks the slots of those that changed."""
+    other units only through which of its pixels they cover and how near they lie to them (a
+    unit nearer than the pair's unit of its tile takes the pixel), so the pairs recomputed are
+    those within reach (both units) of a zone-boundary pixel whose cover by a changed slot, or
+    whose distance to it within reach, the edit changed (such a pixel lies within reach of the
+    cells that changed); ``touched`` marks the slots of those that changed."""
     aff, spans, pix, nbr, off, ip = xd
     K, n_t = rects.shape[0], aff.shape[0]
     reach = float(ip[1])
@@ -543,11 +562,12 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
         if tile[u] >= 0:
             by_tile[tile[u], count[tile[u]]] = u
             count[tile[u]] += 1
+    far = reach * reach + 1.0          # a distance beyond reach: no relation there
     for s in changed:
         ko, kn = tile_of(old_rects[s, 1], spans), tile_of(rects[s, 1], spans)
         moved = old_active[s] and active[s] and ko == kn
         for which in range(1 if moved else 2):
-            if moved:      # one tile: the cells that changed lie in the box of the sides that moved
+            if moved:      # one tile: what changed lies near the box of the sides that moved
                 if not _moved_box(old_rects[s], rects[s], region):
                     continue
                 k = kn
@@ -556,25 +576,39 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                 if not on:
                     continue
                 region[:] = r
-            x0, y0, x1, y1 = _bbox(aff, k, region, 0.5)
+            # a pixel's cover by s, or its distance to s within reach (s nearer than a pair's
+            # unit of its tile), changed only within reach of the region
+            x0, y0, x1, y1 = _bbox(aff, k, region, reach + 0.5)
             for a in range(n_t):
                 for b in range(a + 1, n_t):
                     lo, hi = _rows(pix, off[a * n_t + b], off[a * n_t + b + 1], y0, y1)
                     for p in range(lo, hi):
                         y, x = float(pix[p, 0]), float(pix[p, 1])
-                        if x < x0 or x > x1 or not _covers(aff, k, region, x, y):
-                            continue       # outside the region no cover changed
+                        if x < x0 or x > x1:
+                            continue
                         was = old_active[s] and _covers(aff, ko, old_rects[s], x, y)
                         now = active[s] and _covers(aff, kn, rects[s], x, y)
-                        if was == now:
+                        d_was = min(_distance2(aff, ko, old_rects[s], x, y), far) if old_active[s] else far
+                        d_now = min(_distance2(aff, kn, rects[s], x, y), far) if active[s] else far
+                        if was == now and d_was == d_now and (ko == kn or d_was == far):
                             continue
+                        # only the distance changed: it matters to a pair whose unit of s's tile
+                        # s lies nearer to the pixel than, before or after the edit
+                        near = far if was != now else min(d_was, d_now)
                         for iu in range(count[a]):
                             u = by_tile[a, iu]
-                            if not _inside(box[u], x, y) or _distance2(aff, a, rects[u], x, y) > reach * reach:
+                            if not _inside(box[u], x, y):
+                                continue
+                            du = _distance2(aff, a, rects[u], x, y)
+                            if du > reach * reach:
                                 continue
                             for iv in range(count[b]):
                                 v = by_tile[b, iv]
-                                if _inside(box[v], x, y) and _distance2(aff, b, rects[v], x, y) <= reach * reach:
+                                if not _inside(box[v], x, y):
+                                    continue
+                                dv = _distance2(aff, b, rects[v], x, y)
+                                if dv <= reach * reach and (was != now or (near < du and (a == ko or a == kn))
+                                                            or (near < dv and (b == ko or b == kn))):
                                     redo[min(u, v), max(u, v)] = True
                                     any_redo = True
     if not any_redo:

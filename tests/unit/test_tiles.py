@@ -232,6 +232,24 @@ def test_a_gap_without_jambs_at_the_zones_boundary_is_no_door():
     assert len(d.passages) == 1 and not d.doors
 
 
+def test_a_doorway_is_one_door_between_the_units_nearest_to_it():
+    """The door of :func:`corridor_map` with the corridor unit ending short of the wall and a
+    second unit of the same tile inside it, farther from the doorway: both lie within a door's
+    width of the doorway's pixels and neither covers them, but the doorway joins the space across
+    the wall to the nearer one only (each boundary pixel goes to the nearest unit of each tile)."""
+    classes, zones, thetas = corridor_map(door=True)
+    f = build_tiled_frame(classes, 0.05, MODEL, thetas, zones)
+    rect0, rect1 = corridor_units(f, thetas)
+    short = (rect0[0], rect0[1], rect0[2], rect0[3] - 10)
+    inner = (short[0] + 8, short[1] + 40, short[2] - 8, short[3] - 4)
+    w = wm.add(wm.add(wm.add(wm.empty(3), 0, short), 1, rect1), 2, inner)
+    d = derive_world(f, w)
+    assert [(x.p, x.q) for x in d.doors] == [(0, 1)] and not d.passages
+    # the inner unit alone on its tile (no nearer one): the doorway is its door
+    d = derive_world(f, wm.add(wm.add(wm.empty(3), 1, rect1), 2, inner))
+    assert [(x.p, x.q) for x in d.doors] == [(1, 2)]
+
+
 class OpeningsProvider:
     """A stand-in engine whose types read every part of the evidence that units of two tiles
     change: corridor-like units (corridor pieces included) are corridors, MulDoor ones other,
