@@ -1173,7 +1173,7 @@ def _real_gt_row(args, model, folder: Path, name: str, degrees, tmp: Path, rows:
     sm = run.semantic
     seg, _ = regions_of(sm)
     seg, labels = np.where(inputs.grid.classes == FREE, seg, 0), sm.rooms.labels
-    if degrees is None and args.pool > 1:
+    if args.pool > 1:                   # never with --turn (run() refuses the two together)
         seg, labels = (pooled_maps.scored(a, args.pool, floor) for a in (seg, labels))
     rooms = protocol_scores(gt, labels)
     regions = protocol_scores(gt, seg)

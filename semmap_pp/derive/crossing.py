@@ -285,13 +285,13 @@ def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach
     within ``reach`` of both units, covered by no third unit and nearer to each of the pair's
     units than to any other unit of its tile (:func:`_nearer`; ties keep the pixel)."""
     cand = np.zeros(hi - lo, np.bool_)
-    third = np.empty(rects.shape[0], np.int64)      # the other units within reach of the window
-    tiles = np.empty(rects.shape[0], np.int64)
+    third = np.empty(rects.shape[0], np.int64)      # the other units that may take a pixel:
+    tiles = np.empty(rects.shape[0], np.int64)      # cover it, or (on the pair's tiles) lie nearer
     n = 0
     for t in range(rects.shape[0]):
         if t != i and t != j and active[t]:
             k = tile_of(rects[t, 1], spans)
-            x0, y0, x1, y1 = _bbox(aff, k, rects[t], reach + 0.5)
+            x0, y0, x1, y1 = _bbox(aff, k, rects[t], reach + 0.5 if k == ki or k == kj else 0.5)
             if x0 <= box[2] and box[0] <= x1 and y0 <= box[3] and box[1] <= y1:
                 third[n], tiles[n] = t, k
                 n += 1
@@ -592,9 +592,9 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                         d_now = min(_distance2(aff, kn, rects[s], x, y), far) if active[s] else far
                         if was == now and d_was == d_now and (ko == kn or d_was == far):
                             continue
-                        # only the distance changed: it matters to a pair whose unit of s's tile
-                        # s lies nearer to the pixel than, before or after the edit
-                        near = far if was != now else min(d_was, d_now)
+                        # where only the distance changed, it matters to a pair whose unit of
+                        # s's tile s lies nearer to the pixel than, before or after the edit
+                        near = min(d_was, d_now)
                         for iu in range(count[a]):
                             u = by_tile[a, iu]
                             if not _inside(box[u], x, y):
