@@ -244,18 +244,27 @@ def facing_lengths(aff, kp, rp, kq, rq):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _distance2(aff, k, rect, x, y):  # pragma: no cover - compiled
-    """Squared distance (pixels²) of image point ``(x, y)`` to the box of a unit's cell centres."""
+def _distance2(aff, k, rects, u, x, y):  # pragma: no cover - compiled
+    """Squared distance (pixels²) of image point ``(x, y)`` to the box of the cell centres of unit
+    ``u`` (a row of ``rects``, read in place: no view of the row in the inner loops)."""
     r, c = _to_lattice(aff, k, x, y)
-    dr = max(rect[0] - r, 0.0, r - (rect[2] - 1))
-    dc = max(rect[1] - c, 0.0, c - (rect[3] - 1))
+    dr = max(rects[u, 0] - r, 0.0, r - (rects[u, 2] - 1))
+    dc = max(rects[u, 1] - c, 0.0, c - (rects[u, 3] - 1))
     return dr * dr + dc * dc
 
 
 @numba.njit(cache=True, nogil=True)
-def _covers(aff, k, rect, x, y):  # pragma: no cover - compiled
+def _covers(aff, k, rects, u, x, y):  # pragma: no cover - compiled
+    """Whether tile ``k``'s lattice puts image point ``(x, y)`` inside the cells of unit ``u`` (a
+    row of ``rects``)."""
     r, c = _to_lattice(aff, k, x, y)
-    return rect[0] - 0.5 <= r < rect[2] - 0.5 and rect[1] - 0.5 <= c < rect[3] - 0.5
+    return rects[u, 0] - 0.5 <= r < rects[u, 2] - 0.5 and rects[u, 1] - 0.5 <= c < rects[u, 3] - 0.5
+
+
+@numba.njit(cache=True, nogil=True)
+def _inside_at(boxes, u, x, y):  # pragma: no cover - compiled
+    """:func:`_inside` of row ``u`` of ``boxes`` (read in place)."""
+    return boxes[u, 0] <= x <= boxes[u, 2] and boxes[u, 1] <= y <= boxes[u, 3]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -286,7 +295,8 @@ def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach
     units than to any other unit of its tile (:func:`_nearer`; ties keep the pixel)."""
     cand = np.zeros(hi - lo, np.bool_)
     third = np.empty(rects.shape[0], np.int64)      # the other units that may take a pixel:
-    tiles = np.empty(rects.shape[0], np.int64)      # cover it, or (on the pair's tiles) lie nearer
+    tiles = np.empty(rects.shape[0], np.int64)      # cover it, or (on the pair's tiles) lie nearer;
+    boxes = np.empty((rects.shape[0], 4))           # the box of the pixels it may take
     n = 0
     for t in range(rects.shape[0]):
         if t != i and t != j and active[t]:
@@ -294,19 +304,24 @@ def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach
             x0, y0, x1, y1 = _bbox(aff, k, rects[t], reach + 0.5 if k == ki or k == kj else 0.5)
             if x0 <= box[2] and box[0] <= x1 and y0 <= box[3] and box[1] <= y1:
                 third[n], tiles[n] = t, k
+                boxes[n, 0], boxes[n, 1], boxes[n, 2], boxes[n, 3] = x0, y0, x1, y1
                 n += 1
     r2 = reach * reach
     for p in range(lo, hi):
         y, x = float(pix[p, 0]), float(pix[p, 1])
         if not _inside(box, x, y):
             continue
-        di, dj = _distance2(aff, ki, rects[i], x, y), _distance2(aff, kj, rects[j], x, y)
+        di, dj = _distance2(aff, ki, rects, i, x, y), _distance2(aff, kj, rects, j, x, y)
         if di > r2 or dj > r2:
             continue
         free = True
         for m in range(n):
+            # it covers only pixels in its box grown by half a cell, and lies nearer than the
+            # pair's unit of its tile (within reach) only to pixels in its box grown by reach
+            if not _inside_at(boxes, m, x, y):
+                continue
             t, k = third[m], tiles[m]
-            if _covers(aff, k, rects[t], x, y) or _nearer(aff, k, rects[t], x, y, ki, di, kj, dj):
+            if _covers(aff, k, rects, t, x, y) or _nearer(aff, k, rects, t, x, y, ki, di, kj, dj):
                 free = False
                 break
         cand[p - lo] = free
@@ -314,13 +329,13 @@ def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach
 
 
 @numba.njit(cache=True, nogil=True)
-def _nearer(aff, k, rect, x, y, ki, di, kj, dj):  # pragma: no cover - compiled
-    """Whether a unit ``rect`` of tile ``k`` lies nearer to pixel ``(x, y)`` than the pair's unit of
-    the same tile (squared distances ``di``, ``dj`` of the pair's units, of tiles ``ki``, ``kj``):
-    the pixel is then that unit's side of the boundary, not the pair's."""
+def _nearer(aff, k, rects, t, x, y, ki, di, kj, dj):  # pragma: no cover - compiled
+    """Whether unit ``t`` (row of ``rects``) of tile ``k`` lies nearer to pixel ``(x, y)`` than the
+    pair's unit of the same tile (squared distances ``di``, ``dj`` of the pair's units, of tiles
+    ``ki``, ``kj``): the pixel is then that unit's side of the boundary, not the pair's."""
     if k != ki and k != kj:
         return False
-    d = _distance2(aff, k, rect, x, y)
+    d = _distance2(aff, k, rects, t, x, y)
     return (k == ki and d < di) or (k == kj and d < dj)
 
 
@@ -542,9 +557,9 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
     """:func:`cross_update`'s pairs without a changed slot: a pair's relation depends on the
     other units only through which of its pixels they cover and how near they lie to them (a
     unit nearer than the pair's unit of its tile takes the pixel), so the pairs recomputed are
-    those within reach (both units) of a zone-boundary pixel whose cover by a changed slot, or
-    whose distance to it within reach, the edit changed (such a pixel lies within reach of the
-    cells that changed); ``touched`` marks the slots of those that changed."""
+    those within reach (both units) of a zone-boundary pixel that a changed slot takes from them
+    on one side of the edit and not on the other (such a pixel lies within reach of the cells
+    that changed); ``touched`` marks the slots of those whose relation changed."""
     aff, spans, pix, nbr, off, ip = xd
     K, n_t = rects.shape[0], aff.shape[0]
     reach = float(ip[1])
@@ -563,6 +578,9 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
             by_tile[tile[u], count[tile[u]]] = u
             count[tile[u]] += 1
     far = reach * reach + 1.0          # a distance beyond reach: no relation there
+    r2 = reach * reach
+    near_v = np.empty(K, np.int64)     # the units of tile b within reach of a pixel,
+    dist_v = np.empty(K)               # and their distances
     for s in changed:
         ko, kn = tile_of(old_rects[s, 1], spans), tile_of(rects[s, 1], spans)
         moved = old_active[s] and active[s] and ko == kn
@@ -586,29 +604,37 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                         y, x = float(pix[p, 0]), float(pix[p, 1])
                         if x < x0 or x > x1:
                             continue
-                        was = old_active[s] and _covers(aff, ko, old_rects[s], x, y)
-                        now = active[s] and _covers(aff, kn, rects[s], x, y)
-                        d_was = min(_distance2(aff, ko, old_rects[s], x, y), far) if old_active[s] else far
-                        d_now = min(_distance2(aff, kn, rects[s], x, y), far) if active[s] else far
+                        was = old_active[s] and _covers(aff, ko, old_rects, s, x, y)
+                        now = active[s] and _covers(aff, kn, rects, s, x, y)
+                        d_was = min(_distance2(aff, ko, old_rects, s, x, y), far) if old_active[s] else far
+                        d_now = min(_distance2(aff, kn, rects, s, x, y), far) if active[s] else far
                         if was == now and d_was == d_now and (ko == kn or d_was == far):
                             continue
-                        # where only the distance changed, it matters to a pair whose unit of
-                        # s's tile s lies nearer to the pixel than, before or after the edit
-                        near = min(d_was, d_now)
+                        n_v = 0
+                        for iv in range(count[b]):
+                            v = by_tile[b, iv]
+                            if _inside_at(box, v, x, y):
+                                dv = _distance2(aff, b, rects, v, x, y)
+                                if dv <= r2:
+                                    near_v[n_v], dist_v[n_v] = v, dv
+                                    n_v += 1
+                        if n_v == 0:
+                            continue
                         for iu in range(count[a]):
                             u = by_tile[a, iu]
-                            if not _inside(box[u], x, y):
+                            if not _inside_at(box, u, x, y):
                                 continue
-                            du = _distance2(aff, a, rects[u], x, y)
-                            if du > reach * reach:
+                            du = _distance2(aff, a, rects, u, x, y)
+                            if du > r2:
                                 continue
-                            for iv in range(count[b]):
-                                v = by_tile[b, iv]
-                                if not _inside(box[v], x, y):
-                                    continue
-                                dv = _distance2(aff, b, rects[v], x, y)
-                                if dv <= reach * reach and (was != now or (near < du and (a == ko or a == kn))
-                                                            or (near < dv and (b == ko or b == kn))):
+                            for m in range(n_v):
+                                v, dv = near_v[m], dist_v[m]
+                                # the pixel is the pair's only where no third unit covers it or,
+                                # on a tile of the pair, lies nearer to it than the pair's unit:
+                                # whether s takes it from the pair, before and after the edit
+                                before = was or (ko == a and d_was < du) or (ko == b and d_was < dv)
+                                after = now or (kn == a and d_now < du) or (kn == b and d_now < dv)
+                                if before != after:
                                     redo[min(u, v), max(u, v)] = True
                                     any_redo = True
     if not any_redo:
