@@ -114,12 +114,12 @@ class CutMoves(WallMoves):
                         new = wm.add(new, slot, piece)
                     if self.valid(new):
                         crosses.append((new, slots))
-            def spaces(world) -> bool:
+            def spaces(world) -> bool:      # (every piece still there: ``alive``)
                 sides = np.diff(world.rects[list(slots)].reshape(-1, 2, 2), axis=1)[:, 0]
-                return bool(world.active[list(slots)].all() and (sides.max(axis=1) >= least).all())
+                return bool((sides.max(axis=1) >= least).all())
 
             for new in self.best_few(crosses, tries):     # the best by log p as cut
-                if self.tentative(new, slots, slots, keep=spaces):
+                if self.tentative(new, slots, slots, keep=spaces, alive=slots):
                     changed = True
                     break
         return changed

@@ -103,15 +103,16 @@ class Climb:
         return all_valid(world.rects, world.active, self.data.shape, self.data.min_side,
                          self.data.max_side)
 
-    def propose_above(self, new: wm.World, changed, floor: float):
+    def propose_above(self, new: wm.World, changed, floor: float, bound: float | None = None):
         """``new``'s proposal, for a caller that takes it only when its log p exceeds ``floor``.
 
         A tracker that :attr:`supports_floor` may skip the knowledge inference of a proposal whose
-        type-free upper bound is already below ``floor`` (its ``logp`` is then ``-inf``): the same
-        choices as with every proposal evaluated, fewer inferences.
+        type-free upper bound (``bound``, when the caller has it from :meth:`bound_order`) is
+        already below ``floor`` (its ``logp`` is then ``-inf``): the same choices as with every
+        proposal evaluated, fewer inferences.
         """
         if getattr(self.tr, "supports_floor", False):
-            return self.tr.propose(new, changed, floor=floor)
+            return self.tr.propose(new, changed, floor=floor, bound=bound)
         return self.tr.propose(new, changed)
 
     def try_world(self, new: wm.World, changed) -> bool:
@@ -150,7 +151,7 @@ class Climb:
             if bounds is not None and below_floor(bounds[i], best_lp):
                 break                # this bound and every later one lie below the best so far
             w, changed = candidates[i]
-            prop = self.propose_above(w, changed, best_lp)
+            prop = self.propose_above(w, changed, best_lp, None if bounds is None else bounds[i])
             if prop.logp > best_lp or (best is not None and prop.logp == best_lp and i < best_i):
                 best, best_lp, best_i = prop, prop.logp, i
         return best
@@ -181,8 +182,8 @@ class Climb:
             if bounds is not None and floor > -math.inf and below_floor(bounds[i], floor):
                 break
             w, changed = candidates[i]
-            prop = (self.propose_above(w, changed, floor) if floor > -math.inf
-                    else self.tr.propose(w, changed))
+            prop = (self.propose_above(w, changed, floor, None if bounds is None else bounds[i])
+                    if floor > -math.inf else self.tr.propose(w, changed))
             scored.append((prop.logp, i))
         return [candidates[i][0] for _, i in sorted(scored, key=lambda x: (-x[0], x[1]))[:k]]
 
@@ -217,16 +218,23 @@ class WallMoves(Climb):
     """The wall moves of the ascent: each wall of a unit to its best position, or every edge on
     one wall together, and a candidate world kept only when its wall-moved units raise log p."""
 
-    def tentative(self, new: wm.World, changed, polish, keep=None) -> bool:
+    def tentative(self, new: wm.World, changed, polish, keep=None, alive=()) -> bool:
         """Take ``new``, wall-move the units ``polish``, keep it all only if log p rose (else undo);
-        with ``keep`` (a test of the world then) also only if it passes."""
+        with ``keep`` (a test of the world then) also only if it passes, and with ``alive`` (slots)
+        only if every one of them is still a unit: a wall move drops units and never adds one, so
+        the wall moves stop as soon as one of them is gone (the same outcome, sooner)."""
         if not self.valid(new):
             return False
         old, before = self.world, self.tr.logp
         self.tr.accept(self.tr.propose(new, tuple(int(s) for s in changed)))
+        gone = False
         for s in polish:
+            gone = not all(self.world.active[int(a)] for a in alive)
+            if gone:
+                break
             self.wall_moves(int(s))
-        if self.tr.logp > before + 1e-9 and (keep is None or keep(self.world)):
+        gone = gone or not all(self.world.active[int(a)] for a in alive)
+        if not gone and self.tr.logp > before + 1e-9 and (keep is None or keep(self.world)):
             return True
         diff = np.flatnonzero((old.active != self.world.active)
                               | np.any(old.rects != self.world.rects, axis=1))

@@ -594,7 +594,8 @@ class Tracker(KnowledgeTracking):
         hist = self.hist if hist is None else hist
         return covered_free(hist) / max(self.post.data.n_free, 1)
 
-    def propose(self, new_world: wm.World, changed_slots, floor: float | None = None) -> ScoredProposal:
+    def propose(self, new_world: wm.World, changed_slots, floor: float | None = None,
+                bound: float | None = None) -> ScoredProposal:
         """Evaluate ``new_world`` (which differs from :attr:`world` only in ``changed_slots``).
 
         Types of *every* unit are re-derived (evidence of a neighbour may change with the edit);
@@ -604,26 +605,28 @@ class Tracker(KnowledgeTracking):
         reaches ``floor`` (MH with the uniform drawn first: ``floor = log π(W) + T (log u -
         log_ratio)``). With knowledge on, when an upper bound of ``log π(W')`` over every
         possible typing is already below ``floor``, the provider is not asked and the proposal
-        comes back with ``logp = -inf`` (``bounded`` set; never accept it).
+        comes back with ``logp = -inf`` (``bounded`` set; never accept it). ``bound``: that bound,
+        when the caller has it from :meth:`upper_bound` of the same current world.
         """
         post = self.post
         if post.provider is not self._provider:   # knowledge switched without a resync
             self.resync()
         old = self._typ
         ow = old.world
-        geometry = old.geometry.copy()
-        adj = old.adj.copy()
         changed = np.array(changed_slots, dtype=np.int64)
-        hist = self.hist.copy()
         data = post.data
         # a tiled lattice: the relations of pairs of two tiles (None, compiled away, otherwise)
         tiled = old.cross is not None
         xd = post.cross if tiled else None
-        xo = cross = old.cross.copy() if tiled else None
         touched = np.zeros(ow.capacity, np.bool_) if tiled else None
         aff = xd.aff if tiled else None
-        if floor is not None and self._below_floor(new_world, changed, floor, xo, touched, aff):
-            return self._bounded(new_world)
+        if floor is not None and self._below_floor(new_world, changed, floor, old.cross, touched, aff,
+                                                   bound):
+            return self._bounded(new_world)      # (the bound only reads the current arrays)
+        geometry = old.geometry.copy()
+        adj = old.adj.copy()
+        hist = self.hist.copy()
+        xo = cross = old.cross.copy() if tiled else None
         if self._fixed:
             types = ow.types.copy()
             loglik, logprior, gamma_total = _propose_fixed(
@@ -659,10 +662,13 @@ class Tracker(KnowledgeTracking):
         return ScoredProposal(new, loglik + logprior, loglik, logprior,
                         _Typing(new, geometry, adj, sale, cross), (hist, gamma_total, knowledge))
 
-    def _below_floor(self, new_world, changed, floor, xo, touched, aff) -> bool:
-        """Whether :meth:`upper_bound` of ``new_world`` lies below ``floor`` (counted in
-        :attr:`skipped`)."""
-        bound, which = self._bound(new_world, changed, xo, touched, aff)
+    def _below_floor(self, new_world, changed, floor, xo, touched, aff, bound=None) -> bool:
+        """Whether :meth:`upper_bound` of ``new_world`` (``bound`` when given) lies below
+        ``floor`` (counted in :attr:`skipped`)."""
+        if bound is None:
+            bound, which = self._bound(new_world, changed, xo, touched, aff)
+        else:
+            which = 1 if self._fixed else 0
         if below_floor(bound, floor):
             self.skipped[which] += 1
             return True

@@ -350,8 +350,8 @@ def test_ascent_floors_skip_inferences_and_change_nothing(monkeypatch):
     evaluated = []
     propose = Tracker.propose
 
-    def counting(self, new_world, changed_slots, floor=None):
-        out = propose(self, new_world, changed_slots, floor)
+    def counting(self, new_world, changed_slots, floor=None, bound=None):
+        out = propose(self, new_world, changed_slots, floor, bound)
         evaluated[-1] += not out.bounded
         return out
 
@@ -772,7 +772,9 @@ class FakeTracker:
     def upper_bound(self, world, changed):
         return self.bounds[world]
 
-    def propose(self, world, changed, floor=None):
+    def propose(self, world, changed, floor=None, bound=None):
+        # the bound the ascent hands over is the one it was given
+        assert bound is None or bound == self.bounds[world] or np.isnan([bound, self.bounds[world]]).all()
         if floor is not None and below_floor(self.bounds[world], floor):   # the tracker's test
             return SimpleNamespace(logp=-np.inf, bounded=True)
         self.evaluated += 1
@@ -948,3 +950,32 @@ def test_w_stars_polish_cuts_a_unit_over_four_spaces_along_both_axes():
     assert not units_over(cut, (180, 100), (180, 350))               # the two rooms apart
     assert not units_over(cut, (60, 300), (180, 350))                # the clutter and a room apart
     assert not units_over(cut, (60, 100), (180, 100))
+
+
+def test_tentative_stops_its_wall_moves_once_a_unit_it_needs_is_gone(monkeypatch):
+    """:meth:`WallMoves.tentative` with ``alive``: a candidate whose wall moves drop one of those
+    units is undone, as without ``alive`` when ``keep`` asks for every one of them; the units
+    after the drop are not wall-moved, and the world and log p are the ones before."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    post, asc = _two_rooms_ascent(crossing_wall=False)
+    start, before = asc.world, asc.tr.logp
+    moved = []
+
+    def wall_moves(self, slot):       # the first wall move swallows unit 3
+        moved.append(slot)
+        if self.world.active[3]:
+            self.tr.accept(self.tr.propose(wm.remove(self.world, 3), (3,)))
+        return True
+
+    monkeypatch.setattr(_Ascent, "wall_moves", wall_moves)
+    cut = wm.replace(asc.world, 0, (38, 0, 62, 190))
+    kept = asc.tentative(cut, (0,), (0, 1, 2), keep=lambda w: bool(w.active[[0, 3]].all()), alive=(0, 3))
+    assert not kept and moved == [0]
+    assert np.array_equal(asc.world.rects, start.rects) and np.array_equal(asc.world.active, start.active)
+    assert asc.tr.logp == before
+
+    moved.clear()
+    post, asc = _two_rooms_ascent(crossing_wall=False)     # without alive: every unit wall-moved
+    assert not asc.tentative(cut, (0,), (0, 1, 2), keep=lambda w: bool(w.active[[0, 3]].all()))
+    assert moved == [0, 1, 2] and asc.tr.logp == before
