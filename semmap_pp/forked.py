@@ -12,7 +12,8 @@ this process instead, as with one core: the outputs are the same bytes either wa
 
 ``semmap map`` with two cores also makes its start world in one
 (:func:`semmap_pp.run.pipeline.timed_start_world`, 1-2 s of one core on a real floor) while it
-imports PyMC, ArviZ and matplotlib, which take as long.
+imports PyMC, ArviZ and matplotlib, which take as long, and W*'s polish tries half of a round's
+crosses in one while it tries the other half (:meth:`semmap_pp.sampler.ascent_walls.Climb.each`).
 
 >>> import os
 >>> Forked(os.getpid, fork=False).result() == os.getpid()

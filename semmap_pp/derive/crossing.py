@@ -610,39 +610,56 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                         d_now = min(_distance2(aff, kn, rects, s, x, y), far) if active[s] else far
                         if was == now and d_was == d_now and (ko == kn or d_was == far):
                             continue
-                        n_v = 0
-                        for iv in range(count[b]):
-                            v = by_tile[b, iv]
-                            if _inside_at(box, v, x, y):
-                                dv = _distance2(aff, b, rects, v, x, y)
-                                if dv <= r2:
-                                    near_v[n_v], dist_v[n_v] = v, dv
-                                    n_v += 1
-                        if n_v == 0:
-                            continue
-                        for iu in range(count[a]):
-                            u = by_tile[a, iu]
-                            if not _inside_at(box, u, x, y):
-                                continue
-                            du = _distance2(aff, a, rects, u, x, y)
-                            if du > r2:
-                                continue
-                            for m in range(n_v):
-                                v, dv = near_v[m], dist_v[m]
-                                # the pixel is the pair's only where no third unit covers it or,
-                                # on a tile of the pair, lies nearer to it than the pair's unit:
-                                # whether s takes it from the pair, before and after the edit
-                                before = was or (ko == a and d_was < du) or (ko == b and d_was < dv)
-                                after = now or (kn == a and d_now < du) or (kn == b and d_now < dv)
-                                if before != after:
-                                    redo[min(u, v), max(u, v)] = True
-                                    any_redo = True
+                        any_redo |= _redo_at(aff, rects, box, by_tile, count, a, b, x, y,
+                                             (was, now), (d_was, d_now), (ko, kn), r2, near_v,
+                                             dist_v, redo)
     if not any_redo:
         return
     for p in range(K):
         for q in range(p + 1, K):
             if redo[p, q] and _set_pair(rects, active, p, q, box, adj, xo, xd):
                 touched[p] = touched[q] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def _redo_at(aff, rects, box, by_tile, count, a, b, x, y, cover, dist, tiles, r2, near_v, dist_v,
+             redo):  # pragma: no cover - compiled
+    """Mark in ``redo`` the pairs of unchanged units of tiles ``a`` and ``b`` within reach
+    (``r2``, squared) of pixel ``(x, y)`` that an edited unit takes the pixel from on one side of
+    the edit and not on the other: ``cover``, ``dist`` and ``tiles`` are its cover of the pixel,
+    squared distance to it and tile before and after the edit. The pixel is a pair's only where no
+    third unit covers it or, on a tile of the pair, lies nearer to it than the pair's unit of that
+    tile. ``near_v``, ``dist_v``: room for the units of tile ``b`` within reach and their
+    distances. Returns whether any pair was marked."""
+    was, now = cover
+    d_was, d_now = dist
+    ko, kn = tiles
+    n_v = 0
+    for iv in range(count[b]):
+        v = by_tile[b, iv]
+        if _inside_at(box, v, x, y):
+            dv = _distance2(aff, b, rects, v, x, y)
+            if dv <= r2:
+                near_v[n_v], dist_v[n_v] = v, dv
+                n_v += 1
+    marked = False
+    if n_v == 0:
+        return marked
+    for iu in range(count[a]):
+        u = by_tile[a, iu]
+        if not _inside_at(box, u, x, y):
+            continue
+        du = _distance2(aff, a, rects, u, x, y)
+        if du > r2:
+            continue
+        for m in range(n_v):
+            v, dv = near_v[m], dist_v[m]
+            before = was or (ko == a and d_was < du) or (ko == b and d_was < dv)
+            after = now or (kn == a and d_now < du) or (kn == b and d_now < dv)
+            if before != after:
+                redo[min(u, v), max(u, v)] = True
+                marked = True
+    return marked
 
 
 @numba.njit(cache=True, nogil=True)

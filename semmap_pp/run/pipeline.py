@@ -149,17 +149,17 @@ def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, b
     return first, starts, pm_tune, pm_draws, schedule, chain_starts, history
 
 
-def _wstar_map(inputs: Inputs, post, best: wm.World, data, *, log, previous_ids):
+def _wstar_map(inputs: Inputs, post, best: wm.World, data, *, log, previous_ids, fork: bool = False):
     """The semantic map of W*: ``best`` polished by greedy ascent of the full target ``post``
-    (when ``[kernels] polish_rounds``), then given a unit over each room that rooms.png finds
-    seen through its door where the target gains by it (:func:`_through_door_units`), its units'
-    ids carried over from ``previous_ids``."""
+    (when ``[kernels] polish_rounds``; ``fork``: on two cores, :func:`polish`'s), then given a unit
+    over each room that rooms.png finds seen through its door where the target gains by it
+    (:func:`_through_door_units`), its units' ids carried over from ``previous_ids``."""
     kernel_settings = inputs.model.kernels
     polished = None
     if kernel_settings.polish_rounds:   # the nearest local maximum of the full target (ascent.py)
         log(f"polishing W* ({wm.n_units(best)} units) by greedy ascent of the full target")
         t_polish, before = time.perf_counter(), post.evaluate(best).total
-        best = polish(post, best, data, kernel_settings.polish_rounds)
+        best = polish(post, best, data, kernel_settings.polish_rounds, fork=fork)
         polished = (before, time.perf_counter() - t_polish)
     sm = semantic_map(inputs.grid, inputs.frame, post, best, roi=inputs.roi, previous=previous_ids)
     if polished is not None:            # sm.log_posterior is W*'s, evaluated once
@@ -270,7 +270,8 @@ def _run_map(inputs: Inputs, settings: RunSettings, folder, *, log, callback, st
     best_chain = result.best_chain
     if resume is not None:   # W* of the earlier segments may still be the best
         best, best_chain = resume.better_best(best, result.best_logp, best_chain)
-    sm = _wstar_map(inputs, post, best, data, log=log, previous_ids=previous_ids)
+    sm = _wstar_map(inputs, post, best, data, log=log, previous_ids=previous_ids,
+                    fork=settings.cores > 1)
     rate = total_kernels / seconds if seconds > 0 else 0.0
     swallowed = _walls_inside_note(sm, post, model)
     if swallowed:

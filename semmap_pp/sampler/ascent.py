@@ -54,7 +54,7 @@ class _Ascent(JoinMoves, CutMoves):
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
                  merges: bool = True, recuts: bool = False, shared_walls: bool = False,
                  double_cuts: bool = True, wide_cuts: bool = False, jogs: bool = False,
-                 crosses: bool = False) -> wm.World:
+                 crosses: bool = False, fork: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
     L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
@@ -62,7 +62,9 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     single cut helps, ``wide_cuts=True`` cuts all along a plateau of line evidence
     (:meth:`_Ascent.splits`), ``jogs=True`` the jogs last (:meth:`_Ascent.jogs`), each followed
     by the joining moves, ``crosses=True`` the cuts along both axes at once after the splits
-    (:meth:`_Ascent.crosses`); W*'s polish is :func:`polish`.
+    (:meth:`_Ascent.crosses`); W*'s polish is :func:`polish`. ``fork``: the crosses try half their
+    units in a forked process meanwhile (two cores; the same result:
+    :meth:`~semmap_pp.sampler.ascent_walls.Climb.each`).
 
     Parameters
     ----------
@@ -85,6 +87,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     World
         A world whose log posterior is at least that of ``world`` (types left undecided)."""
     asc = _Ascent(posterior, world, data)
+    asc.fork = fork
     if not np.isfinite(asc.tr.logp):
         return world
 
@@ -130,7 +133,7 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     return out
 
 
-def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
+def polish(posterior, world: wm.World, data, rounds: int, fork: bool = False) -> wm.World:
     """W*'s polish: :func:`refine_world` of the full target with the recuts and the whole-wall
     moves, without double cuts and births. The knowledge-free start ascent cuts rooms out of
     L-shaped walls with two cuts and covers free space by births already; in the polish, under a
@@ -145,9 +148,10 @@ def polish(posterior, world: wm.World, data, rounds: int) -> wm.World:
     room over the corridor is cut at its wall, and the corridor's pieces are joined by open
     passages). The start ascent keeps the peaks: wide cuts there, where the double cuts try every
     pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
-    evidence")."""
+    evidence"). ``fork``: as :func:`refine_world`'s."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
-                        double_cuts=False, births=False, wide_cuts=True, jogs=True, crosses=True)
+                        double_cuts=False, births=False, wide_cuts=True, jogs=True, crosses=True,
+                        fork=fork)
 
 
 def add_units(posterior, world: wm.World, data, boxes) -> tuple[wm.World, list[int]]:

@@ -5,6 +5,8 @@ free space."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from semmap_pp import world as wm
@@ -93,36 +95,36 @@ class CutMoves(WallMoves):
         into pieces) and at least ``2 min_side`` long (the ascent's fragments are narrower than
         that; a piece shorter both ways is a corner of furniture, not a space: docs/sampler.md)."""
         tries = int(self.data.settings.cross_tries)
-        g, least = self.data.wall_share, 2 * int(self.data.min_side)
-        changed = False
-        for s in self.units() if tries > 0 else ():
-            if not self.world.active[s]:
-                continue
-            r0, c0, r1, c1 = rect = [int(v) for v in self.world.rects[s]]
-            rows, cols = self.cut_lines(rect, 0), self.cut_lines(rect, 1)
-            if not rows or not cols:
-                continue
-            slots = (s, *(int(f) for f in self.free(3)[:3]))
-            if len(slots) < 4:            # a full world at its largest capacity
-                continue
-            crosses = []
-            for r in rows:
-                for c in cols:
-                    pieces = ([r0, c0, r, c], [r0, c - g, r, c1], [r - g, c0, r1, c], [r - g, c - g, r1, c1])
-                    new = wm.replace(self.world, s, pieces[0])
-                    for slot, piece in zip(slots[1:], pieces[1:]):
-                        new = wm.add(new, slot, piece)
-                    if self.valid(new):
-                        crosses.append((new, slots))
-            def spaces(world) -> bool:      # (every piece still there: ``alive``)
-                sides = np.diff(world.rects[list(slots)].reshape(-1, 2, 2), axis=1)[:, 0]
-                return bool((sides.max(axis=1) >= least).all())
+        return self.each(self.units() if tries > 0 else (), functools.partial(self._cross, tries=tries))
 
-            for new in self.best_few(crosses, tries):     # the best by log p as cut
-                if self.tentative(new, slots, slots, keep=spaces, alive=slots):
-                    changed = True
-                    break
-        return changed
+    def _cross(self, s: int, tries: int) -> bool:
+        """:meth:`crosses` of unit ``s``: whether one of its crosses was kept."""
+        g, least = self.data.wall_share, 2 * int(self.data.min_side)
+        if not self.world.active[s]:
+            return False
+        r0, c0, r1, c1 = rect = [int(v) for v in self.world.rects[s]]
+        rows, cols = self.cut_lines(rect, 0), self.cut_lines(rect, 1)
+        if not rows or not cols:
+            return False
+        slots = (s, *(int(f) for f in self.free(3)[:3]))
+        if len(slots) < 4:            # a full world at its largest capacity
+            return False
+        crosses = []
+        for r in rows:
+            for c in cols:
+                pieces = ([r0, c0, r, c], [r0, c - g, r, c1], [r - g, c0, r1, c], [r - g, c - g, r1, c1])
+                new = wm.replace(self.world, s, pieces[0])
+                for slot, piece in zip(slots[1:], pieces[1:]):
+                    new = wm.add(new, slot, piece)
+                if self.valid(new):
+                    crosses.append((new, slots))
+
+        def spaces(world) -> bool:      # (every piece still there: ``alive``)
+            sides = np.diff(world.rects[list(slots)].reshape(-1, 2, 2), axis=1)[:, 0]
+            return bool((sides.max(axis=1) >= least).all())
+
+        return any(self.tentative(new, slots, slots, keep=spaces, alive=slots)
+                   for new in self.best_few(crosses, tries))     # the best by log p as cut
 
     def splits(self, double: bool = True, wide: bool = False) -> bool:
         """Split a unit at its strongest interior wall line when that helps (pieces share the

@@ -7,12 +7,15 @@ edge on one wall together.
 
 from __future__ import annotations
 
+import functools
 import math
+import os
 
 import numba
 import numpy as np
 
 from semmap_pp import world as wm
+from semmap_pp.forked import Forked
 from semmap_pp.model import MAX_K
 from semmap_pp.target.posterior import below_floor
 from semmap_pp.target.prior import all_valid
@@ -24,6 +27,9 @@ MAX_CAPACITY = MAX_K
 
 # The resolution at which ``[kernels] ascent_peaks`` is given (the maps the model was measured on).
 PEAKS_RESOLUTION = 0.05
+
+#: :meth:`Climb.each` hands half of a loop to a forked process only from this many items on.
+FORK_MIN_ITEMS = 6
 
 
 def ascent_peaks(n: int, resolution: float) -> int:
@@ -69,8 +75,24 @@ def _swallowed(rects, active, slot, thin_below, share):  # pragma: no cover - co
     return out
 
 
+def _first_success(attempt, items, parent: int):
+    """The index of the first of ``items`` for which ``attempt`` returns True, None when none
+    does: :meth:`Climb.each`'s forked half. In the process ``parent`` itself (no process could be
+    forked, or it failed) it tries nothing and returns ``False``."""
+    if os.getpid() == parent:
+        return False
+    for k, x in enumerate(items):
+        if attempt(x):
+            return k
+    return None
+
+
 class Climb:
     """Greedy ascent state: a tracker of the target and the kernels' data."""
+
+    #: Whether the loops of :meth:`each` try half of their items in a forked process meanwhile
+    #: (two cores; set by :func:`~semmap_pp.sampler.ascent.refine_world`).
+    fork = False
 
     def __init__(self, posterior, world: wm.World, data, *, peaks: int | None = None, local: int = 3,
                  absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5,
@@ -186,6 +208,44 @@ class Climb:
                     if floor > -math.inf else self.tr.propose(w, changed))
             scored.append((prop.logp, i))
         return [candidates[i][0] for _, i in sorted(scored, key=lambda x: (-x[0], x[1]))[:k]]
+
+    def each(self, items, attempt) -> bool:
+        """``attempt(x)`` for each of ``items`` in turn, each on the world the ones before left;
+        whether any of them returned True (changed the world).
+
+        With :attr:`fork`, the second half of the items is tried meanwhile in a forked process,
+        on the world as it is when the first half begins, up to its first success. When the first
+        half changes nothing, that is what trying the second half here would do: only its first
+        success is tried again here, and the items after it go on the same way; when the first
+        half changes the world, the other process's answer is dropped. Either way the outcome is
+        that of trying every item in turn here (the attempts are deterministic), in less time
+        when most attempts fail, as a unit's crosses do; where many succeed (the wall moves) the
+        forks cost more than they save. Without a process to fork (one core, a pool's worker,
+        another thread running) the items are tried here."""
+        items, changed = list(items), False
+        while items:
+            if not self.fork or len(items) < FORK_MIN_ITEMS:
+                for x in items:
+                    changed |= bool(attempt(x))
+                return changed
+            first, second = items[:len(items) // 2], items[len(items) // 2:]
+            job = Forked(functools.partial(_first_success, attempt, second, os.getpid()), fork=True)
+            try:
+                hit = next((k for k, x in enumerate(first) if attempt(x)), None)
+                if hit is not None:            # the world changed: the other answer is void
+                    changed, items = True, first[hit + 1:] + second
+                    continue
+                found = job.result()
+            finally:
+                job.close()
+            if found is False:                 # no process was forked: the second half here
+                items, self.fork = second, False
+                continue
+            if found is None:                  # nothing in the second half changes the world
+                return changed
+            changed |= bool(attempt(second[found]))
+            items = second[found + 1:]
+        return changed
 
     def units(self, within=None) -> list:
         """The active slots, in slot order: all, or those in the set ``within``."""

@@ -3,6 +3,7 @@
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from semmap_pp import world as wm
 from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
@@ -979,3 +980,51 @@ def test_tentative_stops_its_wall_moves_once_a_unit_it_needs_is_gone(monkeypatch
     post, asc = _two_rooms_ascent(crossing_wall=False)     # without alive: every unit wall-moved
     assert not asc.tentative(cut, (0,), (0, 1, 2), keep=lambda w: bool(w.active[[0, 3]].all()))
     assert moved == [0, 1, 2] and asc.tr.logp == before
+
+
+class _Tally:
+    """A stand-in for an ascent's state for :meth:`Climb.each`: a list of the items taken; an
+    item is taken when ``rule(taken, item)`` holds (a deterministic test of the state)."""
+
+    def __init__(self, rule):
+        self.taken, self.rule = [], rule
+
+    def attempt(self, x) -> bool:
+        if self.rule(self.taken, x):
+            self.taken.append(x)
+            return True
+        return False
+
+
+@pytest.mark.parametrize("forks", ["fork", "no process"])
+def test_each_with_a_forked_half_takes_what_trying_in_turn_takes(forks, monkeypatch):
+    """:meth:`Climb.each` with ``fork``: on random rules (none, one, several or every item
+    taken, each decision depending on the items taken before), the items taken, their order and
+    the answer are those of trying every item in turn here; also when no process can be forked
+    (the forked half's answer is then made here)."""
+    import semmap_pp.forked
+    from semmap_pp.sampler import ascent_walls
+    from semmap_pp.sampler.ascent_walls import Climb
+
+    if forks == "no process":
+        monkeypatch.setattr(semmap_pp.forked, "_one_thread", lambda: False)
+    started = []
+    start = semmap_pp.forked.Forked._start
+    monkeypatch.setattr(semmap_pp.forked.Forked, "_start", lambda self: started.append(1) or start(self))
+    rng = np.random.default_rng(5)
+    for trial in range(40 if forks == "fork" else 200):
+        n = int(rng.integers(0, 3 * ascent_walls.FORK_MIN_ITEMS))
+        p = float(rng.choice([0.0, 0.05, 0.3, 1.0]))
+        salt = int(rng.integers(1 << 30))
+
+        def rule(taken, x, p=p, salt=salt):     # deterministic in (the state, the item)
+            return np.random.default_rng([salt, len(taken), sum(taken), x]).random() < p
+
+        results = []
+        for fork in (False, True):
+            state = _Tally(rule)
+            climb = object.__new__(Climb)
+            climb.fork = fork
+            results.append((climb.each(range(n), state.attempt), state.taken))
+        assert results[0] == results[1], (trial, n, p)
+    assert (len(started) > 20) if forks == "fork" else not started
