@@ -287,14 +287,15 @@ class WallMoves(Climb):
             return False
         old, before = self.world, self.tr.logp
         self.tr.accept(self.tr.propose(new, tuple(int(s) for s in changed)))
-        gone = False
+
+        def lost() -> bool:
+            return not all(self.world.active[int(a)] for a in alive)
+
         for s in polish:
-            gone = not all(self.world.active[int(a)] for a in alive)
-            if gone:
+            if lost():
                 break
             self.wall_moves(int(s))
-        gone = gone or not all(self.world.active[int(a)] for a in alive)
-        if not gone and self.tr.logp > before + 1e-9 and (keep is None or keep(self.world)):
+        if not lost() and self.tr.logp > before + 1e-9 and (keep is None or keep(self.world)):
             return True
         diff = np.flatnonzero((old.active != self.world.active)
                               | np.any(old.rects != self.world.rects, axis=1))

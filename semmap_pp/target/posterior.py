@@ -664,13 +664,12 @@ class Tracker(KnowledgeTracking):
 
     def _below_floor(self, new_world, changed, floor, xo, touched, aff, bound=None) -> bool:
         """Whether :meth:`upper_bound` of ``new_world`` (``bound`` when given) lies below
-        ``floor`` (counted in :attr:`skipped`)."""
+        ``floor`` (counted in :attr:`skipped`: the type-free bound with knowledge, else the fixed
+        provider's)."""
         if bound is None:
-            bound, which = self._bound(new_world, changed, xo, touched, aff)
-        else:
-            which = 1 if self._fixed else 0
+            bound = self._bound(new_world, changed, xo, touched, aff)
         if below_floor(bound, floor):
-            self.skipped[which] += 1
+            self.skipped[1 if self._fixed else 0] += 1
             return True
         return False
 
@@ -688,29 +687,29 @@ class Tracker(KnowledgeTracking):
         changed = np.array(changed_slots, dtype=np.int64)
         return self._bound(new_world, changed, old.cross if tiled else None,
                            np.zeros(old.world.capacity, np.bool_) if tiled else None,
-                           self.post.cross.aff if tiled else None)[0]
+                           self.post.cross.aff if tiled else None)
 
-    def _bound(self, new_world, changed, xo, touched, aff) -> tuple[float, int]:
-        """``(bound, which)``: with knowledge the type-free bound (bound 1, ``which`` 0); with the
-        fixed provider on a tiled lattice the proposal's score without the pairs of two tiles,
-        which cost several times the score (the fixed types and the likelihood are exact without
-        them, and each pair's SaLe factor is at most 1; ``which`` 1); on one lattice no bound
-        (``inf``: it would only add a score). ``xo`` and ``touched`` are only read."""
+    def _bound(self, new_world, changed, xo, touched, aff) -> float:
+        """With knowledge the type-free bound (bound 1); with the fixed provider on a tiled
+        lattice the proposal's score without the pairs of two tiles, which cost several times the
+        score (the fixed types and the likelihood are exact without them, and each pair's SaLe
+        factor is at most 1); on one lattice no bound (``inf``: it would only add a score). ``xo``
+        and ``touched`` are only read."""
         post, old = self.post, self._typ
         ow, data = old.world, post.data
         if not self._fixed:
             return float(_type_free_bound(
                 data.xsum, post._gain_max, _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), _ro(old.adj), _ro(self.hist),
-                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp, aff)), 0
+                self.gamma_total, _NO_SALE, _NEVER_SALE, self._prior_n, post._ip, post._fp, aff))
         if aff is not None:      # a tiled lattice (``aff``: its tiles' rotations)
             return float(_fixed_bound(
                 data.xsum, _ro(data.gain), _ro(ow.rects), _ro(ow.active), _ro(ow.types),
                 _ro(new_world.rects), _ro(new_world.active), changed, _ro(old.geometry),
                 _ro(old.adj), _ro(ow.types), GEOMETRY_TYPE, _ro(self.hist), self.gamma_total,
                 _ro(post.fixed.fixed_sale), _ro(self._prior_n), post._ip, post._fp, xo, touched,
-                aff)), 1
-        return math.inf, 1
+                aff))
+        return math.inf
 
     @staticmethod
     def _bounded(world) -> ScoredProposal:
