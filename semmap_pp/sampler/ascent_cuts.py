@@ -93,9 +93,31 @@ class CutMoves(WallMoves):
         that raises log p with four spaces is kept: every piece still there (a cross one of
         whose pieces a wall move absorbs carves the unit, and cut freiburg_building101's rooms
         into pieces) and at least ``2 min_side`` long (the ascent's fragments are narrower than
-        that; a piece shorter both ways is a corner of furniture, not a space: docs/sampler.md)."""
+        that; a piece shorter both ways is a corner of furniture, not a space: docs/sampler.md).
+        After a call that kept none, the next one tries only the units whose rectangle or a near
+        unit's (:meth:`_cross_key`) changed since: the polish's later rounds mostly move a few
+        walls, and the crosses kept on every floor measured were kept in the first call."""
         tries = int(self.data.settings.cross_tries)
-        return self.each(self.units() if tries > 0 else (), functools.partial(self._cross, tries=tries))
+        if tries <= 0:
+            return False
+        failed = self._crosses_failed or {}
+        changed = self.each([s for s in self.units() if failed.get(s) != self._cross_key(s)],
+                            functools.partial(self._cross, tries=tries))
+        # after a round of crosses that changed nothing, each unit with the rectangles around it
+        self._crosses_failed = None if changed else {s: self._cross_key(s) for s in self.units()}
+        return changed
+
+    #: After a call of :meth:`crosses` that kept none: per unit, :meth:`_cross_key` as its
+    #: crosses failed. A unit whose key is the same at the next call is not tried again (the
+    #: wall moves between rounds seldom reach it); None once a cross was kept.
+    _crosses_failed: dict | None = None
+
+    def _cross_key(self, s: int) -> bytes:
+        """Unit ``s``'s rectangle and those of the units within two wall bands of it
+        (:meth:`near`), in slot order: what its crosses and their wall moves meet."""
+        near = sorted(self.near((s,)))
+        return np.int64(s).tobytes() + np.asarray(self.world.rects[near], np.int64).tobytes() + \
+            np.asarray(near, np.int64).tobytes()
 
     def _cross(self, s: int, tries: int) -> bool:
         """:meth:`crosses` of unit ``s``: whether one of its crosses was kept."""

@@ -982,6 +982,36 @@ def test_tentative_stops_its_wall_moves_once_a_unit_it_needs_is_gone(monkeypatch
     assert moved == [0, 1, 2] and asc.tr.logp == before
 
 
+def test_crosses_are_not_tried_again_on_a_unit_whose_neighbourhood_kept_its_rectangles(monkeypatch):
+    """After a call of :meth:`CutMoves.crosses` that kept none, the next call tries only the
+    units whose rectangle, or the rectangle of a unit near them, changed since; after a call
+    that kept one, every unit again."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    post, asc = _two_rooms_ascent(crossing_wall=False)
+    tried, keep = [], set()
+
+    def cross(self, s, tries):
+        tried.append(s)
+        return s in keep
+
+    monkeypatch.setattr(_Ascent, "_cross", cross)
+    assert not asc.crosses() and tried == [0, 1, 2, 3]
+    tried.clear()
+    assert not asc.crosses() and tried == []
+    near = asc.near((1,))
+    assert near == {1, 3}                   # the room at the corridor's right end, not the others
+    asc.tr.accept(asc.tr.propose(wm.replace(asc.world, 1, (38, 402, 62, 600)), (1,)))
+    assert not asc.crosses() and tried == [1, 3]
+    tried.clear()
+    keep.add(3)
+    asc.tr.accept(asc.tr.propose(wm.replace(asc.world, 1, (38, 400, 62, 600)), (1,)))
+    assert asc.crosses() and tried == [1, 3]     # (the fake keeps 3 but leaves the world as it is)
+    tried.clear()
+    keep.clear()
+    assert not asc.crosses() and tried == [0, 1, 2, 3]
+
+
 class _Tally:
     """A stand-in for an ascent's state for :meth:`Climb.each`: a list of the items taken; an
     item is taken when ``rule(taken, item)`` holds (a deterministic test of the state)."""
