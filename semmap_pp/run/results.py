@@ -205,6 +205,10 @@ def collect_draws(records, model: Model, *, draws_option: str = "--draws"):
                          draws_option=draws_option)
     samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
                "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
+    if all(records[c].types is not None for c in kept_chains):     # (not when read from resume.npz)
+        samples["types"] = np.stack([records[c].types[recorded[c]] for c in kept_chains]).astype(np.int8)
+        samples["knowledge"] = np.stack([np.asarray(records[c].stats["knowledge"])[recorded[c]]
+                                         for c in kept_chains]).astype(bool)
     return kept_chains, n_kept, summaries, sample_stats, report, samples, notes
 
 
@@ -214,18 +218,27 @@ def figure_source(run: MapRun):
     return run.spread if run.spread is not None else run
 
 
-def sampled_worlds(run: MapRun | SpreadSample, n: int, chains=None, first: int = 0) -> list[wm.World]:
+def sampled_worlds(run: MapRun | SpreadSample, n: int, chains=None, first: int = 0,
+                   knowledge: bool | None = None) -> list[wm.World]:
     """Up to ``n`` recorded worlds, evenly thinned over the draws ``first..`` (from 0) of ``chains``
-    (indices from 0 into the recorded chains; all of them when None), types not assigned."""
-    rects, active = run.samples["rects"][:, first:], run.samples["active"][:, first:]
+    (indices from 0 into the recorded chains; all of them when None). Types not assigned, but
+    with ``knowledge`` (whether the target that would type them has its knowledge on) a world
+    drawn under that same target keeps the types the sampler gave it (the MAP types, which
+    :meth:`~semmap_pp.target.posterior.Posterior.typing` would give it again)."""
+    names = ["rects", "active"] + (["types", "knowledge"] if knowledge is not None and "types" in run.samples else [])
+    arrays = [run.samples[k][:, first:] for k in names]
     if chains is not None:
         idx = np.asarray(sorted(chains), dtype=int)
-        rects, active = rects[idx], active[idx]
-    rects = rects.reshape(-1, *rects.shape[2:])
-    active = active.reshape(-1, active.shape[-1])
+        arrays = [a[idx] for a in arrays]
+    rects = arrays[0].reshape(-1, *arrays[0].shape[2:])
+    active = arrays[1].reshape(-1, arrays[1].shape[-1])
     idx = np.unique(np.linspace(0, len(rects) - 1, num=min(n, len(rects))).round().astype(int))
     K = active.shape[1]
-    return [wm.make(rects[i], active[i], np.full(K, wm.NO_TYPE)) for i in idx]
+    untyped = np.full(K, wm.NO_TYPE)
+    if len(arrays) == 2:
+        return [wm.make(rects[i], active[i], untyped) for i in idx]
+    types, known = arrays[2].reshape(-1, K), arrays[3].reshape(-1)
+    return [wm.make(rects[i], active[i], types[i] if known[i] == knowledge else untyped) for i in idx]
 
 
 def spread_chains(run: MapRun | SpreadSample) -> list[int]:

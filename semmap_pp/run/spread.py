@@ -115,5 +115,6 @@ def posterior_worlds(run, n: int) -> list:
     (:func:`spread_first_draw`), typed as the sampler typed them: what posterior.png,
     posterior_cells.png and world.json's posterior marginals are made of."""
     src = figure_source(run)
-    return typed_worlds(run_target(run.inputs),
-                        sampled_worlds(src, n, spread_chains(src), spread_first_draw(src)))
+    post = run_target(run.inputs)
+    return typed_worlds(post, sampled_worlds(src, n, spread_chains(src), spread_first_draw(src),
+                                             knowledge=bool(post.knowledge_on)))

@@ -60,8 +60,9 @@ def merge_records(history, new) -> list:
             continue
         keys = [k for k in old.stats if k in rec.stats]
         stats = {k: np.concatenate([old.stats[k], rec.stats[k]]) for k in keys}
+        types = None if old.types is None or rec.types is None else np.concatenate([old.types, rec.types])
         out.append(ChainRecord(stats, np.concatenate([old.rects, rec.rects]),
-                               np.concatenate([old.active, rec.active]), rec.last))
+                               np.concatenate([old.active, rec.active]), rec.last, types))
     return out
 
 

@@ -58,12 +58,15 @@ class ChainRecord(NamedTuple):
         The world after each real draw.
     last : ChainStart or None
         Where the chain would continue (None when it made no draw).
+    types : ndarray, (n, K) int8, or None
+        The types the sampler gave each world (None for draws read back from resume.npz).
     """
 
     stats: dict
     rects: np.ndarray
     active: np.ndarray
     last: object
+    types: np.ndarray | None = None
 
 
 class SampleResult(NamedTuple):
@@ -127,7 +130,8 @@ class _Recorder:
                 self.draws[c][-1] = ({k: v for k, v in prev.items() if k not in _OBJECT_STATS},
                                      *self.draws[c][-1][1:])
             self.draws[c].append((stats, np.rint(draw.point["rects"]).astype(np.int32),
-                                  np.asarray(draw.point["active"]) > 0))
+                                  np.asarray(draw.point["active"]) > 0,
+                                  np.asarray(draw.point["types"]).astype(np.int8)))
         if self.callback is not None:
             self.callback(draw_info(stats))
         if stats["stopped"] and self.sequential:
@@ -154,7 +158,7 @@ class _Recorder:
                                best_rects=np.asarray(last["best_rects"]),
                                best_active=np.asarray(last["best_active"], bool))
             out.append(ChainRecord(stats, np.stack([r[1] for r in rows]), np.stack([r[2] for r in rows]),
-                                   start))
+                                   start, np.stack([r[3] for r in rows])))
         return out
 
 

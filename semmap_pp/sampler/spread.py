@@ -123,10 +123,14 @@ def wall_disagreement_m2(p_wall: np.ndarray, resolution: float) -> float:
 
 
 def typed_worlds(posterior, worlds) -> list[wm.World]:
-    """``worlds`` with types from ``posterior`` (the MAP types the sampler used); repeats typed once."""
+    """``worlds`` with types from ``posterior`` (the MAP types the sampler used); repeats typed
+    once, and a world whose units all have a type already (the sampler's) kept as it is."""
     cache: dict[bytes, np.ndarray] = {}
     out = []
     for w in worlds:
+        if (np.asarray(w.types)[np.asarray(w.active, bool)] != wm.NO_TYPE).all():
+            out.append(w)
+            continue
         key = w.rects.tobytes() + w.active.tobytes()
         if key not in cache:
             cache[key] = np.asarray(posterior.typing(w).world.types)

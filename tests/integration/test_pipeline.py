@@ -94,6 +94,42 @@ def test_run_map_keeps_recorded_worlds():
     assert " kernels/s per chain" in run.timing_text()
 
 
+def test_sampled_worlds_keep_the_types_the_sampler_gave_them():
+    """With the rules on, the recorded worlds carry the sampler's types: those that
+    Posterior.typing gives each world from scratch (what posterior.png and the posterior
+    marginals use). Worlds drawn before the knowledge was on, or asked for a target without
+    it, come back untyped, and typed_worlds types them."""
+    from semmap_pp.knowledge import load_rules
+    from semmap_pp.resources import DEFAULT_RULES
+    from semmap_pp.run.inputs import Inputs
+    from semmap_pp.run.pipeline import run_map
+    from semmap_pp.run.results import RunSettings, sampled_worlds
+    from semmap_pp.run.target_factory import run_target
+    from semmap_pp.sampler.spread import typed_worlds
+
+    g = rooms_grid(door=True)
+    f = build_frame(g, MODEL)
+    roi = default_roi(g.classes, closing_radius_cells(MODEL.evaluate.roi_closing_m, g.resolution))
+    inputs = Inputs(g, MODEL, load_rules(DEFAULT_RULES), f, roi, "default")
+    run = run_map(inputs, RunSettings.from_model(MODEL, seed=2, chains=2, cores=1, tune=3, draws=8,
+                                                 n_inner=10), log=lambda m: None)
+    post = run_target(inputs)
+    assert post.knowledge_on and run.samples["knowledge"].any()
+    worlds = sampled_worlds(run, 100, knowledge=True)
+    known = run.samples["knowledge"].reshape(-1)
+    assert len(worlds) == known.size
+    for w, k in zip(worlds, known):
+        typed = np.asarray(post.typing(w).world.types)
+        if k:
+            assert np.array_equal(np.asarray(w.types), typed)
+        else:
+            assert (np.asarray(w.types) == wm.NO_TYPE).all()
+        assert np.array_equal(np.asarray(typed_worlds(post, [w])[0].types), typed)
+    # asked for a target without knowledge: only the draws made without it keep their types
+    for w, k in zip(sampled_worlds(run, 100, knowledge=False), known):
+        assert k == (np.asarray(w.types)[np.asarray(w.active)] == wm.NO_TYPE).all()
+
+
 def test_timing_text_leaves_compiling_draws_out_of_the_rate():
     from types import SimpleNamespace as NS
 
