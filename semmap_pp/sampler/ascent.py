@@ -54,7 +54,7 @@ class _Ascent(JoinMoves, CutMoves):
 def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: bool = True,
                  merges: bool = True, recuts: bool = False, shared_walls: bool = False,
                  double_cuts: bool = True, wide_cuts: bool = False, jogs: bool = False,
-                 crosses: bool = False, fork: bool = False) -> wm.World:
+                 crosses: bool = False, fork: bool = False, memo: bool = False) -> wm.World:
     """Greedy ascent of ``posterior`` from ``world`` with the kernels' moves (module docstring);
     ``merges=False`` leaves out the merges and the bridges, ``recuts=True`` adds the recuts of
     L-shaped pairs (:meth:`_Ascent.recuts`), ``shared_walls=True`` the moves of whole walls
@@ -64,7 +64,8 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     by the joining moves, ``crosses=True`` the cuts along both axes at once after the splits
     (:meth:`_Ascent.crosses`); W*'s polish is :func:`polish`. ``fork``: the crosses try half their
     units in a forked process meanwhile (two cores; the same result:
-    :meth:`~semmap_pp.sampler.ascent_walls.Climb.each`).
+    :meth:`~semmap_pp.sampler.ascent_walls.Climb.each`); ``memo``: the merges and bridges keep
+    their failed tries (:class:`~semmap_pp.sampler.ascent_walls.FailedTries`).
 
     Parameters
     ----------
@@ -88,17 +89,15 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
         A world whose log posterior is at least that of ``world`` (types left undecided)."""
     asc = _Ascent(posterior, world, data)
     asc.fork = fork
+    asc.tries = {} if memo else None
     if not np.isfinite(asc.tr.logp):
         return world
 
     def one_round() -> bool:     # each move in turn (`|` runs every one; `and` skips those off)
         changed = asc.removals() | asc.all_wall_moves() | asc.removals()
-        changed |= merges and (asc.merges() | asc.bridges())
-        changed |= recuts and asc.recuts()
-        changed |= asc.splits(double_cuts, wide_cuts)
-        changed |= crosses and asc.crosses()
-        changed |= births and asc.births()
-        return changed
+        changed |= (merges and (asc.merges() | asc.bridges())) | (recuts and asc.recuts())
+        changed |= asc.splits(double_cuts, wide_cuts) | (crosses and asc.crosses())
+        return changed | (births and asc.births())
 
     def join_round() -> bool:     # after whole walls moved: nothing cut, nothing born
         changed = asc.removals()
@@ -148,10 +147,11 @@ def polish(posterior, world: wm.World, data, rounds: int, fork: bool = False) ->
     room over the corridor is cut at its wall, and the corridor's pieces are joined by open
     passages). The start ascent keeps the peaks: wide cuts there, where the double cuts try every
     pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
-    evidence"). ``fork``: as :func:`refine_world`'s."""
+    evidence"). ``fork``: as :func:`refine_world`'s; its merges and bridges keep their failed
+    tries (``memo``), as its crosses do."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
                         double_cuts=False, births=False, wide_cuts=True, jogs=True, crosses=True,
-                        fork=fork)
+                        fork=fork, memo=True)
 
 
 def add_units(posterior, world: wm.World, data, boxes) -> tuple[wm.World, list[int]]:

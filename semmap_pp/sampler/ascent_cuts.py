@@ -113,11 +113,9 @@ class CutMoves(WallMoves):
     _crosses_failed: dict | None = None
 
     def _cross_key(self, s: int) -> bytes:
-        """Unit ``s``'s rectangle and those of the units within two wall bands of it
-        (:meth:`near`), in slot order: what its crosses and their wall moves meet."""
-        near = sorted(self.near((s,)))
-        return np.int64(s).tobytes() + np.asarray(self.world.rects[near], np.int64).tobytes() + \
-            np.asarray(near, np.int64).tobytes()
+        """Unit ``s``'s :meth:`local_key`: its rectangle and those of the units within two wall
+        bands of it, what its crosses and their wall moves meet."""
+        return self.local_key(self.world.rects[s])
 
     def _cross(self, s: int, tries: int) -> bool:
         """:meth:`crosses` of unit ``s``: whether one of its crosses was kept."""

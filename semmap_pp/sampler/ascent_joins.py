@@ -77,7 +77,7 @@ class JoinMoves(WallMoves):
         The box and the trimmed units are then wall-moved, and the whole kept only if log p rose.
         """
         t = self.data.wall_cells
-        changed = False
+        changed, tries = False, self.failed_tries("merges")
         for a, b, ra, rb in self._pairs():
             gap_r = max(ra[0], rb[0]) - min(ra[2], rb[2])
             gap_c = max(ra[1], rb[1]) - min(ra[3], rb[3])
@@ -90,14 +90,17 @@ class JoinMoves(WallMoves):
                 continue
             if self.boundary_lines(ra, rb) >= self.merge_line_max:
                 continue
+            key = None if tries is None else self.local_key(box)
+            if key is not None and tries.skip((a, b), key):
+                continue
             new, cut = self.cut_back(wm.replace(wm.remove(self.world, b), a, box), a, box)
             if any(new.active[u] and self.trimmed_by(new, u) > t
                    and (area(new.rects[u]) < self.merge_keep * area(self.world.rects[u])
                         or self.boundary_lines(box, [int(v) for v in new.rects[u]]) < self.trim_line_min)
                    for u in cut):
                 continue      # the box would trim a unit to a sliver, or where no wall stands
-            changed |= self.tentative(new, (a, b, *cut), [a, *cut])
-        return changed
+            changed |= self._tried(tries, (a, b), key, self.tentative(new, (a, b, *cut), [a, *cut]))
+        return self._ended(tries, changed)
 
     def _pairs(self):
         """``(a, b, rect a, rect b)`` for each pair of the units active now, skipping a pair once
@@ -124,7 +127,7 @@ class JoinMoves(WallMoves):
         too short to be wall-like) is a local optimum for every single move, not for this one.
         """
         d = self.data
-        changed = False
+        changed, tries = False, self.failed_tries("bridges")
         for a, b, ra, rb in self._pairs():
             for axis in (0, 1):
                 x = 1 - axis
@@ -141,14 +144,18 @@ class JoinMoves(WallMoves):
                 if (sides[1] < self.evidence.corridor_min_ratio * sides[0]
                         or sides[0] * self.resolution >= self.evidence.hall_min_size):
                     continue          # only corridor-like boxes: a corridor in pieces
+                key = None if tries is None else self.local_key(box)
+                if key is not None and tries.skip((a, b, axis), key):
+                    break
                 new, cut = self.cut_back(wm.remove(wm.replace(self.world, a, box), b), a, box)
                 m = 2 * d.wall_cells   # the units along the box move with it
                 near = [u for u in wm.active_slots(new).tolist() if u != a and not (
                     new.rects[u][0] >= box[2] + m or new.rects[u][2] <= box[0] - m
                     or new.rects[u][1] >= box[3] + m or new.rects[u][3] <= box[1] - m)]
-                changed |= self.tentative(new, (a, b, *cut), [a, *near] * 2)
+                changed |= self._tried(tries, (a, b, axis), key,
+                                       self.tentative(new, (a, b, *cut), [a, *near] * 2))
                 break
-        return changed
+        return self._ended(tries, changed)
 
     def recuts(self, align: int = 3) -> bool:
         """Cut an L-shaped pair of units the other way.

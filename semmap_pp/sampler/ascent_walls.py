@@ -87,12 +87,59 @@ def _first_success(attempt, items, parent: int):
     return None
 
 
+class FailedTries:
+    """The tries of one move kind (each an item, such as a pair of units, with the
+    :meth:`Climb.local_key` of what it meets) that failed in the kind's last call that changed
+    nothing. W*'s polish does not try such an item again while its key is the same: its later
+    rounds mostly move a few walls, far from most of the tries (not exact: a try could meet types
+    changed by an edit farther away; docs/sampler.md, "crosses")."""
+
+    def __init__(self):
+        self._last: dict = {}
+        self._now: dict = {}
+
+    def skip(self, item, key: bytes) -> bool:
+        """Whether ``item`` failed last time with the same ``key`` (it is then kept as failed)."""
+        if self._last.get(item) == key:
+            self._now[item] = key
+            return True
+        return False
+
+    def failed(self, item, key: bytes) -> None:
+        self._now[item] = key
+
+    def end(self, changed: bool) -> None:
+        """The end of a call: its failures are kept only when it changed nothing."""
+        self._last, self._now = ({} if changed else self._now), {}
+
+
 class Climb:
     """Greedy ascent state: a tracker of the target and the kernels' data."""
 
     #: Whether the loops of :meth:`each` try half of their items in a forked process meanwhile
     #: (two cores; set by :func:`~semmap_pp.sampler.ascent.refine_world`).
     fork = False
+    #: Per move kind its :class:`FailedTries` (W*'s polish: the merges and the bridges), None:
+    #: every try made in every call.
+    tries: dict | None = None
+
+    def failed_tries(self, kind: str) -> FailedTries | None:
+        """The :class:`FailedTries` of move ``kind``; None when they are not kept."""
+        return None if self.tries is None else self.tries.setdefault(kind, FailedTries())
+
+    @staticmethod
+    def _tried(tries: FailedTries | None, item, key, kept: bool) -> bool:
+        """``kept``, the outcome of a try of ``item``, noted in ``tries`` when it failed."""
+        if tries is not None and not kept:
+            tries.failed(item, key)
+        return kept
+
+    @staticmethod
+    def _ended(tries: FailedTries | None, changed: bool) -> bool:
+        """``changed``, the outcome of a call, after :meth:`FailedTries.end`."""
+        if tries is not None:
+            tries.end(changed)
+        return changed
 
     def __init__(self, posterior, world: wm.World, data, *, peaks: int | None = None, local: int = 3,
                  absorb_share: float = 0.8, merge_slack: float = 0.15, merge_line_max: float = 0.5,
@@ -254,14 +301,24 @@ class Climb:
 
     def near(self, slots) -> set:
         """``slots`` and the active units within two wall bands of any of them."""
-        rects, act, t = self.world.rects, self.world.active, 2 * int(self.data.wall_cells)
-        out = np.zeros(len(act), bool)
+        out = np.zeros(self.world.capacity, bool)
         for s in slots:
-            if act[s]:
-                r = rects[s]
-                out |= ((rects[:, 0] <= r[2] + t) & (rects[:, 2] >= r[0] - t)
-                        & (rects[:, 1] <= r[3] + t) & (rects[:, 3] >= r[1] - t))
-        return set(np.flatnonzero(act & out).tolist())
+            if self.world.active[s]:
+                out |= self._near_box(self.world.rects[s])
+        return set(np.flatnonzero(out).tolist())
+
+    def _near_box(self, r) -> np.ndarray:
+        """(K,) bool: the active units within two wall bands of the box ``r``."""
+        rects, t = self.world.rects, 2 * int(self.data.wall_cells)
+        return self.world.active & ((rects[:, 0] <= r[2] + t) & (rects[:, 2] >= r[0] - t)
+                                    & (rects[:, 1] <= r[3] + t) & (rects[:, 3] >= r[1] - t))
+
+    def local_key(self, box) -> bytes:
+        """``box`` with the slots and rectangles of the units within two wall bands of it: what a
+        try over ``box`` meets, for :class:`FailedTries`."""
+        near = np.flatnonzero(self._near_box(box))
+        return (np.asarray(box, np.int64).tobytes() + near.astype(np.int64).tobytes()
+                + np.asarray(self.world.rects[near], np.int64).tobytes())
 
     def untyped(self) -> wm.World:
         """The current world with its types left undecided (what the ascent returns)."""

@@ -1012,6 +1012,34 @@ def test_crosses_are_not_tried_again_on_a_unit_whose_neighbourhood_kept_its_rect
     assert not asc.crosses() and tried == [0, 1, 2, 3]
 
 
+def test_a_bridge_that_failed_is_tried_again_only_once_the_units_around_it_changed(monkeypatch):
+    """With failed tries kept (W*'s polish), a bridge whose try changed nothing is not tried in
+    the next call while every unit within two wall bands of its box keeps its rectangle; once one
+    moves, or after a call that kept a move, it is tried again. Without them, every call tries it."""
+    from semmap_pp.sampler.ascent import _Ascent
+
+    post, asc = _two_rooms_ascent(crossing_wall=False)
+    tried, keep = [], [False]
+
+    def tentative(self, new, changed, polish, keep_=None, alive=()):
+        tried.append(tuple(changed[:2]))
+        return keep[0]
+
+    monkeypatch.setattr(_Ascent, "tentative", tentative)
+    assert not asc.bridges() and not asc.bridges() and tried == [(0, 1), (0, 1)]   # not kept
+    asc.tries = {}
+    tried.clear()
+    assert not asc.bridges() and tried == [(0, 1)]
+    assert not asc.bridges() and tried == [(0, 1)]                 # the same units around it
+    asc.tr.accept(asc.tr.propose(wm.replace(asc.world, 3, (38, 299, 124, 404)), (3,)))
+    assert not asc.bridges() and tried == [(0, 1)] * 2             # a room beside it moved
+    keep[0] = True
+    asc.tr.accept(asc.tr.propose(wm.replace(asc.world, 3, (38, 299, 124, 402)), (3,)))
+    assert asc.bridges() and tried == [(0, 1)] * 3                 # (kept: the fake leaves the world)
+    keep[0] = False
+    assert not asc.bridges() and tried == [(0, 1)] * 4             # after a call that kept one
+
+
 class _Tally:
     """A stand-in for an ascent's state for :meth:`Climb.each`: a list of the items taken; an
     item is taken when ``rule(taken, item)`` holds (a deterministic test of the state)."""
