@@ -205,7 +205,7 @@ def collect_draws(records, model: Model, *, draws_option: str = "--draws"):
                          draws_option=draws_option)
     samples = {"rects": np.stack([records[c].rects[recorded[c]] for c in kept_chains]).astype(np.int32),
                "active": np.stack([records[c].active[recorded[c]] for c in kept_chains]).astype(bool)}
-    if all(records[c].types is not None for c in kept_chains):     # (not when read from resume.npz)
+    if all(getattr(records[c], "types", None) is not None for c in kept_chains):   # (not from resume.npz)
         samples["types"] = np.stack([records[c].types[recorded[c]] for c in kept_chains]).astype(np.int8)
         samples["knowledge"] = np.stack([np.asarray(records[c].stats["knowledge"])[recorded[c]]
                                          for c in kept_chains]).astype(bool)
