@@ -96,7 +96,8 @@ class CutMoves(WallMoves):
         that; a piece shorter both ways is a corner of furniture, not a space: docs/sampler.md).
         After a call that kept none, the next one tries only the units whose rectangle or a near
         unit's (:meth:`_cross_key`) changed since: the polish's later rounds mostly move a few
-        walls, and the crosses kept on every floor measured were kept in the first call."""
+        walls (not exact; the merges and bridges keep their failed tries alike,
+        :class:`~semmap_pp.sampler.ascent_walls.FailedTries`; docs/sampler.md, "crosses")."""
         tries = int(self.data.settings.cross_tries)
         if tries <= 0:
             return False
