@@ -64,8 +64,8 @@ def refine_world(posterior, world: wm.World, data, *, rounds: int = 3, births: b
     by the joining moves, ``crosses=True`` the cuts along both axes at once after the splits
     (:meth:`_Ascent.crosses`); W*'s polish is :func:`polish`. ``fork``: the crosses try half their
     units in a forked process meanwhile (two cores; the same result:
-    :meth:`~semmap_pp.sampler.ascent_walls.Climb.each`); ``memo``: the merges and bridges keep
-    their failed tries (:class:`~semmap_pp.sampler.ascent_walls.FailedTries`).
+    :meth:`~semmap_pp.sampler.ascent_walls.Climb.each`); ``memo``: the crosses, merges and bridges
+    keep their failed tries (:class:`~semmap_pp.sampler.ascent_walls.FailedTries`).
 
     Parameters
     ----------
@@ -147,8 +147,8 @@ def polish(posterior, world: wm.World, data, rounds: int, fork: bool = False) ->
     room over the corridor is cut at its wall, and the corridor's pieces are joined by open
     passages). The start ascent keeps the peaks: wide cuts there, where the double cuts try every
     pair of them, made it up to 13 times as slow (CHANGELOG.md, "W*'s polish cuts along plateaus of line
-    evidence"). ``fork``: as :func:`refine_world`'s; its merges and bridges keep their failed
-    tries (``memo``), as its crosses do."""
+    evidence"). ``fork``: as :func:`refine_world`'s; its crosses, merges and bridges keep their
+    failed tries (``memo``)."""
     return refine_world(posterior, world, data, rounds=rounds, recuts=True, shared_walls=True,
                         double_cuts=False, births=False, wide_cuts=True, jogs=True, crosses=True,
                         fork=fork, memo=True)

@@ -94,29 +94,21 @@ class CutMoves(WallMoves):
         whose pieces a wall move absorbs carves the unit, and cut freiburg_building101's rooms
         into pieces) and at least ``2 min_side`` long (the ascent's fragments are narrower than
         that; a piece shorter both ways is a corner of furniture, not a space: docs/sampler.md).
-        After a call that kept none, the next one tries only the units whose rectangle or a near
-        unit's (:meth:`_cross_key`) changed since: the polish's later rounds mostly move a few
-        walls (not exact; the merges and bridges keep their failed tries alike,
-        :class:`~semmap_pp.sampler.ascent_walls.FailedTries`; docs/sampler.md, "crosses")."""
+        In W*'s polish (:class:`~semmap_pp.sampler.ascent_walls.FailedTries`), after a call that
+        kept none the next one tries only the units whose rectangle or a near unit's
+        (:meth:`local_key`) changed since: the polish's later rounds mostly move a few walls (not
+        exact; docs/sampler.md, "crosses")."""
         tries = int(self.data.settings.cross_tries)
         if tries <= 0:
             return False
-        failed = self._crosses_failed or {}
-        changed = self.each([s for s in self.units() if failed.get(s) != self._cross_key(s)],
-                            functools.partial(self._cross, tries=tries))
-        # after a round of crosses that changed nothing, each unit with the rectangles around it
-        self._crosses_failed = None if changed else {s: self._cross_key(s) for s in self.units()}
-        return changed
-
-    #: After a call of :meth:`crosses` that kept none: per unit, :meth:`_cross_key` as its
-    #: crosses failed. A unit whose key is the same at the next call is not tried again (the
-    #: wall moves between rounds seldom reach it); None once a cross was kept.
-    _crosses_failed: dict | None = None
-
-    def _cross_key(self, s: int) -> bytes:
-        """Unit ``s``'s :meth:`local_key`: its rectangle and those of the units within two wall
-        bands of it, what its crosses and their wall moves meet."""
-        return self.local_key(self.world.rects[s])
+        failed = self.failed_tries("crosses")
+        keys = None if failed is None else {s: self.local_key(self.world.rects[s]) for s in self.units()}
+        todo = [s for s in self.units() if keys is None or not failed.skip(s, keys[s])]
+        changed = self.each(todo, functools.partial(self._cross, tries=tries))
+        if failed is not None:    # (half of them may be tried in a forked process: noted here)
+            for s in todo:        # dropped by ``end`` when a cross was kept
+                failed.failed(s, keys[s])
+        return self._ended(failed, changed)
 
     def _cross(self, s: int, tries: int) -> bool:
         """:meth:`crosses` of unit ``s``: whether one of its crosses was kept."""

@@ -119,8 +119,8 @@ class Climb:
     #: Whether the loops of :meth:`each` try half of their items in a forked process meanwhile
     #: (two cores; set by :func:`~semmap_pp.sampler.ascent.refine_world`).
     fork = False
-    #: Per move kind its :class:`FailedTries` (W*'s polish: the merges and the bridges), None:
-    #: every try made in every call.
+    #: Per move kind its :class:`FailedTries` (W*'s polish: the crosses, merges and bridges),
+    #: None: every try made in every call.
     tries: dict | None = None
 
     def failed_tries(self, kind: str) -> FailedTries | None:
