@@ -10,9 +10,9 @@ other Python threads, which a fork does not copy, so that a lock one of them hol
 the child; the child killed, an error in it, no answer within :data:`WAIT_S`), they are drawn in
 this process instead, as with one core: the outputs are the same bytes either way.
 
-``semmap map`` with two cores also makes its start world in one
+``semmap map`` with two cores also makes its start world and the run's shared tables in one
 (:func:`semmap_pp.run.pipeline.timed_start_world`, 1-2 s of one core on a real floor) while it
-imports PyMC, ArviZ and matplotlib, which take as long, and W*'s polish tries half of a round's
+imports PyMC, ArviZ and matplotlib, which take as long, and draws graph.png beside the figures, and W*'s polish tries half of a round's
 crosses in one while it tries the other half (:meth:`semmap_pp.sampler.ascent_walls.Climb.each`).
 
 >>> import os

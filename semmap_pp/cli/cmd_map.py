@@ -178,6 +178,7 @@ def _install_sigint(stop):
 def run(args) -> int:
     from semmap_pp.run.memory import check_memory, young_heap
     from semmap_pp.run.outdir import check_free_space, lock_out_dir, needed_bytes
+    from semmap_pp.run.shared import shared_folder
     from semmap_pp.outputs.report import FILES as OUTPUT_FILES
     from semmap_pp.run.outdir import check_out_dir
     from semmap_pp.run.inputs import check_inputs_not_outputs
@@ -232,27 +233,28 @@ def run(args) -> int:
     check_free_space(out, needed_bytes(h * w))
     # the lock is held until every file is written: one run at a time in a folder; the sampling
     # and the outputs collect only what they make
-    with lock_out_dir(out), young_heap():
+    with lock_out_dir(out), young_heap(), shared_folder() as folder:
         if state is None or out.resolve() != args.resume.resolve():
             check_out_dir(out, args.force)     # again under the lock: a run that ended meanwhile may have filled it
-        job = _start_job(inputs, settings) if state is None and starts is None else None
+        job = _start_job(inputs, settings, folder) if state is None and starts is None else None
         if job is not None:     # said now: the imports below take a second or two
             from semmap_pp.run.pipeline import BUILDING_STARTS, map_head
             print(f"{map_head(inputs)}; {BUILDING_STARTS}", file=sys.stderr, flush=True)
         try:
             _import_the_rest()
             return _sample_and_write(args, out, inputs, settings, state, rules, starts, previous_ids,
-                                     previous_places, ids_from, job)
+                                     previous_places, ids_from, job, folder)
         finally:
             if job is not None:
                 job.close()
 
 
-def _start_job(inputs, settings):
+def _start_job(inputs, settings, folder=None):
     """With two cores or more, the data-driven start world made in a forked process
     (:func:`semmap_pp.run.pipeline.timed_start_world`, one core for 1-2 s on a real floor) while
     this one imports the rest of the program (:func:`_import_the_rest`), which the run then
-    waits for; None with one core: the run makes it itself, as it would."""
+    waits for; with the run's shared ``folder`` the process makes the run's tables too, into it.
+    None with one core: the run makes it itself, as it would."""
     if settings.cores < 2:
         return None
     import functools
@@ -260,7 +262,7 @@ def _start_job(inputs, settings):
     from semmap_pp.forked import Forked
     from semmap_pp.run.pipeline import timed_start_world
 
-    return Forked(functools.partial(timed_start_world, inputs), fork=True)
+    return Forked(functools.partial(timed_start_world, inputs, folder), fork=True)
 
 
 def _import_the_rest() -> None:
@@ -281,9 +283,10 @@ def _import_the_rest() -> None:
 
 
 def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, previous_ids,
-                      previous_places, ids_from, start_job=None) -> int:
+                      previous_places, ids_from, start_job=None, folder=None) -> int:
     """Sample (:func:`semmap_pp.run.pipeline.run_map`) and write every output into ``out``, which
-    the caller holds the lock of; the exit status. ``start_job``: :func:`_start_job`'s."""
+    the caller holds the lock of; the exit status. ``start_job``: :func:`_start_job`'s; ``folder``:
+    the run's shared folder (:func:`~semmap_pp.run.shared.shared_folder`) it was given."""
     from semmap_pp.cli.progress import Progress
     from semmap_pp.cli.runs import general_path_note
     from semmap_pp.errors import SemmapError
@@ -308,7 +311,7 @@ def _sample_and_write(args, out: Path, inputs, settings, state, rules, starts, p
                       every=args.progress_every, parallel=min(settings.cores, settings.chains)) as progress:
             result = run_map(inputs, settings, log=log, callback=progress if args.progress != "none" else None,
                              stop=stop, budget=args.budget, resume=state, starts=starts,
-                             start_job=start_job, previous_ids=previous_ids)
+                             start_job=start_job, previous_ids=previous_ids, folder=folder)
     except BaseException as exc:
         signal.signal(signal.SIGINT, previous)
         if isinstance(exc, SemmapError) and stop():
@@ -447,9 +450,11 @@ def _write_outputs(out: Path, run, rules, meta: dict) -> tuple[list[Path], bool]
         worlds = posterior_worlds(run, N_SAMPLED_WORLDS)
         with young_heap():
             # with two cores, report.html's figures that need no other file are drawn meanwhile
-            figures = Forked(lambda: posterior_pngs(run, worlds), fork=run.settings.cores > 1)
+            # (graph.png among them: the figures' process has time to spare, this one has none)
+            figures = Forked(lambda: posterior_pngs(run, worlds, graph=True), fork=run.settings.cores > 1)
             try:
-                wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds)
+                wstar = write_wstar(out, run, rules_name=rules.name, rules_path=rules, worlds=worlds,
+                                    figures=("overlay",))
                 written += write_posterior(out, run, worlds, wstar, rules_name=rules.name,
                                            other_files=(RESUME_FILE,), figures=figures.result)
             finally:

@@ -123,22 +123,34 @@ def remove_stale_temps(out_dir: str | os.PathLike) -> list[Path]:
     return gone
 
 
-def write_plan(out: Path, sm, doc: dict) -> tuple[list[Path], dict, dict]:
-    """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
-    regions.png, rooms.png, the types layer, the ROS 2 bag rosbag2/, overlay.png and graph.png
-    (world.json and labels.png are the caller's). Returns the paths, the two figures' PNG bytes and
-    the regions."""
+#: The figures of :func:`write_plan`: overlay.png and graph.png.
+PLAN_FIGURES = ("overlay", "graph")
+
+
+def plan_graph(sm, doc: dict):
+    """``(graph, regions)``: graph.graphml's graph of ``doc`` (world.json's content) and the
+    regions of ``sm`` (units joined by open walls)."""
     passages = passage_pairs(sm)
     regions = join_regions(sm.unit_ids, passages)
+    return world_graph(sm, doc, regions, passages), regions
+
+
+def write_plan(out: Path, sm, doc: dict, figures: tuple[str, ...] = PLAN_FIGURES) -> tuple[list[Path], dict, dict]:
+    """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
+    regions.png, rooms.png, the types layer, the ROS 2 bag rosbag2/, and of overlay.png and
+    graph.png those named in ``figures`` (world.json and labels.png are the caller's; ``semmap
+    map`` draws graph.png elsewhere meanwhile: :func:`posterior_pngs`). Returns the paths, the
+    figures' PNG bytes and the regions."""
+    graph, regions = plan_graph(sm, doc)
     region_img = regions_image(sm, regions)
-    graph = world_graph(sm, doc, regions, passages)
     written = [write_geojson(out / "world.geojson", geojson_dict(sm, doc, regions)),
                write_graphml(out / "graph.graphml", graph),
                write_regions_png(out / "regions.png", region_img),
                write_labels_png(out / "rooms.png", sm.rooms.labels)]
     written.extend(write_types_layer(out, sm, doc))
     written.append(write_run_bag(out, sm, doc))
-    pngs = {"overlay": fig.overlay_png(sm, doc), "graph": fig.graph_png(sm, graph)}
+    drawn = {"overlay": lambda: fig.overlay_png(sm, doc), "graph": lambda: fig.graph_png(sm, graph)}
+    pngs = {name: drawn[name]() for name in PLAN_FIGURES if name in figures}
     for name, data in pngs.items():
         atomic.write_bytes(out / f"{name}.png", data)
         written.append(out / f"{name}.png")
@@ -156,11 +168,11 @@ class WstarFiles(NamedTuple):
 
 
 def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=None,
-                worlds=None) -> WstarFiles:
+                worlds=None, figures: tuple[str, ...] = PLAN_FIGURES) -> WstarFiles:
     """The files of W* (world.json, labels.png, trace.nc, spread.nc, diagnostics.txt and the plan
-    files of :func:`write_plan`) into ``out_dir``, created if missing; world.json with the
-    posterior marginals over ``worlds`` (the typed sampled worlds) when given. The first half of
-    :func:`write_all`."""
+    files of :func:`write_plan`, of its figures those named in ``figures``) into ``out_dir``,
+    created if missing; world.json with the posterior marginals over ``worlds`` (the typed
+    sampled worlds) when given. The first half of :func:`write_all`."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
@@ -168,7 +180,7 @@ def write_wstar(out_dir: str | os.PathLike, run, *, rules_name: str, rules_path=
     written, doc = write_core(out, run, rules_name=rules_name,
                               rules_path=rules_path if rules_path is not None else rules_name, worlds=worlds)
 
-    plan, pngs, regions = write_plan(out, sm, doc)
+    plan, pngs, regions = write_plan(out, sm, doc, figures)
     written += plan
     return WstarFiles(written, doc, pngs, regions)
 
@@ -213,34 +225,44 @@ class SpreadImages:
 PANEL_BAND_ROWS = 64
 
 
-def posterior_pngs(run, worlds: list) -> dict[str, bytes]:
+def posterior_pngs(run, worlds: list, graph: bool = False) -> dict[str, bytes]:
     """The figures of report.html that need neither world.json nor the plan files, as PNG bytes:
     posterior.png and posterior_cells.png (of the typed sampled ``worlds``) and the previews of
-    regions.png, rooms.png and the region of interest. ``semmap map`` draws them in a forked
-    process while it writes the other files (:mod:`semmap_pp.forked`)."""
+    regions.png, rooms.png and the region of interest; with ``graph`` graph.png too (of W*'s
+    world.json content without the posterior marginals, which it does not draw). ``semmap map``
+    draws them in a forked process while it writes the other files (:mod:`semmap_pp.forked`)."""
     sm = run.semantic
+    drawn = {}
+    if graph:
+        drawn["graph"] = fig.graph_png(sm, plan_graph(sm, world_dict(sm))[0])
     images = SpreadImages(sm.frame, worlds)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
     ess = mode.ess if mode is not None else None      # NaN when nothing moved: no ESS is given
     cells_png = fig.posterior_cells_png(sm, images, len(worlds), ess)
     del images   # the counts: not kept through the other figures
-    return {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png,
-            "regions": fig.regions_preview_png(sm, regions_image(sm)),
-            "rooms": fig.regions_preview_png(sm, sm.rooms.labels),
-            "roi": fig.roi_png(sm, run.inputs.roi_name)}
+    return drawn | {"posterior": fig.posterior_png(sm, worlds, ess), "posterior_cells": cells_png,
+                    "regions": fig.regions_preview_png(sm, regions_image(sm)),
+                    "rooms": fig.regions_preview_png(sm, sm.rooms.labels),
+                    "roi": fig.roi_png(sm, run.inputs.roi_name)}
 
 
 def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarFiles, *, rules_name: str,
                     other_files: tuple[str, ...] = (), figures=None) -> list[Path]:
     """posterior.png, posterior_cells.png and report.html, after :func:`write_wstar`; the paths
     written, those of ``wstar`` first. ``figures``: a callable that returns
-    :func:`posterior_pngs` (drawn elsewhere meanwhile); by default they are drawn here. The second
-    half of :func:`write_all`."""
+    :func:`posterior_pngs` (drawn elsewhere meanwhile); by default they are drawn here. The plan's
+    figures that ``wstar`` left out (:func:`write_plan`) are written too, from ``figures`` or drawn
+    here. The second half of :func:`write_all`."""
     out = Path(out_dir)
     written, doc, pngs, regions = list(wstar.written), wstar.doc, dict(wstar.pngs), wstar.regions
+    left = [name for name in PLAN_FIGURES if name not in pngs]
     pngs |= figures() if figures is not None else posterior_pngs(run, worlds)
-    for name in ("posterior", "posterior_cells"):
+    if any(name not in pngs for name in left):      # drawn here, as write_plan would
+        graph, _ = plan_graph(run.semantic, doc)
+        pngs |= {name: fig.overlay_png(run.semantic, doc) if name == "overlay" else fig.graph_png(run.semantic, graph)
+                 for name in left if name not in pngs}
+    for name in left + ["posterior", "posterior_cells"]:
         atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")
     names = [p.name for p in written] + ["report.html"] + list(other_files)
@@ -281,4 +303,4 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
 
 
 __all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "posterior_pngs",
-           "write_core", "posterior_doc", "write_plan", "diagnostics_text"]
+           "write_core", "posterior_doc", "write_plan", "plan_graph", "PLAN_FIGURES", "diagnostics_text"]

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -88,12 +89,25 @@ def data_start_world(inputs: Inputs, data=None) -> wm.World:
     return clean
 
 
-def timed_start_world(inputs: Inputs) -> tuple[wm.World, float]:
-    """:func:`data_start_world` of ``inputs`` (with kernel data of its own) and the seconds it took:
-    what ``semmap map`` hands :func:`run_map` as ``start_job``, made in a forked process."""
+class Started(NamedTuple):
+    """What :func:`timed_start_world` makes: the start world, the seconds it took and, when it was
+    given the run's shared folder, the run's tables (:func:`make_tables`) it was made with."""
+
+    world: wm.World
+    seconds: float
+    tables: tuple | None = None
+
+
+def timed_start_world(inputs: Inputs, folder=None) -> Started:
+    """:func:`data_start_world` of ``inputs`` and the seconds it took: what ``semmap map`` hands
+    :func:`run_map` as ``start_job``, made in a forked process. With the run's shared ``folder``
+    the run's tables are made first, into it (:func:`make_tables`), the start world is made with
+    them and they are handed back too (mapped arrays travel as their files' paths), so that the
+    run does not make them again; without, the start world has kernel data of its own."""
+    tables = make_tables(inputs, folder) if folder is not None else None
     t0 = time.perf_counter()
-    world = data_start_world(inputs)
-    return world, time.perf_counter() - t0
+    world = data_start_world(inputs, None if tables is None else tables[0])
+    return Started(world, time.perf_counter() - t0, tables)
 
 
 #: What the first line of a run's log says it does next (after :func:`map_head`).
@@ -107,22 +121,21 @@ def map_head(inputs: Inputs) -> str:
 
 
 def _chain_plan(inputs: Inputs, settings: RunSettings, *, log, resume, starts, base_start, data=None,
-                start_job=None):
+                started: Started | None = None):
     """Where the chains start and how long they run, said in the log: ``(first start worlds,
     start worlds, burn-in and draws pm.sample is asked for, schedule, chain starts, history)``,
     for a new run (data-driven or given start worlds) or one that resumes an earlier run; ``data``
-    is the run's kernel data, which the start worlds' ascent reuses; ``start_job`` (see
-    :func:`run_map`) hands over the data-driven start world made elsewhere."""
+    is the run's kernel data, which the start worlds' ascent reuses; ``started``: the data-driven
+    start world made elsewhere (:func:`run_map`'s ``start_job``)."""
     head = map_head(inputs)
     if resume is None:
         rng = np.random.default_rng(settings.seed)
         if starts is None:   # minutes on a large map: say so before, and how long after
-            if start_job is None:       # else the caller said it when it began the job
+            if started is None:       # else the caller said it when it began the job
                 log(f"{head}; {BUILDING_STARTS}")
             t_start, made = time.perf_counter(), "shared" if base_start is not None else None
-            if base_start is None and start_job is not None:
-                base_start, seconds = start_job.result()
-                made = f"{seconds:.1f} s"
+            if base_start is None and started is not None:
+                base_start, made = started.world, f"{started.seconds:.1f} s"
             starts = start_worlds(inputs, settings.chains, rng, base=base_start, data=data)
             made = made or f"{time.perf_counter() - t_start:.1f} s"
             log(f"start world: {wm.n_units(starts[0])} units ({made})")
@@ -190,7 +203,7 @@ def _through_door_units(inputs: Inputs, post, sm, data, *, log, previous_ids):
 
 def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, stop=None,
             budget: float | None = None, resume=None, starts: list | None = None,
-            base_start: wm.World | None = None, start_job=None, previous_ids=None) -> MapRun:
+            base_start: wm.World | None = None, start_job=None, previous_ids=None, folder=None) -> MapRun:
     """Sample worlds for ``inputs`` and return W*, its semantic map and the convergence report.
 
     Parameters
@@ -210,18 +223,23 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     base_start : World, optional
         :func:`data_start_world` of ``inputs``, made earlier (it does not depend on the seed:
         ``semmap stability`` makes it once for all its seeds); the run is the same as without.
-    start_job : object with ``result() -> (World, seconds)``, optional
+    start_job : object with ``result() -> Started``, optional
         :func:`timed_start_world` of ``inputs`` being made elsewhere (``semmap map`` forks a process
-        for it before it imports PyMC, ArviZ and matplotlib); asked for when the chains' start
-        worlds are made, and unused with ``resume``, ``starts`` or ``base_start``. The run is the
-        same as without; its log leaves out the first line (:func:`map_head`, "building the start
-        worlds"), which the caller says when it begins the job.
+        for it before it imports PyMC, ArviZ and matplotlib), with the run's tables when it was
+        given ``folder``; asked for before the run makes its tables, and unused with ``resume``,
+        ``starts`` or ``base_start``. The run is the same as without; its log leaves out the first
+        line (:func:`map_head`, "building the start worlds"), which the caller says when it
+        begins the job.
     previous_ids : semmap_pp.plans.world_file.PreviousIds, optional
         The units of an earlier world.json whose ids W*'s units carry over where they are the
         same place (:mod:`semmap_pp.semantic.ids`); W* itself is the same as without.
+    folder : path, optional
+        The folder of the run's shared tables (:func:`~semmap_pp.run.shared.shared_folder`), made
+        by the caller, which gave it to ``start_job`` too; by default one is made for the run.
+        Either way it is removed when the run ends.
     """
 
-    with shared_folder() as folder:   # the lattice tables the chains' processes map, not copy
+    with shared_folder(folder) as folder:   # the lattice tables the chains' processes map, not copy
         run = _run_map(inputs, settings, folder, log=log, callback=callback, stop=stop, budget=budget,
                        resume=resume, starts=starts, base_start=base_start, start_job=start_job,
                        previous_ids=previous_ids)
@@ -229,15 +247,28 @@ def run_map(inputs: Inputs, settings: RunSettings, *, log=print, callback=None, 
     return run
 
 
-def shared_tables(inputs: Inputs, folder) -> tuple:
-    """The run's kernel data and target factory, their lattice-sized tables mapped from files of
-    ``folder`` (:mod:`semmap_pp.run.shared`): the same values, held once for all processes."""
+def make_tables(inputs: Inputs, folder) -> tuple:
+    """The run's kernel data and likelihood data, their lattice-sized tables mapped from files of
+    ``folder`` (:mod:`semmap_pp.run.shared`): the same values, held once for all processes; the
+    likelihood data is what :func:`~semmap_pp.target.likelihood.prepare` gives from now on in
+    this process."""
     frame, model = inputs.frame, inputs.model
     data = share_fields(data_from_frame(frame, model.kernels, store=functools.partial(share, folder=folder)),
                         KERNEL_TABLES, folder)
     likelihood = share_fields(prepare(frame, model), LIKELIHOOD_TABLES, folder)
     remember(frame, model, likelihood)
-    return data, TargetFactory(frame, model, inputs.rules, likelihood)
+    return data, likelihood
+
+
+def shared_tables(inputs: Inputs, folder, made: tuple | None = None) -> tuple:
+    """The run's kernel data and target factory: :func:`make_tables`, or the tables ``made``
+    already (by :func:`timed_start_world` in another process, into the same ``folder``)."""
+    if made is None:
+        data, likelihood = make_tables(inputs, folder)
+    else:
+        data, likelihood = made
+        remember(inputs.frame, inputs.model, likelihood)
+    return data, TargetFactory(inputs.frame, inputs.model, inputs.rules, likelihood)
 
 
 def _run_map(inputs: Inputs, settings: RunSettings, folder, *, log, callback, stop, budget, resume, starts,
@@ -245,10 +276,13 @@ def _run_map(inputs: Inputs, settings: RunSettings, folder, *, log, callback, st
     """:func:`run_map` with the shared tables' ``folder``."""
     model, frame = inputs.model, inputs.frame
     kernel_settings = model.kernels
-    data, factory = shared_tables(inputs, folder)
+    started = None
+    if start_job is not None and resume is None and starts is None and base_start is None:
+        started = start_job.result()
+    data, factory = shared_tables(inputs, folder, None if started is None else started.tables)
     first, starts, pm_tune, pm_draws, schedule, chain_starts, history = _chain_plan(
         inputs, settings, log=log, resume=resume, starts=starts, base_start=base_start, data=data,
-        start_job=start_job)
+        started=started)
     t0 = time.perf_counter()
     result = sample_worlds(factory, data, starts, draws=pm_draws, tune=pm_tune,
                            chains=settings.chains, cores=settings.cores, n_inner=settings.n_inner,

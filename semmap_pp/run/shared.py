@@ -117,14 +117,17 @@ def share_fields(obj, names, folder: str | os.PathLike | None):
 
 
 @contextmanager
-def shared_folder():
+def shared_folder(path: str | None = None):
     """A temporary folder for a run's shared arrays, removed when the run ends (the processes that
-    mapped a file keep it until they unmap it; the run's chains have all ended by then)."""
-    try:
-        path = tempfile.mkdtemp(prefix="semmap-arrays-")
-    except OSError:          # no temporary folder to write: the tables stay ordinary arrays
-        yield None
-        return
+    mapped a file keep it until they unmap it; the run's chains have all ended by then); ``path``:
+    one made already (by an outer ``shared_folder``, whose process began using it earlier), removed
+    here, when this one ends."""
+    if path is None:
+        try:
+            path = tempfile.mkdtemp(prefix="semmap-arrays-")
+        except OSError:          # no temporary folder to write: the tables stay ordinary arrays
+            yield None
+            return
     try:
         yield path
     finally:

@@ -370,3 +370,16 @@ def test_figures_drawn_in_a_forked_process_are_the_same_bytes(hostile_run, tmp_p
     write_posterior(tmp_path, run, worlds, wstar, rules_name="<b>rules</b>.lp", figures=figures.result)
     for name in ("posterior.png", "posterior_cells.png", "report.html"):
         assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name
+    # as `semmap map` does: graph.png drawn there too (from world.json's content without the
+    # posterior marginals), the other process drawing only overlay.png; or, with the figures drawn
+    # here, by write_posterior itself
+    assert set(posterior_pngs(run, worlds, graph=True)) == set(here) | {"graph"}
+    for n, drawn in enumerate((Forked(lambda: posterior_pngs(run, worlds, graph=True), fork=True).result, None)):
+        again = tmp_path / f"again{n}"
+        wstar = write_wstar(again, run, rules_name="<b>rules</b>.lp", worlds=worlds, figures=("overlay",))
+        assert not (again / "graph.png").exists()
+        written = write_posterior(again, run, worlds, wstar, rules_name="<b>rules</b>.lp", figures=drawn)
+        names = [p.name for p in written]
+        assert names.count("graph.png") == 1 and names.count("overlay.png") == 1 and names[-1] == "report.html"
+        for name in ("graph.png", "overlay.png", "posterior.png", "report.html"):
+            assert (again / name).read_bytes() == (out / name).read_bytes(), (n, name)

@@ -12,7 +12,11 @@ import pytest
 from semmap_pp import forked
 from semmap_pp.cli.cmd_map import _import_the_rest, _start_job
 from semmap_pp.run.inputs import load_inputs
-from semmap_pp.run.pipeline import data_start_world, timed_start_world
+from semmap_pp.run.pipeline import (KERNEL_TABLES, LIKELIHOOD_TABLES, data_start_world, shared_tables,
+                                    timed_start_world)
+from semmap_pp.run.shared import SharedArray, shared_folder
+from semmap_pp.sampler.kernels import data_from_frame
+from semmap_pp.target.likelihood import _prepare, prepare
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,16 +36,45 @@ def test_two_cores_fork_a_process_that_makes_the_runs_own_start_world(inputs, mo
     try:
         assert job._proc is not None and job._proc.pid != os.getpid()
         _import_the_rest()          # what the parent does meanwhile
-        world, seconds = job.result()
+        world, seconds, tables = job.result()
     finally:
         job.close()
-    assert seconds > 0 and _same(world, data_start_world(inputs))
+    assert seconds > 0 and _same(world, data_start_world(inputs)) and tables is None
 
 
 def test_one_core_makes_no_process_and_the_run_makes_its_start_world_itself(inputs):
     assert _start_job(inputs, NS(cores=1)) is None
-    world, seconds = timed_start_world(inputs)
-    assert seconds > 0 and _same(world, data_start_world(inputs))
+    world, seconds, tables = timed_start_world(inputs)
+    assert seconds > 0 and _same(world, data_start_world(inputs)) and tables is None
+
+
+def test_the_forked_process_hands_over_the_runs_tables_made_into_its_shared_folder(inputs, monkeypatch):
+    """Given the run's shared folder, the start world's process makes the run's kernel and
+    likelihood tables there and hands them back as mapped files (their paths travel, not their
+    values): the values the run would make itself, and the same start world."""
+    monkeypatch.setattr(forked, "_one_thread", lambda: True)
+    with shared_folder() as folder:
+        job = _start_job(inputs, NS(cores=2), folder)
+        try:
+            child = job._proc.pid
+            world, seconds, (data, likelihood) = job.result()
+        finally:
+            job.close()
+        assert seconds > 0 and _same(world, data_start_world(inputs))
+        own = data_from_frame(inputs.frame, inputs.model.kernels)
+        for name in KERNEL_TABLES:
+            mapped = getattr(data, name)
+            assert isinstance(mapped, SharedArray) and Path(mapped._path).parent == Path(folder)
+            assert Path(mapped._path).name.startswith(f"{child}-")      # made by the child
+            assert np.array_equal(mapped, getattr(own, name))
+        fresh = _prepare(inputs.frame, inputs.model)
+        for name in LIKELIHOOD_TABLES:
+            assert isinstance(getattr(likelihood, name), SharedArray)
+            assert np.array_equal(getattr(likelihood, name), getattr(fresh, name))
+        data2, factory = shared_tables(inputs, folder, (data, likelihood))
+        assert data2 is data and factory.likelihood is likelihood
+        assert prepare(inputs.frame, inputs.model) is likelihood     # what the run's targets read
+    assert not Path(folder).exists()
 
 
 def test_the_first_line_is_said_before_the_rest_is_imported_and_once(monkeypatch, capsys, tmp_path):
