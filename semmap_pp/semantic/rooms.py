@@ -11,7 +11,15 @@ free cells, and on a map saved with graded values the cells seen free a few time
    too small for a room (interior under ``min_room_m2``) seeds none (its floor joins the nearest
    room in step 3, or keeps its unit's room where none reaches it), and joins through a passage
    only where the floor crosses it (:class:`UnitPieces`): drawn across a wall, it does not join
-   the rooms on its two sides.
+   the rooms on its two sides. A region whose walls hold rooms apart is a room per core
+   (:func:`split_cores`, after step 3: which floor is the region's, and the rooms seen through
+   their door, are decided as if it were one room): where two or more parts of its interior lie
+   farther than ``split_core_m`` from the map's walls (occupied cells on wall lines, and unknown
+   stretches of at least ``split_unknown_m2`` or open to the map's edge), each of at least
+   ``split_min_m2``, each such core is a room and each cell of the region's floor goes to the
+   core nearest to it along the floor. That is a unit W* drew over a room and the corridor in
+   front of it, or over two rooms with a door between them: a door is narrower than twice
+   ``split_core_m``, furniture is no wall, so a cluttered room keeps one core.
 2. **Rooms seen through their door.** The strips along each interior (up to ``band_m`` along the
    floor) go to it; the free cells left fall into connected pieces. A piece of at least
    ``min_room_m2`` that meets the rooms only through openings no wider than a door (``door_max_m``
@@ -45,6 +53,7 @@ from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
 from semmap_pp.semantic.regions import join_regions, passage_pairs, region_lut
+from semmap_pp.target.likelihood import wall_like_axis
 
 _FOUR = ndi.generate_binary_structure(2, 1)
 _EIGHT = np.ones((3, 3), bool)
@@ -189,7 +198,8 @@ def _walled_share(piece: np.ndarray, free: np.ndarray, walls: np.ndarray | None)
 
 def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
                 params: RoomParams = RoomParams(), occupied: np.ndarray | None = None,
-                fallback: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+                fallback: np.ndarray | None = None,
+                walls_apart: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
     """Rooms of the free cells (see the module docstring).
 
     Parameters
@@ -208,6 +218,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     fallback : (H, W) int, optional
         Region id of cells that keep it when no room reaches them (a unit's interior that seeds
         nothing: a closet behind its door), 0 elsewhere.
+    walls_apart : (H, W) bool, optional
+        The walls that hold rooms apart (:func:`walls_apart`): a room per core of each region
+        (:func:`split_cores`); None: one per region.
 
     Returns
     -------
@@ -230,12 +243,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     full = np.zeros(free.shape, np.int32)
     if not free.any():
         return full, []
-    # work on the free cells' bounding box (a SLAM map's canvas is mostly unknown)
-    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
-    # (with the walls just beyond them: the blur's margin and one cell)
+    # work on the free cells' bounding box, with the walls just beyond them (the blur's margin and one cell)
     blur = int(round(params.wall_blur_m / resolution))
-    pad = 2 + blur
-    box = (slice(max(rows[0] - pad, 0), rows[-1] + 1 + pad), slice(max(cols[0] - pad, 0), cols[-1] + 1 + pad))
+    box = _free_box(free, 2 + blur)
     free = free[box]
     doors = np.asarray(doors, bool)[box]
     seeds = np.asarray(seeds)[box]
@@ -261,9 +271,108 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     if fallback is not None:
         fallback = np.asarray(fallback)[box]
         flooded = np.where((flooded == 0) & (fallback > 0) & free & ~doors, fallback, flooded)
-    labels, found = _numbered(flooded, n_regions, n_extra)
+    # a region's rooms walled apart: its floor shared among its cores
+    flooded, parent = _divided(flooded, seeds, walls_apart, box, resolution, params, n_regions + n_extra, blocked)
+    labels, found = _numbered(flooded)
     full[box] = labels
-    return full, found
+    return full, [(k, parent.get(old, old if old <= n_regions else 0), n) for k, old, n in found]
+
+
+def _free_box(free: np.ndarray, pad: int) -> tuple[slice, slice]:
+    """The bounding box of ``free`` (not empty) with ``pad`` cells around it: a SLAM map's canvas
+    is mostly unknown."""
+    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
+    return (slice(max(rows[0] - pad, 0), rows[-1] + 1 + pad), slice(max(cols[0] - pad, 0), cols[-1] + 1 + pad))
+
+
+def _divided(flooded, seeds, walls, box, resolution, params, first, blocked):
+    """``(flooded, parent)``: the rooms of ``flooded`` whose region's seeds hold two or more
+    cores (:func:`split_cores`, ``walls[box]`` the walls; None: no room is divided) divided among
+    them, each cell of the room to the core nearest to it along the room's floor (its first core
+    keeps the region's id, the others take ``first + 1, ...``, which ``parent`` maps to the
+    region); the other rooms as they are. The rooms seen through their door, and which cells are
+    a region's, are those of ``flooded``."""
+    if walls is None:
+        return flooded, {}
+    cores, parent = split_cores(seeds, np.asarray(walls, bool)[box], resolution, params)
+    if not parent:
+        return flooded, {}
+    m = int(seeds.max())
+    cores = np.where(cores > m, cores - m + first, cores)    # after the rooms seen through a door
+    parent = {j - m + first: k for j, k in parent.items()}
+    out = flooded.copy()
+    for k in sorted(set(parent.values())):
+        room = flooded == k
+        shared = geodesic_flood(np.where(room, cores, 0).astype(np.int32), room, walls=blocked)
+        out[room & (shared > 0)] = shared[room & (shared > 0)]
+    return out, parent
+
+
+def split_cores(seeds: np.ndarray, walls: np.ndarray, resolution: float,
+                params: RoomParams = RoomParams()) -> tuple[np.ndarray, dict[int, int]]:
+    """The cores of step 1's rooms walled apart (module docstring): ``(seeds, parent)``, each region of
+    ``seeds`` (ids 1..m) whose interior holds two or more cores seeded by them instead (the
+    first keeps the region's id, the others take ``m + 1, ...``; ``parent`` maps those to the
+    region), its other cells no seeds; the other regions as they are.
+
+    A core is a connected part of the region's area (its seed cells, closed and their holes
+    filled: furniture inside is area too) farther than ``split_core_m`` from ``walls``, of at least
+    ``split_min_m2``. ``split_core_m`` 0: no region is split.
+
+    >>> seeds = np.zeros((9, 21), int); seeds[1:8, 1:20] = 1      # one unit over two rooms
+    >>> walls = np.zeros((9, 21), bool); walls[0, :] = walls[8, :] = True
+    >>> walls[:, 0] = walls[:, 20] = True; walls[:, 10] = True; walls[4, 10] = False  # a door
+    >>> split, parent = split_cores(seeds, walls, 1.0, RoomParams(split_core_m=1.5, split_min_m2=4.0))
+    >>> parent, int(split[4, 5]), int(split[4, 15]), int(split[4, 10])      # the doorway is no core
+    ({2: 1}, 1, 2, 0)
+    """
+    seeds = np.asarray(seeds)
+    out, parent = seeds.copy(), {}
+    if params.split_core_m <= 0 or not seeds.any():
+        return out, parent
+    core = ndi.distance_transform_edt(~np.asarray(walls, bool)) > params.split_core_m / resolution
+    least = params.split_min_m2 / resolution ** 2
+    nxt = int(seeds.max())
+    for k, sl in enumerate(ndi.find_objects(seeds), start=1):
+        if sl is None:
+            continue
+        own = seeds[sl] == k
+        area = ndi.binary_fill_holes(ndi.binary_closing(own, _EIGHT, iterations=3))
+        parts, n = ndi.label(core[sl] & area, _EIGHT)
+        sizes = np.bincount(parts.ravel(), minlength=n + 1)
+        cores = [j for j in range(1, n + 1) if sizes[j] >= least]
+        if len(cores) < 2:
+            continue
+        sub = out[sl]
+        sub[own] = 0
+        sub[own & (parts == cores[0])] = k
+        for j in cores[1:]:
+            nxt += 1
+            sub[own & (parts == j)] = nxt
+            parent[nxt] = k
+    return out, parent
+
+
+def walls_apart(sm, params: RoomParams = RoomParams()) -> np.ndarray:
+    """(H, W) bool: the walls that hold rooms apart in :func:`split_cores`, in the input
+    image's frame: the occupied cells on wall lines of each lattice of ``sm.frame`` (the
+    likelihood's wall-like cells: :func:`~semmap_pp.target.likelihood.wall_like_axis`), and the
+    unknown stretches of at least ``split_unknown_m2`` or open to the map's edge (the building's
+    outside, a room never seen). Furniture, specks and the shadows behind them are no walls."""
+    frame, grid = sm.frame, sm.grid
+    c = frame.cells
+    occ = frame.classes == OCCUPIED
+    lines = [wall_like_axis(occ, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap, along)
+             for along in (1, 0)]
+    walls = np.asarray(frame.to_image(lines[0] | lines[1], fill=False), bool)
+    unknown, n = ndi.label(grid.classes == UNKNOWN)
+    if n:
+        sizes = np.bincount(unknown.ravel(), minlength=n + 1)
+        wide = sizes >= params.split_unknown_m2 / grid.resolution ** 2
+        wide[np.concatenate([unknown[0], unknown[-1], unknown[:, 0], unknown[:, -1]])] = True
+        wide[0] = False
+        walls |= wide[unknown]
+    return walls
 
 
 def _rooms_beyond_doors(near, passable, free, walls, n_regions, min_cells, door_cells, walled_min):
@@ -294,14 +403,15 @@ def _rooms_beyond_doors(near, passable, free, walls, n_regions, min_cells, door_
     return seeded, extra, passable
 
 
-def _numbered(flooded, n_regions, n_extra):
-    """The rooms numbered 1..k, the regions first (in order), then the rooms seen through their
-    door: ``(labels, [(room id, region or 0, cells), ...])``."""
-    present = np.bincount(flooded.ravel(), minlength=n_regions + n_extra + 1)
+def _numbered(flooded):
+    """The rooms numbered 1..k in the order of their labels in ``flooded`` (the regions first,
+    then the rooms seen through their door, then a region's further rooms walled apart):
+    ``(labels, [(room id, label, cells), ...])``."""
+    present = np.bincount(flooded.ravel())
     lut = np.zeros(present.size, np.int32)
     kept = [old for old in range(1, present.size) if present[old]]
     lut[kept] = np.arange(1, len(kept) + 1, dtype=np.int32)
-    return lut[flooded], [(int(lut[old]), old if old <= n_regions else 0, int(present[old])) for old in kept]
+    return lut[flooded], [(int(lut[old]), old, int(present[old])) for old in kept]
 
 
 def seen_share(mask: np.ndarray) -> float:
@@ -572,8 +682,9 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     seeds = lut[pieces.seeds()]
     fallback = lut[pieces.units]
     door_img = sm.frame.to_image(door_lat, fill=False)
+    apart = walls_apart(sm, params) if params.split_core_m > 0 else None
     labels, found = room_labels(floor, seeds, door_img, sm.grid.resolution, params,
-                                occupied=classes == OCCUPIED, fallback=fallback)
+                                occupied=classes == OCCUPIED, fallback=fallback, walls_apart=apart)
     units_of: dict[int, list[int]] = {}
     for uid, rid in region.items():
         units_of.setdefault(rid, []).append(uid)
@@ -606,5 +717,5 @@ def through_door_boxes(sm) -> list[tuple[int, int, int, int]]:
     return boxes
 
 
-__all__ = ["Room", "Rooms", "room_labels", "through_door_boxes", "room_joins", "rooms_of", "opening_share", "seen_share", "wide_opening",
+__all__ = ["Room", "Rooms", "room_labels", "split_cores", "walls_apart", "through_door_boxes", "room_joins", "rooms_of", "opening_share", "seen_share", "wide_opening",
            "geodesic_flood"]

@@ -300,11 +300,20 @@ def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
     text = (ROOT / "models" / "default.toml").read_text()
     assert load_model().rooms == RoomParams(**{k: getattr(load_model().rooms, k)
                                                for k in ("min_room_m2", "door_max_m", "open_share_min",
-                                                         "band_m", "walled_min", "wall_blur_m")})
+                                                         "band_m", "walled_min", "wall_blur_m",
+                                                         "split_core_m", "split_min_m2", "split_unknown_m2")})
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace("open_share_min = 0.6", "open_share_min = 1.5"))
     with pytest.raises(ModelError, match="rooms.open_share_min"):
         load_model(bad)
+    for old, new in (("split_core_m = 0.45", "split_core_m = -1"), ("split_min_m2 = 1.5", "split_min_m2 = 0"),
+                     ("split_unknown_m2 = 4.0", 'split_unknown_m2 = "big"')):
+        bad.write_text(text.replace(old, new))
+        with pytest.raises(ModelError, match=f"rooms.{old.split()[0]}"):
+            load_model(bad)
+    off = tmp_path / "off.toml"
+    off.write_text(text.replace("split_core_m = 0.45", "split_core_m = 0"))
+    assert load_model(off).rooms.split_core_m == 0.0
     without = tmp_path / "old.toml"
     start = text.index("[rooms]")
     end = text.index("\n[", start + 1)
@@ -666,19 +675,25 @@ def two_rooms_and_a_small_unit_across_their_wall(tmp_path: Path, gap: bool):
 def test_a_small_unit_across_a_wall_joins_the_rooms_only_where_the_floor_crosses_it(tmp_path, gap):
     """Passages join the small unit to both rooms' units. Where the wall holds no opening inside
     it, the rooms stay two and each takes the small unit's floor on its side of the wall; where
-    the floor crosses the unit through an opening, the three units are one room."""
+    the floor crosses the unit through an opening, the three units are one region, whose two
+    rooms the wall holds apart (split_cores; without that split, one room)."""
     from semmap_pp.semantic.regions import passage_pairs
+    from semmap_pp.semantic.rooms import rooms_of
     sm = two_rooms_and_a_small_unit_across_their_wall(tmp_path, gap)
     assert passage_pairs(sm) == [(1, 2), (2, 3)]
-    labels = sm.rooms.labels
-    upper, lower = np.unique(labels[12:60, 12:88]), np.unique(labels[66:116, 12:88])
-    assert len(upper) == 1 and len(lower) == 1 and upper[0] > 0 and lower[0] > 0
-    if gap:
-        assert upper[0] == lower[0]
-        assert [r.units for r in sm.rooms.rooms] == [(1, 2, 3)]
-    else:
-        assert upper[0] != lower[0]
-        assert sorted(r.units for r in sm.rooms.rooms) == [(1, 2), (3,)]
+    for rooms, one_region in ((sm.rooms, False), (rooms_of(sm, RoomParams(split_core_m=0.0)), True)):
+        labels = rooms.labels
+        upper, lower = np.unique(labels[12:60, 12:88]), np.unique(labels[66:116, 12:88])
+        assert len(upper) == 1 and len(lower) == 1 and upper[0] > 0 and lower[0] > 0
+        if gap and one_region:
+            assert upper[0] == lower[0]
+            assert [r.units for r in rooms.rooms] == [(1, 2, 3)]
+        elif gap:
+            assert upper[0] != lower[0]
+            assert [r.units for r in rooms.rooms] == [(1, 2, 3), (1, 2, 3)]
+        else:
+            assert upper[0] != lower[0]
+            assert sorted(r.units for r in rooms.rooms) == [(1, 2), (3,)]
 
 
 def test_a_small_unit_seeds_no_room_of_its_own(tmp_path):
@@ -704,3 +719,52 @@ def test_a_small_unit_seeds_no_room_of_its_own(tmp_path):
     room = sm.rooms.rooms[0].id
     assert (labels[12:58, 12:88] == room).all()              # the room ...
     assert (labels[66:96, 30:78] == room).all()              # ... and the floor beyond the window
+
+
+# --- rooms walled apart under one unit -----------------------------------------------------------
+
+def two_rooms_and_desks(tmp_path: Path) -> Path:
+    """A map_server map (0.05 m cells) of two rooms side by side, 3.5 x 3.5 m each, a 0.9 m door
+    in the wall between them (beside the far wall: the wall's 2.5 m are a wall line, longer than
+    ``object_max_extent``), and in the left room a row of three 0.6 m desks across it with 0.5 m
+    passages between them and the walls."""
+    img = np.full((80, 160), 205, np.uint8)
+    img[5:75, 5:155] = 254
+    img[3:5, 3:157] = img[75:77, 3:157] = img[3:77, 3:5] = img[3:77, 155:157] = 0
+    img[5:75, 79:81] = 0                   # the wall between the rooms
+    img[57:75, 79:81] = 254                # its door
+    for c0 in (15, 37, 59):                # the desks, 10-cell passages between them
+        img[34:46, c0:c0 + 12] = 0
+    Image.fromarray(img).save(tmp_path / "two.pgm")
+    (tmp_path / "two.yaml").write_text("image: two.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n"
+                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    return tmp_path / "two.yaml"
+
+
+def test_one_unit_over_two_rooms_walled_apart_seeds_two_rooms_but_desks_hold_none_apart(tmp_path):
+    """A region (one unit of W*) over two rooms with a door between them seeds a room in each
+    (split_cores); the map's walls hold them apart (walls_apart), the desks do not: the room
+    with desks across it keeps one core, where taking every non-free cell for a wall cuts it."""
+    from types import SimpleNamespace
+    from semmap_pp.run.inputs import load_inputs
+    from semmap_pp.semantic.rooms import split_cores, walls_apart
+    inputs = load_inputs(two_rooms_and_desks(tmp_path))
+    sm = SimpleNamespace(frame=inputs.frame, grid=inputs.grid)
+    walls = walls_apart(sm)
+    assert walls[20, 80] and walls[4, 40] and not walls[40, 20]        # walls, not the desks
+    assert not walls[65, 80]                                            # nor the door
+    free = inputs.grid.classes == FREE
+    seeds = np.where(free, 1, 0)
+    split, parent = split_cores(seeds, walls, 0.05, RoomParams())
+    assert parent == {2: 1}
+    assert split[20, 40] == 1 and split[60, 40] == 1 and split[40, 120] == 2    # above and below the desks
+    _, parent_all = split_cores(seeds, ~free, 0.05, RoomParams())
+    assert len(parent_all) == 2             # the desks taken for walls: three cores
+    assert split_cores(seeds, walls, 0.05, RoomParams(split_core_m=0.0))[1] == {}
+    assert split_cores(seeds, walls, 0.05, RoomParams(split_min_m2=50.0))[1] == {}   # cores too small
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.05, RoomParams(), walls_apart=walls)
+    assert [r[1] for r in rooms] == [1, 1]                              # two rooms of region 1
+    assert labels[40, 20] != labels[40, 120] and labels[65, 80] in (labels[40, 20], labels[40, 120])
+    assert (labels[free] > 0).all()
+    labels1, rooms1 = room_labels(free, seeds, np.zeros_like(free), 0.05, RoomParams())
+    assert len(rooms1) == 1
