@@ -135,6 +135,15 @@ def plan_graph(sm, doc: dict):
     return world_graph(sm, doc, regions, passages), regions
 
 
+def plan_pngs(sm, doc: dict, figures: tuple[str, ...] = PLAN_FIGURES, graph=None) -> dict[str, bytes]:
+    """The PNG bytes of the plan's figures named in ``figures`` (overlay.png, graph.png) of
+    ``doc`` (world.json's content); ``graph``: its :func:`plan_graph` graph, made here if needed."""
+    if "graph" in figures and graph is None:
+        graph = plan_graph(sm, doc)[0]
+    drawn = {"overlay": lambda: fig.overlay_png(sm, doc), "graph": lambda: fig.graph_png(sm, graph)}
+    return {name: drawn[name]() for name in PLAN_FIGURES if name in figures}
+
+
 def write_plan(out: Path, sm, doc: dict, figures: tuple[str, ...] = PLAN_FIGURES) -> tuple[list[Path], dict, dict]:
     """The files of one world, the plan a planner or a person uses: world.geojson, graph.graphml,
     regions.png, rooms.png, the types layer, the ROS 2 bag rosbag2/, and of overlay.png and
@@ -149,8 +158,7 @@ def write_plan(out: Path, sm, doc: dict, figures: tuple[str, ...] = PLAN_FIGURES
                write_labels_png(out / "rooms.png", sm.rooms.labels)]
     written.extend(write_types_layer(out, sm, doc))
     written.append(write_run_bag(out, sm, doc))
-    drawn = {"overlay": lambda: fig.overlay_png(sm, doc), "graph": lambda: fig.graph_png(sm, graph)}
-    pngs = {name: drawn[name]() for name in PLAN_FIGURES if name in figures}
+    pngs = plan_pngs(sm, doc, figures, graph)
     for name, data in pngs.items():
         atomic.write_bytes(out / f"{name}.png", data)
         written.append(out / f"{name}.png")
@@ -232,9 +240,7 @@ def posterior_pngs(run, worlds: list, graph: bool = False) -> dict[str, bytes]:
     world.json content without the posterior marginals, which it does not draw). ``semmap map``
     draws them in a forked process while it writes the other files (:mod:`semmap_pp.forked`)."""
     sm = run.semantic
-    drawn = {}
-    if graph:
-        drawn["graph"] = fig.graph_png(sm, plan_graph(sm, world_dict(sm))[0])
+    drawn = plan_pngs(sm, world_dict(sm), ("graph",)) if graph else {}
     images = SpreadImages(sm.frame, worlds)
     source = run.spread if run.spread is not None else run   # the draws the worlds come from
     mode = source.report.within_mode
@@ -258,10 +264,7 @@ def write_posterior(out_dir: str | os.PathLike, run, worlds: list, wstar: WstarF
     written, doc, pngs, regions = list(wstar.written), wstar.doc, dict(wstar.pngs), wstar.regions
     left = [name for name in PLAN_FIGURES if name not in pngs]
     pngs |= figures() if figures is not None else posterior_pngs(run, worlds)
-    if any(name not in pngs for name in left):      # drawn here, as write_plan would
-        graph, _ = plan_graph(run.semantic, doc)
-        pngs |= {name: fig.overlay_png(run.semantic, doc) if name == "overlay" else fig.graph_png(run.semantic, graph)
-                 for name in left if name not in pngs}
+    pngs |= plan_pngs(run.semantic, doc, tuple(name for name in left if name not in pngs))   # drawn here
     for name in left + ["posterior", "posterior_cells"]:
         atomic.write_bytes(out / f"{name}.png", pngs[name])
         written.append(out / f"{name}.png")
@@ -303,4 +306,4 @@ def write_all(out_dir: str | os.PathLike, run, worlds: list, *, rules_name: str,
 
 
 __all__ = ["N_SAMPLED_WORLDS", "WstarFiles", "write_all", "write_wstar", "write_posterior", "posterior_pngs",
-           "write_core", "posterior_doc", "write_plan", "plan_graph", "PLAN_FIGURES", "diagnostics_text"]
+           "write_core", "posterior_doc", "write_plan", "plan_graph", "plan_pngs", "PLAN_FIGURES", "diagnostics_text"]

@@ -54,7 +54,7 @@ from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
 from semmap_pp.semantic.regions import join_regions, passage_pairs, region_lut
-from semmap_pp.target.likelihood import wall_like_axis
+from semmap_pp.target.likelihood import wall_like
 
 _FOUR = ndi.generate_binary_structure(2, 1)
 _EIGHT = np.ones((3, 3), bool)
@@ -366,8 +366,13 @@ def _filled(mask: np.ndarray) -> np.ndarray:
     background, n = ndi.label(~mask, _FOUR)
     hole = np.ones(n + 1, bool)
     hole[0] = False
-    hole[np.concatenate([background[0], background[-1], background[:, 0], background[:, -1]])] = False
+    hole[_edge_labels(background)] = False
     return mask | hole[background]
+
+
+def _edge_labels(labels: np.ndarray) -> np.ndarray:
+    """The labels of ``labels``' first and last rows and columns."""
+    return np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
 
 
 #: The walls of :func:`walls_apart` of each frame a run's rooms were made on (its three semantic
@@ -389,20 +394,18 @@ def _walls_apart_of(sm, params: RoomParams) -> np.ndarray:
 def walls_apart(sm, params: RoomParams = RoomParams()) -> np.ndarray:
     """(H, W) bool: the walls that hold rooms apart in :func:`split_cores`, in the input
     image's frame: the occupied cells on wall lines of each lattice of ``sm.frame`` (the
-    likelihood's wall-like cells: :func:`~semmap_pp.target.likelihood.wall_like_axis`), and the
+    likelihood's wall-like cells: :func:`~semmap_pp.target.likelihood.wall_like`), and the
     unknown stretches of at least ``split_unknown_m2`` or open to the map's edge (the building's
     outside, a room never seen). Furniture, specks and the shadows behind them are no walls."""
     frame, grid = sm.frame, sm.grid
     c = frame.cells
-    occ = frame.classes == OCCUPIED
-    lines = [wall_like_axis(occ, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap, along)
-             for along in (1, 0)]
-    walls = np.asarray(frame.to_image(lines[0] | lines[1], fill=False), bool)
+    lines = wall_like(frame.classes == OCCUPIED, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap)
+    walls = np.asarray(frame.to_image(lines, fill=False), bool)
     unknown, n = ndi.label(grid.classes == UNKNOWN)
     if n:
         sizes = np.bincount(unknown.ravel(), minlength=n + 1)
         wide = sizes >= params.split_unknown_m2 / grid.resolution ** 2
-        wide[np.concatenate([unknown[0], unknown[-1], unknown[:, 0], unknown[:, -1]])] = True
+        wide[_edge_labels(unknown)] = True
         wide[0] = False
         walls |= wide[unknown]
     return walls
