@@ -53,3 +53,14 @@ def mask_box(mask) -> tuple[int, int, int, int] | None:
     if rows.size == 0:
         return None
     return int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1
+
+
+def border_cells(a: np.ndarray) -> np.ndarray:
+    """The first and last row and column of the 2-D array ``a``, each cell once.
+
+    >>> border_cells(np.arange(12).reshape(3, 4)).tolist()
+    [0, 1, 2, 3, 8, 9, 10, 11, 4, 7]
+    """
+    if a.shape[0] < 3 or a.shape[1] < 3:
+        return a.ravel()
+    return np.concatenate([a[0], a[-1], a[1:-1, 0], a[1:-1, -1]])

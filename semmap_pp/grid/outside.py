@@ -30,7 +30,7 @@ import dataclasses
 import numpy as np
 from scipy import ndimage
 
-from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, border_cells
 from semmap_pp.model import OUTSIDE_MODES, OutsideParams
 
 
@@ -56,18 +56,11 @@ def border_open_share(classes: np.ndarray, seal_radius: int, wall_distance=None)
     ``wall_distance``: :func:`_wall_distance` of ``classes`` when the caller has it.
     """
     c = np.asarray(classes)
-    free = _border(c) == FREE
+    free = border_cells(c) == FREE
     if not free.any():
         return 0.0                      # the common case (no free border cell): no distance transform
     d = _wall_distance(c) if wall_distance is None else wall_distance
-    return float(((_border(d[1:-1, 1:-1]) > seal_radius) & free).mean())
-
-
-def _border(a: np.ndarray) -> np.ndarray:
-    """The first and last row and column of ``a``, each cell once."""
-    if a.shape[0] < 3 or a.shape[1] < 3:
-        return a.ravel()
-    return np.concatenate([a[0], a[-1], a[1:-1, 0], a[1:-1, -1]])
+    return float(((border_cells(d[1:-1, 1:-1]) > seal_radius) & free).mean())
 
 
 def seal_radius(seal_gap_m: float, resolution: float) -> int:
@@ -108,7 +101,7 @@ def outside_free(classes: np.ndarray, seal_radius: int, wall_distance=None) -> n
     # distance transforms rather than dilations with a disc: linear in the cells at any radius
     d = _wall_distance(c) if wall_distance is None else wall_distance
     labels, _ = ndimage.label(d > r)
-    ring = _border(labels)
+    ring = border_cells(labels)
     core = np.isin(labels, np.unique(ring[ring > 0]))
     if not core.any():
         return np.zeros(c.shape, bool)
@@ -134,7 +127,7 @@ def clear_outside(grid, params: OutsideParams):
     if mode == "keep":
         return grid, None
     radius = seal_radius(seal_gap_m, grid.resolution)
-    if mode == "auto" and not (_border(grid.classes) == FREE).any():
+    if mode == "auto" and not (border_cells(grid.classes) == FREE).any():
         return grid, None               # the common case, before any distance transform
     dist = _wall_distance(grid.classes)
     share = border_open_share(grid.classes, radius, dist)

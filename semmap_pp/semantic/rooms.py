@@ -49,7 +49,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
-from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, border_cells, mask_box
 from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
@@ -282,8 +282,8 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
 def _free_box(free: np.ndarray, pad: int) -> tuple[slice, slice]:
     """The bounding box of ``free`` (not empty) with ``pad`` cells around it: a SLAM map's canvas
     is mostly unknown."""
-    rows, cols = np.flatnonzero(free.any(axis=1)), np.flatnonzero(free.any(axis=0))
-    return (slice(max(rows[0] - pad, 0), rows[-1] + 1 + pad), slice(max(cols[0] - pad, 0), cols[-1] + 1 + pad))
+    r0, c0, r1, c1 = mask_box(free)
+    return slice(max(r0 - pad, 0), r1 + pad), slice(max(c0 - pad, 0), c1 + pad)
 
 
 def _divided(flooded, seeds, walls, box, resolution, params, first, blocked):
@@ -366,13 +366,8 @@ def _filled(mask: np.ndarray) -> np.ndarray:
     background, n = ndi.label(~mask, _FOUR)
     hole = np.ones(n + 1, bool)
     hole[0] = False
-    hole[_edge_labels(background)] = False
+    hole[border_cells(background)] = False
     return mask | hole[background]
-
-
-def _edge_labels(labels: np.ndarray) -> np.ndarray:
-    """The labels of ``labels``' first and last rows and columns."""
-    return np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
 
 
 #: The walls of :func:`walls_apart` of each frame a run's rooms were made on (its three semantic
@@ -405,7 +400,7 @@ def walls_apart(sm, params: RoomParams = RoomParams()) -> np.ndarray:
     if n:
         sizes = np.bincount(unknown.ravel(), minlength=n + 1)
         wide = sizes >= params.split_unknown_m2 / grid.resolution ** 2
-        wide[_edge_labels(unknown)] = True
+        wide[border_cells(unknown)] = True
         wide[0] = False
         walls |= wide[unknown]
     return walls
