@@ -262,6 +262,7 @@ class RoomParams:
     band_m: float = 0.3
     walled_min: float = 0.2
     wall_blur_m: float = 0.05
+    wall_floor_max: float = 0.1
     split_core_m: float = 0.45
     split_min_m2: float = 1.5
     split_unknown_m2: float = 4.0
@@ -554,6 +555,7 @@ def load_model(path: str | Path | None = None) -> Model:
             band_m=r.optional("rooms.band_m", rooms.band_m, r.number, positive=True, hi=100.0),
             walled_min=r.optional("rooms.walled_min", rooms.walled_min, r.number, lo=0.0, hi=1.0),
             wall_blur_m=r.optional("rooms.wall_blur_m", rooms.wall_blur_m, r.number, lo=0.0, hi=10.0),
+            wall_floor_max=r.optional("rooms.wall_floor_max", rooms.wall_floor_max, r.number, lo=0.0, hi=1.0),
             split_core_m=r.optional("rooms.split_core_m", rooms.split_core_m, r.number, lo=0.0, hi=100.0),
             split_min_m2=r.optional("rooms.split_min_m2", rooms.split_min_m2, r.number, positive=True, hi=1e4),
             split_unknown_m2=r.optional("rooms.split_unknown_m2", rooms.split_unknown_m2, r.number,

@@ -670,17 +670,20 @@ def floor_cells(grid, params: RoomParams = RoomParams()) -> np.ndarray:
 
     The free cells, and the cells the map's thresholds call unknown whose occupancy lies nearer to
     the free cells' (their median) than to the map's own unknown value (the occupancy most unknown
-    cells hold), unless they lie within ``wall_blur_m`` of an occupied cell. A map saved with
-    graded values holds cells seen free a few times, lighter than its unknown grey but above
-    ``free_thresh``: room segmenters and hand-drawn room truth count them as floor. The grey
-    cells along a wall are its blur, not floor. A trinary map (only free, unknown and occupied
+    cells hold); within ``wall_blur_m`` of an occupied cell only those whose occupancy is at most
+    ``wall_floor_max`` as well. A map saved with graded values holds cells seen free a few times,
+    lighter than its unknown grey but above ``free_thresh``: room segmenters and hand-drawn room
+    truth count them as floor, along the walls too. A wall's blur, the grey between its black and
+    the floor's white, is darker: not floor. A trinary map (only free, unknown and occupied
     values) has no such cells.
 
     >>> from semmap_pp.grid.occupancy import OccupancyGrid
-    >>> g = OccupancyGrid(np.array([[0, 1, 1, 1, 1, 1, 2]], np.uint8),
-    ...                   np.array([[0.0, 0.05, 0.2, 0.2, 0.2, 0.05, 1.0]]), 0.05)
-    >>> floor_cells(g).astype(int).tolist()     # 0.05: nearer to free (0) than to unknown (0.2)
-    [[1, 1, 0, 0, 0, 0, 0]]
+    >>> g = OccupancyGrid(np.array([[2, 1, 0, 1, 1, 1, 1, 1, 1, 2]], np.uint8),
+    ...                   np.array([[1.0, 0.15, 0.0, 0.05, 0.4, 0.4, 0.4, 0.15, 0.05, 1.0]]), 0.05)
+    >>> floor_cells(g).astype(int).tolist()     # nearer to free (0) than to unknown (0.4); 0.15 by a wall: its blur
+    [[0, 0, 1, 1, 0, 0, 0, 1, 1, 0]]
+    >>> floor_cells(g, RoomParams(wall_floor_max=0.0)).astype(int).tolist()   # none beside a wall
+    [[0, 0, 1, 1, 0, 0, 0, 1, 0, 0]]
     """
     classes, occ = grid.classes, grid.occupancy
     free = classes == FREE
@@ -694,7 +697,8 @@ def floor_cells(grid, params: RoomParams = RoomParams()) -> np.ndarray:
     seen = unknown & (occ < (p_unknown + p_free) / 2)
     blur = int(round(params.wall_blur_m / grid.resolution))
     if blur > 0 and seen.any():
-        seen &= ~ndi.binary_dilation(classes == OCCUPIED, _EIGHT, iterations=blur)
+        seen &= (occ <= params.wall_floor_max) | ~ndi.binary_dilation(classes == OCCUPIED, _EIGHT,
+                                                                       iterations=blur)
     return free | seen
 
 

@@ -251,32 +251,40 @@ def test_seen_share_equals_the_hull_of_every_cells_corners(seed):
 # --- the floor: the cells rooms.png labels -----------------------------------------------------
 
 def graded_room():
-    """A room of free cells (p 0.004) in a map whose unknown grey is p 0.196, walls p 1 around
-    it; inside, a patch seen free only a few times (p 0.06), a patch nearer the grey (p 0.15),
-    and lighter cells along the wall (its blur)."""
+    """A room of free cells (p 0.004) in a map whose unknown grey is p 0.4 (the freiburg floors'),
+    walls p 1 around it; inside, a patch seen free only a few times (p 0.06), a patch nearer the
+    grey (p 0.25); along the west wall a darker grey (p 0.15: the wall's blur), along the east
+    wall cells seen free a few times (p 0.06)."""
     from semmap_pp.cells import OCCUPIED, UNKNOWN
     from semmap_pp.grid.occupancy import OccupancyGrid
     classes = np.full((30, 40), UNKNOWN, np.uint8)
-    occ = np.full((30, 40), 0.196, np.float32)
+    occ = np.full((30, 40), 0.4, np.float32)
     classes[5:25, 5:35], occ[5:25, 5:35] = OCCUPIED, 1.0
     classes[6:24, 6:34], occ[6:24, 6:34] = FREE, 0.004
     classes[10:14, 10:16], occ[10:14, 10:16] = UNKNOWN, 0.06       # seen free a few times
-    classes[16:20, 10:16], occ[16:20, 10:16] = UNKNOWN, 0.15       # nearer the unknown grey
-    classes[6:24, 6], occ[6:24, 6] = UNKNOWN, 0.06                 # the west wall's blur
+    classes[16:20, 10:16], occ[16:20, 10:16] = UNKNOWN, 0.25       # nearer the unknown grey
+    classes[6:24, 6], occ[6:24, 6] = UNKNOWN, 0.15                 # the west wall's blur
+    classes[6:24, 33], occ[6:24, 33] = UNKNOWN, 0.06               # seen free along the east wall
     occ[0, 0] = np.nan                                             # unknown by the image itself
     return OccupancyGrid(classes, occ, 0.05)
 
 
 def test_the_floor_holds_cells_seen_free_but_not_the_grey_nor_a_walls_blur():
     g = graded_room()
-    floor = floor_cells(g, RoomParams(wall_blur_m=0.05))
+    floor = floor_cells(g, RoomParams(wall_blur_m=0.05, wall_floor_max=0.1))
     assert floor[10:14, 10:16].all()                       # nearer to free than to the grey
     assert not floor[16:20, 10:16].any()                   # nearer to the grey
-    assert not floor[7:23, 6].any()                        # within a cell of the wall
-    assert (floor == ((g.classes == FREE) | (np.arange(40)[None] >= 10) & (np.arange(40)[None] < 16)
-                      & (np.arange(30)[:, None] >= 10) & (np.arange(30)[:, None] < 14))).all()
-    # without a blur margin the wall's light cells are floor too
+    assert not floor[7:23, 6].any()                        # beside the wall, darker than 0.1: its blur
+    assert floor[6:24, 33].all()                           # beside the wall, seen free
+    rows, cols = np.arange(30)[:, None], np.arange(40)[None]
+    patch = (rows >= 10) & (rows < 14) & (cols >= 10) & (cols < 16)
+    east = (rows >= 6) & (rows < 24) & (cols == 33)
+    assert (floor == ((g.classes == FREE) | patch | east)).all()
+    # without a blur margin the west wall's grey is floor too (nearer to free than to the grey)
     assert floor_cells(g, RoomParams(wall_blur_m=0.0))[7:23, 6].all()
+    # and with no grey at all allowed beside a wall, neither wall's cells are
+    none = floor_cells(g, RoomParams(wall_blur_m=0.05, wall_floor_max=0.0))
+    assert not none[7:23, 6].any() and not none[7:23, 33].any()
 
 
 def test_a_trinary_map_s_floor_is_its_free_cells():
@@ -294,6 +302,22 @@ def test_the_cells_seen_free_of_a_graded_slam_map_are_in_its_hand_drawn_rooms():
     gt = read_segmentation_truth(REAL_GT / "g4s_y2" / "gt.png", "rose2")
     assert added.sum() > 0.02 * (gt > 0).sum()
     assert (gt[added] > 0).mean() > 0.9
+
+
+@pytest.mark.parametrize("name", ["g4s_y2", "freiburg_building101", "freiburg_building52"])
+def test_beside_a_wall_the_hand_drawn_rooms_hold_the_light_greys_and_not_the_darker_ones(name):
+    """tools/floor_greys.py on the three graded real-gt floors: within a cell of a wall, the grey
+    cells inside the hand-drawn rooms are nearly all at most ``wall_floor_max`` (p 0.1), those
+    outside every room nearly all above it (a wall's blur); the model's value splits them."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("floor_greys", ROOT / "tools" / "floor_greys.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    band = tool.table(REAL_GT / name)["beside a wall (<= 1.5 cells)"]
+    k = tool.P_EDGES.index(load_model().rooms.wall_floor_max) + 1      # bins at most the value
+    inside, outside = np.array(band["in rooms"]), np.array(band["outside rooms"])
+    assert inside[:k].sum() > 0.99 * inside.sum() and inside.sum() > 1000
+    assert outside[k:].sum() > 0.9 * outside.sum()
 
 
 def test_the_model_file_rooms_table_is_read_and_checked(tmp_path):
