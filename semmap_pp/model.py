@@ -107,6 +107,7 @@ class WorldParams:
     exterior_fan_seen_max: float = 0.0
     exterior_outline_gap_m: float = 0.0
     exterior_outline_walls_max: float = 0.0
+    exterior_outline_trust_min: float = 0.0
     wall_min_cells: int = 1
     door_speck_m2: float = 0.0
     passage_gap_m: float = 0.0
@@ -189,6 +190,7 @@ class CellParams:
     exterior_fan_seen_max: float = 0.0
     exterior_outline_gap: int = 0
     exterior_outline_walls_max: float = 0.0
+    exterior_outline_trust_min: float = 0.0
     door_speck: int = 1
     passage_gap: int = 0
 
@@ -433,6 +435,7 @@ class Model:
             exterior_fan_seen_max=w.exterior_fan_seen_max,
             exterior_outline_gap=n(w.exterior_outline_gap_m),
             exterior_outline_walls_max=w.exterior_outline_walls_max,
+            exterior_outline_trust_min=w.exterior_outline_trust_min,
             door_speck=max(1, n(w.door_speck_m2, dims=2)), passage_gap=n(w.passage_gap_m))
 
 
@@ -614,7 +617,7 @@ def _world(r: _Reader) -> WorldParams:
     # the exterior test is optional (off when its keys are absent: model files written before it)
     exterior = {k: r.number(f"world.{k}", lo=0.0, hi=1.0) for k in
                 ("exterior_max_share", "exterior_seen_min", "exterior_fan_seen_max",
-                 "exterior_outline_walls_max")
+                 "exterior_outline_walls_max", "exterior_outline_trust_min")
                 if r.has(f"world.{k}")}
     world = WorldParams(**{k: r.number(f"world.{k}", positive=True) for k in (
         "wall_thickness_m", "object_max_extent_m", "door_min_m", "door_max_m", "min_unit_side_m",

@@ -106,6 +106,7 @@ def derive_world(frame, world: wm.World) -> Derived:
                                    outline_gap=c.exterior_outline_gap,
                                    object_extent=c.object_max_extent,
                                    outline_walls_max=c.exterior_outline_walls_max,
+                                   outline_trust=c.exterior_outline_trust_min,
                                    opened=opened[group], keep=2 if len(groups) == 1 else 1)
     inside = {int(s) for s in slots[~ext]}
     exterior = [Exterior(int(slots[i]), tuple(int(slots[j]) for j in np.flatnonzero(adj[i] & ~ext)))

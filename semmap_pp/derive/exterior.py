@@ -56,6 +56,14 @@ walls line less than ``outline_walls_max`` of its perimeter. A room glimpsed thr
 whose outer walls the laser never drew, lies outside the outline as well, but it opens onto the
 corridor or the room it was seen from: W* gives it a door.
 
+The hull of a lattice's enclosed units spans whatever lies between them (two wings of one
+direction joined through a wing of another; a wing's corridor running past a hall), and a fan there
+that rays leave through three sides escapes rule 2. Such a unit is exterior when more than half of
+it lies outside the outline and the outline holds the building: at least ``outline_trust`` of
+the cells of the enclosed units walled on three sides lie within it (:func:`outline_share`). A
+map explored in part, whose rooms seen only through their doors were never walled in by the
+laser, leaves them open to the outside; there the hull decides alone.
+
 The flag changes nothing in the posterior: exterior units keep their cells' states (and so the
 CPR); the outputs list them apart from the building's units (world.json ``exterior``), and
 labels.png, doors, adjacency and objects hold the building's units only (docs/model.md,
@@ -281,6 +289,24 @@ def building_outline(classes: np.ndarray, gap: int, object_extent: int = 0) -> n
     return ~swept[pad:pad + c.shape[0], pad:pad + c.shape[1]]
 
 
+def _outline_holds(inside, rects: np.ndarray, trust: float) -> bool:
+    """Whether the building's outline (``inside()``, made only when asked for) holds at least
+    ``trust`` of the cells of ``rects`` (the units enclosed by walls of their own); False when
+    ``trust`` is 0 (the test is off) or there are no such cells. A map whose walls close the
+    building (windows and exits bridged) holds nearly all of them; a map explored in part, whose
+    rooms the robot saw only through their doors, leaves most of them open to the outside.
+
+    >>> grid = np.zeros((6, 6), bool); grid[:3] = True
+    >>> rects = np.array([[0, 0, 3, 6], [3, 0, 6, 2]])          # 18 cells inside, 6 outside
+    >>> _outline_holds(lambda: grid, rects, 0.7), _outline_holds(lambda: grid, rects, 0.8)
+    (True, False)
+    """
+    if trust <= 0.0 or len(rects) == 0:
+        return False
+    mask = _union(rects, inside().shape)
+    return bool(mask.any() and inside()[mask].mean() >= trust)
+
+
 def _outside_the_outline(classes, rects, own, share, opened, taken, wall, outside_min,
                          fan_seen_max, walls_max, inside) -> list:
     """The ranking entries (as :func:`find_exterior` sorts them) of the units not in ``taken``
@@ -300,11 +326,48 @@ def _outside_the_outline(classes, rects, own, share, opened, taken, wall, outsid
     return out
 
 
+def enclosure(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
+              seen_min: float) -> tuple:
+    """How walls enclose each of ``rects`` (module docstring): ``(own, supported, shares,
+    enclosed, walled)``, the sides' shares without cover (list of (4,) arrays), the supported
+    units, the sides' shares with the supported units' cover ((n, 4)), the enclosed units, and the
+    units whose own walls enclose three sides (the footprint is the hull of the enclosed ones
+    among them; a corridor stub open at its end and held by its neighbour's cover may reach out of
+    the building)."""
+    own = [side_shares(classes, r, None, wall, seen_min, own=0) for r in rects]
+    supported = np.array([np.sort(sh)[2] >= max_share and perimeter_share(sh, r) >= max_share
+                          for sh, r in zip(own, rects)], dtype=bool).reshape(len(rects))
+    count = np.zeros(classes.shape, dtype=np.int32)
+    for r0, c0, r1, c1 in rects[supported]:
+        count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
+    shares = np.array([side_shares(classes, r, count, wall, seen_min, own=int(sup))
+                       for r, sup in zip(rects, supported)]).reshape(len(rects), 4)
+    enclosed = supported & (np.sort(shares, axis=1)[:, 2] >= max_share)
+    walled = np.array([np.sort(sh)[1] >= max_share for sh in own], dtype=bool).reshape(len(rects))
+    return own, supported, shares, enclosed, walled
+
+
+def outline_share(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
+                  seen_min: float, outline_gap: int, object_extent: int = 0) -> float | None:
+    """The share of the cells of the enclosed units walled on three sides (:func:`enclosure`)
+    that lie within :func:`building_outline`: how well the outline holds the building (the
+    ``outline_trust`` test of :func:`find_exterior`); None without such units or outline."""
+    rects = np.asarray(rects, dtype=np.int64).reshape(-1, 4)
+    if outline_gap <= 0 or len(rects) == 0:
+        return None
+    _own, _sup, _shares, enclosed, walled = enclosure(np.asarray(classes), rects, wall, max_share,
+                                                      seen_min)
+    mask = _union(rects[enclosed & walled], np.asarray(classes).shape)
+    if not mask.any():
+        return None
+    return float(building_outline(classes, outline_gap, object_extent)[mask].mean())
+
+
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
                   seen_min: float, outside_min: float = 0.5, across: int = 3,
                   fan_seen_max: float = 0.0, outline_gap: int = 0,
                   object_extent: int = 0, outline_walls_max: float = 0.0,
-                  opened=None, keep: int = 2) -> np.ndarray:
+                  opened=None, keep: int = 2, outline_trust: float = 0.0) -> np.ndarray:
     """(n,) bool: which of the units ``rects`` (n, 4) are exterior (module docstring); all False
     when ``max_share`` is 0 (the test is off). A unit is flagged when its second largest enclosed
     share is below ``max_share`` and more than ``outside_min`` of its area lies outside the
@@ -326,7 +389,11 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     units with a door or a passage to another unit) a unit the rules above keep is exterior when it
     has no door and no passage, more than ``outside_min`` of it lies outside the outline, less than
     ``fan_seen_max`` of its interior is seen and its own walls line less than
-    ``outline_walls_max`` of its perimeter (:func:`_outside_the_outline`). At least ``keep`` of
+    ``outline_walls_max`` of its perimeter (:func:`_outside_the_outline`). With ``outline_trust``
+    (0: off) a unit that rays leave through three sides is flagged when more than ``outside_min``
+    of it lies outside the outline, inside the hull or not, provided the outline holds the building:
+    at least ``outline_trust`` of the cells of the enclosed units walled on three sides lie within
+    it (:func:`_outline_holds`). At least ``keep`` of
     ``rects`` stay in the building (2: a world is never left without units; the units of one tile
     of a tiled lattice keep 1, the world's other tiles holding the rest)."""
     classes = np.asarray(classes)
@@ -335,26 +402,18 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     exterior = np.zeros(n, dtype=bool)
     if max_share <= 0.0 or n <= keep:
         return exterior
-    own = [side_shares(classes, r, None, wall, seen_min, own=0) for r in rects]
-    supported = np.array([np.sort(sh)[2] >= max_share and perimeter_share(sh, r) >= max_share
-                          for sh, r in zip(own, rects)])
-    count = np.zeros(classes.shape, dtype=np.int32)
-    for r0, c0, r1, c1 in rects[supported]:
-        count[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] += 1
-    shares = np.array([side_shares(classes, r, count, wall, seen_min, own=int(sup))
-                       for r, sup in zip(rects, supported)])
+    own, supported, shares, enclosed, walled = enclosure(classes, rects, wall, max_share, seen_min)
     ranked = np.sort(shares, axis=1)
     share = ranked[:, 2]                                   # the second largest share
-    enclosed = supported & (share >= max_share)
-    # the footprint: the enclosed units drawn on three sides by walls of their own (a corridor
-    # stub open at its end and held by its neighbour's cover may reach out of the building)
-    walled = np.array([np.sort(sh)[1] >= max_share for sh in own], dtype=bool)
     hull = _hull(rects[enclosed & walled])
     if hull is None:                # no unit enclosed: no footprint to be outside of
         return exterior
     enclosed_mask = _union(rects[enclosed], classes.shape)
     three_sides = rects[supported & (ranked[:, 1] >= max_share)]
     ortho = None                    # built when a unit first needs it
+    # the building's own outline, made once and only when a unit needs it
+    inside = functools.cache(lambda: building_outline(classes, outline_gap, object_extent))
+    trusted = outline_gap > 0 and _outline_holds(inside, rects[enclosed & walled], outline_trust)
     order = []
     for i in range(n):
         out = _outside_share(rects[i], hull) if share[i] < max_share else 0.0
@@ -366,10 +425,10 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
             out = _mask_outside_share(rects[i], ortho)
             if out <= outside_min and _seen_inside(classes, rects[i], wall) < fan_seen_max:
                 out = 1.0               # a fan in a notch: flagged first, as wholly outside
+        if trusted and out <= outside_min and share[i] < max_share:   # a fan the hull spans
+            out = _mask_outside_share(rects[i], inside())
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
-    # the building's own outline, made once and only when a unit needs it
-    inside = functools.cache(lambda: building_outline(classes, outline_gap, object_extent))
     if order and outline_gap > 0:   # what the building's walls enclose stays in
         order = [(key, i) for key, i in order if _mask_outside_share(rects[i], inside()) > outside_min]
     if outline_walls_max > 0.0 and outline_gap > 0 and opened is not None:
@@ -380,4 +439,5 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     return exterior
 
 
-__all__ = ["building_outline", "find_exterior", "ortho_hull", "perimeter_share", "side_shares"]
+__all__ = ["building_outline", "enclosure", "find_exterior", "ortho_hull", "outline_share",
+           "perimeter_share", "side_shares"]

@@ -135,3 +135,24 @@ def test_the_cli_refuses_a_bad_start_in_one_line_and_writes_nothing(tmp_path):
     assert not out.exists()
     r = semmap("map", "--resume", tmp_path, "--start", bad)
     assert r.returncode == 2 and "--start cannot be given with --resume" in r.stderr
+
+
+def test_tools_outline_trust_reads_a_run_s_world_back_and_gives_each_tile_s_share(run_dir, inputs,
+                                                                               capsys):
+    """tools/outline_trust.py: the share of the enclosed units' cells within the outline, per tile,
+    for a world.json read back as `semmap score` reads it; the same as derive.exterior's."""
+    import importlib.util
+    from semmap_pp.derive.exterior import outline_share
+    spec = importlib.util.spec_from_file_location("outline_trust", ROOT / "tools" / "outline_trust.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    assert tool.main([str(MAP), str(run_dir / "world.json"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    (shares,) = out["tiles"].values()
+    world = read_start_world(run_dir / "world.json", inputs.frame, inputs.grid, 64)
+    c = inputs.frame.cells
+    direct = outline_share(inputs.frame.classes, world.rects[wm.active_slots(world)], c.wall,
+                           c.exterior_max_share, c.exterior_seen_min, c.exterior_outline_gap,
+                           c.object_max_extent)
+    assert len(shares) == 1 and shares[0] == (None if direct is None else round(direct, 3))
+    assert direct is None or 0.0 <= direct <= 1.0

@@ -587,3 +587,50 @@ def test_the_drawn_plans_with_wings_at_other_angles():
         after = find_exterior(*args, **kw, outline_gap=c.exterior_outline_gap,
                               object_extent=c.object_max_extent)
         assert np.flatnonzero(after).tolist() == list(range(len(rects) - len(fans), len(rects))), name
+
+
+def l_building(open_west: bool = False):
+    """An L of two rooms (walls 2 cells): A along the top, B down the left side, a door between
+    them; a window in A's bottom wall with a fan of rays beyond it into the L's open corner, which
+    the convex hull of A and B spans. ``open_west``: B's outer wall has a 2.5 m gap (a glass front
+    the laser did not draw), so the outline lets the outside into B."""
+    c = np.full((240, 240), UNKNOWN, np.uint8)
+    c[0:62, 0:220] = OCCUPIED
+    c[2:60, 2:218] = FREE
+    c[60:220, 0:62] = OCCUPIED
+    c[62:218, 2:60] = FREE
+    c[60:62, 20:40] = FREE                                # the door between A and B
+    c[60:62, 120:140] = FREE                              # the window
+    for col in range(-20, 281, 4):                        # rays beyond it, spreading out
+        for t in np.linspace(0.0, 1.0, 300):
+            r, cc = int(round(61 + 150 * t)), int(round(130 + (col - 130) * t))
+            if not (0 <= r < 240 and 0 <= cc < 240) or c[r, cc] == OCCUPIED:
+                break                                     # a ray stops at a wall
+            c[r, cc] = FREE
+    if open_west:
+        c[100:150, 0:2] = FREE
+    return c
+
+
+L_A, L_B, L_FAN = (0, 0, 62, 220), (60, 0, 220, 62), (62, 100, 122, 160)
+
+
+def test_a_fan_the_hull_spans_is_exterior_when_the_outline_holds_the_building():
+    """The fan beyond the L's window opens on three sides and lies inside the hull of the two
+    enclosed rooms, so the hull keeps it; it lies outside the building's outline, and the outline
+    holds both rooms whole: with ``outline_trust`` it is exterior. Where the outline lets the
+    outside into room B (an undrawn glass front), it holds less than ``outline_trust`` of the
+    enclosed rooms' cells and the hull decides alone, as on a map explored in part."""
+    from semmap_pp.derive.exterior import building_outline, outline_share
+    rects = np.array([L_A, L_B, L_FAN])
+    kw = dict(wall=2, max_share=0.3, seen_min=0.1, outline_gap=30)
+    c = l_building()
+    assert not building_outline(c, 30)[100, 130] and building_outline(c, 30)[30, 100]
+    assert outline_share(c, rects, 2, 0.3, 0.1, 30) > 0.99    # the window's cells lie outside
+    assert not find_exterior(c, rects, **kw).any()
+    assert find_exterior(c, rects, **kw, outline_trust=0.8).tolist() == [False, False, True]
+    leaky = l_building(open_west=True)
+    share = outline_share(leaky, rects, 2, 0.3, 0.1, 30)
+    assert 0.3 < share < 0.8
+    assert not find_exterior(leaky, rects, **kw, outline_trust=0.8).any()
+    assert find_exterior(leaky, rects, **kw, outline_trust=share - 0.01).tolist() == [False, False, True]

@@ -83,14 +83,16 @@ def test_model_files_without_the_enclosure_keys_load_with_the_term_off(tmp_path)
 
 
 def test_model_files_without_the_exterior_keys_load_with_the_test_off(tmp_path):
-    old = without_lines(tmp_path, "exterior_", n=5).cells(0.05)
+    old = without_lines(tmp_path, "exterior_", n=6).cells(0.05)
     assert old.exterior_max_share == 0.0 and old.exterior_fan_seen_max == 0.0
     assert old.exterior_outline_gap == 0                      # no outline: the hull rules alone
     assert old.exterior_outline_walls_max == 0.0              # and no fan flagged by it alone
+    assert old.exterior_outline_trust_min == 0.0              # nor by it where the hull holds it
     now = load_model().cells(0.05)
     assert now.exterior_max_share == 0.3 and now.exterior_fan_seen_max == 0.7
     assert now.exterior_outline_gap == 50                     # 2.5 m
     assert now.exterior_outline_walls_max == 0.5
+    assert now.exterior_outline_trust_min == 0.8
 
 
 def test_model_files_without_walls_inside_max_get_the_default(tmp_path):
