@@ -289,22 +289,22 @@ def building_outline(classes: np.ndarray, gap: int, object_extent: int = 0) -> n
     return ~swept[pad:pad + c.shape[0], pad:pad + c.shape[1]]
 
 
-def _outline_holds(inside, rects: np.ndarray, trust: float) -> bool:
-    """Whether the building's outline (``inside()``, made only when asked for) holds at least
-    ``trust`` of the cells of ``rects`` (the units enclosed by walls of their own); False when
-    ``trust`` is 0 (the test is off) or there are no such cells. A map whose walls close the
-    building (windows and exits bridged) holds nearly all of them; a map explored in part, whose
-    rooms the robot saw only through their doors, leaves most of them open to the outside.
+def _held_share(inside, rects: np.ndarray) -> float | None:
+    """The share of the cells of ``rects`` (the units enclosed by walls of their own) that lie
+    within the building's outline (``inside()``, made only when asked for); None without such
+    cells. A map whose walls close the building (windows and exits bridged) holds nearly all of
+    them; a map explored in part, whose rooms the robot saw only through their doors, leaves most
+    of them open to the outside.
 
     >>> grid = np.zeros((6, 6), bool); grid[:3] = True
     >>> rects = np.array([[0, 0, 3, 6], [3, 0, 6, 2]])          # 18 cells inside, 6 outside
-    >>> _outline_holds(lambda: grid, rects, 0.7), _outline_holds(lambda: grid, rects, 0.8)
-    (True, False)
+    >>> _held_share(lambda: grid, rects), _held_share(lambda: grid, rects[:0])
+    (0.75, None)
     """
-    if trust <= 0.0 or len(rects) == 0:
-        return False
+    if len(rects) == 0:
+        return None
     mask = _union(rects, inside().shape)
-    return bool(mask.any() and inside()[mask].mean() >= trust)
+    return float(inside()[mask].mean()) if mask.any() else None
 
 
 def _outside_the_outline(classes, rects, own, share, opened, taken, wall, outside_min,
@@ -357,10 +357,8 @@ def outline_share(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
         return None
     _own, _sup, _shares, enclosed, walled = enclosure(np.asarray(classes), rects, wall, max_share,
                                                       seen_min)
-    mask = _union(rects[enclosed & walled], np.asarray(classes).shape)
-    if not mask.any():
-        return None
-    return float(building_outline(classes, outline_gap, object_extent)[mask].mean())
+    return _held_share(functools.cache(lambda: building_outline(classes, outline_gap, object_extent)),
+                       rects[enclosed & walled])
 
 
 def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: float,
@@ -393,7 +391,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     (0: off) a unit that rays leave through three sides is flagged when more than ``outside_min``
     of it lies outside the outline, inside the hull or not, provided the outline holds the building:
     at least ``outline_trust`` of the cells of the enclosed units walled on three sides lie within
-    it (:func:`_outline_holds`). At least ``keep`` of
+    it (:func:`_held_share`). At least ``keep`` of
     ``rects`` stay in the building (2: a world is never left without units; the units of one tile
     of a tiled lattice keep 1, the world's other tiles holding the rest)."""
     classes = np.asarray(classes)
@@ -411,9 +409,11 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     enclosed_mask = _union(rects[enclosed], classes.shape)
     three_sides = rects[supported & (ranked[:, 1] >= max_share)]
     ortho = None                    # built when a unit first needs it
-    # the building's own outline, made once and only when a unit needs it
+    # the building's own outline, made once and only when a unit needs it; so is the test of
+    # whether it holds the building
     inside = functools.cache(lambda: building_outline(classes, outline_gap, object_extent))
-    trusted = outline_gap > 0 and _outline_holds(inside, rects[enclosed & walled], outline_trust)
+    trusted = functools.cache(lambda: outline_gap > 0 and outline_trust > 0.0 and (
+        _held_share(inside, rects[enclosed & walled]) or 0.0) >= outline_trust)
     order = []
     for i in range(n):
         out = _outside_share(rects[i], hull) if share[i] < max_share else 0.0
@@ -425,7 +425,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
             out = _mask_outside_share(rects[i], ortho)
             if out <= outside_min and _seen_inside(classes, rects[i], wall) < fan_seen_max:
                 out = 1.0               # a fan in a notch: flagged first, as wholly outside
-        if trusted and out <= outside_min and share[i] < max_share:   # a fan the hull spans
+        if out <= outside_min and share[i] < max_share and trusted():   # a fan the hull spans
             out = _mask_outside_share(rects[i], inside())
         if out > outside_min:
             order.append(((-out, share[i], tuple(int(v) for v in rects[i])), i))
