@@ -32,9 +32,10 @@ Euclidean distance, in pixels, from its centre to the box of the unit's cell cen
   width is the smaller of the two.
 
 One compiled definition serves both users: the target's adjacency and opening evidence
-(:func:`cross_all` for a world, :func:`cross_update` after an edit: a pair is recomputed when it
-holds an edited unit or when an edited unit's old or new rectangle reaches its window, since a
-third unit's cover, or its distance, changes its openings) and :func:`cross_tile_openings` for ``derive_world``.
+(:func:`cross_all` for a world, :func:`cross_update` after an edit: a pair is recomputed only
+when an opening pixel's candidacy for it changed, which the cells an edit changed bound, or when
+it holds a unit new on its tile or one whose shorter side changed) and
+:func:`cross_tile_openings` for ``derive_world``.
 On a lattice of one direction there is no pair of tiles and nothing is computed
 (:data:`NO_CROSS`).
 """
@@ -248,23 +249,22 @@ def _distance2(aff, k, rects, u, x, y):  # pragma: no cover - compiled
     """Squared distance (pixels²) of image point ``(x, y)`` to the box of the cell centres of unit
     ``u`` (a row of ``rects``, read in place: no view of the row in the inner loops)."""
     r, c = _to_lattice(aff, k, x, y)
+    return _distance2_at(rects, u, r, c)
+
+
+@numba.njit(cache=True, nogil=True)
+def _distance2_at(rects, u, r, c):  # pragma: no cover - compiled
+    """:func:`_distance2` of the point at ``(r, c)`` on the unit's tile's lattice."""
     dr = max(rects[u, 0] - r, 0.0, r - (rects[u, 2] - 1))
     dc = max(rects[u, 1] - c, 0.0, c - (rects[u, 3] - 1))
     return dr * dr + dc * dc
 
 
 @numba.njit(cache=True, nogil=True)
-def _covers(aff, k, rects, u, x, y):  # pragma: no cover - compiled
-    """Whether tile ``k``'s lattice puts image point ``(x, y)`` inside the cells of unit ``u`` (a
-    row of ``rects``)."""
-    r, c = _to_lattice(aff, k, x, y)
+def _covers_at(rects, u, r, c):  # pragma: no cover - compiled
+    """Whether the point at ``(r, c)`` on the lattice of unit ``u``'s tile (a pixel's centre, by
+    :func:`_to_lattice`) lies inside the unit's cells (``u`` a row of ``rects``)."""
     return rects[u, 0] - 0.5 <= r < rects[u, 2] - 0.5 and rects[u, 1] - 0.5 <= c < rects[u, 3] - 0.5
-
-
-@numba.njit(cache=True, nogil=True)
-def _inside_at(boxes, u, x, y):  # pragma: no cover - compiled
-    """:func:`_inside` of row ``u`` of ``boxes`` (read in place)."""
-    return boxes[u, 0] <= x <= boxes[u, 2] and boxes[u, 1] <= y <= boxes[u, 3]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -292,51 +292,52 @@ def _rows(pix, g0, g1, y0, y1):  # pragma: no cover - compiled
 def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach):  # pragma: no cover
     """Which pixels ``[lo, hi)`` of a pair's group may be opening pixels: in the window ``box``,
     within ``reach`` of both units, covered by no third unit and nearer to each of the pair's
-    units than to any other unit of its tile (:func:`_nearer`; ties keep the pixel)."""
+    units than to any other unit of its tile (ties keep the pixel: a unit nearer to it than the
+    pair's unit of its tile makes it that unit's side of the boundary, not the pair's)."""
     cand = np.zeros(hi - lo, np.bool_)
-    third = np.empty(rects.shape[0], np.int64)      # the other units that may take a pixel:
-    tiles = np.empty(rects.shape[0], np.int64)      # cover it, or (on the pair's tiles) lie nearer;
-    boxes = np.empty((rects.shape[0], 4))           # the box of the pixels it may take
+    K, n_t = rects.shape[0], aff.shape[0]
+    third = np.empty((K, 8))          # the other units that may take a pixel (rows of _unit_row):
+    tiles = np.empty(K, np.int64)     # cover it, or (on the pair's tiles) lie nearer
     n = 0
-    for t in range(rects.shape[0]):
+    for t in range(K):
         if t != i and t != j and active[t]:
             k = tile_of(rects[t, 1], spans)
+            # it covers only pixels in its box grown by half a cell, and lies nearer than the
+            # pair's unit of its tile (within reach) only to pixels in its box grown by reach
             x0, y0, x1, y1 = _bbox(aff, k, rects[t], reach + 0.5 if k == ki or k == kj else 0.5)
             if x0 <= box[2] and box[0] <= x1 and y0 <= box[3] and box[1] <= y1:
-                third[n], tiles[n] = t, k
-                boxes[n, 0], boxes[n, 1], boxes[n, 2], boxes[n, 3] = x0, y0, x1, y1
+                _unit_row(rects, t, third[n])
+                tiles[n] = k
                 n += 1
     r2 = reach * reach
+    lat = np.empty((n_t, 2))          # the pixel on each tile's lattice
     for p in range(lo, hi):
         y, x = float(pix[p, 0]), float(pix[p, 1])
         if not _inside(box, x, y):
             continue
-        di, dj = _distance2(aff, ki, rects, i, x, y), _distance2(aff, kj, rects, j, x, y)
+        for k in range(n_t):
+            lat[k, 0], lat[k, 1] = _to_lattice(aff, k, x, y)
+        di = _distance2_at(rects, i, lat[ki, 0], lat[ki, 1])
+        dj = _distance2_at(rects, j, lat[kj, 0], lat[kj, 1])
         if di > r2 or dj > r2:
             continue
         free = True
         for m in range(n):
-            # it covers only pixels in its box grown by half a cell, and lies nearer than the
-            # pair's unit of its tile (within reach) only to pixels in its box grown by reach
-            if not _inside_at(boxes, m, x, y):
-                continue
-            t, k = third[m], tiles[m]
-            if _covers(aff, k, rects, t, x, y) or _nearer(aff, k, rects, t, x, y, ki, di, kj, dj):
+            k = tiles[m]
+            r, c = lat[k, 0], lat[k, 1]
+            # _covers_at, then _distance2_at, of the unit's row
+            if third[m, 4] <= r < third[m, 5] and third[m, 6] <= c < third[m, 7]:
                 free = False
                 break
+            if k == ki or k == kj:
+                dr = max(third[m, 0] - r, 0.0, r - third[m, 1])
+                dc = max(third[m, 2] - c, 0.0, c - third[m, 3])
+                d = dr * dr + dc * dc
+                if (k == ki and d < di) or (k == kj and d < dj):
+                    free = False
+                    break
         cand[p - lo] = free
     return cand
-
-
-@numba.njit(cache=True, nogil=True)
-def _nearer(aff, k, rects, t, x, y, ki, di, kj, dj):  # pragma: no cover - compiled
-    """Whether unit ``t`` (row of ``rects``) of tile ``k`` lies nearer to pixel ``(x, y)`` than the
-    pair's unit of the same tile (squared distances ``di``, ``dj`` of the pair's units, of tiles
-    ``ki``, ``kj``): the pixel is then that unit's side of the boundary, not the pair's."""
-    if k != ki and k != kj:
-        return False
-    d = _distance2(aff, k, rects, t, x, y)
-    return (k == ki and d < di) or (k == kj and d < dj)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -524,11 +525,18 @@ def cross_update(old_rects, old_active, rects, active, changed, adj, xo, touched
                  xd):  # pragma: no cover - compiled
     """After an edit of the slots ``changed`` (the old world ``old_*``, the new ``rects``,
     ``active``; ``adj``'s rows of the changed slots already cleared and their lattice adjacency
-    set): the pairs of two tiles that hold a changed slot, and those whose window a changed
-    slot's old or new rectangle reaches (a third unit's cover or distance changes their openings),
-    recomputed in ``adj`` and ``xo`` (see :func:`cross_all`); ``touched`` marks the slots of
-    every pair without a changed slot that changed. Equal to :func:`cross_all` of the new world
-    (tests/unit/test_tiles.py)."""
+    set; ``xo`` the old world's openings): the pairs of two tiles whose relation may have changed,
+    recomputed in ``adj`` and ``xo`` (see :func:`cross_all`). A pair's openings depend on the
+    world only through its units' shorter sides (the passage test) and its *candidate* pixels,
+    those :func:`_candidates` keeps; its adjacency on its openings and the overlap of its two
+    grown rectangles. So a pair is recomputed when a pixel's candidacy for it changed
+    (:func:`_candidacy_changes`), and, when it holds a changed slot, when one of its units is new
+    on its tile (born, or moved to another tile) or when a unit's shorter side changed and an
+    opening of the pair may be as wide as the passage test's bound (:func:`_kept`); every other
+    pair holding a changed slot keeps its openings and takes its adjacency from them and its
+    overlap (with ``xo`` empty, adjacency alone, every such pair is recomputed). ``touched`` marks
+    the slots of every pair without a changed slot whose relation changed. Equal to
+    :func:`cross_all` of the new world (tests/unit/test_tiles.py)."""
     aff, spans = xd[0], xd[1]
     if aff.shape[0] < 2:
         return
@@ -537,50 +545,114 @@ def cross_update(old_rects, old_active, rects, active, changed, adj, xo, touched
     is_changed = np.zeros(K, np.bool_)
     for s in changed:
         is_changed[s] = True
-        if xo.shape[0] > 0:
-            xo[s, :, :] = 0
-            xo[:, s, :] = 0
-    for s in changed:
-        if not active[s]:
-            continue
-        for t in range(K):
-            if t != s and active[t] and (not is_changed[t] or t > s) and \
-                    tile_of(rects[s, 1], spans) != tile_of(rects[t, 1], spans):
-                _set_pair(rects, active, s, t, box, adj, xo, xd)
-    _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo,
-                 touched, xd)
+    redo = _candidacy_changes(old_rects, old_active, rects, active, changed, box, xd)
+    keep = xo.shape[0] > 0
+    for p in range(K):
+        for q in range(p + 1, K):
+            edited = is_changed[p] or is_changed[q]
+            if not (edited or redo[p, q]):
+                continue
+            if not (active[p] and active[q]) or tile_of(rects[p, 1], spans) == tile_of(rects[q, 1], spans):
+                if keep and edited:      # no relation of two tiles now (the lattice's is in adj)
+                    xo[p, q, 0] = xo[q, p, 0] = xo[p, q, 1] = xo[q, p, 1] = 0
+                continue
+            if not edited:
+                if _set_pair(rects, active, p, q, box, adj, xo, xd):
+                    touched[p] = touched[q] = True
+            elif keep and not redo[p, q] and _kept(old_rects, old_active, rects, p, q, xd):
+                adj[p, q] = adj[q, p] = xo[p, q, 0] + xo[p, q, 1] > 0 or grown_overlap(
+                    aff, tile_of(rects[p, 1], spans), rects[p], tile_of(rects[q, 1], spans), rects[q],
+                    float(xd[5][0]))
+            else:
+                _set_pair(rects, active, p, q, box, adj, xo, xd)
 
 
 @numba.njit(cache=True, nogil=True)
-def _third_units(old_rects, old_active, rects, active, changed, is_changed, box, adj, xo, touched,
-                 xd):  # pragma: no cover - compiled
-    """:func:`cross_update`'s pairs without a changed slot: a pair's relation depends on the
-    other units only through which of its pixels they cover and how near they lie to them (a
-    unit nearer than the pair's unit of its tile takes the pixel), so the pairs recomputed are
-    those within reach (both units) of a zone-boundary pixel that a changed slot takes from them
-    on one side of the edit and not on the other (such a pixel lies within reach of the cells
-    that changed); ``touched`` marks the slots of those whose relation changed."""
+def _kept(old_rects, old_active, rects, p, q, xd):  # pragma: no cover - compiled
+    """Whether the pair ``(p, q)`` of two tiles, holding a changed slot and no pixel whose
+    candidacy for it changed, keeps its openings: both units were there on the same tiles, and
+    where a unit's shorter side changed no opening of the pair can reach the passage test's width
+    along its tile, before or after (:func:`_narrow`)."""
+    spans, ip = xd[1], xd[5]
+    kp, kq = tile_of(rects[p, 1], spans), tile_of(rects[q, 1], spans)
+    if not (old_active[p] and old_active[q]) or tile_of(old_rects[p, 1], spans) != kp or \
+            tile_of(old_rects[q, 1], spans) != kq:
+        return False
+    for u in (p, q):
+        before, after = _short(old_rects[u], ip[3]), _short(rects[u], ip[3])
+        if before != after and not _narrow(rects, p, q, u, min(before, after) - 2 * ip[3], xd):
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _narrow(rects, p, q, u, width, xd):  # pragma: no cover - compiled
+    """Whether every opening of units ``p`` and ``q`` (two tiles) is narrower than ``width`` along
+    the tile of ``u`` (``p`` or ``q``) as :func:`_run_width` measures it: the pixels of their
+    zones' group within reach of both, of which every opening is made, span less."""
+    aff, spans, pix, nbr, off, ip = xd
+    kp, kq = tile_of(rects[p, 1], spans), tile_of(rects[q, 1], spans)
+    ku = kp if u == p else kq
+    n_t = aff.shape[0]
+    g = min(kp, kq) * n_t + max(kp, kq)
+    reach = float(ip[1])
+    r2 = reach * reach
+    x0, y0, x1, y1 = _bbox(aff, kp, rects[p], reach)
+    u0, v0, u1, v1 = _bbox(aff, kq, rects[q], reach)
+    box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
+    lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
+    r0 = c0 = np.inf
+    r1 = c1 = -np.inf
+    for i in range(lo, hi):
+        y, x = float(pix[i, 0]), float(pix[i, 1])
+        if not _inside(box, x, y) or _distance2(aff, kp, rects, p, x, y) > r2 or \
+                _distance2(aff, kq, rects, q, x, y) > r2:
+            continue
+        r, c = _to_lattice(aff, ku, x, y)
+        r0, r1, c0, c1 = min(r0, r), max(r1, r), min(c0, c), max(c1, c)
+    return r0 > r1 or int(round(max(r1 - r0, c1 - c0))) + 1 < width
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidacy_changes(old_rects, old_active, rects, active, changed, box,
+                       xd):  # pragma: no cover - compiled
+    """(K, K) bool, upper triangle: the pairs of units of two tiles to which some zone-boundary
+    pixel is a candidate (:func:`_candidates`) in one of the old and new worlds and not in the
+    other (``box``: the new world's boxes of :func:`_boxes` grown by :func:`_reach`). A pixel's
+    candidacy depends on the other units only through which of them cover it and how near they
+    lie to it, so only pixels where a changed slot's cover or distance within reach changed are
+    looked at, and those lie within reach of the cells that changed: the strip of a unit's moved
+    sides, or the whole rectangle of a unit added, removed or moved to another tile.
+
+    At such a pixel of the boundary of tiles ``a`` and ``b`` a world's candidate pairs follow
+    :func:`_candidates`' rule: ``u`` of tile ``a`` and ``v`` of tile ``b`` both within reach, no
+    other unit covering the pixel, and no other unit of either one's tile nearer to it; so each is
+    a nearest unit of its tile (ties kept), and no third unit covers it. The unchanged units near
+    the pixel are read once, then each world's changed slots are added to them."""
     aff, spans, pix, nbr, off, ip = xd
     K, n_t = rects.shape[0], aff.shape[0]
     reach = float(ip[1])
-    redo = np.zeros((K, K), np.bool_)
-    any_redo = False
-    region = np.empty(4, np.int64)
-    # the unchanged units of each tile, in slot order
-    tile = np.full(K, -1, np.int64)
-    for u in range(K):
-        if active[u] and not is_changed[u]:
-            tile[u] = tile_of(rects[u, 1], spans)
-    by_tile = np.empty((n_t, K), np.int64)
-    count = np.zeros(n_t, np.int64)
-    for u in range(K):
-        if tile[u] >= 0:
-            by_tile[tile[u], count[tile[u]]] = u
-            count[tile[u]] += 1
-    far = reach * reach + 1.0          # a distance beyond reach: no relation there
     r2 = reach * reach
-    near_v = np.empty(K, np.int64)     # the units of tile b within reach of a pixel,
-    dist_v = np.empty(K)               # and their distances
+    far = r2 + 1.0                     # a distance beyond reach: no relation there
+    is_changed = np.zeros(K, np.bool_)
+    for s in changed:
+        is_changed[s] = True
+    redo = np.zeros((K, K), np.bool_)
+    mark = np.zeros((K, K), np.int8)   # a pixel's pairs: 1 in the old world, 2 in the new
+    seen = np.empty((K * K, 2), np.int64)
+    # the units a pixel is read against (rows of _unit_rows): the unchanged ones near the window,
+    # then the changed slots in the old and in the new world
+    rows = np.empty((3, K, 8))
+    ids = np.empty((3, K), np.int64)
+    tiles = np.empty((3, K), np.int64)
+    count = np.zeros(3, np.int64)
+    for w in range(2):
+        w_rects, w_active = (old_rects, old_active) if w == 0 else (rects, active)
+        _table(w_rects, changed, w_active, np.ones(K, np.bool_), None, spans, rows, ids, tiles, count, w + 1)
+    ends = np.empty((4, K), np.int64)  # nearest units of tiles a, b: the unchanged, then a world's
+    lat = np.empty((n_t, 2))           # the pixel on each tile's lattice
+    region = np.empty(4, np.int64)
+    window = np.empty(4)
     for s in changed:
         ko, kn = tile_of(old_rects[s, 1], spans), tile_of(rects[s, 1], spans)
         moved = old_active[s] and active[s] and ko == kn
@@ -594,9 +666,12 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                 if not on:
                     continue
                 region[:] = r
-            # a pixel's cover by s, or its distance to s within reach (s nearer than a pair's
-            # unit of its tile), changed only within reach of the region
+            # a pixel's cover by s, or its distance to s within reach, changed only within reach
+            # of the region
             x0, y0, x1, y1 = _bbox(aff, k, region, reach + 0.5)
+            window[0], window[1], window[2], window[3] = x0, y0, x1, y1
+            count[0] = 0
+            _table(rects, np.arange(K), active, ~is_changed, (box, window), spans, rows, ids, tiles, count, 0)
             for a in range(n_t):
                 for b in range(a + 1, n_t):
                     lo, hi = _rows(pix, off[a * n_t + b], off[a * n_t + b + 1], y0, y1)
@@ -604,62 +679,124 @@ def _third_units(old_rects, old_active, rects, active, changed, is_changed, box,
                         y, x = float(pix[p, 0]), float(pix[p, 1])
                         if x < x0 or x > x1:
                             continue
-                        was = old_active[s] and _covers(aff, ko, old_rects, s, x, y)
-                        now = active[s] and _covers(aff, kn, rects, s, x, y)
-                        d_was = min(_distance2(aff, ko, old_rects, s, x, y), far) if old_active[s] else far
-                        d_now = min(_distance2(aff, kn, rects, s, x, y), far) if active[s] else far
+                        for t in range(n_t):
+                            lat[t, 0], lat[t, 1] = _to_lattice(aff, t, x, y)
+                        was = old_active[s] and _covers_at(old_rects, s, lat[ko, 0], lat[ko, 1])
+                        now = active[s] and _covers_at(rects, s, lat[kn, 0], lat[kn, 1])
+                        d_was = min(_distance2_at(old_rects, s, lat[ko, 0], lat[ko, 1]), far) if old_active[s] else far
+                        d_now = min(_distance2_at(rects, s, lat[kn, 0], lat[kn, 1]), far) if active[s] else far
                         if was == now and d_was == d_now and (ko == kn or d_was == far):
                             continue
-                        any_redo |= _redo_at(aff, rects, box, by_tile, count, a, b, x, y,
-                                             (was, now), (d_was, d_now), (ko, kn), r2, near_v,
-                                             dist_v, redo)
-    if not any_redo:
-        return
-    for p in range(K):
-        for q in range(p + 1, K):
-            if redo[p, q] and _set_pair(rects, active, p, q, box, adj, xo, xd):
-                touched[p] = touched[q] = True
+                        n_seen = _pixel_pairs(rows, ids, tiles, count, lat, a, b, r2, ends, mark, seen)
+                        for m in range(n_seen):
+                            u, v = seen[m, 0], seen[m, 1]
+                            if mark[u, v] != 3:
+                                redo[min(u, v), max(u, v)] = True
+                            mark[u, v] = 0
+    return redo
 
 
 @numba.njit(cache=True, nogil=True)
-def _redo_at(aff, rects, box, by_tile, count, a, b, x, y, cover, dist, tiles, r2, near_v, dist_v,
-             redo):  # pragma: no cover - compiled
-    """Mark in ``redo`` the pairs of unchanged units of tiles ``a`` and ``b`` within reach
-    (``r2``, squared) of pixel ``(x, y)`` that an edited unit takes the pixel from on one side of
-    the edit and not on the other: ``cover``, ``dist`` and ``tiles`` are its cover of the pixel,
-    squared distance to it and tile before and after the edit. The pixel is a pair's only where no
-    third unit covers it or, on a tile of the pair, lies nearer to it than the pair's unit of that
-    tile. ``near_v``, ``dist_v``: room for the units of tile ``b`` within reach and their
-    distances. Returns whether any pair was marked."""
-    was, now = cover
-    d_was, d_now = dist
-    ko, kn = tiles
-    n_v = 0
-    for iv in range(count[b]):
-        v = by_tile[b, iv]
-        if _inside_at(box, v, x, y):
-            dv = _distance2(aff, b, rects, v, x, y)
-            if dv <= r2:
-                near_v[n_v], dist_v[n_v] = v, dv
-                n_v += 1
-    marked = False
-    if n_v == 0:
-        return marked
-    for iu in range(count[a]):
-        u = by_tile[a, iu]
-        if not _inside_at(box, u, x, y):
+def _pixel_pairs(rows, ids, tiles, count, lat, a, b, r2, ends, mark, seen):  # pragma: no cover
+    """Set 1 in ``mark[u, v]`` for every pair (``u`` of tile ``a``, ``v`` of tile ``b``) to which
+    a pixel of their zones' boundary (``lat``: its place on each tile's lattice) is a candidate
+    in the old world, and 2 in the new, appending to ``seen`` the pairs marked; returns how many.
+    The units it is read against are rows of :func:`_unit_row` (``ids``, ``tiles``, ``count``):
+    row 0 the unchanged units near it, rows 1 and 2 the changed slots in the old and in the new
+    world. :func:`_candidates`' rule: ``u`` and ``v`` both within reach (``r2``, squared), no other
+    unit covering the pixel, and no other unit of either one's tile nearer to it; so each is a
+    nearest unit of its tile (ties kept: ``ends``, rows 0 and 1 for the unchanged units, 2 and 3
+    for a world's), and no third unit covers it."""
+    n_seen = 0
+    base_a = base_b = np.inf
+    base_na = base_nb = base_covers = 0
+    base0 = base1 = -1
+    for w in range(3):       # the unchanged units, then each world's changed
+        if w == 0:
+            near_a = near_b = np.inf
+            na = nb = covers = 0
+            cover0 = cover1 = -1
+        else:
+            near_a, near_b, na, nb = base_a, base_b, base_na, base_nb
+            covers, cover0, cover1 = base_covers, base0, base1
+            for i in range(na):
+                ends[2, i] = ends[0, i]
+            for i in range(nb):
+                ends[3, i] = ends[1, i]
+        e = 0 if w == 0 else 2
+        for m in range(count[w]):
+            k = tiles[w, m]
+            r, c = lat[k, 0], lat[k, 1]
+            # _distance2_at and _covers_at of the unit's row
+            dr = max(rows[w, m, 0] - r, 0.0, r - rows[w, m, 1])
+            dc = max(rows[w, m, 2] - c, 0.0, c - rows[w, m, 3])
+            d = dr * dr + dc * dc
+            if d > r2:       # neither within reach nor covering the pixel
+                continue
+            u = ids[w, m]
+            if rows[w, m, 4] <= r < rows[w, m, 5] and rows[w, m, 6] <= c < rows[w, m, 7]:
+                if covers == 0:
+                    cover0 = u
+                elif covers == 1:
+                    cover1 = u
+                covers += 1
+            if k == a:
+                if d < near_a:
+                    near_a, na = d, 0
+                if d == near_a:
+                    ends[e, na] = u
+                    na += 1
+            elif k == b:
+                if d < near_b:
+                    near_b, nb = d, 0
+                if d == near_b:
+                    ends[e + 1, nb] = u
+                    nb += 1
+        if covers > 2:       # no candidate (the unchanged: in either world)
+            if w == 0:
+                break
             continue
-        du = _distance2(aff, a, rects, u, x, y)
-        if du > r2:
+        if w == 0:
+            base_a, base_b, base_na, base_nb = near_a, near_b, na, nb
+            base_covers, base0, base1 = covers, cover0, cover1
             continue
-        for m in range(n_v):
-            v, dv = near_v[m], dist_v[m]
-            before = was or (ko == a and d_was < du) or (ko == b and d_was < dv)
-            after = now or (kn == a and d_now < du) or (kn == b and d_now < dv)
-            if before != after:
-                redo[min(u, v), max(u, v)] = True
-                marked = True
-    return marked
+        for i in range(na):
+            u = ends[2, i]
+            for j in range(nb):
+                v = ends[3, j]
+                if (covers > 0 and cover0 != u and cover0 != v) or \
+                        (covers > 1 and cover1 != u and cover1 != v):
+                    continue     # a third unit covers the pixel
+                if mark[u, v] == 0:
+                    seen[n_seen, 0], seen[n_seen, 1] = u, v
+                    n_seen += 1
+                mark[u, v] |= w
+    return n_seen
+
+
+@numba.njit(cache=True, nogil=True)
+def _table(rects, units, active, eligible, near, spans, rows, ids, tiles, count,
+           w):  # pragma: no cover - compiled
+    """Append to row ``w`` of ``rows``, ``ids``, ``tiles`` (``count[w]`` long) the units of
+    ``units`` that are active and ``eligible`` (and, with ``near = (boxes, window)``, whose box
+    meets ``window``): each one's :func:`_unit_row`, slot and tile."""
+    for u in units:
+        if active[u] and eligible[u] and (near is None or _meets(near[0][u], near[1])):
+            m = count[w]
+            _unit_row(rects, u, rows[w, m])
+            ids[w, m], tiles[w, m] = u, tile_of(rects[u, 1], spans)
+            count[w] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _unit_row(rects, u, out):  # pragma: no cover - compiled
+    """Into ``out`` (8 floats): unit ``u``'s (a row of ``rects``) box of cell centres (first and
+    last row, first and last column) and its cells' box (rows from, to; columns from, to), as
+    :func:`_distance2_at` and :func:`_covers_at` read them."""
+    out[0], out[1] = float(rects[u, 0]), float(rects[u, 2] - 1)
+    out[2], out[3] = float(rects[u, 1]), float(rects[u, 3] - 1)
+    out[4], out[5] = rects[u, 0] - 0.5, rects[u, 2] - 0.5
+    out[6], out[7] = rects[u, 1] - 0.5, rects[u, 3] - 0.5
 
 
 @numba.njit(cache=True, nogil=True)

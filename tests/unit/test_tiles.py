@@ -338,6 +338,59 @@ def test_incremental_relations_across_tiles_equal_the_full_ones(knowledge):
     assert seen["cross"] > 50 and seen["flips"] > 20 and seen["third"] > 0, seen
 
 
+def _nudged(rng, rect):
+    """``rect`` with one or two of its sides moved by 1 to 4 cells (a SHRINK/DILATE-like edit)."""
+    r = list(rect)
+    for k in rng.choice(4, size=int(rng.integers(1, 3)), replace=False).tolist():
+        r[k] += int(rng.choice([-4, -3, -2, -1, 1, 2, 3, 4]))
+    return tuple(r)
+
+
+def test_relations_across_tiles_follow_small_moves_and_edits_of_two_slots():
+    """Pairs of two tiles keep their relation unless a pixel's candidacy, their overlap or a
+    shorter side changes (derive.crossing.cross_update): on the turn of :func:`corridor_map`,
+    edits that move one or two sides of a unit by a few cells (two units far from the corridor's
+    free pixels among them, related by their grown rectangles alone), and edits of two slots at once
+    (two units nudged, one nudged and one born or removed), leave the tracker's adjacency and
+    openings equal to a full evaluation after every edit, while pairs holding an edited unit
+    keep openings and change them."""
+    rng = np.random.default_rng(7)
+    f, post, base, _ = _corridor_tracker(False)
+    w = wm.add(wm.add(wm.empty(7), 0, base[0]), 1, base[1])
+    for s in range(2, 5):         # more units near the turn
+        w = wm.add(w, s, _near_the_boundary(rng, f, base))
+    for s, k, x in ((5, 0, 135.0), (6, 1, 165.0)):   # two far from the corridor's free pixels,
+        r, c = f.tile_image_to_lattice(k, np.array([x]), np.array([60.0]))   # facing across the turn
+        w = wm.add(w, s, (int(r[0]) - 10, int(c[0]) - 10, int(r[0]) + 10, int(c[0]) + 10))
+    tr = post.start(w)
+    seen = {"kept": 0, "changed": 0, "two": 0, "overlap": 0}
+    for _ in range(500):
+        old = tr.world
+        units = np.flatnonzero(old.active)
+        s = int(rng.choice(units))
+        nw = wm.replace(old, s, _nudged(rng, old.rects[s]))
+        changed = [s]
+        if rng.random() < 0.4:
+            t = int(rng.integers(old.capacity))
+            if t != s:
+                nw = (wm.replace(nw, t, _nudged(rng, old.rects[t])) if old.active[t] and rng.random() < 0.6
+                      else wm.remove(nw, t) if old.active[t] else wm.add(nw, t, _near_the_boundary(rng, f, base)))
+                changed.append(t)
+                seen["two"] += 1
+        prop = tr.propose(nw, changed)
+        adj, cross = post.relations(nw)
+        assert np.array_equal(prop.typing.adj, adj) and np.array_equal(prop.typing.cross, cross)
+        full = post.evaluate(nw).total
+        assert (prop.logp == full) if math.isinf(full) else prop.logp == pytest.approx(full, rel=1e-9, abs=0)
+        held = cross[s].sum(axis=1) > 0
+        seen["kept"] += int((held & (cross[s] == tr._typ.cross[s]).all(axis=1)).sum())
+        seen["changed"] += int(((cross[s] != tr._typ.cross[s]).any(axis=1)).sum())
+        seen["overlap"] += int(adj[5, 6] != tr._typ.adj[5, 6])
+        if math.isfinite(prop.logp) and rng.random() < 0.7:
+            tr.accept(prop)
+    assert seen["kept"] > 50 and seen["changed"] > 10 and seen["two"] > 100 and seen["overlap"] > 5, seen
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("knowledge", [False, True])
 def test_a_floor_skips_a_proposal_across_tiles_only_below_its_bound(knowledge, monkeypatch):
