@@ -263,6 +263,8 @@ class RoomParams:
     open_share_min: float = 0.6
     band_m: float = 0.3
     walled_min: float = 0.2
+    exit_fan_exterior_min: float = 0.5
+    exit_fan_walled_max: float = 0.1
     wall_blur_m: float = 0.05
     wall_floor_max: float = 0.1
     split_core_m: float = 0.45
@@ -557,6 +559,10 @@ def load_model(path: str | Path | None = None) -> Model:
                                       lo=0.0, hi=1.0),
             band_m=r.optional("rooms.band_m", rooms.band_m, r.number, positive=True, hi=100.0),
             walled_min=r.optional("rooms.walled_min", rooms.walled_min, r.number, lo=0.0, hi=1.0),
+            exit_fan_exterior_min=r.optional("rooms.exit_fan_exterior_min", rooms.exit_fan_exterior_min, r.number,
+                                        lo=0.0, hi=1.0),
+            exit_fan_walled_max=r.optional("rooms.exit_fan_walled_max",
+                                               rooms.exit_fan_walled_max, r.number, lo=0.0, hi=1.0),
             wall_blur_m=r.optional("rooms.wall_blur_m", rooms.wall_blur_m, r.number, lo=0.0, hi=10.0),
             wall_floor_max=r.optional("rooms.wall_floor_max", rooms.wall_floor_max, r.number, lo=0.0, hi=1.0),
             split_core_m=r.optional("rooms.split_core_m", rooms.split_core_m, r.number, lo=0.0, hi=100.0),

@@ -29,7 +29,11 @@ free cells, and on a map saved with graded values the cells seen free a few time
    (a SLAM map blurs its walls into a margin of cells neither free nor occupied). That is a room
    the robot saw through its door, or entered without W* giving it a unit, flagged
    ``seen_through_door`` in world.json's ``rooms``. Without such walls it is rays into the open
-   through a window or an exit: no room.
+   through a window or an exit: no room. A piece that meets the rooms through a wider opening is
+   the open side of the room in front and joins it in step 3, unless more than
+   ``exit_fan_exterior_min`` of it lies in W*'s exterior units and less than
+   ``exit_fan_walled_max`` of the non-free cells around it are walls: rays into the open through
+   an exit, no room. A unit too small for a room keeps no room in rays into the open.
 3. **Every other free cell** (rays through a door, an alcove, a strip along a ragged wall) joins
    the room it is nearest to along the free floor, never across a door (a breadth-first
    geodesic flood, 8-connected but never cutting the corner between two wall or door cells: a
@@ -200,7 +204,8 @@ def _walled_share(piece: np.ndarray, free: np.ndarray, walls: np.ndarray | None)
 def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resolution: float,
                 params: RoomParams = RoomParams(), occupied: np.ndarray | None = None,
                 fallback: np.ndarray | None = None,
-                walls_apart: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+                walls_apart: np.ndarray | None = None,
+                outside: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
     """Rooms of the free cells (see the module docstring).
 
     Parameters
@@ -222,6 +227,9 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     walls_apart : (H, W) bool, optional
         The walls that hold rooms apart (:func:`walls_apart`): a room per core of each region
         (:func:`split_cores`); None: one per region.
+    outside : (H, W) bool, optional
+        The cells of W*'s exterior units, for the rays into the open through an exit (step 2:
+        ``exit_fan_exterior_min``); None: every piece beyond a wide opening is flooded.
 
     Returns
     -------
@@ -260,23 +268,33 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
     passable = free & ~doors
     seeds = np.where(passable, seeds, 0).astype(np.int32)
     n_regions = int(seeds.max(initial=0))
-    min_cells = params.min_room_m2 / resolution ** 2
-    door_cells = params.door_max_m / resolution
 
     # the strips along each interior (its wall band, a ragged wall's margin) go to it first, so that
     # what is left falls apart into the pieces beyond the walls
     near = geodesic_flood(seeds, passable, max(1, int(round(params.band_m / resolution))), blocked)
-    seeded, n_extra, passable = _rooms_beyond_doors(near, passable, free, walls, n_regions,
-                                                    min_cells, door_cells, params.walled_min)
-    flooded = geodesic_flood(seeded, passable, walls=blocked)
-    if fallback is not None:
-        fallback = np.asarray(fallback)[box]
-        flooded = np.where((flooded == 0) & (fallback > 0) & free & ~doors, fallback, flooded)
+    flooded, n_extra = _pieces_flooded(near, passable, free, walls, blocked, n_regions, resolution, params,
+                                       None if outside is None else np.asarray(outside, bool)[box],
+                                       None if fallback is None else np.asarray(fallback)[box])
     # a region's rooms walled apart: its floor shared among its cores
     flooded, parent = _divided(flooded, seeds, walls_apart, box, resolution, params, n_regions + n_extra, blocked)
     labels, found = _numbered(flooded)
     full[box] = labels
     return full, [(k, parent.get(old, old if old <= n_regions else 0), n) for k, old, n in found]
+
+
+def _pieces_flooded(near, passable, free, walls, blocked, n_regions, resolution, params, outside, fallback):
+    """Steps 2 and 3 of the module docstring on the seeds grown by their strips (``near``):
+    ``(flooded, rooms seen through their door)``; ``fallback`` (cells that keep a unit's region
+    where no room reaches them) never in rays into the open."""
+    seeded, n_extra, passable = _rooms_beyond_doors(
+        near, passable, free, walls, n_regions, params.min_room_m2 / resolution ** 2,
+        params.door_max_m / resolution, params.walled_min,
+        outside if params.exit_fan_exterior_min > 0 else None, params.exit_fan_exterior_min,
+        params.exit_fan_walled_max)
+    flooded = geodesic_flood(seeded, passable, walls=blocked)
+    if fallback is not None:      # not in rays into the open (out of passable): those are no room
+        flooded = np.where((flooded == 0) & (fallback > 0) & passable, fallback, flooded)
+    return flooded, n_extra
 
 
 def _free_box(free: np.ndarray, pad: int) -> tuple[slice, slice]:
@@ -406,10 +424,13 @@ def walls_apart(sm, params: RoomParams = RoomParams()) -> np.ndarray:
     return walls
 
 
-def _rooms_beyond_doors(near, passable, free, walls, n_regions, min_cells, door_cells, walled_min):
+def _rooms_beyond_doors(near, passable, free, walls, n_regions, min_cells, door_cells, walled_min,
+                        outside=None, outside_min=0.0, open_walled_max=0.0):
     """Step 2 of the module docstring on the seeds grown by their strips (``near``): ``(seeded,
     rooms added, passable)``, each piece of the floor left that is a room seen through its door
-    labelled ``n_regions + 1, ...``, and the pieces of rays into the open taken out of ``passable``."""
+    labelled ``n_regions + 1, ...``, and the pieces of rays into the open taken out of ``passable``
+    (through a window; through an exit, ``outside``: the cells of W*'s exterior units, more than
+    ``outside_min`` of the piece in them and fewer walls around it than ``open_walled_max``)."""
     pieces, n = ndi.label(passable & (near == 0), _EIGHT)
     seeded = near.copy()
     extra = 0
@@ -425,6 +446,10 @@ def _rooms_beyond_doors(near, passable, free, walls, n_regions, min_cells, door_
         contact = _contact_widths(piece, near[sl])
         contact[0] = 0
         if contact.max(initial=0) > door_cells:
+            # rays into the open through an exit, where W* has an exterior unit: no room either
+            if outside is not None and (piece & outside[sl]).sum() > outside_min * sizes[k] and \
+                    _walled_share(piece, free[sl], None if walls is None else walls[sl]) < open_walled_max:
+                passable = passable & (pieces != k)
             continue
         if _walled_share(piece, free[sl], None if walls is None else walls[sl]) >= walled_min:
             extra += 1
@@ -719,7 +744,8 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     door_img = sm.frame.to_image(door_lat, fill=False)
     apart = _walls_apart_of(sm, params) if params.split_core_m > 0 else None
     labels, found = room_labels(floor, seeds, door_img, sm.grid.resolution, params,
-                                occupied=classes == OCCUPIED, fallback=fallback, walls_apart=apart)
+                                occupied=classes == OCCUPIED, fallback=fallback, walls_apart=apart,
+                                outside=_exterior_cells(sm))
     units_of: dict[int, list[int]] = {}
     for uid, rid in region.items():
         units_of.setdefault(rid, []).append(uid)
@@ -732,6 +758,15 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
                           bool(units) and set(units) <= alone))
     rooms = tuple(rooms)
     return Rooms(labels, rooms)
+
+
+def _exterior_cells(sm) -> np.ndarray:
+    """(H, W) bool: the image cells of W*'s exterior units (their rectangles, on their tiles)."""
+    lat = np.zeros(sm.frame.shape, bool)
+    for e in sm.derived.exterior:
+        r0, c0, r1, c1 = (max(int(v), 0) for v in sm.world.rects[e.slot])
+        lat[r0:r1, c0:c1] = True
+    return sm.frame.to_image(lat, fill=False)
 
 
 def through_door_boxes(sm) -> list[tuple[int, int, int, int]]:

@@ -148,6 +148,26 @@ def test_rays_into_the_open_through_a_window_are_no_room():
     assert (labels[13:32, 10:30] == 0).all()                # not flooded into the corridor either
 
 
+def test_a_small_unit_in_rays_into_the_open_keeps_no_room_there():
+    """A unit too small for a room keeps its cells' room where no room reaches them (``fallback``:
+    a closet behind its door), but not in rays into the open: those are no room."""
+    free, seeds = corridor_and_room(door_width=8)
+    free, seeds = (np.pad(a, ((0, 6), (0, 0))) for a in (free, seeds))
+    open_air = np.zeros_like(free)
+    open_air[10:12, 14:26] = True
+    open_air[10:12, 16:24] = False
+    fallback = np.zeros_like(seeds)
+    fallback[20:24, 15:19] = 2                       # a small unit's interior out in the fan
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=open_air, fallback=fallback)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[13:32, 10:30] == 0).all()
+    closet = np.zeros_like(free)                     # the same piece walled all round: a room
+    closet[10:12, :] = closet[32, :] = closet[:, 9] = closet[:, 30] = True
+    closet[10:12, 16:24] = False
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=closet, fallback=fallback)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
+
+
 def fan_beyond_a_door(far_wall: bool):
     """A corridor (rows 0..9) with a wall (rows 10..11) and a 0.8 m door, and beyond the door a fan
     of rays widening into a room the robot never entered: its sides unseen (unknown cells), and,
@@ -187,6 +207,55 @@ def test_a_fan_into_a_room_seen_through_its_door_is_a_room_and_one_into_the_open
     labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
     assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
     assert (labels[13:33] == 0).all()
+
+
+def fan_beyond_an_exit(far_wall: bool):
+    """:func:`fan_beyond_a_door` through an exit 2.4 m wide (wider than a double door): the rays
+    beyond it meet the corridor's strip through an opening wider than ``door_max_m``."""
+    free, seeds, occupied = fan_beyond_a_door(far_wall)
+    occupied[10:12, 18:42] = False
+    free[10:12, 18:42] = True
+    for r in range(12, 33):
+        half = 12 + (r - 12) // 2
+        free[r, 30 - half:30 + half] = True
+    return free, seeds, occupied
+
+
+def test_rays_into_the_open_through_an_exit_where_w_star_has_an_exterior_unit_are_no_room():
+    """A fan beyond an opening wider than a door joins the room in front (the open side of one
+    space), unless W* put an exterior unit over most of it (``exit_fan_exterior_min``) and hardly any
+    walls lie around it (``exit_fan_walled_max``): rays into the open through an exit. A fan
+    into a room never entered, part of its far wall seen, stays the room's (the walls around it
+    are fewer than a room of its own needs, ``walled_min``, but more than the open's), and so
+    does one the exterior unit covers less, and an open-plan bay walled all round."""
+    free, seeds, occupied = fan_beyond_an_exit(far_wall=False)
+    blur = RoomParams(wall_blur_m=0.1)
+    fan = np.zeros_like(free)
+    fan[14:33] = free[14:33]
+    outside = np.zeros_like(free)
+    outside[16:40, :] = True                         # the exterior unit: most of the fan
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)] and (labels[fan] == 1).all()
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied,
+                                outside=outside)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)] and (labels[fan] == 0).all()
+    assert (labels[0:10] == 1).all()
+    off = RoomParams(wall_blur_m=0.1, exit_fan_exterior_min=0.0)
+    labels, _ = room_labels(free, seeds, np.zeros_like(free), 0.1, off, occupied=occupied, outside=outside)
+    assert (labels[fan] == 1).all()                  # the rule off: flooded as before
+    little = np.zeros_like(free)
+    little[30:40, :] = True                          # an exterior unit over its far end only
+    labels, _ = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied, outside=little)
+    assert (labels[fan] == 1).all()
+    for half, kept in ((1, False), (5, True)):       # 2 or 10 cells of its far wall seen
+        free, seeds, occupied = fan_beyond_an_exit(far_wall=False)
+        occupied[34, 30 - half:30 + half] = True
+        labels, _ = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied, outside=outside)
+        assert (labels[fan] == 1).all() if kept else (labels[fan] == 0).all()
+    free, seeds, occupied = fan_beyond_an_exit(far_wall=True)
+    occupied[12:34, 5] = occupied[12:34, 54] = True  # walls on its sides too: an open-plan bay
+    labels, _ = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied, outside=outside)
+    assert (labels[fan] == 1).all()
 
 
 def test_an_opening_wider_than_a_door_joins_the_unit_in_front():
