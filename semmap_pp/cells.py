@@ -55,6 +55,19 @@ def mask_box(mask) -> tuple[int, int, int, int] | None:
     return int(rows[0]), int(cols[0]), int(rows[-1]) + 1, int(cols[-1]) + 1
 
 
+def rects_mask(rects, shape) -> np.ndarray:
+    """(H, W) bool: the cells of the rectangles ``rects`` (n, 4; ``(r0, c0, r1, c1)``, ends
+    excluded, negative sides clipped at 0) on a lattice of ``shape``.
+
+    >>> rects_mask([(0, 1, 2, 3), (-1, -1, 1, 1)], (3, 3)).astype(int).tolist()
+    [[1, 1, 1], [0, 1, 1], [0, 0, 0]]
+    """
+    m = np.zeros(shape, dtype=bool)
+    for r0, c0, r1, c1 in np.asarray(rects, dtype=np.int64).reshape(-1, 4):
+        m[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    return m
+
+
 def border_cells(a: np.ndarray) -> np.ndarray:
     """The first and last row and column of the 2-D array ``a``, each cell once.
 

@@ -341,6 +341,20 @@ def _candidates(rects, active, i, j, ki, kj, pix, lo, hi, box, aff, spans, reach
 
 
 @numba.njit(cache=True, nogil=True)
+def _pair_window(rects, i, j, ki, kj, pix, off, aff, reach):  # pragma: no cover - compiled
+    """``(box, lo, hi)``: the image box where units ``i`` and ``j`` (tiles ``ki``, ``kj``) both
+    reach (their boxes grown by ``reach``, intersected) and the index range of the pixels of
+    their zones' group whose rows lie in it (:func:`_rows`)."""
+    n_t = aff.shape[0]
+    g = min(ki, kj) * n_t + max(ki, kj)
+    x0, y0, x1, y1 = _bbox(aff, ki, rects[i], reach)
+    u0, v0, u1, v1 = _bbox(aff, kj, rects[j], reach)
+    box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
+    lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
+    return box, lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
 def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # pragma: no cover
     """``(adjacent by the grown rectangles, labels, widths, lo)``: the openings (module
     docstring) of units ``i`` and ``j`` of two tiles, as component labels 1..n of the pixels
@@ -349,14 +363,9 @@ def pair_components(rects, active, i, j, pix, nbr, off, aff, spans, ip):  # prag
     :func:`_run_width`); components shorter than ``door_min`` are left out, and so are those
     that would be doors without a jamb at each end (:func:`_jambs`)."""
     ki, kj = tile_of(rects[i, 1], spans), tile_of(rects[j, 1], spans)
-    n_t = aff.shape[0]
-    g = min(ki, kj) * n_t + max(ki, kj)
     adjacent = grown_overlap(aff, ki, rects[i], kj, rects[j], float(ip[0]))
     reach = float(ip[1])
-    x0, y0, x1, y1 = _bbox(aff, ki, rects[i], reach)
-    u0, v0, u1, v1 = _bbox(aff, kj, rects[j], reach)
-    box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
-    lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
+    box, lo, hi = _pair_window(rects, i, j, ki, kj, pix, off, aff, reach)
     labels = np.zeros(hi - lo, np.int64)
     widths = np.zeros((hi - lo, 2), np.int64)
     if hi == lo:
@@ -593,14 +602,9 @@ def _narrow(rects, p, q, u, width, xd):  # pragma: no cover - compiled
     aff, spans, pix, nbr, off, ip = xd
     kp, kq = tile_of(rects[p, 1], spans), tile_of(rects[q, 1], spans)
     ku = kp if u == p else kq
-    n_t = aff.shape[0]
-    g = min(kp, kq) * n_t + max(kp, kq)
     reach = float(ip[1])
     r2 = reach * reach
-    x0, y0, x1, y1 = _bbox(aff, kp, rects[p], reach)
-    u0, v0, u1, v1 = _bbox(aff, kq, rects[q], reach)
-    box = np.array([max(x0, u0), max(y0, v0), min(x1, u1), min(y1, v1)])
-    lo, hi = _rows(pix, off[g], off[g + 1], box[1], box[3])
+    box, lo, hi = _pair_window(rects, p, q, kp, kq, pix, off, aff, reach)
     r0 = c0 = np.inf
     r1 = c1 = -np.inf
     for i in range(lo, hi):

@@ -92,7 +92,7 @@ import functools
 import numpy as np
 from scipy import ndimage
 
-from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, rects_mask
 
 
 def _side_bands(rect, wall: int, beyond: int | None = None) -> tuple:
@@ -168,7 +168,7 @@ def ortho_hull(rects: np.ndarray, shape) -> np.ndarray:
     >>> int(ortho_hull(U, (6, 6))[0, 3])
     1
     """
-    m = _union(rects, shape)
+    m = rects_mask(rects, shape)
     while True:
         new = m
         for axis in (0, 1):
@@ -178,14 +178,6 @@ def ortho_hull(rects: np.ndarray, shape) -> np.ndarray:
         if np.array_equal(new, m):
             return m
         m = new
-
-
-def _union(rects: np.ndarray, shape) -> np.ndarray:
-    """(H, W) bool: the cells of ``rects`` (n, 4) on a lattice of ``shape``."""
-    m = np.zeros(shape, dtype=bool)
-    for r0, c0, r1, c1 in np.asarray(rects, dtype=np.int64).reshape(-1, 4):
-        m[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
-    return m
 
 
 def _seen_inside(classes: np.ndarray, rect, wall: int) -> float:
@@ -303,7 +295,7 @@ def _held_share(inside, rects: np.ndarray) -> float | None:
     """
     if len(rects) == 0:
         return None
-    mask = _union(rects, inside().shape)
+    mask = rects_mask(rects, inside().shape)
     return float(inside()[mask].mean()) if mask.any() else None
 
 
@@ -406,7 +398,7 @@ def find_exterior(classes: np.ndarray, rects: np.ndarray, wall: int, max_share: 
     hull = _hull(rects[enclosed & walled])
     if hull is None:                # no unit enclosed: no footprint to be outside of
         return exterior
-    enclosed_mask = _union(rects[enclosed], classes.shape)
+    enclosed_mask = rects_mask(rects[enclosed], classes.shape)
     three_sides = rects[supported & (ranked[:, 1] >= max_share)]
     ortho = None                    # built when a unit first needs it
     # the building's own outline, made once and only when a unit needs it; so is the test of

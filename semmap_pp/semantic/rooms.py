@@ -53,7 +53,7 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
-from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, border_cells, mask_box
+from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, border_cells, mask_box, rects_mask
 from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
 from semmap_pp.model import RoomParams
@@ -734,10 +734,7 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     pieces = UnitPieces(sm, floor, classes != OCCUPIED, params.min_room_m2 / sm.grid.resolution ** 2)
     pairs, doors = room_joins(sm, params, pieces)
     region = join_regions(sm.unit_ids, pairs)
-    door_lat = np.zeros(sm.frame.shape, bool)
-    for d in doors:
-        r0, c0, r1, c1 = (max(int(v), 0) for v in d.box)
-        door_lat[r0:r1, c0:c1] = True
+    door_lat = rects_mask([d.box for d in doors], sm.frame.shape)
     lut = region_lut(region, max(sm.unit_ids, default=0) + 1)
     seeds = lut[pieces.seeds()]
     fallback = lut[pieces.units]
@@ -760,13 +757,13 @@ def rooms_of(sm, params: RoomParams = RoomParams()) -> Rooms:
     return Rooms(labels, rooms)
 
 
-def _exterior_cells(sm) -> np.ndarray:
-    """(H, W) bool: the image cells of W*'s exterior units (their rectangles, on their tiles)."""
-    lat = np.zeros(sm.frame.shape, bool)
-    for e in sm.derived.exterior:
-        r0, c0, r1, c1 = (max(int(v), 0) for v in sm.world.rects[e.slot])
-        lat[r0:r1, c0:c1] = True
-    return sm.frame.to_image(lat, fill=False)
+def _exterior_cells(sm) -> np.ndarray | None:
+    """(H, W) bool: the image cells of W*'s exterior units (their rectangles, on their tiles);
+    None without any."""
+    if not sm.derived.exterior:
+        return None
+    rects = [sm.world.rects[e.slot] for e in sm.derived.exterior]
+    return sm.frame.to_image(rects_mask(rects, sm.frame.shape), fill=False)
 
 
 def through_door_boxes(sm) -> list[tuple[int, int, int, int]]:
