@@ -38,6 +38,13 @@ free cells, and on a map saved with graded values the cells seen free a few time
    the room it is nearest to along the free floor, never across a door (a breadth-first
    geodesic flood, 8-connected but never cutting the corner between two wall or door cells: a
    ray's cells may touch only at their corners, a wall drawn as a staircase stays shut).
+4. **Rooms of units over rays into the open.** A room of units (or one of a region's rooms walled
+   apart) is no room when walls enclose less than ``walled_min`` of its own floor (the units'
+   interiors and the strips along them, counted as in step 2) and less than
+   ``exit_fan_walled_max`` of all its floor: W* covered rays through a window or an exit with a
+   unit. A room never entered, seen through its door, keeps its room: its far wall, seen in part,
+   puts more walls around it than the open has; so does a walled room with rays out through its
+   exit joined to it.
 
 Free cells that no room reaches (specks beyond a wall, free space seen outside through a window
 with no room behind it) are 0. ``docs/outputs.md`` compares the convention with ipa's and ROSE2's.
@@ -277,6 +284,7 @@ def room_labels(free: np.ndarray, seeds: np.ndarray, doors: np.ndarray, resoluti
                                        None if fallback is None else np.asarray(fallback)[box])
     # a region's rooms walled apart: its floor shared among its cores
     flooded, parent = _divided(flooded, seeds, walls_apart, box, resolution, params, n_regions + n_extra, blocked)
+    flooded = _unwalled_dropped(flooded, near > 0, free, walls, range(n_regions + 1, n_regions + n_extra + 1), params)
     labels, found = _numbered(flooded)
     full[box] = labels
     return full, [(k, parent.get(old, old if old <= n_regions else 0), n) for k, old, n in found]
@@ -295,6 +303,28 @@ def _pieces_flooded(near, passable, free, walls, blocked, n_regions, resolution,
     if fallback is not None:      # not in rays into the open (out of passable): those are no room
         flooded = np.where((flooded == 0) & (fallback > 0) & passable, fallback, flooded)
     return flooded, n_extra
+
+
+def _unwalled_dropped(flooded, own, free, walls, judged, params):
+    """``flooded`` without the rooms of units over rays into the open (step 4 of the module
+    docstring): walls enclose less than ``walled_min`` of their own floor (``own``: the units'
+    interiors and the strips along them; :func:`_walled_share`) and less than
+    ``exit_fan_walled_max`` of their whole floor. The labels in ``judged`` (rooms seen through
+    their door, which step 2 judged on their whole piece) are kept."""
+    walled_min, open_max = params.walled_min, params.exit_fan_walled_max
+    if walls is None or walled_min <= 0 or open_max <= 0:
+        return flooded
+    judged = set(judged)
+    drop = []
+    for k, sl in enumerate(ndi.find_objects(flooded), start=1):
+        if sl is None or k in judged:
+            continue
+        sl = tuple(slice(max(s.start - 1, 0), s.stop + 1) for s in sl)
+        mine = (flooded[sl] == k) & own[sl]
+        if (mine.any() and _walled_share(mine, free[sl], walls[sl]) < walled_min
+                and _walled_share(flooded[sl] == k, free[sl], walls[sl]) < open_max):
+            drop.append(k)
+    return np.where(np.isin(flooded, drop), 0, flooded).astype(flooded.dtype) if drop else flooded
 
 
 def _free_box(free: np.ndarray, pad: int) -> tuple[slice, slice]:

@@ -104,6 +104,7 @@ def test_the_cells_of_a_ray_that_touch_at_their_corners_join_its_room_but_a_stai
     occupied = np.zeros_like(free)
     for k in range(8):
         occupied[19 - k % 2, 2 + k] = True                    # ... under a staircase wall
+    occupied[1, 1:13] = occupied[1:29, 1] = True              # the rooms' outer walls
     free &= ~occupied
     seeds = np.zeros(free.shape, np.int32)
     seeds[3:11, 3:11] = 1
@@ -141,8 +142,8 @@ def test_rays_into_the_open_through_a_window_are_no_room():
     assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 0)]
     free, seeds = (np.pad(a, ((0, 6), (0, 0))) for a in (free, seeds))   # unknown beyond the fan
     open_air = np.zeros_like(free)
-    open_air[10:12, 14:26] = True                           # a window's frame, nothing beyond
-    open_air[10:12, 16:24] = False
+    open_air[10:12, :] = True                               # the corridor's wall, a window in it,
+    open_air[10:12, 16:24] = False                          # nothing beyond
     labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, occupied=open_air)
     assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
     assert (labels[13:32, 10:30] == 0).all()                # not flooded into the corridor either
@@ -154,7 +155,7 @@ def test_a_small_unit_in_rays_into_the_open_keeps_no_room_there():
     free, seeds = corridor_and_room(door_width=8)
     free, seeds = (np.pad(a, ((0, 6), (0, 0))) for a in (free, seeds))
     open_air = np.zeros_like(free)
-    open_air[10:12, 14:26] = True
+    open_air[10:12, :] = True
     open_air[10:12, 16:24] = False
     fallback = np.zeros_like(seeds)
     fallback[20:24, 15:19] = 2                       # a small unit's interior out in the fan
@@ -207,6 +208,84 @@ def test_a_fan_into_a_room_seen_through_its_door_is_a_room_and_one_into_the_open
     labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
     assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
     assert (labels[13:33] == 0).all()
+
+
+def test_a_unit_over_rays_into_the_open_keeps_no_room_and_one_over_a_room_never_entered_does():
+    """W* may cover a fan of rays with a unit of its own. Its room is dropped when walls enclose
+    less of the unit's own floor than a room seen through its door needs (``walled_min``) and less
+    of all its floor than rays through an exit have (``exit_fan_walled_max``): rays into the open,
+    no room, and not flooded into the corridor either. A room never entered keeps its room when
+    either holds: its far wall seen whole, or only a few cells of it (more walls around than the
+    open has). The corridor, walled along its side, keeps its room."""
+    blur = RoomParams(wall_blur_m=0.1)
+    for seen, kept in ((20, True), (4, True), (0, False)):          # cells of the far wall seen
+        free, seeds, occupied = fan_beyond_a_door(far_wall=seen == 20)
+        occupied[34, 30 - seen // 2:30 + seen // 2] = True
+        seeds[14:32, 18:42] = 2                      # a unit's interior over the fan
+        fan = np.zeros_like(free)
+        fan[16:33] = free[16:33]
+        labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, blur, occupied=occupied)
+        assert (labels[0:10] == 1).all()
+        if kept:
+            assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 2)]
+            assert (labels[fan] == 2).all()
+        else:
+            assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+            assert (labels[12:33][free[12:33]] != 1).all() and (labels[fan] == 0).all()
+    off = RoomParams(wall_blur_m=0.1, walled_min=0.0)
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, off, occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1), (2, 2)] and (labels[fan] == 2).all()
+
+
+def test_a_unit_over_a_room_and_rays_beyond_it_keeps_the_room():
+    """One unit W* drew over a walled room and over rays into the open beside it, the two walled
+    apart (a room per core, step 1): the room is kept, the rays are no room. Rooms are judged
+    each on its own floor, not the unit on all of them."""
+    free = np.zeros((40, 70), bool)
+    occupied = np.zeros_like(free)
+    free[0:10, :] = True                             # a corridor, walled below
+    occupied[10:12, :] = True
+    occupied[10:12, 14:20] = occupied[10:12, 46:52] = False
+    free[10:12, 14:20] = free[10:12, 46:52] = True   # a door into the room, an exit into the open
+    free[12:30, 4:30] = True                         # the room, walled all round
+    occupied[12:31, 3] = occupied[12:31, 30] = occupied[30, 3:31] = True
+    for r in range(12, 40):                          # rays into the open beyond the exit
+        half = 3 + (r - 12) // 2
+        free[r, max(49 - half, 32):min(49 + half, 70)] = True
+    seeds = np.zeros(free.shape, np.int32)
+    seeds[1:9, 1:69] = 1
+    seeds[14:28, 6:28] = 2                           # one unit over the room ...
+    seeds[14:38, 33:66] = 2                          # ... and the rays (its interior on both sides)
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, RoomParams(wall_blur_m=0.1),
+                                occupied=occupied, walls_apart=occupied.copy())
+    room, rays = np.zeros_like(free), np.zeros_like(free)
+    room[13:29, 5:29] = True
+    rays[16:40, 32:70] = free[16:40, 32:70]
+    assert (labels[room] == 2).all() and (labels[rays] == 0).all() and (labels[0:10] == 1).all()
+
+
+def test_a_walled_room_with_rays_out_through_its_exit_keeps_its_room():
+    """A room walled all round but for an exit wider than a door, and rays beyond the exit joined
+    to it (the open side of the room in front, step 3): its whole floor is as open as rays into the
+    open, its own floor is walled, so it keeps its room, rays and all."""
+    free = np.zeros((64, 84), bool)
+    occupied = np.zeros_like(free)
+    free[1:20, 21:60] = True                         # the room ...
+    occupied[0, 20:61] = occupied[20, 20:61] = occupied[0:21, 20] = occupied[0:21, 60] = True
+    occupied[20, 28:52] = False                      # ... and its exit, 2.4 m wide
+    free[20, 28:52] = True
+    free[21:24, 28:52] = True                        # the floor just beyond the exit, then
+    for a in np.radians(np.linspace(-60, 60, 15)):   # single rays into the open
+        for t in range(1, 42):
+            free[int(round(20 + t * np.cos(a))), int(round(40 + t * np.sin(a)))] = True
+    seeds = np.zeros(free.shape, np.int32)
+    seeds[2:19, 22:59] = 1
+    rays = np.zeros_like(free)
+    rays[24:] = free[24:]
+    labels, rooms = room_labels(free, seeds, np.zeros_like(free), 0.1, RoomParams(wall_blur_m=0.1),
+                                occupied=occupied)
+    assert [(k, region) for k, region, _ in rooms] == [(1, 1)]
+    assert (labels[1:20, 21:60] == 1).all() and (labels[rays] == 1).mean() > 0.9
 
 
 def fan_beyond_an_exit(far_wall: bool):
