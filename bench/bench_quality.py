@@ -663,13 +663,30 @@ def seen_by_class(pred: dict, truth: dict, matches: dict) -> dict:
     return out
 
 
-def _rooms_vs_truth(sm, truth_labels) -> dict:
-    """rooms.png against the synthetic truth's units (its free cells; the ROSE2 protocol), and its
-    rooms seen through a door that lie mostly outside every true unit (fans outside the building
-    taken for rooms)."""
+def room_truth(truth_labels, l_shapes=()) -> np.ndarray:
+    """The synthetic truth's rooms: its units' labels, the two rectangles of each L-shaped room
+    (``truth.json``'s ``l_shapes``, pairs of unit ids) one room under the first one's id. The
+    generator draws an L room as two units with no wall between them; a room segmentation, as a
+    person draws it, has one room there.
+
+    >>> room_truth(np.array([[1, 2, 3]]), [[1, 2]]).tolist()
+    [[1, 1, 3]]
+    """
+    truth = np.asarray(truth_labels).astype(np.int64)
+    lut = np.arange(int(truth.max(initial=0)) + 1)
+    for a, b in l_shapes:
+        if max(a, b) < lut.size:
+            lut[lut == lut[b]] = lut[a]
+    return lut[truth]
+
+
+def _rooms_vs_truth(sm, truth_labels, l_shapes=()) -> dict:
+    """rooms.png against the synthetic truth's rooms (:func:`room_truth`: its units, an L-shaped
+    room's two one room; its free cells; the ROSE2 protocol), and its rooms seen through a door
+    that lie mostly outside every true unit (fans outside the building taken for rooms)."""
     from semmap_pp.cells import FREE
     from semmap_pp.evaluate import protocol_scores
-    truth = np.asarray(truth_labels).astype(np.int64)
+    truth = room_truth(truth_labels, l_shapes)
     if truth.shape != sm.grid.classes.shape:
         return {}
     lab = sm.rooms.labels
@@ -753,7 +770,7 @@ def bench_synthetic(args, model, rules, floors=None) -> dict:
                "door_f1": round(door_f1, 4) if door_f1 == door_f1 else None,
                "door_p": round(dp, 4) if dp == dp else None, "door_r": round(dr, 4) if dr == dr else None,
                "unit_f1_with_exterior": round(sx.unit_f1, 4),
-               **_rooms_vs_truth(sm, floor.truth_labels),
+               **_rooms_vs_truth(sm, floor.truth_labels, floor.truth.get("l_shapes", ())),
                **_recall_by_wing(floor.truth, sc.matches),
                "observed_units": len(observed_truth(floor.truth)["units"]),
                "type_accuracy_observed": _r4(so.type_accuracy),

@@ -140,3 +140,23 @@ def test_route_agreement_counts_pairs_and_detours():
     detour = dict(same, doors=[{"id": 1, "units": [10, 11], "center_px": [20, 19]}])   # the door at a corner
     r = bq.route_agreement(detour, truth, matches, 0.05)
     assert r["route_ratios"][0] > 1.0 and r["route_found"] == 3
+
+
+def test_an_l_shaped_room_is_one_room_of_the_synthetic_truth():
+    """rooms.png is scored against rooms: the generator's L-shaped room, two units with no wall
+    between them, is one room; a prediction of the whole L is right, and one that cuts it in
+    two finds only the larger part of it."""
+    import numpy as np
+    from semmap_pp.evaluate import protocol_scores
+    units = np.zeros((50, 50), np.int64)   # rooms of more than 200 cells (the protocol's)
+    units[0:50, 0:20] = 1                # the L's long arm ...
+    units[30:50, 20:50] = 2              # ... and its foot
+    units[0:25, 25:50] = 3               # another room
+    rooms = bq.room_truth(units, [[1, 2]])
+    assert set(np.unique(rooms).tolist()) == {0, 1, 3}
+    assert (rooms[units == 2] == 1).all() and (rooms[units == 3] == 3).all()
+    whole = np.where(units == 2, 1, units)
+    assert protocol_scores(rooms, whole).precision == 1.0
+    assert protocol_scores(units, whole).precision < 1.0     # scored against the units it is not
+    cut = protocol_scores(rooms, units)
+    assert cut.precision == 1.0 and cut.recall < 1.0
