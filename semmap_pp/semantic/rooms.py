@@ -320,9 +320,10 @@ def _unwalled_dropped(flooded, own, free, walls, judged, params):
         if sl is None or k in judged:
             continue
         sl = tuple(slice(max(s.start - 1, 0), s.stop + 1) for s in sl)
-        mine = (flooded[sl] == k) & own[sl]
+        room = flooded[sl] == k
+        mine = room & own[sl]
         if (mine.any() and _walled_share(mine, free[sl], walls[sl]) < walled_min
-                and _walled_share(flooded[sl] == k, free[sl], walls[sl]) < open_max):
+                and _walled_share(room, free[sl], walls[sl]) < open_max):
             drop.append(k)
     return np.where(np.isin(flooded, drop), 0, flooded).astype(flooded.dtype) if drop else flooded
 
