@@ -60,9 +60,10 @@ import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import ConvexHull, QhullError
 
-from semmap_pp.cells import FREE, OCCUPIED, UNKNOWN, border_cells, mask_box, rects_mask
+from semmap_pp.cells import FREE, OCCUPIED, UNIT_TYPES, UNKNOWN, border_cells, mask_box, rects_mask
 from semmap_pp.derive.doors import connecting_wall, wall_strip
 from semmap_pp.derive.states import interior
+from semmap_pp.lattice.tiles import rect_spans
 from semmap_pp.model import RoomParams
 from semmap_pp.semantic.regions import join_regions, passage_pairs, region_lut
 from semmap_pp.target.likelihood import wall_like
@@ -677,6 +678,64 @@ class UnitPieces:
         return not (in_a and in_b) or bool(in_a & in_b)
 
 
+def wall_open(kinds: set, classes: np.ndarray, rp, rq, wall: int, share_min: float) -> bool:
+    """Whether the wall between two units of types ``kinds`` (rectangles ``rp``, ``rq``) is open,
+    the open side of one space that W* cut in two rather than a wall with a door: at least
+    ``share_min`` of its lines are open (:func:`opening_share`), and it is not a corridor's or a
+    hall's wall to a room (a room open to the corridor along it is a room of its own)."""
+    if _THROUGH_TYPES & kinds and "room" in kinds:
+        return False
+    return opening_share(classes, rp, rq, wall) >= share_min
+
+
+def open_walls(derived, world, frame, through_door, params: RoomParams):
+    """``derived`` with the doors on open walls listed as passages: an opening that takes most of
+    the wall two units share (:func:`wall_open`, ``open_share_min``) where no wall line stands
+    beside it (:func:`walled_beside`) is no door in a wall but a cut through one space. A door
+    at the narrow end of a corridor takes most of its wall too, but the wall beside it is drawn.
+    A unit added over a room seen through its door (slots ``through_door``) keeps its doors, and
+    so does a door between two tiles of a lattice of several directions (their rectangles are on
+    two lattices: no wall strip is shared)."""
+    keep, opened = [], []
+    decided: dict = {}
+    tiled = bool(rect_spans(frame))
+    lines = None
+    for d in derived.doors:
+        pair = (min(d.p, d.q), max(d.p, d.q))
+        if pair not in decided:
+            rp, rq = world.rects[d.p], world.rects[d.q]
+            kinds = {UNIT_TYPES[int(world.types[s])] for s in pair}
+            across = tiled and frame.tile_of_rect(rp) != frame.tile_of_rect(rq)
+            decided[pair] = not across and not set(pair) & set(through_door) and wall_open(
+                kinds, frame.door_classes, rp, rq, frame.cells.wall, params.open_share_min)
+            if decided[pair]:
+                if lines is None:
+                    c = frame.cells
+                    lines = wall_like(frame.classes == OCCUPIED, c.object_max_extent,
+                                      c.wall_line_tolerance, c.wall_line_gap)
+                decided[pair] = not walled_beside(frame.door_classes, lines, rp, rq, frame.cells.wall)
+        (opened if decided[pair] else keep).append(d)
+    if not opened:
+        return derived
+    return derived._replace(doors=keep, passages=list(derived.passages) + opened)
+
+
+def walled_beside(classes: np.ndarray, lines: np.ndarray, rp, rq, wall: int) -> bool:
+    """Whether a wall stands beside the openings of the wall ``rp`` and ``rq`` share: at least half
+    of the strip's closed lines (:func:`~semmap_pp.derive.doors.wall_strip`) cross a cell of a wall
+    line (``lines``: the likelihood's wall-like cells), not only furniture or a unit's corner."""
+    found = wall_strip(classes, rp, rq, wall)
+    if found is None:
+        return True
+    strip, (a0, b0, a1, b1), vertical = found
+    axis = 1 if vertical else 0
+    closed = ~(strip == FREE).all(axis=axis)
+    if not closed.any():
+        return False
+    walled = np.asarray(lines[a0:a1, b0:b1]).any(axis=axis)
+    return 2 * int((closed & walled).sum()) >= int(closed.sum())
+
+
 def room_joins(sm, params: RoomParams, pieces=None) -> tuple[list[tuple[int, int]], list]:
     """Unit-id pairs one room joins, and the doors that stay doors between rooms.
 
@@ -708,8 +767,7 @@ def room_joins(sm, params: RoomParams, pieces=None) -> tuple[list[tuple[int, int
         if pair not in decided:
             kinds = {sm.type_of(pair[0]), sm.type_of(pair[1])}
             through = bool(_THROUGH_TYPES & kinds)            # a corridor or a hall
-            joined = (not through or "room" not in kinds) and \
-                opening_share(classes, rects[d.p], rects[d.q], wall) >= params.open_share_min
+            joined = wall_open(kinds, classes, rects[d.p], rects[d.q], wall, params.open_share_min)
             if not joined and not through:
                 free = classes == FREE if free is None else free
                 joined = wide_opening(free, rects[d.p], rects[d.q], wall, width)

@@ -19,7 +19,7 @@ from semmap_pp.derive.states import interior
 from semmap_pp.evaluate import closing_radius_cells, cpr, default_roi
 from semmap_pp.model import RoomParams
 from semmap_pp.semantic.ids import carry_ids
-from semmap_pp.semantic.rooms import Rooms, rooms_of
+from semmap_pp.semantic.rooms import Rooms, open_walls, rooms_of
 from semmap_pp.semantic.world_json import rect_corners_m
 
 
@@ -151,7 +151,7 @@ def semantic_map(grid, frame, posterior, world: wm.World, *, roi: np.ndarray | N
 
     terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world
-    derived = derive_world(frame, world)
+    derived = open_walls(derive_world(frame, world), world, frame, through_door, posterior.model.rooms)
     slot_ids, id_record = number_units(frame, world, derived.slots), None
     if previous is not None:
         order = sorted(slot_ids, key=slot_ids.get)

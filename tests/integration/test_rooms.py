@@ -807,6 +807,94 @@ def test_a_door_taking_most_of_a_wall_joins_two_units_but_never_a_corridor_and_a
     assert len(doors) == (0 if one_room else 1)
 
 
+from types import SimpleNamespace as _NS
+_CELLS = _NS(wall=2, object_max_extent=30, wall_line_tolerance=1, wall_line_gap=1)
+
+
+def test_a_door_with_a_wall_line_beside_it_stays_a_door():
+    """A door that takes most of a narrow wall (the end of a corridor, a link between two wings)
+    stands in a wall the map draws: the wall line runs on past the two units, so the wall's
+    closed lines are a wall line's cells and the opening stays a door. The same opening beside a
+    stub that is no wall line (a unit's corner, furniture) is a passage."""
+    from semmap_pp.cells import FREE, OCCUPIED
+    from semmap_pp.derive import Derived
+    from semmap_pp.derive.doors import Door
+    from semmap_pp.semantic.rooms import open_walls
+    for long_wall, passage in ((True, False), (False, True)):
+        classes = np.full((120, 84), FREE, np.uint8)
+        classes[0:2, :] = OCCUPIED
+        classes[2:8, 38:42] = OCCUPIED                      # the jamb above the 28-line opening
+        classes[36:44, 38:42] = OCCUPIED                    # and below it ...
+        if long_wall:
+            classes[36:110, 38:42] = OCCUPIED               # ... a wall line running on past the units
+        rp, rq = (0, 0, 44, 42), (0, 38, 44, 84)
+        door = Door(0, 1, (8, 38, 36, 42), True, 28)
+        derived = Derived(np.array([0, 1]), None, [door], [], np.ones((2, 2), bool), [], [], [], [])
+        world = _NS(rects=[rp, rq], types=np.array([0, 0]))
+        frame = _NS(door_classes=classes, classes=classes, cells=_CELLS)
+        out = open_walls(derived, world, frame, (), RoomParams(open_share_min=0.6))
+        assert (out.passages == [door]) is passage and (out.doors == [door]) is not passage
+
+
+@pytest.mark.parametrize("types, gap_cells, through_door, passage", [
+    (("room", "room"), 34, (), True), (("room", "other"), 34, (), True),
+    (("corridor", "corridor"), 34, (), True),
+    (("room", "room"), 16, (), False),                                   # a door in a wall
+    (("corridor", "room"), 34, (), False), (("room", "hall"), 34, (), False),   # a corridor's side
+    (("room", "room"), 34, (1,), False)])                  # a room seen through its door keeps it
+def test_a_door_taking_most_of_a_wall_is_listed_as_a_passage(types, gap_cells, through_door, passage):
+    """world.json's doors and passages read the wall as rooms.png does: an opening that takes
+    ``open_share_min`` of the wall two units share, beside a stub that is no wall line, is the
+    open side of one space (a passage), unless a corridor or a hall meets a room there or a unit
+    was added over a room seen through its door; the passage joins the two units in rooms.png as
+    the door did."""
+    from types import SimpleNamespace
+    from semmap_pp.cells import UNIT_TYPES
+    from semmap_pp.derive import Derived
+    from semmap_pp.derive.doors import Door
+    from semmap_pp.semantic.rooms import open_walls, room_joins
+    classes, rp, rq = two_units_with_a_partition(gap_cells)
+    door = Door(0, 1, (42 - gap_cells, 38, 42, 42), True, gap_cells)
+    derived = Derived(np.array([0, 1]), None, [door], [], np.ones((2, 2), bool), [], [], [], [])
+    world = SimpleNamespace(rects=[rp, rq], types=np.array([UNIT_TYPES.index(t) for t in types]))
+    frame = SimpleNamespace(door_classes=classes, classes=classes, cells=_CELLS)
+    params = RoomParams(open_share_min=0.6)
+    out = open_walls(derived, world, frame, through_door, params)
+    assert (out.passages == [door], out.doors == []) == ((passage, passage) if passage else (False, False))
+    assert len(out.doors) + len(out.passages) == 1
+    fake = _FakeMap(classes, rp, rq, types)
+    fake.derived = out
+    fake.through_door = frozenset(through_door)
+    pairs, doors = room_joins(fake, RoomParams(open_share_min=0.6, door_max_m=100.0))
+    assert doors == out.doors                          # rooms.png: the same rooms either way
+    if passage:
+        assert pairs == [(1, 2)]
+
+
+def test_a_door_between_two_tiles_stays_a_door():
+    """On a lattice of several directions two units of two tiles lie on two lattices: no wall strip
+    of theirs is shared, so their door is never read as an open wall."""
+    from types import SimpleNamespace
+    from semmap_pp.derive import Derived
+    from semmap_pp.derive.doors import Door
+    from semmap_pp.lattice.tiles import TiledFrame
+    from semmap_pp.semantic.rooms import open_walls
+    classes, rp, rq = two_units_with_a_partition(34)       # open on one lattice ...
+    door = Door(0, 1, (8, 38, 42, 42), True, 34)
+    derived = Derived(np.array([0, 1]), None, [door], [], np.ones((2, 2), bool), [], [], [], [])
+    world = SimpleNamespace(rects=[rp, rq], types=np.array([0, 0]))
+    one = SimpleNamespace(shape=(44, 40))
+    for cols, passage in (((0, 100), True), ((0, 36), False)):    # ... a tile each when split at 38
+        frame = TiledFrame.__new__(TiledFrame)
+        object.__setattr__(frame, "tiles", (one, one))
+        object.__setattr__(frame, "cols", cols)
+        object.__setattr__(frame, "door_classes", classes)
+        object.__setattr__(frame, "classes", classes)
+        object.__setattr__(frame, "cells", _CELLS)
+        out = open_walls(derived, world, frame, (), RoomParams(open_share_min=0.6))
+        assert (out.passages == [door]) is passage and (out.doors == [door]) is not passage
+
+
 def semantic_map_of(tmp_path: Path, img: np.ndarray, boxes):
     """The semantic map of a world of units over ``img`` (a map_server image, 0.05 m cells, saved
     with its YAML in ``tmp_path``): one unit per pixel box ``(x0, y0, x1, y1)``, in order."""
