@@ -693,20 +693,20 @@ def open_walls(derived, world, frame, through_door, params: RoomParams):
     the wall two units share (:func:`wall_open`, ``open_share_min``) where no wall line stands
     beside it (:func:`walled_beside`) is no door in a wall but a cut through one space. A door
     at the narrow end of a corridor takes most of its wall too, but the wall beside it is drawn.
-    A unit added over a room seen through its door (slots ``through_door``) keeps its doors, and
-    so does a door between two tiles of a lattice of several directions (their rectangles are on
-    two lattices: no wall strip is shared)."""
+    A unit added over a room seen through its door (slots ``through_door``) keeps its doors. On a
+    lattice of several directions every door stays a door: a wall at another angle than the
+    tile's is no wall line of its lattice, so what stands beside an opening is not read there."""
+    if rect_spans(frame):
+        return derived
     keep, opened = [], []
     decided: dict = {}
-    tiled = bool(rect_spans(frame))
     lines = None
     for d in derived.doors:
         pair = (min(d.p, d.q), max(d.p, d.q))
         if pair not in decided:
             rp, rq = world.rects[d.p], world.rects[d.q]
             kinds = {UNIT_TYPES[int(world.types[s])] for s in pair}
-            across = tiled and frame.tile_of_rect(rp) != frame.tile_of_rect(rq)
-            decided[pair] = not across and not set(pair) & set(through_door) and wall_open(
+            decided[pair] = not set(pair) & set(through_door) and wall_open(
                 kinds, frame.door_classes, rp, rq, frame.cells.wall, params.open_share_min)
             if decided[pair]:
                 if lines is None:
