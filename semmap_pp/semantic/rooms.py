@@ -688,14 +688,16 @@ def wall_open(kinds: set, classes: np.ndarray, rp, rq, wall: int, share_min: flo
     return opening_share(classes, rp, rq, wall) >= share_min
 
 
-def open_walls(derived, world, frame, through_door, params: RoomParams):
+def open_walls(derived, world, frame, through_door, params: RoomParams, wall_lines=None):
     """``derived`` with the doors on open walls listed as passages: an opening that takes most of
     the wall two units share (:func:`wall_open`, ``open_share_min``) where no wall line stands
     beside it (:func:`walled_beside`) is no door in a wall but a cut through one space. A door
     at the narrow end of a corridor takes most of its wall too, but the wall beside it is drawn.
     A unit added over a room seen through its door (slots ``through_door``) keeps its doors. On a
     lattice of several directions every door stays a door: a wall at another angle than the
-    tile's is no wall line of its lattice, so what stands beside an opening is not read there."""
+    tile's is no wall line of its lattice, so what stands beside an opening is not read there.
+    ``wall_lines``: a callable giving the lattice's wall-like cells (the likelihood's, made once
+    per map), called only when a door's wall is open; None: found here."""
     if rect_spans(frame):
         return derived
     keep, opened = [], []
@@ -711,8 +713,9 @@ def open_walls(derived, world, frame, through_door, params: RoomParams):
             if decided[pair]:
                 if lines is None:
                     c = frame.cells
-                    lines = wall_like(frame.classes == OCCUPIED, c.object_max_extent,
-                                      c.wall_line_tolerance, c.wall_line_gap)
+                    lines = wall_lines() if wall_lines is not None else wall_like(
+                        frame.classes == OCCUPIED, c.object_max_extent, c.wall_line_tolerance,
+                        c.wall_line_gap)
                 decided[pair] = not walled_beside(frame.door_classes, lines, rp, rq, frame.cells.wall)
         (opened if decided[pair] else keep).append(d)
     if not opened:

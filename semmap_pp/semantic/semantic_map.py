@@ -21,6 +21,7 @@ from semmap_pp.model import RoomParams
 from semmap_pp.semantic.ids import carry_ids
 from semmap_pp.semantic.rooms import Rooms, open_walls, rooms_of
 from semmap_pp.semantic.world_json import rect_corners_m
+from semmap_pp.target.likelihood import X_WALLLIKE, prepare
 
 
 @dataclass(frozen=True)
@@ -151,7 +152,8 @@ def semantic_map(grid, frame, posterior, world: wm.World, *, roi: np.ndarray | N
 
     terms = posterior.evaluate(world) if terms is None else terms
     world = terms.world
-    derived = open_walls(derive_world(frame, world), world, frame, through_door, posterior.model.rooms)
+    derived = open_walls(derive_world(frame, world), world, frame, through_door, posterior.model.rooms,
+                         lambda: prepare(frame, posterior.model).xcode == X_WALLLIKE)
     slot_ids, id_record = number_units(frame, world, derived.slots), None
     if previous is not None:
         order = sorted(slot_ids, key=slot_ids.get)

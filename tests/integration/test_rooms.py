@@ -1028,3 +1028,18 @@ def test_one_unit_over_two_rooms_walled_apart_seeds_two_rooms_but_desks_hold_non
     assert (labels[free] > 0).all()
     labels1, rooms1 = room_labels(free, seeds, np.zeros_like(free), 0.05, RoomParams())
     assert len(rooms1) == 1
+
+
+def test_the_likelihoods_wall_like_cells_are_the_wall_lines_open_walls_reads():
+    """semantic_map hands open_walls the likelihood's wall-like cells (made once per map) instead of
+    finding the wall lines again: the two are the same cells."""
+    from semmap_pp.cells import OCCUPIED
+    from semmap_pp.lattice.frame import build_frame_from_classes
+    from semmap_pp.synth import generate_floor
+    from semmap_pp.target.likelihood import X_WALLLIKE, prepare, wall_like
+    model = load_model()
+    frame = build_frame_from_classes(generate_floor(3, resolution=0.05).classes, 0.05, model)
+    c = frame.cells
+    found = wall_like(frame.classes == OCCUPIED, c.object_max_extent, c.wall_line_tolerance, c.wall_line_gap)
+    assert found.any()
+    assert np.array_equal(prepare(frame, model).xcode == X_WALLLIKE, found)
